@@ -1,0 +1,44 @@
+"""Error and warning types shared by every part of identcheck.
+
+Loaders collect every problem they find and raise one :class:`InputError`; the CLI maps it
+to exit code 2. Solvers raise :class:`DegenerateError` when the data cannot decide (never a
+silent wrong number).
+"""
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad user input (file, marker, joint type, option); lists every problem found at once.
+
+    Parameters
+    ----------
+    problems : list of str
+        One human-readable sentence per problem, each naming the file, line, key, marker or
+        frame it concerns.
+    source : str, optional
+        The file (or other source) the problems were found in; prefixed to the message.
+    """
+
+    def __init__(self, problems, source: str | None = None):
+        if isinstance(problems, str):
+            problems = [problems]
+        self.problems = list(problems)
+        self.source = source
+        head = f"{source}: " if source else ""
+        if len(self.problems) == 1:
+            msg = head + self.problems[0]
+        else:
+            msg = head + f"{len(self.problems)} problems:\n" + "\n".join(f"  - {p}" for p in self.problems)
+        super().__init__(msg)
+
+
+class DegenerateError(ValueError):
+    """The samples do not determine the answer (singular system, coincident markers, α = 0, ...)."""
+
+
+class DerivationError(RuntimeError):
+    """A symbolic identity that must hold exactly did not reduce to zero."""
+
+
+class IdentifiabilityWarning(UserWarning):
+    """Usable but near-degenerate data: the answer is sensitive to noise."""

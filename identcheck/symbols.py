@@ -1,0 +1,136 @@
+"""Canonical SymPy symbols, assumptions and order for every joint case.
+
+Angles never appear as ``sin``/``cos`` calls: each angle φ is a pair of polynomial symbols
+(c_φ, s_φ) tied by c_φ² + s_φ² = 1, so that identities are proved by exact polynomial
+reduction (fast and certain) instead of ``trigsimp``. "Symbol order is data": generated
+functions take their arguments in the order these tuples give.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import sympy as sp
+
+from .errors import InputError
+
+# sample coordinates of a child marker in the frame F of the parent's markers
+x, y, z = sp.symbols("x y z", real=True)
+R2 = sp.Symbol("R2", nonnegative=True)  # R² = x² + y² + z²
+
+# Denavit–Hartenberg constants of a revolute joint seen from two parent markers (Pham Fig. 2)
+d, l = sp.symbols("d l", real=True)
+r, rho = sp.symbols("r rho", positive=True)
+
+# angles as (cos, sin) symbol pairs; the angle symbols themselves are for display only
+alpha, theta, beta = sp.symbols("alpha theta beta", real=True)
+c_alpha, s_alpha = sp.symbols("c_alpha s_alpha", real=True)
+c_theta, s_theta = sp.symbols("c_theta s_theta", real=True)
+c_beta, s_beta = sp.symbols("c_beta s_beta", real=True)
+
+# per-sample auxiliaries of eq. (4)-(5): A = x sinθ - y cosθ, B = x cosθ + y sinθ
+A, B = sp.symbols("A B", real=True)
+
+# the solved unknown vector Z of eq. (10) and the cubic's variable Q of eq. (13)
+Q = sp.Symbol("Q", real=True)
+Z = sp.symbols("Z1:6", real=True)
+cos_sign = sp.Symbol("sigma", real=True)  # ±1: which sign cos α takes (mirror images)
+
+
+@dataclass(frozen=True)
+class Angle:
+    """An angle carried as a (cos, sin) pair of symbols."""
+
+    name: str
+    symbol: sp.Symbol
+    cos: sp.Symbol
+    sin: sp.Symbol
+
+    @property
+    def circle(self) -> sp.Expr:
+        """The polynomial c² + s² - 1 that vanishes for every real angle."""
+        return self.cos**2 + self.sin**2 - 1
+
+
+ALPHA = Angle("alpha", alpha, c_alpha, s_alpha)
+THETA = Angle("theta", theta, c_theta, s_theta)
+BETA = Angle("beta", beta, c_beta, s_beta)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One identifiability case: a joint type with p markers on the parent, q on the child.
+
+    Attributes
+    ----------
+    constants : tuple of Symbol
+        Constant parameters Π_c + Σ_c (the same in every sample), canonical order.
+    constant_angles : tuple of Angle
+        Constant parameters that are angles (carried as cos/sin pairs).
+    variables : tuple of Angle
+        Per-sample variable parameters Π_v + Σ_v.
+    sample : tuple of Symbol
+        Output coordinates of one sample, in the frame of the parent's markers.
+    """
+
+    joint: str
+    p: int
+    q: int
+    constants: tuple
+    constant_angles: tuple
+    variables: tuple
+    sample: tuple
+
+    @property
+    def key(self) -> str:
+        return f"{self.joint}({self.p},{self.q})"
+
+    @property
+    def trig_pairs(self) -> tuple:
+        """Every (cos, sin) pair the case uses, constants first."""
+        return tuple((a.cos, a.sin) for a in self.constant_angles + self.variables)
+
+    @property
+    def parameter_symbols(self) -> tuple:
+        """Symbols a joint-parameter vector is made of: lengths then cos/sin of angles."""
+        out = list(self.constants)
+        for a in self.constant_angles:
+            out += [a.cos, a.sin]
+        return tuple(out)
+
+
+_CASES = {
+    ("revolute", 2, 1): Case(
+        joint="revolute", p=2, q=1,
+        constants=(d, r, l, rho),
+        constant_angles=(ALPHA,),
+        variables=(THETA, BETA),
+        sample=(x, y, z),
+    ),
+}
+
+JOINT_TYPES = ("revolute", "spherical")
+
+
+def case(joint: str, p: int, q: int) -> Case:
+    """Return the canonical :class:`Case` for ``joint`` with p parent and q child markers.
+
+    Raises
+    ------
+    InputError
+        For an unknown joint type or a (p, q) case that has no derivation yet.
+    """
+    joint = str(joint).lower()
+    if joint not in JOINT_TYPES:
+        raise InputError(f"unknown joint type {joint!r}; known types: {', '.join(JOINT_TYPES)}")
+    try:
+        return _CASES[(joint, int(p), int(q))]
+    except KeyError:
+        known = ", ".join(f"{j} {a} {b}" for j, a, b in sorted(_CASES))
+        raise InputError(
+            f"no derivation for {joint} ({p},{q}) yet; derived cases: {known}"
+        ) from None
+
+
+def known_cases() -> list:
+    """All cases with a derivation, in canonical order."""
+    return [_CASES[k] for k in sorted(_CASES)]
