@@ -13,9 +13,20 @@ def get(name: str) -> Derivation:
     return importlib.import_module(DERIVATIONS[name]).derive()
 
 
+CASE_DERIVATION = {"revolute(2,1)": "revolute21"}
+
+
+def for_case(case) -> Derivation:
+    """The derivation that yields the linear form M·Y = K of a case."""
+    try:
+        return get(CASE_DERIVATION[case.key])
+    except KeyError:
+        raise RuntimeError(f"no derivation of the linear form for {case.key} yet") from None
+
+
 def derive_all() -> list:
     """Every derivation, in canonical order."""
     return [get(n) for n in sorted(DERIVATIONS)]
 
 
-__all__ = ["Check", "Derivation", "Step", "DERIVATIONS", "get", "derive_all"]
+__all__ = ["Check", "Derivation", "Step", "DERIVATIONS", "get", "for_case", "derive_all"]

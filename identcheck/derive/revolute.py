@@ -174,7 +174,11 @@ def derive() -> Derivation:
     ca_k = cos_sign * sp.sqrt(1 - sol[S])
     l_k = sol[w] / ca_k - Z[0] * ca_k
     rho2_k = sol[r2] + Z[0] ** 2 - l_k**2 - Q
-    dv.results["back"] = {"r2": sol[r2], "sin2_alpha": sol[S], "w": sol[w], "v": sol[v]}
+    dv.results["back"] = {"r2": sol[r2], "sin2_alpha": sol[S], "w": sol[w], "v": sol[v],
+                          "cos_alpha": ca_k, "l": l_k, "rho2": rho2_k,
+                          # when cos α = 0, l = ±sqrt(v) (u = l + d cos α = l)
+                          "l_if_cos0": cos_sign * sp.sqrt(sol[v]),
+                          "rho2_if_cos0": sol[r2] + Z[0] ** 2 - sol[v] - Q}
     dv.add_check(name="back_r", where="after (13)", printed=printed.BACK_R2, derived=sol[r2],
                  agrees=equal(sol[r2], printed.BACK_R2))
     dv.add_check(name="back_alpha", where="after (13)", printed=printed.BACK_SIN2_ALPHA,
@@ -202,6 +206,11 @@ def derive() -> Derivation:
     theta_cs = ((x * B_s - y * A_s) / rxy2, (x * A_s + y * B_s) / rxy2)
     local = (D[:3, :3].T * (p - D[:3, 3]))
     dv.results["theta_cs"] = theta_cs
+    h = sp.Symbol("h", real=True)
+    rel = sp.Matrix([0, 0, h]) - D[:3, 3]
+    dist2 = reduce_circle(sp.expand((rel.T * rel)[0] - ((rel.T * axis)[0]) ** 2), TRIG)
+    assert not dist2.has(ct, st), "distance of a parent marker to the axis must not depend on θ"
+    dv.results["axis_distance2"] = (h, sp.factor(dist2))  # squared distance of (0, 0, h) to the axis
     dv.results["local"] = local  # (ρ cosβ, ρ sinβ, l) when the sample is on the joint's output set
     dv.steps.append(Step(
         "Per-sample angles",
@@ -270,6 +279,11 @@ def _root_structure(dv: Derivation, sol: dict, cubic: sp.Poly) -> None:
         "(R² + Q − 2zd)²/4r² ≥ 0), so the two output sets are the same surface and no number of "
         "samples can tell the joints apart. With mirror images that makes 4 joints.",
         [("g(q)", g), ("\\rho'^2 (2Wc^2 - q)", sp.Symbol("r^2") * (2 * Wsym * c**2 + 2 * lval**2 - q))]))
+    dv.add_check(name="root_structure_proof", where="(13)", printed="(not in the paper)",
+                 derived="all eight identities of the root analysis reduce to 0" if proved else
+                 "an identity of the root analysis failed: " + ", ".join(k for k, v in dv.results["roots"].items()
+                                                                       if v is False),
+                 agrees=proved)
     dv.add_check(name="root_extraneous", where="after (13)",
                  printed=f"{printed.CLAIM_EXTRANEOUS_ROOTS} root extraneous (fails (5))",
                  derived="0 roots extraneous: q₋ is a real joint whose output set equals the true one",

@@ -1,0 +1,216 @@
+"""Command-line interface: parse, make one library call, print, exit (codes of CONTRACT.md).
+
+0 success, 1 negative answer (not identifiable / derivation mismatch / certificate rejected),
+2 bad input (message on stderr naming the file, marker or option).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from .errors import DegenerateError, InputError
+
+log = logging.getLogger("identcheck")
+
+NOT_YET = {
+    "table": "the identifiability table (every joint type x markers)",
+    "plan": "marker plans before capture",
+    "fit": "fitting recorded trials with uncertainty",
+    "diagnose": "the model/measurement discrepancy workflow",
+}
+
+
+def _print_json(obj) -> None:
+    print(json.dumps(obj, indent=2, sort_keys=True, default=str))
+
+
+def _cmd_derive(a) -> int:
+    from . import derive, report
+    from .derive import render
+
+    dvs = derive.derive_all()
+    paths = render.write(dvs, a.out)
+    rep = report.derive_report(dvs, a.out, paths)
+    if a.json:
+        _print_json(rep)
+    else:
+        for d in rep["derivations"]:
+            print(f"{d['title']}: {'ok' if d['ok'] else 'MISMATCH'}")
+            for c in d["checks"]:
+                flag = "agrees" if c["agrees"] else (f"erratum {c['erratum']}" if c["ok"] else "DISAGREES (unrecorded)")
+                print(f"  {c['name']:<24} {c['where']:<16} {flag}")
+        print(f"written to {a.out}")
+    return 0 if rep["ok"] else 1
+
+
+def _cmd_rank(a) -> int:
+    from . import certify
+
+    cert = certify.rank(a.joint, a.p, a.q, n_samples=a.samples, seed=a.seed)
+    if a.save:
+        Path(a.save).write_text(cert.to_json(indent=2), encoding="utf-8")
+        log.info("certificate saved to %s", a.save)
+    if a.json:
+        _print_json(cert.to_dict())
+    else:
+        print(f"{cert.joint} ({cert.p},{cert.q}): unknowns {', '.join(cert.unknowns)}")
+        print(f"exact rank {cert.rank} of {len(cert.unknowns)} (float cross-check: {cert.numeric_rank})")
+        print(cert.statement)
+    return 0 if cert.full_rank else 1
+
+
+def _cmd_verify(a) -> int:
+    from . import certify
+
+    try:
+        cert = json.loads(Path(a.certificate).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(["file not found"], source=a.certificate) from None
+    except json.JSONDecodeError as exc:
+        raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=a.certificate) from None
+    if not isinstance(cert, dict):
+        raise InputError(["a certificate is a JSON object"], source=a.certificate)
+    res = certify.verify(cert)
+    out = {"ok": res.ok, "problems": res.problems, "certificate": a.certificate}
+    if a.json:
+        _print_json(out)
+    else:
+        print("certificate verified: exact rank recomputed" if res.ok else "certificate REJECTED:")
+        for p in res.problems:
+            print("  - " + p)
+    return 0 if res.ok else 1
+
+
+def _cmd_simulate(a) -> int:
+    from .simulate import simulate_file
+
+    if a.effect:
+        raise InputError([f"--effect {a.effect}: injecting effects is not available yet"])
+    sim = simulate_file(a.model, a.out, seed=a.seed, n_frames=a.frames, rate_hz=a.rate, rom_deg=a.rom_deg,
+                        noise_mm=a.noise_mm, occlusion=a.occlusion)
+    if a.truth:
+        sim.save_truth(a.truth)
+    log.info("wrote %s (%d frames, %d markers)", a.out, sim.trial.n_frames, sim.trial.n_markers)
+    if a.json:
+        _print_json({"out": str(a.out), "n_frames": sim.trial.n_frames, "markers": list(sim.trial.labels),
+                     "truth": sim.truth.to_dict(poses=False)})
+    return 0
+
+
+def _cmd_identify(a) -> int:
+    from . import report
+    from .identify import identify_joint
+    from .io.model import Model
+    from .trial import Trial
+
+    model = Model.from_toml(a.model)
+    trial = Trial.from_file(a.trial)
+    names = a.joint or [n for n in model.joint_order]
+    frames = [int(f) for f in a.frames.split(",")] if a.frames else None
+    results = [identify_joint(model, trial, n, frames=frames, precision=a.precision) for n in names]
+    rep = report.identify_report(results)
+    if a.json:
+        _print_json(rep)
+    else:
+        for name, j in rep["joints"].items():
+            print(f"{name}: {j['case']}, {j['n_samples']} samples -> {j['candidates']} joints "
+                  f"({j['parameter_sets']} parameter sets x mirror images); unique: {j['unique']}")
+            rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
+            markers = list(rows[0])
+            print("   distances to the hinge axis (mm): " + "  ".join(f"{m:>8}" for m in markers))
+            for i, row in enumerate(rows):
+                print(f"   joint {i}:" + " " * 26 + "  ".join(f"{row[m]:8.2f}" for m in markers))
+    return 0 if all(j["unique"] for j in rep["joints"].values()) else 1
+
+
+def _not_yet(verb):
+    def run(a) -> int:
+        print(f"identcheck {verb}: {NOT_YET[verb]} is not available yet", file=sys.stderr)
+        return 2
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="identcheck", description=(
+        "Can the joint parameters of this skeleton be identified from these markers? "
+        "Certified answers, generated solvers."))
+    p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
+    sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
+
+    s = sub.add_parser("derive", help="regenerate and check every derivation against the paper")
+    s.add_argument("--out", default="derivations/out", help="directory for the rendered Markdown")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_derive)
+
+    s = sub.add_parser("rank", help="exact generic rank of the sampled M-matrix of a case")
+    s.add_argument("joint", help="joint type (revolute | spherical)")
+    s.add_argument("p", type=int, help="markers on the parent link")
+    s.add_argument("q", type=int, help="markers on the child link")
+    s.add_argument("--samples", type=int, default=None, help="rows of M (default: number of unknowns)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--save", metavar="FILE", help="also write the certificate to FILE")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_rank)
+
+    s = sub.add_parser("verify", help="re-check a saved rank certificate from scratch")
+    s.add_argument("certificate")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_verify)
+
+    s = sub.add_parser("simulate", help="write a synthetic trial (TRC or C3D by extension)")
+    s.add_argument("model")
+    s.add_argument("--out", required=True)
+    s.add_argument("--effect", default=None, help="inject a named effect (not available yet)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--frames", type=int, default=200)
+    s.add_argument("--rate", type=float, default=100.0, help="Hz")
+    s.add_argument("--rom-deg", type=float, default=60.0, help="range of motion of each exercised angle")
+    s.add_argument("--noise-mm", type=float, default=0.0, help="Gaussian marker noise (std per axis)")
+    s.add_argument("--occlusion", type=float, default=0.0, help="fraction of frames with marker gaps")
+    s.add_argument("--truth", metavar="FILE", help="also write the true parameters as JSON")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_simulate)
+
+    s = sub.add_parser("identify", help="every joint a trial's samples admit (exact-case solvers)")
+    s.add_argument("model")
+    s.add_argument("trial")
+    s.add_argument("--joint", action="append", help="joint name (repeatable; default: all)")
+    s.add_argument("--frames", help="comma-separated frame indices (default: every fully visible frame)")
+    s.add_argument("--precision", type=int, default=None, help="decimal digits (mpmath) instead of float64")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_identify)
+
+    for verb in NOT_YET:
+        s = sub.add_parser(verb, help=f"{NOT_YET[verb]} (not available yet)")
+        s.add_argument("args", nargs="*")
+        s.add_argument("--json", action="store_true")
+        s.add_argument("--plots", default=None)
+        s.set_defaults(func=_not_yet(verb))
+    return p
+
+
+def main(argv=None) -> int:
+    """Run the CLI in-process; returns the exit code (tests call this)."""
+    parser = build_parser()
+    try:
+        a = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0) and 2
+    logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, stream=sys.stderr,
+                        format="identcheck: %(message)s")
+    try:
+        return a.func(a)
+    except InputError as exc:
+        print(f"identcheck {a.verb}: {exc}", file=sys.stderr)
+        return 2
+    except DegenerateError as exc:
+        print(f"identcheck {a.verb}: degenerate data: {exc}", file=sys.stderr)
+        return 1
+
+
+def run() -> None:
+    """Console-script entry point."""
+    sys.exit(main())

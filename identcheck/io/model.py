@@ -1,0 +1,523 @@
+"""Marker-plan model: segments, their markers and the joints that connect them (TOML).
+
+The model file is the one described in CONTRACT.md::
+
+    units = "mm"
+    [segments.pelvis]
+    markers = ["LASI", "RASI", "SACR"]
+    [segments.thigh_r]
+    markers = ["RGT", "RTHI", "RKNE"]
+    [joints.hip_r]
+    type = "spherical"
+    parent = "pelvis"
+    child = "thigh_r"
+
+Optional extensions, used by :mod:`identcheck.simulate` to make a synthetic subject
+deterministic (all coordinates in the file's ``units``, converted to mm on load):
+
+- ``[segments.NAME.positions]`` ``MARKER = [x, y, z]``: marker position in the segment frame;
+- ``segments.NAME.length_mm``: segment length in mm;
+- ``joints.NAME.axis = [x, y, z]``: hinge direction of a revolute joint, in the parent frame;
+- ``joints.NAME.centre_parent`` / ``centre_child``: joint centre (revolute: a point on the
+  hinge axis) in the parent / child segment frame.
+
+Every problem in a file is collected and reported at once in a single :class:`InputError`
+that names the file and the TOML key.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+from identcheck.errors import InputError
+
+JOINT_TYPES = ("revolute", "spherical")
+"""Joint types a model may declare."""
+
+MODEL_UNITS = {"mm": 1.0, "m": 1000.0}
+"""Allowed ``units`` values and their factor to millimetres."""
+
+TOP_KEYS = ("units", "segments", "joints")
+SEGMENT_KEYS = ("markers", "positions", "length_mm")
+JOINT_KEYS = ("type", "parent", "child", "axis", "centre_parent", "centre_child")
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A rigid body carrying markers.
+
+    Attributes
+    ----------
+    name : str
+    markers : tuple of str
+        Marker names in file order; may be empty.
+    positions : dict of str to tuple of 3 float, optional
+        Marker positions in the segment frame, in mm (only those the file gives).
+    length_mm : float, optional
+        Segment length in mm, if the file gives it.
+    """
+
+    name: str
+    markers: tuple[str, ...] = ()
+    positions: dict[str, Vec3] | None = None
+    length_mm: float | None = None
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint between a parent and a child segment.
+
+    Attributes
+    ----------
+    name : str
+    type : str
+        One of :data:`JOINT_TYPES`.
+    parent, child : str
+        Segment names.
+    axis : tuple of 3 float, optional
+        Unit hinge direction in the parent frame (revolute only), if the file gives it.
+    centre_parent, centre_child : tuple of 3 float, optional
+        Joint centre (revolute: a point on the hinge axis) in the parent / child frame, mm.
+    """
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    axis: Vec3 | None = None
+    centre_parent: Vec3 | None = None
+    centre_child: Vec3 | None = None
+
+
+@dataclass(frozen=True)
+class Model:
+    """A tree of segments joined by joints, with the markers each segment carries.
+
+    Build it with :meth:`from_toml` or :meth:`from_dict`; direct construction (for example
+    through ``dataclasses.replace``) checks the tree too.
+
+    Attributes
+    ----------
+    segments : dict of str to Segment
+    joints : dict of str to Joint
+    units : str
+        The ``units`` key of the file ("mm" or "m"); positions are stored in mm regardless.
+    source : str
+        Where the model came from, used in error messages.
+    root : str
+        The one segment that is no joint's child.
+    joint_order : tuple of str
+        Joint names, every parent's joint before its children's (breadth first from the root).
+    markers : tuple of str
+        Every marker name, segment by segment in file order.
+    """
+
+    segments: dict[str, Segment]
+    joints: dict[str, Joint] = field(default_factory=dict)
+    units: str = "mm"
+    source: str = "<dict>"
+    root: str = field(init=False)
+    joint_order: tuple[str, ...] = field(init=False)
+    markers: tuple[str, ...] = field(init=False)
+    _marker_segment: dict[str, str] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        problems = _check_parts(self.segments, self.joints) + _check_tree(self.segments, self.joints)
+        if problems:
+            raise InputError(problems, source=self.source)
+        root, order = _order(self.segments, self.joints)
+        owner = {m: s.name for s in self.segments.values() for m in s.markers}
+        object.__setattr__(self, "root", root)
+        object.__setattr__(self, "joint_order", order)
+        object.__setattr__(self, "markers", tuple(owner))
+        object.__setattr__(self, "_marker_segment", owner)
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_toml(cls, path) -> "Model":
+        """Load and check a model file.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            TOML model file (CONTRACT.md, "Model file").
+
+        Returns
+        -------
+        Model
+
+        Raises
+        ------
+        InputError
+            File missing or unreadable, TOML syntax error (with its line), or any model
+            problem (all listed at once, each naming its TOML key).
+
+        Examples
+        --------
+        >>> model = Model.from_toml("examples/leg.toml")   # doctest: +SKIP
+        >>> model.root, model.joint_order                  # doctest: +SKIP
+        ('pelvis', ('hip_r', 'knee_r', 'ankle_r'))
+        """
+        path = Path(path)
+        source = str(path)
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except FileNotFoundError:
+            raise InputError(["file not found"], source=source) from None
+        except IsADirectoryError:
+            raise InputError(["is a directory, expected a TOML model file"], source=source) from None
+        except UnicodeDecodeError as exc:
+            raise InputError([f"not UTF-8 text ({exc.reason} at byte {exc.start})"],
+                             source=source) from None
+        except OSError as exc:
+            raise InputError([f"cannot read file: {exc.strerror}"], source=source) from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError([f"TOML syntax error: {exc}"], source=source) from None
+        return cls.from_dict(data, source=source)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], source: str = "<dict>") -> "Model":
+        """Build a model from the dictionary a TOML model file parses to.
+
+        Parameters
+        ----------
+        d : mapping
+            ``{"units": ..., "segments": {...}, "joints": {...}}`` as in the TOML file.
+        source : str
+            Name used in error messages.
+
+        Returns
+        -------
+        Model
+
+        Raises
+        ------
+        InputError
+            Every problem found (missing keys, wrong types, unknown segments or joint types,
+            duplicate markers, cycles, several roots), at once.
+        """
+        problems: list[str] = []
+        if not isinstance(d, Mapping):
+            raise InputError([f"expected a table of model keys, got {type(d).__name__}"],
+                             source=source)
+        _unknown_keys(d, TOP_KEYS, "", problems)
+        units = d.get("units", "mm")
+        if not isinstance(units, str) or units not in MODEL_UNITS:
+            problems.append(f"units: {units!r} is not a known unit (allowed: "
+                            f"{', '.join(MODEL_UNITS)})")
+            units = "mm"
+        scale = MODEL_UNITS[units]
+        segments = _parse_segments(d.get("segments"), scale, problems)
+        joints, dropped = _parse_joints(d.get("joints", {}), segments, scale, problems)
+        problems += _check_tree(segments, joints, check_roots=not dropped)
+        if problems:
+            raise InputError(problems, source=source)
+        return cls(segments=segments, joints=joints, units=units, source=source)
+
+    # ------------------------------------------------------------------ queries
+    def marker_segment(self, name: str) -> str:
+        """Name of the segment carrying marker `name`.
+
+        Raises
+        ------
+        InputError
+            The model has no such marker.
+        """
+        try:
+            return self._marker_segment[name]
+        except KeyError:
+            raise InputError([_unknown("marker", name, self.markers)], source=self.source) from None
+
+    def parent_joint(self, segment: str) -> Joint | None:
+        """The joint whose child is `segment` (None for the root)."""
+        return next((j for j in self.joints.values() if j.child == segment), None)
+
+    def child_joints(self, segment: str) -> tuple[Joint, ...]:
+        """Joints whose parent is `segment`, in ``joint_order``."""
+        return tuple(self.joints[n] for n in self.joint_order if self.joints[n].parent == segment)
+
+    def joint_markers(self, joint: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """Markers on the parent and on the child segment of `joint` (the p and q of a case)."""
+        j = self.joints[joint]
+        return self.segments[j.parent].markers, self.segments[j.child].markers
+
+    def to_dict(self) -> dict:
+        """The TOML-shaped dictionary (coordinates in mm, ``units = "mm"``); ``from_dict`` inverts it."""
+        segs = {}
+        for s in self.segments.values():
+            entry: dict[str, Any] = {"markers": list(s.markers)}
+            if s.positions:
+                entry["positions"] = {m: list(p) for m, p in s.positions.items()}
+            if s.length_mm is not None:
+                entry["length_mm"] = s.length_mm
+            segs[s.name] = entry
+        joints = {}
+        for j in self.joints.values():
+            entry = {"type": j.type, "parent": j.parent, "child": j.child}
+            for key in ("axis", "centre_parent", "centre_child"):
+                if getattr(j, key) is not None:
+                    entry[key] = list(getattr(j, key))
+            joints[j.name] = entry
+        return {"units": "mm", "segments": segs, "joints": joints}
+
+
+# ---------------------------------------------------------------------- parsing helpers
+def _unknown(kind: str, name: str, known) -> str:
+    known = list(known)
+    close = difflib.get_close_matches(str(name), known, n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    listing = ", ".join(known) if known else "none"
+    return f"unknown {kind} {name!r} (known: {listing}){hint}"
+
+
+def _unknown_keys(table: Mapping, allowed, where: str, problems: list[str]) -> None:
+    for key in table:
+        if key not in allowed:
+            close = difflib.get_close_matches(key, allowed, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            problems.append(f"{where}{key}: unknown key (allowed: {', '.join(allowed)}){hint}")
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _vec3(value, key: str, problems: list[str], scale: float = 1.0) -> Vec3 | None:
+    if (isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value)):
+        return tuple(float(v) * scale for v in value)
+    problems.append(f"{key}: expected 3 finite numbers [x, y, z], got {value!r}")
+    return None
+
+
+def _parse_segments(raw, scale: float, problems: list[str]) -> dict[str, Segment]:
+    if raw is None:
+        problems.append("segments: missing; add at least one [segments.NAME] table")
+        return {}
+    if not isinstance(raw, Mapping):
+        problems.append(f"segments: expected a table of segments, got {type(raw).__name__}")
+        return {}
+    if not raw:
+        problems.append("segments: empty; add at least one [segments.NAME] table")
+    segments: dict[str, Segment] = {}
+    owner: dict[str, str] = {}
+    for name, table in raw.items():
+        key = f"segments.{name}"
+        if not isinstance(table, Mapping):
+            problems.append(f"{key}: expected a table, got {type(table).__name__}")
+            continue
+        _unknown_keys(table, SEGMENT_KEYS, key + ".", problems)
+        markers = table.get("markers")
+        if markers is None:
+            problems.append(f"{key}.markers: missing (use markers = [] for a segment without markers)")
+            markers = []
+        elif not (isinstance(markers, list) and all(isinstance(m, str) and m.strip() for m in markers)):
+            problems.append(f"{key}.markers: expected a list of non-empty marker names, got {markers!r}")
+            markers = [m for m in markers if isinstance(m, str) and m.strip()] if isinstance(markers, list) else []
+        kept = []
+        for m in markers:
+            if m in owner:
+                where = "twice in" if owner[m] == name else f"in both segments.{owner[m]}.markers and"
+                problems.append(f"duplicate marker {m!r}: listed {where} {key}.markers")
+                continue
+            owner[m] = name
+            kept.append(m)
+        positions = _parse_positions(table.get("positions"), key, kept, scale, problems)
+        length = table.get("length_mm")
+        if length is not None and not (_is_number(length) and length > 0):
+            problems.append(f"{key}.length_mm: expected a positive number of mm, got {length!r}")
+            length = None
+        segments[name] = Segment(name=name, markers=tuple(kept), positions=positions,
+                                 length_mm=None if length is None else float(length))
+    return segments
+
+
+def _parse_positions(raw, key: str, markers, scale: float, problems: list[str]):
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping):
+        problems.append(f"{key}.positions: expected a table MARKER = [x, y, z], got {type(raw).__name__}")
+        return None
+    out: dict[str, Vec3] = {}
+    for m, value in raw.items():
+        if m not in markers:
+            problems.append(f"{key}.positions.{m}: marker not listed in {key}.markers")
+            continue
+        p = _vec3(value, f"{key}.positions.{m}", problems, scale)
+        if p is not None:
+            out[m] = p
+    names = list(out)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            if math.dist(out[a], out[b]) < 1e-9:
+                problems.append(f"{key}.positions: markers {a!r} and {b!r} are at the same position")
+    return out or None
+
+
+def _parse_joints(raw, segments, scale: float, problems: list[str]) -> tuple[dict[str, Joint], bool]:
+    """Joints with valid ends, and whether some joint was left out for bad ends."""
+    if not isinstance(raw, Mapping):
+        problems.append(f"joints: expected a table of joints, got {type(raw).__name__}")
+        return {}, True
+    joints: dict[str, Joint] = {}
+    dropped = False
+    for name, table in raw.items():
+        key = f"joints.{name}"
+        if not isinstance(table, Mapping):
+            problems.append(f"{key}: expected a table, got {type(table).__name__}")
+            continue
+        _unknown_keys(table, JOINT_KEYS, key + ".", problems)
+        values = {k: table.get(k) for k in ("type", "parent", "child")}
+        for k, v in values.items():
+            if v is None:
+                problems.append(f"{key}.{k}: missing")
+            elif not isinstance(v, str):
+                problems.append(f"{key}.{k}: expected a string, got {v!r}")
+        jtype = values["type"]
+        if isinstance(jtype, str) and jtype not in JOINT_TYPES:
+            problems.append(f"{key}.type: unknown joint type {jtype!r} (allowed: {', '.join(JOINT_TYPES)})")
+        # a joint with good ends stays in the tree whatever else is wrong with it, so that
+        # its segments are not also reported as disconnected
+        ok = True
+        for k in ("parent", "child"):
+            v = values[k]
+            if not isinstance(v, str):
+                ok = False
+            elif segments and v not in segments:
+                problems.append(f"{key}.{k}: " + _unknown("segment", v, segments))
+                ok = False
+        if ok and values["parent"] == values["child"]:
+            problems.append(f"{key}: parent and child are the same segment {values['parent']!r}")
+            ok = False
+        axis = None
+        if "axis" in table:
+            axis = _vec3(table["axis"], f"{key}.axis", problems)
+            if axis is not None and math.hypot(*axis) < 1e-12:
+                problems.append(f"{key}.axis: must not be the zero vector")
+                axis = None
+            elif axis is not None:
+                n = math.hypot(*axis)
+                axis = tuple(a / n for a in axis)
+            if jtype == "spherical":
+                problems.append(f"{key}.axis: only a revolute joint has a hinge axis")
+        centres = {k: _vec3(table[k], f"{key}.{k}", problems, scale) if k in table else None
+                   for k in ("centre_parent", "centre_child")}
+        if ok:
+            joints[name] = Joint(name=name, type=jtype, parent=values["parent"],
+                                 child=values["child"], axis=axis, **centres)
+        dropped |= not ok
+    return joints, dropped
+
+
+# ---------------------------------------------------------------------- tree checks
+def _check_parts(segments: Mapping[str, Segment], joints: Mapping[str, Joint]) -> list[str]:
+    """Joint types and duplicate markers, for models built without :meth:`Model.from_dict`."""
+    problems = [f"joints.{j.name}.type: unknown joint type {j.type!r} (allowed: {', '.join(JOINT_TYPES)})"
+                for j in joints.values() if j.type not in JOINT_TYPES]
+    owner: dict[str, str] = {}
+    for s in segments.values():
+        for m in s.markers:
+            if m in owner:
+                problems.append(f"duplicate marker {m!r}: listed in both segments.{owner[m]}.markers "
+                                f"and segments.{s.name}.markers")
+            owner[m] = s.name
+    return problems
+
+
+def _check_tree(segments: Mapping[str, Segment], joints: Mapping[str, Joint],
+                check_roots: bool = True) -> list[str]:
+    """Problems with the joint tree: two parents, cycles, several roots.
+
+    `check_roots` is False when a joint was already rejected for its ends: its child would
+    look like a second root, which is a consequence, not a separate problem.
+    """
+    problems: list[str] = []
+    if not segments:
+        return problems  # already reported by the parser, or nothing to check
+    parent_of: dict[str, Joint] = {}
+    for j in joints.values():
+        if j.parent not in segments or j.child not in segments:
+            problems.append(f"joints.{j.name}: connects unknown segments {j.parent!r} -> {j.child!r}")
+            continue
+        if j.child in parent_of:
+            first = parent_of[j.child]
+            problems.append(
+                f"segment {j.child!r} has two parents: joints.{first.name} (parent {first.parent!r}) "
+                f"and joints.{j.name} (parent {j.parent!r}); joints must form a tree")
+            continue
+        parent_of[j.child] = j
+    cycles = _cycles(segments, [j for j in joints.values()
+                                if j.parent in segments and j.child in segments])
+    problems += cycles
+    roots = [s for s in segments if s not in parent_of]
+    if len(roots) > 1 and check_roots:
+        problems.append(
+            f"more than one root segment (segments that are no joint's child): {', '.join(roots)}; "
+            "the segments are not all connected by joints")
+    elif not roots and not cycles:  # pragma: no cover - implied by a cycle
+        problems.append("no root segment: every segment is some joint's child")
+    return problems
+
+
+def _cycles(segments, joints) -> list[str]:
+    """One problem per joint that closes a loop (joints taken as undirected edges)."""
+    adjacent: dict[str, list[tuple[str, str]]] = {s: [] for s in segments}
+    problems = []
+    for j in joints:
+        path = _path(adjacent, j.child, j.parent)
+        if path is None:
+            adjacent[j.parent].append((j.child, j.name))
+            adjacent[j.child].append((j.parent, j.name))
+            continue
+        segs, names = path
+        chain = " -> ".join(segs + [segs[0]])
+        names = ", ".join(f"joints.{n}" for n in names + [j.name])
+        problems.append(f"joints form a cycle: {chain} ({names}); joints must form a tree")
+    return problems
+
+
+def _path(adjacent, start: str, goal: str):
+    """Segments and joints on the path start -> goal (breadth first), or None."""
+    back = {start: None}
+    queue = [start]
+    while queue:
+        s = queue.pop(0)
+        if s == goal:
+            segs, names = [], []
+            while back[s] is not None:
+                segs.append(s)
+                s, name = back[s]
+                names.append(name)
+            return [start] + segs[::-1], names[::-1]
+        for other, name in adjacent[s]:
+            if other not in back:
+                back[other] = (s, name)
+                queue.append(other)
+    return None
+
+
+def _order(segments, joints) -> tuple[str, tuple[str, ...]]:
+    """Root and breadth-first joint order (file order among siblings)."""
+    children = {s: [] for s in segments}
+    for j in joints.values():
+        children[j.parent].append(j.name)
+    root = next(s for s in segments if all(j.child != s for j in joints.values()))
+    order: list[str] = []
+    queue = [root]
+    while queue:
+        s = queue.pop(0)
+        for name in children[s]:
+            order.append(name)
+            queue.append(joints[name].child)
+    return root, tuple(order)

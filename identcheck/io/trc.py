@@ -1,0 +1,315 @@
+"""OpenSim TRC marker files: read and write.
+
+Layout (tab-separated; line numbers from 1)::
+
+    1  PathFileType  4  (X/Y/Z)  name.trc
+    2  DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  ...
+    3  60.00     60.00       151        41          mm     60.00         ...
+    4  Frame#  Time  RASI  <tab><tab>  LASI  <tab><tab> ...
+    5  <tab><tab>  X1  Y1  Z1  X2  Y2  Z2 ...
+    6+ 1  0.000  x  y  z  x  y  z ...     (blank lines are skipped; empty cell = occluded)
+
+Coordinates are converted to millimetres. Frame# and Time columns are not used: the frame
+rate comes from ``DataRate`` (``CameraRate`` if absent).
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from identcheck.errors import InputError
+
+UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+"""Length units a trial file may use, with their factor to millimetres."""
+
+_MAX_LISTED = 10  # per kind of problem, so a broken file does not print thousands of lines
+
+
+class MarkerData(NamedTuple):
+    """What a reader returns (shared by the TRC and C3D readers).
+
+    Attributes
+    ----------
+    xyz : numpy.ndarray
+        Marker positions, shape (n_frames, n_markers, 3), float64, mm, NaN = occluded.
+    labels : tuple of str
+    rate_hz : float
+    """
+
+    xyz: np.ndarray
+    labels: tuple
+    rate_hz: float
+
+
+def read_bytes(path: Path) -> bytes:
+    """File contents, or an :class:`InputError` naming the file (missing, directory, ...)."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(["file not found"], source=str(path)) from None
+    except IsADirectoryError:
+        raise InputError(["is a directory, expected a marker file"], source=str(path)) from None
+    except OSError as exc:
+        raise InputError([f"cannot read file: {exc.strerror or exc}"], source=str(path)) from None
+
+
+def unit_factor(units: str, where: str, problems: list[str]) -> float:
+    """Factor from `units` to mm; appends a problem (naming `where`) if unknown."""
+    key = str(units).strip().lower()
+    if key in UNITS_TO_MM:
+        return UNITS_TO_MM[key]
+    problems.append(f"{where}: unknown units {units!r} (allowed: {', '.join(UNITS_TO_MM)})")
+    return 1.0
+
+
+def duplicates(labels) -> dict[str, list[int]]:
+    """Labels that occur more than once, with the 0-based positions where they occur."""
+    where: dict[str, list[int]] = {}
+    for i, lab in enumerate(labels):
+        where.setdefault(lab, []).append(i)
+    return {lab: idx for lab, idx in where.items() if len(idx) > 1}
+
+
+def _capped(items: list[str], what: str) -> list[str]:
+    if len(items) <= _MAX_LISTED:
+        return items
+    return items[:_MAX_LISTED] + [f"... and {len(items) - _MAX_LISTED} more {what}"]
+
+
+def _cells(line: str) -> list[str]:
+    """Tab-separated cells, stripped, without trailing empty cells."""
+    cells = [c.strip() for c in line.split("\t")]
+    while cells and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+# ---------------------------------------------------------------------- reading
+def read_trc(path) -> MarkerData:
+    """Read an OpenSim TRC file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    MarkerData
+        ``xyz`` shape (n_frames, n_markers, 3) in mm (converted from the file's ``Units``),
+        NaN where a cell is empty; ``labels`` from line 4; ``rate_hz`` from ``DataRate``.
+
+    Raises
+    ------
+    InputError
+        Missing or empty file, incomplete header, unknown units, missing / misplaced /
+        duplicated marker names, rows with the wrong number of columns, non-numeric cells
+        (naming line, column and marker), fewer data rows than ``NumFrames`` says.
+        Every problem is listed at once.
+
+    Warns
+    -----
+    UserWarning
+        More data rows than ``NumFrames``, ``NumMarkers`` disagreeing with the names, or a
+        sample with only some of its X/Y/Z cells filled (the sample is treated as occluded).
+    """
+    path = Path(path)
+    src = str(path)
+    raw = read_bytes(path)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    if not text.strip():
+        raise InputError(["empty file"], source=src)
+    if "\x00" in text[:4096]:
+        raise InputError(["binary content: not a text TRC file (a C3D file needs the .c3d extension)"],
+                         source=src)
+    lines = text.splitlines()
+    if len(lines) < 5:
+        raise InputError([f"truncated header: only {len(lines)} line(s); a TRC file has 5 header "
+                          "lines (PathFileType, keys, values, marker names, X/Y/Z) before the data"],
+                         source=src)
+    problems: list[str] = []
+    rate_hz, factor, n_frames_hdr, n_markers_hdr = _parse_header(lines[1], lines[2], problems)
+    labels = _parse_names(lines[3], problems)
+    if n_markers_hdr is not None and labels and n_markers_hdr != len(labels):
+        warnings.warn(f"{src}: line 3 says NumMarkers = {n_markers_hdr} but line 4 names "
+                      f"{len(labels)} markers; using the names", UserWarning, stacklevel=3)
+    width = 2 + 3 * len(labels)
+    rows, linenos = [], []
+    bad_width = []
+    for i in range(5, len(lines)):
+        if not lines[i].strip():
+            continue
+        cells = [c.strip() for c in lines[i].split("\t")]
+        if len(cells) > width and not any(cells[width:]):
+            cells = cells[:width]
+        if labels and len(cells) != width:
+            n_cols = len(_cells(lines[i]))
+            bad_width.append(f"line {i + 1}: {n_cols} columns, expected {width} (Frame#, Time and "
+                             f"X/Y/Z for {len(labels)} markers)")
+            continue
+        rows.append(cells)
+        linenos.append(i + 1)
+    problems += _capped(bad_width, "rows with the wrong number of columns")
+    if not rows and not bad_width:
+        problems.append("no data rows after the header (data start on line 6)")
+    if n_frames_hdr is not None and rows and not bad_width:
+        if len(rows) < n_frames_hdr:
+            problems.append(f"line 3 says NumFrames = {n_frames_hdr} but the file has only {len(rows)} "
+                            f"data rows (lines {linenos[0]}-{linenos[-1]}); the file looks truncated")
+        elif len(rows) > n_frames_hdr:
+            warnings.warn(f"{src}: line 3 says NumFrames = {n_frames_hdr} but the file has {len(rows)} "
+                          "data rows; reading all of them", UserWarning, stacklevel=3)
+    if problems:
+        raise InputError(problems, source=src)
+    values = _parse_numbers(np.array(rows, dtype=str)[:, 2:], linenos, labels, problems)
+    if problems:
+        raise InputError(problems, source=src)
+    xyz = values.reshape(len(rows), len(labels), 3)
+    partial = np.isnan(xyz).any(axis=2) & ~np.isnan(xyz).all(axis=2)
+    if partial.any():
+        f, m = np.argwhere(partial)[0]
+        warnings.warn(f"{src}: {int(partial.sum())} sample(s) have only some of X/Y/Z filled (first: "
+                      f"line {linenos[f]}, marker {labels[m]!r}); treating them as occluded",
+                      UserWarning, stacklevel=3)
+        xyz[partial] = np.nan
+    return MarkerData(xyz * factor, tuple(labels), rate_hz)
+
+
+def _parse_header(keys_line: str, values_line: str, problems: list[str]):
+    keys, values = _cells(keys_line), _cells(values_line)
+    if len(values) != len(keys):
+        problems.append(f"line 3: {len(values)} values for the {len(keys)} keys of line 2")
+    header = dict(zip(keys, values))
+    if "DataRate" not in header and "Units" not in header:
+        problems.append("line 2: no DataRate or Units key; is this a TRC file? (line 2 must hold "
+                        "DataRate, CameraRate, NumFrames, NumMarkers, Units, ...)")
+        return 1.0, 1.0, None, None
+    rate_key = "DataRate" if "DataRate" in header else "CameraRate"
+    rate_hz = 1.0
+    if rate_key not in header:
+        problems.append("line 2: missing key DataRate (the frame rate in Hz)")
+    else:
+        try:
+            rate_hz = float(header[rate_key])
+            if not (math.isfinite(rate_hz) and rate_hz > 0):
+                raise ValueError
+        except ValueError:
+            problems.append(f"line 3: {rate_key} = {header[rate_key]!r} is not a positive number of Hz")
+            rate_hz = 1.0
+    if "Units" not in header:
+        problems.append("line 2: missing key Units (mm or m)")
+        factor = 1.0
+    else:
+        factor = unit_factor(header["Units"], "line 3: Units", problems)
+    counts = []
+    for key in ("NumFrames", "NumMarkers"):
+        value = header.get(key)
+        if value is None:
+            counts.append(None)
+            continue
+        try:
+            counts.append(int(value))
+        except ValueError:
+            problems.append(f"line 3: {key} = {value!r} is not a whole number")
+            counts.append(None)
+    return rate_hz, factor, counts[0], counts[1]
+
+
+def _parse_names(line: str, problems: list[str]) -> list[str]:
+    cells = _cells(line)
+    if len(cells) < 3:
+        problems.append("line 4: no marker names (expected Frame#, Time, then one name per X/Y/Z triple)")
+        return []
+    region = cells[2:]
+    n = (len(region) + 2) // 3
+    labels = []
+    for k in range(n):
+        name = region[3 * k]
+        col = 3 + 3 * k  # 1-based column of this marker's name
+        if not name:
+            problems.append(f"line 4, column {col}: missing marker name (columns {col}-{col + 2})")
+        for off in (1, 2):
+            if 3 * k + off < len(region) and region[3 * k + off]:
+                problems.append(f"line 4, column {col + off}: {region[3 * k + off]!r} is not in a "
+                                "marker-name column (names go in every third column from column 3)")
+        labels.append(name or f"<column {col}>")
+    for lab, idx in duplicates(labels).items():
+        cols = " and ".join(str(3 + 3 * i) for i in idx)
+        problems.append(f"line 4: duplicate marker label {lab!r} (columns {cols})")
+    return labels
+
+
+def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> np.ndarray:
+    """Cells (strings, shape (n_rows, 3 n_markers)) to float64, '' -> NaN; locate bad cells."""
+    cells = np.where(cells == "", "nan", cells)
+    try:
+        values = cells.astype(np.float64)
+    except ValueError:
+        values = None
+    if values is not None:
+        bad = np.isinf(values)
+    else:
+        values = np.full(cells.shape, np.nan)
+        bad = np.zeros(cells.shape, bool)
+        for (r, c), s in np.ndenumerate(cells):
+            try:
+                values[r, c] = float(s)
+            except ValueError:
+                bad[r, c] = True
+        bad |= np.isinf(values)
+    found = []
+    for r, c in np.argwhere(bad):
+        found.append(f"line {linenos[r]}, column {c + 3} (marker {labels[c // 3]!r} {'XYZ'[c % 3]}): "
+                     f"{str(cells[r, c])!r} is not a finite number")
+    problems += _capped(found, "non-numeric cells")
+    return values
+
+
+# ---------------------------------------------------------------------- writing
+def write_trc(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
+    """Write marker trajectories as an OpenSim TRC file in millimetres.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    xyz : array_like
+        shape (n_frames, n_markers, 3), mm; NaN is written as an empty cell.
+    labels : sequence of str
+        Marker names (no tabs or line breaks).
+    rate_hz : float
+
+    Raises
+    ------
+    InputError
+        A label cannot be written in a TRC header.
+    """
+    path = Path(path)
+    xyz = np.asarray(xyz, dtype=np.float64)
+    n_frames, n_markers = xyz.shape[:2]
+    bad = [lab for lab in labels if not lab or any(ch in lab for ch in "\t\r\n")]
+    if bad:
+        raise InputError([f"marker label {lab!r} cannot be written to a TRC file (empty, or has a "
+                          "tab or line break)" for lab in bad], source=str(path))
+    rate = f"{rate_hz:.6g}"
+    head = [
+        f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
+        "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+        f"{rate}\t{rate}\t{n_frames}\t{n_markers}\tmm\t{rate}\t1\t{n_frames}",
+        "Frame#\tTime\t" + "".join(f"{lab}\t\t\t" for lab in labels).rstrip("\t") + "\t\t",
+        "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
+        "",
+    ]
+    flat = xyz.reshape(n_frames, 3 * n_markers)
+    cells = np.char.mod("%.8f", flat)
+    cells[np.isnan(flat)] = ""
+    frames = np.char.mod("%d", np.arange(1, n_frames + 1))
+    times = np.char.mod("%.6f", np.arange(n_frames) / rate_hz)
+    body = ["\t".join((f, t, *row)) for f, t, row in zip(frames, times, cells)]
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write("\n".join(head + body) + "\n")

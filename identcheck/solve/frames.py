@@ -1,0 +1,39 @@
+"""The frame F of two parent markers: A1 at the origin, A2 on +z (Pham et al., section II-A)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import DegenerateError
+
+
+def pair_frame(a1, a2, points):
+    """Coordinates of ``points`` in the frame of the parent markers A1, A2, frame by frame.
+
+    The roll about A1A2 is arbitrary (it is the per-sample θ of the derivation); x is taken
+    from the world axis least aligned with A1A2 so the frame is well defined.
+
+    Parameters
+    ----------
+    a1, a2 : array, shape (..., 3)
+    points : array, shape (..., 3)
+
+    Returns
+    -------
+    local : array, shape (..., 3)
+    h : array, shape (...)
+        |A1A2| per frame (A2 sits at (0, 0, h)).
+    """
+    a1, a2, points = (np.asarray(v, dtype=float) for v in (a1, a2, points))
+    e = a2 - a1
+    h = np.linalg.norm(e, axis=-1)
+    if np.any(h <= 1e-12 * max(1.0, float(np.nanmax(np.abs(a1))))):
+        frames = np.flatnonzero(np.ravel(h <= 1e-12)).tolist()
+        raise DegenerateError(f"A1 and A2 coincide (frames {frames}): their axis is undefined")
+    ez = e / h[..., None]
+    ref = np.eye(3)[np.argmin(np.abs(ez), axis=-1)]
+    ex = ref - np.sum(ref * ez, axis=-1, keepdims=True) * ez
+    ex /= np.linalg.norm(ex, axis=-1, keepdims=True)
+    ey = np.cross(ez, ex)
+    rel = points - a1
+    local = np.stack([np.sum(rel * ex, -1), np.sum(rel * ey, -1), np.sum(rel * ez, -1)], axis=-1)
+    return local, h

@@ -1,0 +1,234 @@
+"""Trial: recorded (or simulated) marker trajectories in one stored form.
+
+Inside a :class:`Trial` positions are float64 millimetres, shape (n_frames, n_markers, 3),
+with NaN for occluded samples, whatever the file said. Build one with a ``from_*`` method and
+read it with ``as_array`` / ``marker`` / ``select``; it is never modified in place.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from identcheck.errors import InputError
+from identcheck.io.c3d import read_c3d, write_c3d
+from identcheck.io.trc import UNITS_TO_MM, duplicates, read_trc, write_trc
+
+FORMATS = (".trc", ".c3d")
+"""File extensions :meth:`Trial.from_file` and :meth:`Trial.to_file` understand."""
+
+
+def _format(path: Path) -> str:
+    ext = path.suffix.lower()
+    if ext not in FORMATS:
+        raise InputError([f"unknown trial file extension {path.suffix or '(none)'!r} "
+                          f"(expected one of {', '.join(FORMATS)}, any case)"], source=str(path))
+    return ext
+
+
+def _float_array(xyz, source: str, copy: bool = False) -> np.ndarray:
+    try:
+        return np.array(xyz, dtype=np.float64) if copy else np.asarray(xyz, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError([f"xyz is not a numeric array ({exc})"], source=source) from None
+
+
+class Trial:
+    """Marker trajectories: shape (n_frames, n_markers, 3) float64 mm, NaN = occluded.
+
+    Use the ``from_*`` constructors; ``Trial(...)`` is the same as :meth:`from_array` with
+    ``units="mm"``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = Trial.from_array(np.zeros((5, 2, 3)), ["A", "B"], rate_hz=100.0, units="m")
+    >>> t.n_frames, t.n_markers, t.marker("B").shape
+    (5, 2, (5, 3))
+    """
+
+    __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source")
+
+    def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>"):
+        problems: list[str] = []
+        xyz = _float_array(xyz, source, copy=True)  # copy: the trial owns its data
+        if xyz.ndim != 3 or xyz.shape[2] != 3:
+            problems.append(f"expected xyz of shape (n_frames, n_markers, 3), got {xyz.shape}")
+        elif xyz.shape[0] == 0:
+            problems.append("no frames (n_frames = 0)")
+        labels = tuple(labels)
+        bad = [lab for lab in labels if not isinstance(lab, str) or not lab.strip()]
+        if bad:
+            problems.append(f"marker labels must be non-empty strings, got {bad!r}")
+        if xyz.ndim == 3 and len(labels) != xyz.shape[1]:
+            problems.append(f"{len(labels)} labels for {xyz.shape[1]} markers")
+        for lab, idx in duplicates(labels).items():
+            problems.append(f"duplicate marker label {lab!r} (markers {', '.join(map(str, idx))})")
+        try:
+            rate_hz = float(rate_hz)
+        except (TypeError, ValueError):
+            rate_hz = float("nan")
+        if not (math.isfinite(rate_hz) and rate_hz > 0):
+            problems.append(f"rate_hz must be a positive number of Hz, got {rate_hz!r}")
+        if not problems and np.isinf(xyz).any():
+            f, m, _ = np.argwhere(np.isinf(xyz))[0]
+            problems.append(f"infinite coordinate (first at frame {f}, marker {labels[m]!r}); "
+                            "use NaN for occluded samples")
+        if problems:
+            raise InputError(problems, source=source)
+        xyz.flags.writeable = False
+        self._xyz = xyz
+        self._labels = labels
+        self._index = {lab: i for i, lab in enumerate(labels)}
+        self._rate_hz = rate_hz
+        self._source = source
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_array(cls, xyz, labels: Sequence[str], rate_hz: float, units: str = "mm",
+                   source: str = "<array>") -> "Trial":
+        """Trial from an array.
+
+        Parameters
+        ----------
+        xyz : array_like
+            Marker positions, shape (n_frames, n_markers, 3), in `units`; NaN = occluded.
+        labels : sequence of str
+            One unique name per marker.
+        rate_hz : float
+            Frame rate in Hz.
+        units : {"mm", "cm", "m"}
+            Units of `xyz`; stored as mm.
+        source : str
+            Name used in error messages.
+
+        Raises
+        ------
+        InputError
+            Wrong shape, label count or duplicates, bad rate, unknown units, infinite values.
+        """
+        key = str(units).strip().lower()
+        if key not in UNITS_TO_MM:
+            raise InputError([f"unknown units {units!r} (allowed: {', '.join(UNITS_TO_MM)})"],
+                             source=source)
+        return cls(_float_array(xyz, source) * UNITS_TO_MM[key], labels, rate_hz, source)
+
+    @classmethod
+    def from_trc(cls, path) -> "Trial":
+        """Read an OpenSim TRC file (see :func:`identcheck.io.trc.read_trc`)."""
+        data = read_trc(path)
+        return cls(data.xyz, data.labels, data.rate_hz, source=str(path))
+
+    @classmethod
+    def from_c3d(cls, path) -> "Trial":
+        """Read the points of a C3D file (see :func:`identcheck.io.c3d.read_c3d`)."""
+        data = read_c3d(path)
+        return cls(data.xyz, data.labels, data.rate_hz, source=str(path))
+
+    @classmethod
+    def from_file(cls, path) -> "Trial":
+        """Read a ``.trc`` or ``.c3d`` file, chosen by extension (any case).
+
+        Raises
+        ------
+        InputError
+            Unknown extension, or any problem the reader finds.
+        """
+        path = Path(path)
+        return cls.from_trc(path) if _format(path) == ".trc" else cls.from_c3d(path)
+
+    # ------------------------------------------------------------------ views
+    @property
+    def xyz(self) -> np.ndarray:
+        """Read-only positions, shape (n_frames, n_markers, 3), mm (use :meth:`as_array` to edit)."""
+        return self._xyz
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return self._labels
+
+    @property
+    def rate_hz(self) -> float:
+        return self._rate_hz
+
+    @property
+    def source(self) -> str:
+        """File (or other origin) the trial came from, for messages."""
+        return self._source
+
+    @property
+    def n_frames(self) -> int:
+        return self._xyz.shape[0]
+
+    @property
+    def n_markers(self) -> int:
+        return self._xyz.shape[1]
+
+    @property
+    def times(self) -> np.ndarray:
+        """Frame times in s from the first frame, shape (n_frames,)."""
+        return np.arange(self.n_frames) / self._rate_hz
+
+    @property
+    def gaps(self) -> np.ndarray:
+        """True where a marker is occluded, shape (n_frames, n_markers)."""
+        return np.isnan(self._xyz).any(axis=2)
+
+    def as_array(self) -> np.ndarray:
+        """A writable copy of the positions, shape (n_frames, n_markers, 3), mm."""
+        return self._xyz.copy()
+
+    def index(self, name: str) -> int:
+        """Column of marker `name`; InputError if the trial has no such marker."""
+        try:
+            return self._index[name]
+        except KeyError:
+            raise InputError([f"no marker {name!r} in the trial (it has {self.n_markers}: "
+                              f"{', '.join(self._labels)})"], source=self._source) from None
+
+    def marker(self, name: str) -> np.ndarray:
+        """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
+        return self._xyz[:, self.index(name)].copy()
+
+    def select(self, labels: Sequence[str]) -> "Trial":
+        """Trial with only `labels`, in that order.
+
+        Raises
+        ------
+        InputError
+            Names every requested marker the trial lacks, at once.
+        """
+        labels = tuple(labels)
+        missing = [lab for lab in labels if lab not in self._index]
+        if missing:
+            raise InputError([f"marker(s) missing from the trial: {', '.join(missing)}"],
+                             source=self._source)
+        cols = [self._index[lab] for lab in labels]
+        return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source)
+
+    def replace(self, xyz=None, labels=None, rate_hz=None, source=None) -> "Trial":
+        """A new trial with some parts replaced (positions in mm); the rest is shared."""
+        return Trial(self._xyz if xyz is None else xyz,
+                     self._labels if labels is None else labels,
+                     self._rate_hz if rate_hz is None else rate_hz,
+                     self._source if source is None else source)
+
+    # ------------------------------------------------------------------ writers
+    def to_trc(self, path) -> None:
+        """Write an OpenSim TRC file in mm."""
+        write_trc(path, self._xyz, self._labels, self._rate_hz)
+
+    def to_c3d(self, path) -> None:
+        """Write a C3D file in mm (32-bit float coordinates)."""
+        write_c3d(path, self._xyz, self._labels, self._rate_hz)
+
+    def to_file(self, path) -> None:
+        """Write ``.trc`` or ``.c3d`` by extension (any case)."""
+        path = Path(path)
+        self.to_trc(path) if _format(path) == ".trc" else self.to_c3d(path)
+
+    def __repr__(self) -> str:
+        return (f"Trial(n_frames={self.n_frames}, n_markers={self.n_markers}, "
+                f"rate_hz={self._rate_hz:g}, source={self._source!r})")
