@@ -60,14 +60,21 @@ def draw_parameters(cs: Case, rng: random.Random) -> dict:
 
 
 def draw_angles(cs: Case, rng: random.Random, n: int) -> list:
-    """n samples of per-sample half-angle tangents, pairwise distinct."""
-    seen, out = set(), []
-    while len(out) < n:
-        ts = tuple(sp.Rational(rng.randint(-40, 40), rng.randint(1, 13)) for _ in cs.variables)
-        if ts not in seen:
-            seen.add(ts)
-            out.append(ts)
-    return out
+    """n samples of per-sample half-angle tangents, distinct in *every* variable.
+
+    Distinct tuples are not enough: a row of M may depend on some variables only (for
+    revolute (2,1) on β alone, since θ turns the sample about the z axis and M sees only
+    R² and z), so a repeated value of one variable can repeat a row.
+    """
+    columns = []
+    for _ in cs.variables:
+        seen = []
+        while len(seen) < n:
+            t = sp.Rational(rng.randint(-40, 40), rng.randint(1, 13))
+            if t not in seen:
+                seen.append(t)
+        columns.append(seen)
+    return [tuple(col[i] for col in columns) for i in range(n)]
 
 
 def _substitution(cs: Case, params: dict, ts) -> dict:
