@@ -312,8 +312,14 @@ def _identify_mp(xyz, precision: int, rel_tol=None) -> Identification:
                 continue
             Qk = mpmath.re(Qk)
             for sgn in (1, -1):
-                r2, S, l, rho2, l0, rho20 = g["back"]([Qk], Zs, [mpmath.mpf(sgn)]) if abs(1 - g["back"]([Qk], Zs, [1])[1]) > eps else \
-                    _cos0(g, Qk, Zs, sgn)
+                try:
+                    vals = g["back"]([Qk], Zs, [mpmath.mpf(sgn)]) if abs(1 - g["back"]([Qk], Zs, [1])[1]) > eps else \
+                        _cos0(g, Qk, Zs, sgn)
+                except ZeroDivisionError:
+                    continue
+                if any(isinstance(v, mpmath.mpc) and abs(mpmath.im(v)) > eps * (1 + abs(v)) for v in vals):
+                    continue  # a complex constant: no real joint for this root and sign
+                r2, S, l, rho2, l0, rho20 = (mpmath.re(v) for v in vals)
                 if not (r2 > eps and eps < S <= 1 + eps and rho2 > -eps) or not mpmath.isfinite(l):
                     continue
                 S = min(S, mpmath.mpf(1))
