@@ -48,7 +48,6 @@ def test_errata_ids_are_documented():
 
 def test_a_wrong_printed_coefficient_is_caught(monkeypatch):
     """If the print had a typo in (13), the derivation must disagree (exit 1 from derive)."""
-    get.__globals__  # noqa: B018 - derivations are cached; rebuild with a patched print
     from identcheck.derive import revolute
 
     monkeypatch.setattr(printed, "CUBIC", printed.CUBIC + sp.Symbol("Q") * 2)

@@ -63,8 +63,9 @@ def linear_form(expr, monomial_vars, trig_pairs=()):
         mono = sp.Mul(*[v**e for v, e in zip(monomial_vars, monom)])
         coeff = sp.factor_terms(sp.together(coeff))
         num, den = sp.fraction(coeff)
-        if reduce_circle(num, trig_pairs).is_number:
-            K -= (reduce_circle(num, trig_pairs) / den) * mono
+        reduced = reduce_circle(num, trig_pairs)
+        if reduced.is_number:
+            K -= (reduced / den) * mono
             continue
         content, prim = sp.Poly(num, *sorted(num.free_symbols, key=sp.default_sort_key)).primitive()
         lead = sp.Poly(prim, *sorted(prim.free_symbols, key=sp.default_sort_key)).LC()

@@ -38,12 +38,6 @@ def dh_matrix() -> sp.Matrix:
     ])
 
 
-def _witness(expr, point) -> dict:
-    """A point where a (non-zero) difference is evaluated, for the erratum's evidence."""
-    return {"point": {str(k): str(v) for k, v in point.items()},
-            "difference": str(sp.nsimplify(sp.sympify(expr).subs(point)))}
-
-
 @lru_cache(maxsize=1)
 def derive() -> Derivation:
     """Run the whole derivation once (cached); see the module docstring."""
