@@ -141,6 +141,8 @@ class RankCertificate:
     statement: str
     format: str = FORMAT
     matrix: list = field(default_factory=list)
+    min_samples: int | None = None
+    expansion: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -185,6 +187,7 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
     )
     names = [f"Y{i}" for i in range(1, n_unknowns + 1)]
     return RankCertificate(
+        min_samples=n_unknowns if full else None, expansion=_expansion(dv, rk if full else None),
         joint=cs.joint, p=cs.p, q=cs.q, unknowns=names,
         unknown_exprs=[str(e) for e in dv.result("Y")], rank=rk, full_rank=full, exact=True,
         deterministic=full, seed=seed, n_samples=n,
@@ -193,6 +196,30 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
         pivot_rows=prow, pivot_columns=pcol, minor_determinant=str(det), numeric_rank=numeric_rank,
         statement=statement, matrix=[[_q(v) for v in row] for row in rows],
     )
+
+
+def _expansion(dv, rank_reduced) -> dict:
+    """When the derivation's raw expansion had dependent columns, how the unknowns were reduced.
+
+    The rank of the raw columns on the output set is at most (#columns − #relations), the
+    relations being proved identities, and at least the certified rank of the reduced system,
+    whose columns are a subset: when the two bounds meet, the rank is exact.
+    """
+    exp = dv.results.get("expansion")
+    if not exp:
+        return {}
+    upper = len(exp["unknowns"]) - len(exp["relations"])
+    return {
+        "unknowns": [str(u) for u in exp["unknowns"]],
+        "relations": [[str(c) for c in rel] for rel in exp["relations"]],
+        "relation_meaning": "sum_k c_k * M_k = 0 on the output set, L2 = |B1 - B2|^2",
+        "rank_upper_bound": upper,
+        "rank": upper if rank_reduced == upper else None,
+        "statement": (f"{len(exp['unknowns'])} unknown monomials; {len(exp['relations'])} proved linear "
+                      f"relation(s) among their columns on the output set give rank <= {upper}; the reduced "
+                      f"system's certified rank {rank_reduced} gives rank >= {rank_reduced}"
+                      + (": the rank is exactly " + str(upper) if rank_reduced == upper else "")),
+    }
 
 
 @dataclass

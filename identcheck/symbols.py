@@ -17,15 +17,28 @@ from .errors import InputError
 x, y, z = sp.symbols("x y z", real=True)
 R2 = sp.Symbol("R2", nonnegative=True)  # R² = x² + y² + z²
 
+# coordinates of two child markers B1, B2 in the frame F (spherical (2,2), Pham section IV-C)
+x1, y1, z1, x2, y2, z2 = sp.symbols("x1 y1 z1 x2 y2 z2", real=True)
+
+# joint centre fixed in the frame of three parent markers (spherical (3,1), section IV-A)
+x_J, y_J, z_J = sp.symbols("x_J y_J z_J", real=True)
+
 # Denavit–Hartenberg constants of a revolute joint seen from two parent markers (Pham Fig. 2)
 d, l = sp.symbols("d l", real=True)
 r, rho = sp.symbols("r rho", positive=True)
+rho1, rho2 = sp.symbols("rho1 rho2", positive=True)  # distances of B1, B2 to a spherical joint's centre
 
 # angles as (cos, sin) symbol pairs; the angle symbols themselves are for display only
 alpha, theta, beta = sp.symbols("alpha theta beta", real=True)
 c_alpha, s_alpha = sp.symbols("c_alpha s_alpha", real=True)
 c_theta, s_theta = sp.symbols("c_theta s_theta", real=True)
 c_beta, s_beta = sp.symbols("c_beta s_beta", real=True)
+# spherical joints: the child's orientation (phi, psi, xi) and the constant angle gamma = ∠B1 J B2
+phi, psi, xi, gamma = sp.symbols("phi psi xi gamma", real=True)
+c_phi, s_phi = sp.symbols("c_phi s_phi", real=True)
+c_psi, s_psi = sp.symbols("c_psi s_psi", real=True)
+c_xi, s_xi = sp.symbols("c_xi s_xi", real=True)
+c_gamma, s_gamma = sp.symbols("c_gamma s_gamma", real=True)
 
 # per-sample auxiliaries of eq. (4)-(5): A = x sinθ - y cosθ, B = x cosθ + y sinθ
 A, B = sp.symbols("A B", real=True)
@@ -54,6 +67,10 @@ class Angle:
 ALPHA = Angle("alpha", alpha, c_alpha, s_alpha)
 THETA = Angle("theta", theta, c_theta, s_theta)
 BETA = Angle("beta", beta, c_beta, s_beta)
+PHI = Angle("phi", phi, c_phi, s_phi)
+PSI = Angle("psi", psi, c_psi, s_psi)
+XI = Angle("xi", xi, c_xi, s_xi)
+GAMMA = Angle("gamma", gamma, c_gamma, s_gamma)
 
 
 @dataclass(frozen=True)
@@ -105,6 +122,23 @@ _CASES = {
         constant_angles=(ALPHA,),
         variables=(THETA, BETA),
         sample=(x, y, z),
+    ),
+    # the sphere of radius rho about a centre fixed among three parent markers
+    ("spherical", 3, 1): Case(
+        joint="spherical", p=3, q=1,
+        constants=(x_J, y_J, z_J, rho),
+        constant_angles=(),
+        variables=(PHI, PSI),
+        sample=(x, y, z),
+    ),
+    # centre on the circle (r cos θ, r sin θ, d) about A1A2; the rigid triangle J B1 B2
+    # (sides rho1, rho2, angle gamma at J) turns about J by the Euler angles (phi, psi, xi)
+    ("spherical", 2, 2): Case(
+        joint="spherical", p=2, q=2,
+        constants=(d, r, rho1, rho2),
+        constant_angles=(GAMMA,),
+        variables=(THETA, PHI, PSI, XI),
+        sample=(x1, y1, z1, x2, y2, z2),
     ),
 }
 

@@ -3,6 +3,8 @@ from .base import Check, Derivation, Step
 
 DERIVATIONS = {
     "revolute21": "identcheck.derive.revolute",
+    "spherical31": "identcheck.derive.spherical31",
+    "spherical22": "identcheck.derive.spherical22",
 }
 
 
@@ -13,7 +15,8 @@ def get(name: str) -> Derivation:
     return importlib.import_module(DERIVATIONS[name]).derive()
 
 
-CASE_DERIVATION = {"revolute(2,1)": "revolute21"}
+CASE_DERIVATION = {"revolute(2,1)": "revolute21", "spherical(3,1)": "spherical31",
+                   "spherical(2,2)": "spherical22"}
 
 
 def for_case(case) -> Derivation:

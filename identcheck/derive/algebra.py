@@ -74,3 +74,48 @@ def linear_form(expr, monomial_vars, trig_pairs=()):
         M.append(content * mono)
         Y.append(prim.as_expr() / den)
     return M, Y, sp.expand(K)
+
+
+def linear_form_in_parameters(expr, parameter_vars):
+    """Split a polynomial in ``parameter_vars`` as Σ_k M_k(sample)·Y_k + (−K), Y_k its monomials.
+
+    The counterpart of :func:`linear_form` when the unknowns are products of parameters (Pham
+    eq. 16): every parameter monomial that occurs becomes an unknown, its coefficient (a
+    polynomial in the sample coordinates) the entry of M, and the parameter-free part −K.
+    Unknowns come in decreasing degree.
+    """
+    poly = sp.Poly(sp.expand(expr), *parameter_vars)
+    M, Y, K = [], [], sp.Integer(0)
+    for monom, coeff in poly.terms():
+        mono = sp.Mul(*[v**e for v, e in zip(parameter_vars, monom)])
+        if mono == 1:
+            K = -coeff.as_expr()
+            continue
+        M.append(sp.factor(coeff.as_expr()))
+        Y.append(mono)
+    return M, Y, sp.expand(K)
+
+
+def polynomial_relations(columns, multipliers, variables):
+    """All relations Σ_k (Σ_j a_jk·m_j)·M_k ≡ 0 with rational a_jk: a basis of the solutions.
+
+    ``columns`` are polynomials M_k in ``variables``. ``multipliers`` are pairs (m_j, name_j):
+    a polynomial (1, or e.g. a squared distance that is constant on the output set) and the
+    symbol that stands for its constant value. Each relation is returned as the list over k of
+    Σ_j a_jk·name_j: a linear dependency among the columns wherever m_j takes the value name_j.
+    """
+    terms = [(j, k, sp.Poly(sp.expand(m * c), *variables)) for j, (m, _) in enumerate(multipliers)
+             for k, c in enumerate(columns)]
+    monomials = sorted({mon for _, _, p in terms for mon in p.monoms()})
+    index = {mon: i for i, mon in enumerate(monomials)}
+    A = sp.zeros(len(monomials), len(terms))
+    for col, (_, _, p) in enumerate(terms):
+        for mon, coef in p.terms():
+            A[index[mon], col] = coef
+    out = []
+    for vec in A.nullspace():
+        rel = [sp.Integer(0)] * len(columns)
+        for val, (j, k, _) in zip(vec, terms):
+            rel[k] += val * multipliers[j][1]
+        out.append([sp.expand(v) for v in rel])
+    return out

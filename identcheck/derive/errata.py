@@ -8,3 +8,10 @@ ERRATA = {
           "reproduces every sample as well",
     "E3": "Pham III-A: (6) takes the positive square root only; (5) is equivalent to (6) with +/-",
 }
+ERRATA.update({
+    "E4": "Pham IV-C: the expansion of (14) has ten unknown monomials; (17) lists nine and omits d^2, whose "
+          "column is |z2 (x1, y1) - z1 (x2, y2)|^2, so (16) with the printed Y cannot hold",
+    "E5": "Pham IV-C: the ten columns of the expansion satisfy one linear relation on the output set "
+          "(B1B2 is rigid), so their rank there is 9, not 10; the identifiable unknowns are nine "
+          "reparametrised combinations, from which d, r, rho1, rho2 follow linearly and uniquely",
+})

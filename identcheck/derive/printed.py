@@ -1,4 +1,4 @@
-"""The equations of Pham et al. (section III-A) transcribed as printed, for comparison only.
+"""The equations of Pham et al. (sections III-A and IV-C) transcribed as printed, for comparison only.
 
 Nothing here is used to compute an answer: every result identcheck uses comes from the
 derivation; these forms exist so that each printed equation can be checked against it.
@@ -47,3 +47,14 @@ CLAIM_EXTRANEOUS_ROOTS = 1   # "one of the Q_k corresponds to the extraneous sol
 CLAIM_NONREAL_ROOTS = 1      # "a second Q_k is usually associated with non-real values"
 CLAIM_JOINTS = 1             # "there remains a unique Q_k, associated with unique values of r, alpha, l, rho"
 CLAIM_ALPHA_BRANCHES = 1     # alpha_k = asin(...): one alpha per root
+
+# --- section IV-C: spherical joint, two markers on each link ---------------------------------
+from ..symbols import rho1, rho2, x1, x2, y1, y2, z1, z2  # noqa: E402
+
+DELTA = x1 * y2 - x2 * y1                                             # below (14)
+H = (x1**2 + y1**2 + (z1 - d) ** 2 + r**2 - rho1**2) / 2              # (15)
+G = (x2**2 + y2**2 + (z2 - d) ** 2 + r**2 - rho2**2) / 2              # (15)
+EQ14 = H**2 * (x2**2 + y2**2) + G**2 * (x1**2 + y1**2) - 2 * H * G * (x1 * x2 + y1 * y2) - r**2 * DELTA**2
+_P1, _P2 = d**2 + r**2 - rho1**2, d**2 + r**2 - rho2**2
+Y17 = [_P1, _P2, d, _P1 * _P2, _P1 * d, _P2 * d, _P1**2, _P2**2, r**2]  # (17)
+CLAIM_S22_SAMPLES = 9        # "9 equations ... prove the 9-identifiability"
