@@ -12,7 +12,7 @@ import mpmath
 
 from identcheck import certify, cli
 from identcheck.solve import identify
-from identcheck.symbols import case
+from identcheck.symbols import case, known_cases
 
 OUT = Path(__file__).resolve().parent / "out"
 
@@ -45,8 +45,9 @@ def witness_e1(seed: int = 7, digits: int = 50) -> str:
 def main() -> int:
     code = cli.main(["derive", "--out", str(OUT)])
     (OUT / "witness_E1.md").write_text(witness_e1(), encoding="utf-8")
-    cert = certify.rank("revolute", 2, 1, seed=0)
-    (OUT / "rank_revolute_2_1.json").write_text(cert.to_json(indent=2), encoding="utf-8")
+    for cs in known_cases():
+        cert = certify.rank(cs.joint, cs.p, cs.q, seed=0)
+        (OUT / f"rank_{cs.joint}_{cs.p}_{cs.q}.json").write_text(cert.to_json(indent=2), encoding="utf-8")
     return code
 
 

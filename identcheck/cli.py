@@ -116,11 +116,14 @@ def _cmd_identify(a) -> int:
         _print_json(rep)
     else:
         for name, j in rep["joints"].items():
-            print(f"{name}: {j['case']}, {j['n_samples']} samples -> {j['candidates']} joints "
-                  f"({j['parameter_sets']} parameter sets x mirror images); unique: {j['unique']}")
+            hinge = j["type"] == "revolute"
+            print(f"{name}: {j['case']}, {j['n_samples']} samples -> {j['candidates']} joint(s)"
+                  + (f" ({j['parameter_sets']} parameter sets x mirror images)" if hinge else "")
+                  + f"; unique: {j['unique']}; largest sample residual {j['rms_residual']:.3g} mm")
             rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
             markers = list(rows[0])
-            print("   distances to the hinge axis (mm): " + "  ".join(f"{m:>8}" for m in markers))
+            what = "distances to the hinge axis (mm): " if hinge else "distances to the centre (mm):     "
+            print("   " + what + "  ".join(f"{m:>8}" for m in markers))
             for i, row in enumerate(rows):
                 print(f"   joint {i}:" + " " * 26 + "  ".join(f"{row[m]:8.2f}" for m in markers))
     return 0 if all(j["unique"] for j in rep["joints"].values()) else 1

@@ -1,8 +1,9 @@
 """Identify one joint of a model from a recorded or simulated trial with the exact-case solvers.
 
 This is the structural-identifiability view of a real trial: the markers a joint's case uses
-(revolute (2,1): two on the parent, one on the child), the samples taken to the parent's
-marker frame, and every joint the samples admit, each with its marker distances. Statistical
+(revolute (2,1): two on the parent, one on the child; spherical (3,1): three and one, the
+centre from each child marker; spherical (2,2): two and two), the samples taken to the
+parent's marker frame, and every joint the samples admit, each with its marker distances. Statistical
 fitting with uncertainty is ``identcheck fit`` (a separate capability).
 """
 from __future__ import annotations
@@ -13,8 +14,8 @@ import numpy as np
 
 from .errors import InputError
 from .io.model import Model
-from .solve import revolute21
-from .solve.frames import pair_frame
+from .solve import revolute21, spherical22, spherical31
+from .solve.frames import pair_frame, triad_frame
 from .trial import Trial
 
 
@@ -54,11 +55,25 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
                          source=model.source)
     jt = model.joints[joint]
     parent, child = model.joint_markers(joint)
-    if (jt.type, len(parent), len(child)) != ("revolute", 2, 1):
-        raise InputError([f"joint {joint!r} is {jt.type} with ({len(parent)},{len(child)}) markers; "
-                          "identify covers the revolute (2,1) case of Pham et al. so far "
-                          "(two markers on the parent segment, one on the child)"], source=model.source)
+    key = (jt.type, min(len(parent), 3) if jt.type == "spherical" else len(parent), len(child))
+    if key not in _CASES and not (jt.type == "spherical" and key[0:2] == ("spherical", 3) and key[2] >= 1):
+        raise InputError([f"joint {joint!r} is {jt.type} with ({len(parent)},{len(child)}) markers; identify covers "
+                          "the exact cases of Pham et al.: revolute (2,1), spherical (3,q) and spherical (2,2) "
+                          "(markers on the parent, on the child)"], source=model.source)
+    label, n_min, solver = _CASES.get(key, _CASES[("spherical", 3, 1)])
+    parent = list(parent)[:3] if jt.type == "spherical" else list(parent)
     names = list(parent) + list(child)
+    frames = _frames(trial, names, frames, n_min, label)
+    sel = trial.select(names).as_array()[frames]
+    cands = solver(sel, parent, list(child), precision)
+    return JointIdentification(joint=joint, type=jt.type, case=label,
+                               markers={"parent": list(parent), "child": list(child)},
+                               n_samples=len(frames), frames=list(map(int, frames)),
+                               parent_spread_mm=_parent_spread(sel[:, :len(parent)]), candidates=cands)
+
+
+def _frames(trial: Trial, names, frames, n_min: int, label: str) -> list:
+    """The frames to use: all fully visible ones by default; requested ones must be visible."""
     xyz = trial.select(names).as_array()
     visible = np.all(np.isfinite(xyz), axis=(1, 2))
     if frames is None:
@@ -70,10 +85,21 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
         hidden = [f for f in frames if not visible[f]]
         if hidden:
             raise InputError([f"frames {hidden}: a marker of {names} is occluded there"], source=trial.source)
-    if len(frames) < revolute21.N_UNKNOWNS:
-        raise InputError([f"only {len(frames)} frames show all of {names}; revolute (2,1) needs at least "
-                          f"{revolute21.N_UNKNOWNS}"], source=trial.source)
-    sel = xyz[frames]
+    if len(frames) < n_min:
+        raise InputError([f"only {len(frames)} frames show all of {names}; {label} needs at least {n_min}"],
+                         source=trial.source)
+    return frames
+
+
+def _parent_spread(parent_xyz: np.ndarray) -> float:
+    """Largest peak-to-peak change of a distance between parent markers (rigidity check), mm."""
+    n = parent_xyz.shape[1]
+    spreads = [np.ptp(np.linalg.norm(parent_xyz[:, i] - parent_xyz[:, j], axis=-1))
+               for i in range(n) for j in range(i + 1, n)]
+    return float(max(spreads, default=0.0))
+
+
+def _revolute21(sel, parent, child, precision) -> list:
     local, h = pair_frame(sel[:, 0], sel[:, 1], sel[:, 2])
     if precision is None:
         ident = revolute21.identify(local, rel_tol=np.inf)
@@ -89,7 +115,46 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
             "residual_mm": float(j.residual),
             "marker_distances": {parent[0]: dist["A1"], parent[1]: dist["A2"], child[0]: dist["B"]},
         })
-    return JointIdentification(joint=joint, type=jt.type, case="revolute(2,1)",
-                               markers={"parent": list(parent), "child": list(child)},
-                               n_samples=len(frames), frames=list(map(int, frames)),
-                               parent_spread_mm=float(np.ptp(h)), candidates=cands)
+    return cands
+
+
+def _spherical3q(sel, parent, child, precision) -> list:
+    """One sphere per child marker in the parent's triad frame; they must share the centre."""
+    centres, dist = [], {}
+    for k, name in enumerate(child):
+        local, _ = triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, 3 + k])
+        j = spherical31.identify(local, precision=precision, rel_tol=np.inf).joints[0]
+        centres.append(np.asarray(j.centre, dtype=float))
+        dist[name] = float(j.rho)
+    centre = np.mean(centres, axis=0)
+    a_local, _ = triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, :3].transpose(1, 0, 2))
+    for i, name in enumerate(parent):
+        dist[name] = float(np.mean(np.linalg.norm(a_local[i] - centre, axis=-1)))
+    # every child marker's sphere should have the same centre; how far apart they are is the residual
+    spread = max((float(np.linalg.norm(c - centre)) for c in centres), default=0.0)
+    rebuilt = max(float(np.max(np.abs(np.linalg.norm(triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, 3 + k])[0]
+                                                     - centre, axis=-1) - dist[n]))) for k, n in enumerate(child))
+    return [{"parameter_set": 0, "mirror": False, "centre_parent_frame": centre.tolist(),
+             "residual_mm": max(spread, rebuilt), "marker_distances": dist}]
+
+
+def _spherical22(sel, parent, child, precision) -> list:
+    b, h = pair_frame(sel[:, :1], sel[:, 1:2], sel[:, 2:4])
+    ident = spherical22.identify(b[:, 0], b[:, 1], precision=precision, rel_tol=np.inf) if precision is None \
+        else spherical22.identify(b[:, 0].tolist(), b[:, 1].tolist(), precision=precision)
+    out = []
+    for j in ident.joints:
+        dist = j.marker_distances(float(np.mean(h)))
+        out.append({"parameter_set": 0, "mirror": False, "d": float(j.d), "r": float(j.r), "rho1": float(j.rho1),
+                    "rho2": float(j.rho2), "residual_mm": float(j.residual),
+                    "marker_distances": {parent[0]: dist["A1"], parent[1]: dist["A2"],
+                                         child[0]: dist["B1"], child[1]: dist["B2"]}})
+    return out
+
+
+# (type, p, q) -> (case label, minimum samples, solver)
+_CASES = {
+    ("revolute", 2, 1): ("revolute(2,1)", revolute21.N_UNKNOWNS, _revolute21),
+    ("spherical", 3, 1): ("spherical(3,1)", spherical31.N_UNKNOWNS, _spherical3q),
+    ("spherical", 2, 2): ("spherical(2,2)", spherical22.n_unknowns(), _spherical22),
+}

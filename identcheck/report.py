@@ -28,9 +28,7 @@ def identify_report(results) -> dict:
             "type": r.type, "case": r.case, "unique": r.unique,
             "candidates": len(r.candidates), "parameter_sets": r.n_parameter_sets,
             "marker_distances": best["marker_distances"],
-            "alternatives": [{k: c[k] for k in ("marker_distances", "mirror", "parameter_set", "d", "r",
-                                                 "alpha", "l", "rho", "residual_mm")}
-                             for c in r.candidates if c is not best],
+            "alternatives": [dict(c) for c in r.candidates if c is not best],
             "rms_residual": best["residual_mm"], "n_samples": r.n_samples,
             "parent_marker_spread_mm": r.parent_spread_mm, "markers": r.markers,
         }

@@ -41,10 +41,24 @@ def test_identify_rejects_cases_it_does_not_cover(tmp_path, capsys):
     leg = str(ROOT / "examples" / "leg.toml")
     trial = tmp_path / "leg.trc"
     assert cli.main(["simulate", leg, "--out", str(trial)]) == 0
-    assert cli.main(["identify", leg, str(trial), "--joint", "hip_r"]) == 2
+    assert cli.main(["identify", leg, str(trial), "--joint", "knee_r"]) == 2  # revolute (3,2): not an exact case
     assert "revolute (2,1)" in capsys.readouterr().err
     assert cli.main(["identify", leg, str(trial), "--joint", "nope"]) == 2
     assert "unknown joint 'nope'" in capsys.readouterr().err
+
+
+def test_identify_spherical_cases_match_truth(tmp_path, capsys):
+    """Both exact spherical cases of Pham et al. recover the simulated hip, uniquely."""
+    for name, case_ in (("hip_31", "spherical(3,1)"), ("hip_22", "spherical(2,2)")):
+        model = str(ROOT / "examples" / f"{name}.toml")
+        trial, truth = tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"
+        assert cli.main(["simulate", model, "--out", str(trial), "--truth", str(truth), "--seed", "5"]) == 0
+        capsys.readouterr()
+        assert cli.main(["identify", model, str(trial), "--json"]) == 0  # unique: exit 0
+        out = json.loads(capsys.readouterr().out)["joints"]["hip_r"]
+        assert out["case"] == case_ and out["unique"] and out["candidates"] == 1
+        true = load_truth(truth).marker_distances("hip_r")
+        assert max(abs(out["marker_distances"][m] - true[m]) for m in out["marker_distances"]) < 0.05  # float32
 
 
 def test_identify_noisy_trial_is_a_clear_answer_not_a_traceback(tmp_path, capsys):
