@@ -9,9 +9,10 @@ import argparse
 import json
 import logging
 import sys
+import warnings
 from pathlib import Path
 
-from .errors import DegenerateError, InputError
+from .errors import DegenerateError, IdentifiabilityWarning, InputError
 
 log = logging.getLogger("identcheck")
 
@@ -90,7 +91,7 @@ def _cmd_simulate(a) -> int:
     if a.effect:
         raise InputError([f"--effect {a.effect}: injecting effects is not available yet"])
     sim = simulate_file(a.model, a.out, seed=a.seed, n_frames=a.frames, rate_hz=a.rate, rom_deg=a.rom_deg,
-                        noise_mm=a.noise_mm, occlusion=a.occlusion)
+                        noise_mm=a.noise_mm, occlusion=a.occlusion, n_axes=a.n_axes)
     if a.truth:
         sim.save_truth(a.truth)
     log.info("wrote %s (%d frames, %d markers)", a.out, sim.trial.n_frames, sim.trial.n_markers)
@@ -172,6 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rate", type=float, default=100.0, help="Hz")
     s.add_argument("--rom-deg", type=float, default=60.0, help="range of motion of each exercised angle")
     s.add_argument("--noise-mm", type=float, default=0.0, help="Gaussian marker noise (std per axis)")
+    s.add_argument("--n-axes", type=int, default=None, choices=(1, 2, 3),
+                   help="rotation axes each spherical joint exercises (default 3; 1 = flexion only)")
     s.add_argument("--occlusion", type=float, default=0.0, help="fraction of frames with marker gaps")
     s.add_argument("--truth", metavar="FILE", help="also write the true parameters as JSON")
     s.add_argument("--json", action="store_true")
@@ -205,13 +208,21 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, stream=sys.stderr,
                         format="identcheck: %(message)s")
     try:
-        return a.func(a)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", IdentifiabilityWarning)
+            warnings.showwarning = _show_warning
+            return a.func(a)
     except InputError as exc:
         print(f"identcheck {a.verb}: {exc}", file=sys.stderr)
         return 2
     except DegenerateError as exc:
         print(f"identcheck {a.verb}: degenerate data: {exc}", file=sys.stderr)
         return 1
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one readable stderr line, not a source location."""
+    print(f"identcheck: warning: {message}", file=sys.stderr)
 
 
 def run() -> None:

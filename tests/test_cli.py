@@ -81,3 +81,17 @@ def test_simulate_bad_extension_and_effect(tmp_path, capsys):
     assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.csv")]) == 2
     assert "x.csv" in capsys.readouterr().err
     assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "marker_slip"]) == 2
+
+
+def test_flexion_only_hip_is_named_coplanar_with_the_motion_to_add(tmp_path, capsys):
+    model = str(ROOT / "examples" / "hip_31.toml")
+    exact, noisy = tmp_path / "flex.trc", tmp_path / "flex_noisy.trc"
+    assert cli.main(["simulate", model, "--out", str(exact), "--n-axes", "1"]) == 0
+    assert cli.main(["simulate", model, "--out", str(noisy), "--n-axes", "1", "--noise-mm", "0.5"]) == 0
+    capsys.readouterr()
+    assert cli.main(["identify", model, str(exact)]) == 1
+    err = capsys.readouterr().err
+    assert "coplanar" in err and "not identifiable" in err and "Traceback" not in err
+    assert cli.main(["identify", model, str(noisy)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the samples are nearly coplanar" in err and "abduction" in err
