@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import math
 import os
 import platform
 import sys
@@ -33,6 +34,7 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -41,7 +43,8 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 
 from identcheck.errors import DegenerateError  # noqa: E402
-from identcheck.solve.revolute21 import N_UNKNOWNS, generated, identify, solve_batch  # noqa: E402
+from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, _cos_and_l, _is_real,  # noqa: E402
+                                         generated, identify, solve_batch)
 
 KEY = "revolute21"
 TARGET_RATE = 1e6       # five-sample identifications per second, batched
@@ -116,9 +119,14 @@ def wrap(a):
 
 # -- the per-problem loop baseline (d) ------------------------------------------------------------
 
+SCALAR = SimpleNamespace(sqrt=math.sqrt, maximum=max, where=lambda cond, a, b: a if cond else b)
+
+
 def loop_one(x: np.ndarray, g: dict, angles: bool, rel_tol: float = 1e-6) -> list:
     """One problem, plainly: generated functions, np.linalg.solve, np.roots, root by root.
 
+    The back-substitution is the solver's own (``_cos_and_l``, ``_is_real``) on Python floats;
+    the cos²α slack is the fixed ``REAL_TOL`` instead of the solver's conditioning estimate.
     Returns the valid candidates as (d, r, α, l, ρ) tuples in mm / rad.
     """
     s = np.sqrt(np.mean(np.sum(x * x, axis=-1)))
@@ -127,17 +135,16 @@ def loop_one(x: np.ndarray, g: dict, angles: bool, rel_tol: float = 1e-6) -> lis
     Z = np.linalg.solve(MK[:, :N_UNKNOWNS], MK[:, N_UNKNOWNS])
     out = []
     for q in np.roots(g["cubic"](Z)):
-        if abs(q.imag) > 1e-5 * (1 + abs(q.real)):  # solve_batch's tolerance (near-double roots)
+        if abs(q.imag) > IMAG_TOL * (1 + abs(q.real)):  # solve_batch's tolerance (near-double roots)
             continue
-        r2, S, l, rho2, l0, rho20 = g["back"](np.array([q.real]), Z, np.array([1.0]))
-        if abs(1 - S) < 1e-9:
-            l, rho2 = l0, rho20
-        if not (r2 > 1e-9 and 1e-9 < S <= 1 + 1e-9 and rho2 > -1e-9 and np.isfinite(l)):
+        r2, S, w, v = map(float, g["back"](np.array([q.real]), Z))
+        ca, l = _cos_and_l(S, w, v, float(Z[0]), SCALAR)
+        rho2 = float(g["rho2"](np.array([q.real]), Z, np.array([l]))[0])
+        if not (_is_real(r2, S, v, rho2, REAL_TOL, REAL_TOL, SCALAR) and math.isfinite(l)):
             continue
-        S = min(S, 1.0)
+        sa = math.sqrt(min(S, 1.0))
         for sgn in (1.0, -1.0):
-            ca, sa = sgn * np.sqrt(1 - S), np.sqrt(S)
-            par = np.array([Z[0], np.sqrt(r2), sgn * l, np.sqrt(max(rho2, 0.0)), ca, sa])
+            par = np.array([Z[0], math.sqrt(r2), sgn * l, math.sqrt(max(rho2, 0.0)), sgn * ca, sa])
             if angles:
                 cs = g["theta"](xs, par)
                 cs = cs / np.hypot(cs[:, 0], cs[:, 1])[:, None]
@@ -146,7 +153,7 @@ def loop_one(x: np.ndarray, g: dict, angles: bool, rel_tol: float = 1e-6) -> lis
                 rebuilt = g["forward"](par, np.concatenate([cs, np.stack([np.cos(b), np.sin(b)], -1)], -1))
                 if not np.max(np.linalg.norm(rebuilt - xs, axis=-1)) <= rel_tol:
                     continue
-            out.append((par[0] * s, par[1] * s, float(np.arctan2(sa, ca)), par[2] * s, par[3] * s))
+            out.append((par[0] * s, par[1] * s, math.atan2(sa, sgn * ca), par[2] * s, par[3] * s))
     return out
 
 
