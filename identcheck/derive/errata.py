@@ -14,4 +14,6 @@ ERRATA.update({
     "E5": "Pham IV-C: the ten columns of the expansion satisfy one linear relation on the output set "
           "(B1B2 is rigid), so their rank there is 9, not 10; the identifiable unknowns are nine "
           "reparametrised combinations, from which d, r, rho1, rho2 follow linearly and uniquely",
+    "E6": "Pham V-A: S22 does not outperform the extended Gamage-Lasenby method on the paper's own measure "
+          "sqrt(C): not reproduced in simulation with known truth nor on a measured hip trial",
 })
