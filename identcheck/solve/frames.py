@@ -26,8 +26,9 @@ def pair_frame(a1, a2, points):
     a1, a2, points = (np.asarray(v, dtype=float) for v in (a1, a2, points))
     e = a2 - a1
     h = np.linalg.norm(e, axis=-1)
-    if np.any(h <= 1e-12 * max(1.0, float(np.nanmax(np.abs(a1))))):
-        frames = np.flatnonzero(np.ravel(h <= 1e-12)).tolist()
+    tiny = h <= 1e-12 * max(1.0, float(np.nanmax(np.abs(a1))))
+    if np.any(tiny):
+        frames = np.flatnonzero(np.ravel(tiny)).tolist()[:10]
         raise DegenerateError(f"A1 and A2 coincide (frames {frames}): their axis is undefined")
     ez = e / h[..., None]
     ref = np.eye(3)[np.argmin(np.abs(ez), axis=-1)]
