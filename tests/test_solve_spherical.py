@@ -149,3 +149,14 @@ def test_s31_near_coplanar_noisy_warns_with_uncertainty():
     # the predicted uncertainty is of the order of the actual error for the well-posed motion
     err = np.linalg.norm(res_good.joints[0].centre - np.array([10.0, -20.0, 300.0]))
     assert err < 5 * res_good.conditioning.uncertainty_mm
+
+
+def test_frames_name_the_degenerate_frames():
+    from identcheck.solve.frames import pair_frame, triad_frame
+    a = np.full((4, 3), 1e6)
+    b = a + np.array([[0, 0, 100.0], [0, 0, 1e-8], [0, 0, 100.0], [0, 0, 100.0]])
+    with pytest.raises(DegenerateError, match=r"frames \[1\]"):
+        pair_frame(a, b, a)
+    c = a + np.array([[0, 0, 200.0]] * 4)  # on the A1A2 line: collinear parent markers
+    with pytest.raises(DegenerateError, match="collinear"):
+        triad_frame(a, b, c, a)
