@@ -25,12 +25,10 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import math
 import os
 import platform
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -42,6 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 
+from results_io import write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import DegenerateError  # noqa: E402
 from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, _cos_and_l, _is_real,  # noqa: E402
                                          generated, identify, solve_batch)
@@ -419,23 +418,6 @@ def table(result: dict) -> str:
     lines.append(f"machine: {m['nproc']} cpus, numpy {m['numpy']}, python {m['python']}, "
                  f"load {m['loadavg_before'][0]:.2f} -> {m['loadavg_after'][0]:.2f}")
     return "\n".join(lines)
-
-
-def write_json(path: Path, key: str, value: dict) -> None:
-    """Read-modify-write: replace one key, keep the others, write atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    data = {}
-    if path.exists():
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise SystemExit(f"{path} is not valid JSON; refusing to overwrite it")
-    data[key] = value
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(data, fh, indent=2, sort_keys=True, allow_nan=False, default=float)
-        fh.write("\n")
-    os.replace(tmp, path)
 
 
 def finite(obj):

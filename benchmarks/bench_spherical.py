@@ -37,11 +37,9 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import platform
 import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -53,6 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 
+from results_io import write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import IdentifiabilityWarning  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.solve.gamage_lasenby import distance_variance_cost, gamage_lasenby  # noqa: E402
@@ -260,23 +259,6 @@ def figure(rows, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-def write_json(path: Path, key: str, update: dict) -> None:
-    """Read-modify-write: merge `update` into ``data[key]``, keep every other key, write atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    data = {}
-    if path.exists():
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            raise SystemExit(f"{path} is not valid JSON; refusing to overwrite it")
-    data[key] = {**data.get(key, {}), **update}
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(data, fh, indent=2, sort_keys=True, allow_nan=False)
-        fh.write("\n")
-    os.replace(tmp, path)
 
 
 def machine_info() -> dict:
@@ -506,7 +488,7 @@ def main(argv=None) -> int:
         real_figure(real, REAL_FIGURE)
         print(f"wrote {REPORT} and {REAL_FIGURE}")
         if out is not None:
-            write_json(out, KEY, {"real": real})
+            write_json(out, KEY, {"real": real}, merge=True)
         return 0
     plans = ((22, (60.0,)),) if args.quick else PLANS
     seeds = min(args.seeds, 2) if args.quick else args.seeds
@@ -524,7 +506,7 @@ def main(argv=None) -> int:
                                "geometry_jitter_mm": GEOMETRY_JITTER_MM, "s22_starts": "linear + sphere + 6 random"},
                   "machine": machine_info(), "total_s": total,
                   "date": datetime.datetime.now().isoformat(timespec="seconds")}
-        write_json(out, KEY, result)
+        write_json(out, KEY, result, merge=True)
         fig_path = FIGURE if out == ROOT / "benchmarks" / "results.json" else out.with_suffix(".png")
         figure(sim["rows"], fig_path)
         print(f"wrote {out} (key {KEY!r}) and {fig_path}")

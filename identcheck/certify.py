@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import random
 from dataclasses import asdict, dataclass, field
-from fractions import Fraction
 
 import numpy as np
 import sympy as sp
@@ -212,7 +211,7 @@ def _expansion(dv, rank_reduced) -> dict:
     return {
         "unknowns": [str(u) for u in exp["unknowns"]],
         "relations": [[str(c) for c in rel] for rel in exp["relations"]],
-        "relation_meaning": "sum_k c_k * M_k = 0 on the output set, L2 = |B1 - B2|^2",
+        "relation_meaning": exp["meaning"],
         "rank_upper_bound": upper,
         "rank": upper if rank_reduced == upper else None,
         "statement": (f"{len(exp['unknowns'])} unknown monomials; {len(exp['relations'])} proved linear "

@@ -15,7 +15,7 @@ import numpy as np
 from .errors import InputError
 from .io.model import Model
 from .solve import revolute21, spherical22, spherical31
-from .solve.frames import pair_frame, triad_frame
+from .solve.frames import pair_frame, parent_frame, to_local
 from .trial import Trial
 
 
@@ -119,21 +119,21 @@ def _revolute21(sel, parent, child, precision) -> list:
 
 
 def _spherical3q(sel, parent, child, precision) -> list:
-    """One sphere per child marker in the parent's triad frame; they must share the centre."""
+    """One sphere per child marker in the parent's frame F_GL; they must share the centre."""
+    rot, _ = parent_frame(sel[:, 0], sel[:, 1], sel[:, 2] - sel[:, 0], names=(parent[0], parent[1], parent[2]))
+    local = to_local(rot, sel[:, 0], sel)                     # (frames, markers, 3)
     centres, dist = [], {}
     for k, name in enumerate(child):
-        local, _ = triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, 3 + k])
-        j = spherical31.identify(local, precision=precision, rel_tol=np.inf).joints[0]
+        j = spherical31.identify(local[:, 3 + k], precision=precision, rel_tol=np.inf).joints[0]
         centres.append(np.asarray(j.centre, dtype=float))
         dist[name] = float(j.rho)
     centre = np.mean(centres, axis=0)
-    a_local, _ = triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, :3].transpose(1, 0, 2))
     for i, name in enumerate(parent):
-        dist[name] = float(np.mean(np.linalg.norm(a_local[i] - centre, axis=-1)))
+        dist[name] = float(np.mean(np.linalg.norm(local[:, i] - centre, axis=-1)))
     # every child marker's sphere should have the same centre; how far apart they are is the residual
-    spread = max((float(np.linalg.norm(c - centre)) for c in centres), default=0.0)
-    rebuilt = max(float(np.max(np.abs(np.linalg.norm(triad_frame(sel[:, 0], sel[:, 1], sel[:, 2], sel[:, 3 + k])[0]
-                                                     - centre, axis=-1) - dist[n]))) for k, n in enumerate(child))
+    spread = max(float(np.linalg.norm(c - centre)) for c in centres)
+    rebuilt = max(float(np.max(np.abs(np.linalg.norm(local[:, 3 + k] - centre, axis=-1) - dist[n])))
+                  for k, n in enumerate(child))
     return [{"parameter_set": 0, "mirror": False, "centre_parent_frame": centre.tolist(),
              "residual_mm": max(spread, rebuilt), "marker_distances": dist}]
 

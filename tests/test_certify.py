@@ -1,7 +1,6 @@
 """Exact rank over the rationals, and replayable certificates."""
 import json
 
-import numpy as np
 import sympy as sp
 from hypothesis import given, strategies as st
 

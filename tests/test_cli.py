@@ -2,7 +2,6 @@
 import json
 from pathlib import Path
 
-import numpy as np
 
 from identcheck import cli
 from identcheck.simulate import load_truth

@@ -2,7 +2,6 @@
 import json
 import random
 
-import numpy as np
 import sympy as sp
 from hypothesis import given, strategies as st
 

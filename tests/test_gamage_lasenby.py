@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
 from identcheck.solve.frames import pair_frame
-from identcheck.solve.gamage_lasenby import (distance_variance_cost, gamage_lasenby, parent_frame,
-                                             sphere_centre, to_local, to_world)
+from identcheck.solve.frames import parent_frame, to_local, to_world
+from identcheck.solve.gamage_lasenby import distance_variance_cost, gamage_lasenby, sphere_centre
 
 
 def make_hip(seed, n_frames=20, rom=0.6, n_children=2, noise=0.0, pelvis_rom=0.4):

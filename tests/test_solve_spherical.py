@@ -152,11 +152,12 @@ def test_s31_near_coplanar_noisy_warns_with_uncertainty():
 
 
 def test_frames_name_the_degenerate_frames():
-    from identcheck.solve.frames import pair_frame, triad_frame
+    from identcheck.solve.frames import pair_frame, parent_frame
     a = np.full((4, 3), 1e6)
     b = a + np.array([[0, 0, 100.0], [0, 0, 1e-8], [0, 0, 100.0], [0, 0, 100.0]])
     with pytest.raises(DegenerateError, match=r"frames \[1\]"):
         pair_frame(a, b, a)
+    b[1, 2] = 100.0
     c = a + np.array([[0, 0, 200.0]] * 4)  # on the A1A2 line: collinear parent markers
-    with pytest.raises(DegenerateError, match="collinear"):
-        triad_frame(a, b, c, a)
+    with pytest.raises(DegenerateError, match=r"parallel to A1A2 in frames \[0, 1, 2, 3\]"):
+        parent_frame(a, b, c - a, names=("A1", "A2", "A3 - A1"))

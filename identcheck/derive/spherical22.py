@@ -112,7 +112,8 @@ def derive() -> Derivation:
     Lsym = sp.Symbol("L2", positive=True)
     rel_L = polynomial_relations(M10, [(sp.Integer(1), sp.Integer(1)), (dist2, Lsym)], SAMPLE)
     rigid = reduce_circle(sp.expand((dist2 - L2).subs(on_set)), TRIG) == 0
-    dv.results["expansion"] = {"unknowns": Y10, "M": M10, "relations": rel_L, "L2_symbol": Lsym}
+    dv.results["expansion"] = {"unknowns": Y10, "M": M10, "relations": rel_L, "L2_symbol": Lsym,
+                               "meaning": "sum_k c_k * M_k = 0 on the output set, where L2 = |B1 - B2|^2"}
     dv.add_check(name="rigid_link", where="IV-C", printed="(B1 and B2 sit on one rigid link)",
                  derived="|B1 − B2|² − L² ≡ 0 on the output set" if rigid else "not constant", agrees=rigid)
     n_rel = len(rel_L)

@@ -61,9 +61,7 @@ def derive() -> Derivation:
         if all(yy.free_symbols == {s} for s, yy in zip((x_J, y_J, z_J), Y[:3])) else None
     if centre is None:
         raise RuntimeError("spherical (3,1): the first three unknowns are not the centre coordinates")
-    rho2 = sp.solve((Y[3] - Zs[3]).subs(centre), rho**2)
-    rho2 = rho2[0] if rho2 else sp.solve((Y[3] - Zs[3]).subs(centre).subs(rho, sp.sqrt(sp.Symbol("q"))),
-                                         sp.Symbol("q"))[0]
+    rho2 = sp.solve((Y[3] - Zs[3]).subs(centre), rho**2)[0]
     dv.results["back"] = {"x_J": centre[x_J], "y_J": centre[y_J], "z_J": centre[z_J], "rho2": rho2, "Z": Zs}
     back_ok = equal(rho2.subs({Zs[i]: Y[i] for i in range(4)}), rho**2)
     dv.add_check(name="radius_from_centre", where="IV-A",

@@ -37,8 +37,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import DegenerateError, InputError
-from .gamage_lasenby import (complete_frames, distance_variance_cost, parent_frame, sphere_centre,
-                             to_local, to_world)
+from .frames import parent_frame, to_local, to_world
+from .gamage_lasenby import complete_frames, distance_variance_cost, sphere_centre
 
 S22_MIN_FRAMES = 9
 """The (2, 2) case is 9-identifiable (section IV-C): fewer complete frames are refused."""

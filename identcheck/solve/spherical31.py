@@ -64,7 +64,7 @@ def conditioning(xyz, noise_mm: float | None = None, *, min_planarity: float = 0
     ``planarity`` is the smallest principal spread over the largest; below ``min_planarity``
     the samples are nearly coplanar. The centre's covariance is the linearised Gauss–Markov
     covariance of the sphere equations: each equation |B|² − 2J·B − c = 0 moves by 2(B − J)·ε
-    for marker noise ε, so Cov(J, c) = 4ρ²σ² (AᵀA)⁻¹ with rows A = [2B, 1].
+    for marker noise ε, so Cov(J, c) = 4ρ²σ² (MᵀM)⁻¹ with M the derivation's rows (±[2B, 1]).
     """
     xyz = check_samples(xyz, N_UNKNOWNS, "B", "spherical (3,1)")
     centred = xyz - xyz.mean(axis=0)
@@ -74,11 +74,11 @@ def conditioning(xyz, noise_mm: float | None = None, *, min_planarity: float = 0
     normal = vt[2]
     unc = None
     if noise_mm is not None and planarity > 0:
-        A = np.hstack([2 * xyz, np.ones((len(xyz), 1))])
+        rows = generated("numpy")["m_row"](xyz)          # the derivation's rows: M = −[2B, 1]
+        M, K = rows[:, :-1], rows[:, -1]
         try:
-            sol = np.linalg.lstsq(A, np.sum(xyz**2, axis=1), rcond=None)[0]
-            rho2 = sol[3] + sol[:3] @ sol[:3]
-            cov = 4 * max(rho2, 0.0) * noise_mm**2 * np.linalg.inv(A.T @ A)
+            rho2 = generated("numpy")["back"](column_scaled_lstsq(M, K))[3]
+            cov = 4 * max(rho2, 0.0) * noise_mm**2 * np.linalg.inv(M.T @ M)
             unc = float(np.sqrt(np.linalg.eigvalsh(cov[:3, :3]).max()))
         except np.linalg.LinAlgError:
             unc = float("inf")
