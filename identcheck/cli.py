@@ -17,7 +17,6 @@ from .errors import DegenerateError, IdentifiabilityWarning, InputError
 log = logging.getLogger("identcheck")
 
 NOT_YET = {
-    "table": "the identifiability table (every joint type x markers)",
     "plan": "marker plans before capture",
     "fit": "fitting recorded trials with uncertainty",
     "diagnose": "the model/measurement discrepancy workflow",
@@ -64,7 +63,7 @@ def _cmd_rank(a) -> int:
 
 
 def _cmd_verify(a) -> int:
-    from . import certify
+    from . import certify, counterexamples, jacobian, table
 
     try:
         cert = json.loads(Path(a.certificate).read_text(encoding="utf-8"))
@@ -74,15 +73,46 @@ def _cmd_verify(a) -> int:
         raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=a.certificate) from None
     if not isinstance(cert, dict):
         raise InputError(["a certificate is a JSON object"], source=a.certificate)
-    res = certify.verify(cert)
-    out = {"ok": res.ok, "problems": res.problems, "certificate": a.certificate}
+    checks = {certify.FORMAT: lambda c: certify.verify(c).problems, jacobian.FORMAT: jacobian.replay,
+              counterexamples.FORMAT: counterexamples.verify_dict, table.FORMAT: table.verify}
+    fmt = cert.get("format")
+    if fmt not in checks:
+        raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(checks))})"],
+                         source=a.certificate)
+    problems = checks[fmt](cert)
+    out = {"ok": not problems, "problems": problems, "certificate": a.certificate, "format": fmt}
     if a.json:
         _print_json(out)
     else:
-        print("certificate verified: exact rank recomputed" if res.ok else "certificate REJECTED:")
-        for p in res.problems:
+        print(f"certificate verified ({fmt}): recomputed from scratch" if not problems else "certificate REJECTED:")
+        for p in problems:
             print("  - " + p)
-    return 0 if res.ok else 1
+    return 0 if not problems else 1
+
+
+def _cmd_table(a) -> int:
+    from .table import table
+
+    doc = table(seed=a.seed, joints=tuple(a.joint) if a.joint else None)
+    if a.save:
+        Path(a.save).write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        log.info("table saved to %s", a.save)
+    if a.json:
+        _print_json(doc)
+        return 0
+    print(f"{'joint':<10} {'p,q':<4} {'identifiable':<13} {'local':<6} {'candidates':<11} {'min N':<6} "
+          f"{'local N':<8} certificate")
+    for r in doc["cases"]:
+        c = r["certificate"]
+        how = c["kind"] + (f" <- {c['follows_from']} ({c['rule']})" if c["kind"] == "remark1" else "")
+        ident = ("yes" if r["identifiable"] else "no") if r["identifiable_decided"] else "undecided"
+        print(f"{r['joint']:<10} {r['p']},{r['q']:<2} {ident:<13} {'yes' if r['local'] else 'no':<6} "
+              f"{'-' if r['candidates'] is None else r['candidates']!s:<11} "
+              f"{'-' if r['min_samples'] is None else r['min_samples']!s:<6} "
+              f"{'-' if r['local_min_samples'] is None else r['local_min_samples']!s:<8} {how}")
+    print("identifiable: generic data give one joint; local: finitely many (candidates, mirror images counted); "
+          "min N: samples for the stated verdict; local N: samples for local identifiability (Jacobian engine).")
+    return 0
 
 
 def _cmd_simulate(a) -> int:
@@ -159,10 +189,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_rank)
 
-    s = sub.add_parser("verify", help="re-check a saved rank certificate from scratch")
+    s = sub.add_parser("verify", help="re-check a saved certificate from scratch (rank, local, counterexample, table)")
     s.add_argument("certificate")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_verify)
+
+    s = sub.add_parser("table", help="identifiability verdict and certificate for every joint type x markers")
+    s.add_argument("--joint", action="append", choices=("revolute", "spherical", "universal", "prismatic"),
+                   help="only this joint type (repeatable; default: all)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random rational points")
+    s.add_argument("--save", metavar="FILE", help="also write the table with its certificates to FILE")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_table)
 
     s = sub.add_parser("simulate", help="write a synthetic trial (TRC or C3D by extension)")
     s.add_argument("model")

@@ -177,8 +177,25 @@ class _Point:
             base += list(_half(self.angles[a.name]))
         self._base = base
 
+    @classmethod
+    def from_record(cls, m: JointModel, rec: dict) -> "_Point":
+        """The point a certificate recorded (its samples only; no draws)."""
+        pt = cls.__new__(cls)
+        pt.m, pt.seed, pt.index = m, None, None
+        pt.lengths = {str(s): Fraction(rec["constants"][str(s)]) for s in m.constants}
+        pt.angles = {a.name: Fraction(rec["constant_angles_t"][a.name]) for a in m.constant_angles}
+        pt.samples = [({str(s): Fraction(smp[str(s)]) for s in m.per_sample_lengths},
+                       {a.name: Fraction(smp["t_" + a.name]) for a in m.variables}) for smp in rec["samples"]]
+        base = [pt.lengths[str(s)] for s in m.constants]
+        for a in m.constant_angles:
+            base += list(_half(pt.angles[a.name]))
+        pt._base = base
+        return pt
+
     def sample(self, i: int) -> list:
         while len(self.samples) <= i:
+            if self.seed is None:
+                raise IndexError(f"the recorded point has {len(self.samples)} samples; sample {i} was asked for")
             j = len(self.samples)
             rng = random.Random(f"identcheck.jacobian:{self.seed}:{self.index}:sample:{j}")
             lengths = {str(s): _draw_length(rng, bool(s.is_positive)) for s in self.m.per_sample_lengths}
@@ -420,16 +437,26 @@ def local_identifiability(m: JointModel, n_samples: int | None = None, seed: int
     scans = [_Scan(m, sym, _Point(m, seed, j)) for j in range(k)]
     while True:
         history, stable = _run(m, sym, scans, n_samples)
-        n = history[-1]["N"]
-        rows = len(sym.J1) * n
-        degree = n * sym.row_degree + sym.grad_degree
-        claims = len(history) * (len(m.interest) + 1)
-        bound = claims * Fraction(degree, SET_SIZE) ** k
-        if bound < TARGET or k >= 8:
+        if _bound(m, sym, history, k)[2] < TARGET or k >= 8:
             break
         k += 1
         scans.append(_Scan(m, sym, _Point(m, seed, k - 1)))
+    return _assemble(m, sym, scans, history, stable, seed)
 
+
+def _bound(m: JointModel, sym: _Symbolic, history: list, k: int) -> tuple:
+    """(degree bound D, number of claims, failure probability claims·(D/|S|)^k)."""
+    degree = history[-1]["N"] * sym.row_degree + sym.grad_degree
+    claims = len(history) * (len(m.interest) + 1)
+    return degree, claims, claims * Fraction(degree, SET_SIZE) ** k
+
+
+def _assemble(m: JointModel, sym: _Symbolic, scans: list, history: list, stable: bool, seed: int) -> LocalCertificate:
+    """The certificate from the scans' records (shared by computing and replaying)."""
+    k = len(scans)
+    n = history[-1]["N"]
+    rows = len(sym.J1) * n
+    degree, claims, bound = _bound(m, sym, history, k)
     last = history[-1]
     ident = last["identifiable"]
     vacuous = not m.interest
@@ -528,6 +555,28 @@ def _statement(m, n, rk, rows, cols, det, full_column, local, vacuous, min_sampl
     if not agree:
         parts.append("The random points disagreed somewhere; ranks were combined by maxima.")
     return " ".join(parts)
+
+
+def replay(cert: dict) -> list:
+    """Re-check a saved local certificate: rebuild the model, re-evaluate the exact Jacobians at the
+    recorded rational points (not the seed) and compare every rank and verdict. Returns problems."""
+    if cert.get("format") != FORMAT:
+        return [f"unknown certificate format {cert.get('format')!r}; expected {FORMAT}"]
+    try:
+        m = get_model(cert["joint"], cert["p"], cert["q"])
+        sym = symbolic(m)
+        scans = [_Scan(m, sym, _Point.from_record(m, rec)) for rec in cert["points"]]
+        n = int(cert["n_samples"])
+        history, stable = _run(m, sym, scans, None if cert["stable"] else n)
+        new = _assemble(m, sym, scans, history, stable, cert["seed"]).to_dict()
+    except (KeyError, TypeError, ValueError, IndexError, ZeroDivisionError) as exc:
+        return [f"malformed local certificate: {exc}"]
+    problems = []
+    for key in ("local", "min_samples", "deterministic", "n_samples", "ranks", "full_jacobian", "interest",
+                "null_space_constants", "degree_bound", "claims", "probability_bound"):
+        if new[key] != cert.get(key):
+            problems.append(f"{key}: recomputed {str(new[key])[:200]}, certificate says {str(cert.get(key))[:200]}")
+    return problems
 
 
 @lru_cache(maxsize=None)

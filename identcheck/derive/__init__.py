@@ -5,6 +5,7 @@ DERIVATIONS = {
     "revolute21": "identcheck.derive.revolute",
     "spherical31": "identcheck.derive.spherical31",
     "spherical22": "identcheck.derive.spherical22",
+    "counterexamples": "identcheck.derive.counterexamples",
 }
 
 

@@ -16,4 +16,7 @@ ERRATA.update({
           "reparametrised combinations, from which d, r, rho1, rho2 follow linearly and uniquely",
     "E6": "Pham V-A: S22 does not outperform the extended Gamage-Lasenby method on the paper's own measure "
           "sqrt(C): not reproduced in simulation with known truth nor on a measured hip trial",
+    "E7": "Pham IV-B: for r' = r - delta, rho' = rho + delta the circle Gamma' does not meet the sphere of "
+          "radius rho' about every B of the output set when rho > r (samples near the A1A2 axis are lost), so "
+          "S n S' = S is false; S n S' still has positive measure and the conclusion stands",
 })

@@ -1,0 +1,1 @@
+"""Fitting recorded trials: segment poses, joint estimators with uncertainty, excitation checks."""
