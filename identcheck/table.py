@@ -83,7 +83,7 @@ def _base(joint: str, p: int, q: int, seed: int):
     return None
 
 
-def _derived(joint: str, p: int, q: int, rows: dict):
+def _derived(joint: str, p: int, q: int, rows: dict, seed: int):
     """A row from Remark 1, preferring the source that needs the fewest samples."""
     options = []
     sym = rows.get((q, p))
@@ -119,7 +119,7 @@ def _certified_rows(joint: str, seed: int) -> list:
         for p in MARKERS:
             for q in MARKERS:
                 if (p, q) not in rows:
-                    r = _derived(joint, p, q, rows)
+                    r = _derived(joint, p, q, rows, seed)
                     if r is not None:
                         rows[(p, q)] = r
                         changed = True

@@ -1,0 +1,139 @@
+"""Every joint exact samples admit, for each locally identifiable revolute/spherical case.
+
+The case is solved the way its row of the identifiability table certifies it: three markers on
+a link fix that link's frame (spherical: the sphere of (3,1); revolute: the circle of (3,1)),
+two on each use Pham's (2,1) and (2,2) solvers, and (p, q) with p < q is solved as (q, p) with
+the links' roles exchanged (Remark 1). Joints are returned as their marker distances — the
+gauge-invariant parameters: each marker's distance to the centre (spherical) or the hinge axis
+(revolute), named A1.. (parent) and B1.. (child).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import DegenerateError, InputError
+from . import revolute21, spherical22, spherical31
+from .frames import pair_frame, parent_frame, to_local
+
+ANGLE_TOL = 1e-6
+
+
+def _names(prefix: str, k: int) -> list:
+    return [f"{prefix}{i}" for i in range(1, k + 1)]
+
+
+def _local_markers(parents: list) -> tuple:
+    """Per-sample rotation and origin of the frame of markers A1, A2, A3, and their local coordinates."""
+    a1, a2, a3 = parents[:3]
+    rot, _ = parent_frame(a1, a2, a3 - a1)
+    local = [to_local(rot, a1, a).mean(axis=0) for a in parents]
+    return rot, a1, local
+
+
+def _swap(dist: list) -> list:
+    out = []
+    for d in dist:
+        out.append({("B" if k[0] == "A" else "A") + k[1:]: v for k, v in d.items()})
+    return out
+
+
+def _spherical_posed(parents, children) -> list:
+    rot, a1, loc = _local_markers(parents)
+    b = [to_local(rot, a1, c) for c in children]
+    J = spherical31.identify(b[0]).joints[0].centre
+    dist = {n: float(np.linalg.norm(p - J)) for n, p in zip(_names("A", len(parents)), loc)}
+    dist.update({n: float(np.linalg.norm(bk - J, axis=1).mean()) for n, bk in zip(_names("B", len(children)), b)})
+    return [dist]
+
+
+def circle(points) -> tuple:
+    """Centre, unit normal and radius of the circle through ≥ 3 points (least squares beyond 3)."""
+    P = np.asarray(points, dtype=float)
+    c0 = P.mean(axis=0)
+    _, s, vt = np.linalg.svd(P - c0)
+    n = vt[2]
+    if s[1] <= 1e-9 * max(s[0], 1e-300):
+        raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
+    # centre: in the plane, equidistant from all points (mediating planes, least squares)
+    A = np.vstack([2 * (P[1:] - P[0]), n])
+    rhs = np.concatenate([np.sum(P[1:] ** 2, axis=1) - np.sum(P[0] ** 2), [n @ c0]])
+    J = np.linalg.lstsq(A, rhs, rcond=None)[0]
+    return J, n, float(np.linalg.norm(P - J, axis=1).mean())
+
+
+def _axis_distance(p, J, n) -> float:
+    w = np.asarray(p) - J
+    return float(np.linalg.norm(w - (w @ n) * n))
+
+
+def _revolute_posed(parents, children) -> list:
+    rot, a1, loc = _local_markers(parents)
+    b = [to_local(rot, a1, c) for c in children]
+    J, n, _ = circle(b[0])
+    dist = {k: _axis_distance(p, J, n) for k, p in zip(_names("A", len(parents)), loc)}
+    dist.update({k: float(np.mean([_axis_distance(x, J, n) for x in bk])) for k, bk in zip(_names("B", len(children)), b)})
+    return [dist]
+
+
+def _revolute21(a1, a2, b) -> list:
+    local, h = pair_frame(a1, a2, b)
+    res = revolute21.identify(local)
+    return res.joints, float(np.mean(h))
+
+
+def _revolute2q(parents, children) -> list:
+    """(2, q): each child marker's (2,1) joints; keep those sharing (d, r, α), the roll θ and a constant β offset."""
+    per_marker = [_revolute21(parents[0], parents[1], c) for c in children]
+    h = per_marker[0][1]
+    out = []
+    for j0 in per_marker[0][0]:
+        chosen = [j0]
+        for joints, _ in per_marker[1:]:
+            match = None
+            for j in joints:
+                same = np.allclose([j.d, j.r, j.alpha], [j0.d, j0.r, j0.alpha], rtol=ANGLE_TOL, atol=ANGLE_TOL * (1 + h))
+                roll = np.max(np.abs(np.sin((np.asarray(j.theta, float) - np.asarray(j0.theta, float)) / 2)))
+                off = np.asarray(j.beta, float) - np.asarray(j0.beta, float)
+                spread = np.max(np.abs(np.sin((off - off[0]) / 2)))
+                if same and roll < ANGLE_TOL and spread < ANGLE_TOL:
+                    match = j
+            if match is None:
+                break
+            chosen.append(match)
+        else:
+            dist = {k: v for k, v in j0.marker_distances(h).items() if k != "B"}
+            dist.update({f"B{i}": float(j.rho) for i, j in enumerate(chosen, 1)})
+            out.append(dist)
+    return out
+
+
+def solve(joint: str, parents, children) -> list:
+    """Every joint (as marker distances) that exact samples of a locally identifiable case admit.
+
+    Parameters
+    ----------
+    joint : "revolute" | "spherical"
+    parents, children : sequences of arrays (N, 3)
+        World positions of each parent / child marker in N samples.
+    """
+    parents = [np.asarray(a, dtype=float) for a in parents]
+    children = [np.asarray(b, dtype=float) for b in children]
+    p, q = len(parents), len(children)
+    if joint not in ("revolute", "spherical"):
+        raise InputError(f"unknown joint type {joint!r} (revolute | spherical)")
+    if p < q:
+        return _swap(solve(joint, children, parents))
+    if joint == "spherical":
+        if p >= 3 and q >= 1:
+            return _spherical_posed(parents, children)
+        if (p, q) == (2, 2):
+            l1, h = pair_frame(parents[0], parents[1], children[0])
+            l2, _ = pair_frame(parents[0], parents[1], children[1])
+            res = spherical22.identify(l1, l2)
+            return [j.marker_distances(float(np.mean(h))) for j in res.joints]
+    else:
+        if p >= 3 and q >= 1:
+            return _revolute_posed(parents, children)
+        if p == 2 and q >= 1:
+            return _revolute2q(parents, children)
+    raise DegenerateError(f"{joint}({p},{q}) is not locally identifiable: no finite set of joints to solve for")
