@@ -102,9 +102,10 @@ def test_coplanar_degeneracy_is_proved():
     assert {c.name for c in dv.checks if c.agrees} >= {"mediating_planes", "radius_from_centre", "identity_on_output_set"}
 
 
-def test_derive_writes_all_three_derivations(tmp_path, capsys):
+def test_derive_writes_every_derivation(tmp_path, capsys):
     assert cli.main(["derive", "--out", str(tmp_path), "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert {d_["name"] for d_ in rep["derivations"]} == {"revolute21", "spherical31", "spherical22"}
+    assert {d_["name"] for d_ in rep["derivations"]} == {"revolute21", "spherical31", "spherical22", "counterexamples"}
+    assert "E7" in (tmp_path / "counterexamples.md").read_text()
     text = (tmp_path / "spherical22.md").read_text()
     assert "E4" in text and "E5" in text
