@@ -18,7 +18,6 @@ log = logging.getLogger("identcheck")
 
 NOT_YET = {
     "plan": "marker plans before capture",
-    "fit": "fitting recorded trials with uncertainty",
     "diagnose": "the model/measurement discrepancy workflow",
 }
 
@@ -160,6 +159,37 @@ def _cmd_identify(a) -> int:
     return 0 if all(j["unique"] for j in rep["joints"].values()) else 1
 
 
+def _cmd_fit(a) -> int:
+    from .fit.fitting import fit_model, report
+    from .io.model import Model
+    from .trial import Trial
+
+    model = Model.from_toml(a.model)
+    trial = Trial.from_file(a.trial)
+    fitted, points = fit_model(model, trial, progress=lambda msg: print(f"identcheck fit: {msg}", file=sys.stderr))
+    rep = report(model, fitted, points)
+    if a.json:
+        _print_json(rep)
+    else:
+        for name, j in rep["joints"].items():
+            head = f"{name}: {j['case']} by {j['estimator'] or '-'}"
+            if not j["identifiable"]:
+                print(f"{head}: NOT IDENTIFIABLE. {j['excitation']['reason']}")
+                continue
+            unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.3g}"
+            print(f"{head}; unique: {j['unique']}; rms residual {j['rms_residual']:.3g} mm; uncertainty {unc} mm")
+            what = "distance to the centre" if j["type"] == "spherical" else "distance to the hinge axis"
+            rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
+            print(f"   {what} (mm): " + "  ".join(f"{m:>8}" for m in rows[0]))
+            for i, row in enumerate(rows):
+                print(f"   joint {i}:{' ' * (len(what) - 2)}" + "  ".join(
+                    "       -" if row[m] is None else f"{row[m]:8.2f}" for m in rows[0]))
+            if not j["excitation"]["ok"]:
+                print(f"   excitation: {j['excitation']['reason']}")
+    ok = all(j["unique"] and j["identifiable"] for j in rep["joints"].values())
+    return 0 if ok else 1
+
+
 def _not_yet(verb):
     def run(a) -> int:
         print(f"identcheck {verb}: {NOT_YET[verb]} is not available yet", file=sys.stderr)
@@ -226,6 +256,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--precision", type=int, default=None, help="decimal digits (mpmath) instead of float64")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_identify)
+
+    s = sub.add_parser("fit", help="joint parameters from a recorded trial, with uncertainty and excitation checks")
+    s.add_argument("model")
+    s.add_argument("trial")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_fit)
 
     for verb in NOT_YET:
         s = sub.add_parser(verb, help=f"{NOT_YET[verb]} (not available yet)")

@@ -1,0 +1,113 @@
+"""Fit every joint of a model to a trial, propagating identified joints as virtual markers.
+
+Joints are visited until nothing changes: a joint is fitted as soon as its links carry enough
+markers — real, or virtual ones left by joints already fitted (a centre, or two points of a hinge,
+sits still on both of its links) — and the estimator is the one :mod:`identcheck.fit.estimate`
+picks for the markers available. So three pelvis markers, one thigh and one shank marker give
+the hip by a (3,1) sphere and then the knee by Pham's (2,1) hinge on the hip centre and the thigh
+marker. A joint whose markers never suffice is reported as not identifiable, with the table's
+row for its case.
+"""
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from ..errors import DegenerateError
+from . import estimate as E
+
+log = logging.getLogger("identcheck")
+
+
+def _case(kind: str, p: int, q: int) -> str:
+    return f"{kind}({p},{q})"
+
+
+def _choose(kind: str, parent: dict, child: dict, case: str) -> E.JointEstimate:
+    """Run the estimator the markers allow (see the table in :mod:`identcheck.fit.estimate`)."""
+    P, C = list(parent.values()), list(child.values())
+    p, q = len(P), len(C)
+    if p < q:
+        return _choose(kind, child, parent, case)
+    stack = lambda xs: np.stack(xs, axis=1)  # noqa: E731
+    if p >= 3 and q >= 3:
+        return E.posed_pair(stack(P), stack(C), kind, case)
+    if p >= 3 and q >= 1:
+        return (E.posed_sphere if kind == "spherical" else E.posed_circle)(stack(P), stack(C), case)
+    if kind == "spherical" and (p, q) == (2, 2):
+        return E.pair_spherical(P[0], P[1], C[0], C[1], case)
+    if kind == "revolute" and p == 2 and q >= 1:
+        return E.pair_revolute(P[0], P[1], stack(C[:1]), case)
+    raise DegenerateError(f"{case} is not identifiable (identcheck table: {case})")
+
+
+def _markers(model, points: dict, virtual: dict, seg: str) -> dict:
+    real = dict(zip(model.segments[seg].markers, np.moveaxis(points[seg], 1, 0)))
+    usable = {k: v for k, v in real.items() if np.isfinite(v).all(axis=1).any()}
+    return {**usable, **virtual.get(seg, {})}
+
+
+def fit_model(model, trial, progress=None) -> dict:
+    """Every joint of ``model`` fitted to ``trial``: name → (JointEstimate | None, info dict)."""
+    points = {name: trial.select(seg.markers).as_array() for name, seg in model.segments.items()}
+    virtual: dict = {}
+    done: dict = {}
+    pending = list(model.joint_order)
+    while pending:
+        progressed = False
+        for name in list(pending):
+            jt = model.joints[name]
+            par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
+            p, q = len(par), len(chi)
+            case = _case(jt.type, p, q)
+            if min(p, q) == 0 or (max(p, q) < 3 and not (p == q == 2 or (jt.type == "revolute" and min(p, q) >= 1
+                                                                             and max(p, q) == 2))):
+                continue        # wait: a later joint may add virtual markers
+            if progress:
+                progress(f"fitting {name}: {case} with {', '.join(par)} | {', '.join(chi)}")
+            est = _choose(jt.type, par, chi, case)
+            done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
+            for seg in (jt.parent, jt.child):
+                virtual.setdefault(seg, {}).update(est.virtual_markers(name))
+            pending.remove(name)
+            progressed = True
+        if not progressed:
+            break
+    for name in pending:
+        jt = model.joints[name]
+        par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
+        done[name] = (None, {"case": _case(jt.type, len(par), len(chi)), "parent_markers": list(par),
+                             "child_markers": list(chi)})
+    return {n: done[n] for n in model.joint_order}, points
+
+
+def _num(x):
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def report(model, fitted: dict, points: dict) -> dict:
+    """The contract's ``fit`` JSON (plus ``case``, ``estimator``, ``notes``)."""
+    out = {}
+    for name, (est, info) in fitted.items():
+        jt = model.joints[name]
+        adjacent = {m: points[seg][:, i] for seg in (jt.parent, jt.child)
+                    for i, m in enumerate(model.segments[seg].markers)}
+        if est is None:
+            out[name] = {"type": jt.type, "case": info["case"], "unique": False, "identifiable": False,
+                         "marker_distances": {}, "alternatives": [], "rms_residual": None, "uncertainty_mm": None,
+                         "excitation": {"ok": False, "reason": (
+                             f"not identifiable: {info['case']} with markers {info['parent_markers']} | "
+                             f"{info['child_markers']} (see `identcheck table`); add markers")},
+                         "estimator": None, "markers_used": info}
+            continue
+        dist = lambda e: {m: _num(e.distance(x)) for m, x in adjacent.items()}  # noqa: E731
+        out[name] = {"type": jt.type, "case": info["case"], "unique": bool(est.unique), "identifiable": True,
+                     "marker_distances": dist(est),
+                     "alternatives": [{"marker_distances": dist(a), "rms_residual": _num(a.rms_residual)}
+                                      for a in est.alternatives],
+                     "rms_residual": _num(est.rms_residual), "uncertainty_mm": _num(est.uncertainty_mm),
+                     "excitation": {"ok": bool(est.excitation_ok), "reason": est.excitation_reason or "ok"},
+                     "estimator": est.estimator, "markers_used": info, "notes": list(est.notes)}
+    return {"joints": out}
