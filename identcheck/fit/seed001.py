@@ -29,6 +29,19 @@ Where this module departs from the print (see ``derivations/errata_seed001_draft
   σ² per coordinate on n visible markers with centroid x̄ and inertia ``J = Σ(|q|² I − q qᵀ)``
   (``q = x − x̄``), ``Cov = σ² (I/n + [r]× J⁻¹ [r]×ᵀ)`` with ``r = c − x̄``: the same thing, with
   the rotation–translation correlation of a pose expressed far from its markers built in.
+* O(σ²) corrections (``bias_correction``). The rows of the constraint hold noisy rotations,
+  so the Gauss–Markov estimate is biased at O(σ²) (errors in variables, and a noisy rotation
+  places a far point slightly towards its markers) and the bias does not shrink with frames;
+  the normal matrix also contains noise that poses as excitation. Both expected terms are
+  removed (:func:`_bias_term`, :func:`_noise_information`); the second gives the
+  ``information_fraction`` on which the excitation verdict rests (rotation about one axis:
+  the fraction is about 0 and the uncertainty infinite).
+* Serial correlation. Eq. (12) takes frames as independent. The lag-1 autocorrelation of the
+  whitened residuals is reported, warned about, and optionally allowed for (``serial="ar1"``).
+* Frame of the covariance. Eq. (12) also ignores that all poses share the estimated body-fixed
+  coordinates. To first order their error only moves a body frame rigidly (a gauge change), so
+  the covariance is that of the centre relative to the parent's markers;
+  :meth:`CentreFit.in_frame` compares with a truth on that footing.
 
 Conventions: positions in mm; ``noise_mm`` is the standard deviation of each coordinate of a
 marker (``sqrt(tr Wy) = sqrt(3)·noise_mm`` in the paper's terms); covariances in mm².
@@ -54,12 +67,13 @@ MAD_TO_SD = 1.482602218505602
 SINGULAR_RTOL = 1e-14
 """Smallest-to-largest eigenvalue ratio of the normal matrix below which the centre is not
 determined at all (:class:`DegenerateError`): within ~50 rounding errors of singular. Short,
-barely moving trials sit just above it and get huge but honest uncertainties instead."""
-INFO_OK = 0.5
+barely moving trials sit just above it and are judged by the excitation check instead."""
+INFO_OK = 0.7
 """Information fraction (see :attr:`CentreFit.information_fraction`) below which the motion
 counts as near-degenerate: ``excitation_ok`` False and :class:`IdentifiabilityWarning`. In
-Monte-Carlo runs the covariance is calibrated above about 0.55 and increasingly optimistic
-below 0.4 (``benchmarks/bench_seed001.py``)."""
+Monte-Carlo runs the covariance is calibrated above about 0.7 (RMS validation index ≤ 1.05),
+about 15% optimistic in the standard deviation at 0.5 and far off below 0.4, where higher-order
+errors-in-variables bias takes over (``benchmarks/bench_seed001.py``)."""
 INFO_FAIL = 0.25
 """... and below which the centre counts as not determined along the weakest direction:
 ``uncertainty_mm`` is infinite."""
@@ -339,8 +353,11 @@ class CentreFit:
         Returns
         -------
         float
-            With a correct covariance ``E[v²] = 1`` and ``E[v] = 2√2/√(3π) ≈ 0.921``.
+            With a correct covariance ``E[v²] = 1`` and ``E[v] = 2√2/√(3π) ≈ 0.921``. NaN when
+            the centre is not determined (``uncertainty_mm`` infinite).
         """
+        if not np.isfinite(self.uncertainty_mm):
+            return float("nan")
         if local_true is None:
             c, W = self.centre_parent, self.covariance
         else:
@@ -501,7 +518,7 @@ def fit_centre(parent_points, child_points, noise_mm: float | None = None, metho
     cov_full = cov_a if method == "pair" else np.block([[cov_a, cov_a], [cov_a, cov_a]])
     cov0, cov1 = cov_full[:3, :3], cov_full[3:, 3:]
     ev, evec = np.linalg.eigh(cov0)
-    spread, _ = _rotation_spread(R0, R1)
+    spread = _rotation_spread(R0, R1)
     motion = (f"the child's rotation relative to the parent spreads {spread[0]:.3g}°, {spread[1]:.3g}°, "
               f"{spread[2]:.3g}° (RMS) about its principal axes")
     ok = fraction >= INFO_OK
@@ -600,7 +617,8 @@ def _check_inputs(parent_points, child_points, noise_mm, method, serial):
         problems.append(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     if serial not in SERIAL:
         problems.append(f"serial must be one of {', '.join(SERIAL)}, got {serial!r}")
-    if noise_mm is not None and not (np.isfinite(noise_mm) and noise_mm >= 0):
+    if noise_mm is not None and not (isinstance(noise_mm, (int, float, np.number)) and np.isfinite(noise_mm)
+                                     and noise_mm >= 0):
         problems.append(f"noise_mm must be a finite number >= 0, got {noise_mm!r}")
     if problems:
         raise InputError(problems, source="fit_centre")
@@ -764,23 +782,36 @@ _SKEW_BASIS = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
 def _noise_information(R0, R1, geo0, geo1, Wi, noise2, method) -> np.ndarray:
     """Expected part of the normal matrix ``A = Σ_t M_tᵀ G_t M_t`` due to pose noise alone.
 
-    The rows ``M_t = [R0, −R1]`` hold estimated rotations ``Exp(φα) Rα``; to O(σ²)
-    ``E[M_tᵀ G M_t] = M̄_tᵀ G M̄_t + E[δM_tᵀ G δM_t]`` with ``δRα = [φα]× Rα``, so the
-    information that motion really supplies is ``A − N``,
-    ``N = Σ_t blockdiag(R0ᵀ E[[φ0]×ᵀ G [φ0]×] R0, R1ᵀ E[[φ1]×ᵀ G [φ1]×] R1)`` and
-    ``E[[φ]×ᵀ G [φ]×] = Σ_kn Σφ_kn K_kᵀ G K_n`` (``Σφα = σ² Rα Jα⁻¹ Rαᵀ``). ``method="paper"``
-    (``M = R0 − R1``): the sum of the two blocks. Without real motion about an axis, ``A``
-    still has noise-sized information about it, and ``A − N`` shows that it is not real.
-    Same units as ``A`` (per unit σ² in G, σ² in Σφ). Shape (6, 6) or (3, 3).
+    The rows ``M_t = [R0, −R1]`` hold estimated rotations ``Exp(φα) Rα``. To O(σ²),
+    ``Exp(φ) R = R + [φ]× R + ½ [φ]×² R`` and ``E[½ [φ]×²] = ½ (Σφ − tr(Σφ) I)``, so with
+    ``D_t = E[δM_t]`` (that second-order mean, per block) ``E[M_tᵀ G M_t] = M̄_tᵀ G M̄_t + N_t``,
+
+    ``N_t = E[δM¹_tᵀ G δM¹_t] + M̄_tᵀ G D_t + D_tᵀ G M̄_t``,
+
+    with the first term block-diagonal, ``Rαᵀ E[[φα]×ᵀ G [φα]×] Rα`` and
+    ``E[[φ]×ᵀ G [φ]×] = Σ_kn Σφ_kn K_kᵀ G K_n`` (``Σφα = σ² Rα Jα⁻¹ Rαᵀ``). The first term adds
+    apparent information (noise posing as motion), the second removes some (a noisy rotation
+    is on average a slight contraction). The information that motion really supplies is
+    ``A − N`` (M̄ ≈ M, an O(σ³) error). ``method="paper"`` (``M = R0 − R1``): the blocks summed.
+    Same units as ``A``. Shape (6, 6) or (3, 3).
     """
-    blocks = []
-    for R, geo in ((R0, geo0), (R1, geo1)):
+    blocks, means = [], []
+    for R, geo, sign in ((R0, geo0, 1.0), (R1, geo1, -1.0)):
         Sphi = noise2 * R @ geo.inertia_inv @ np.swapaxes(R, 1, 2)
         E = np.einsum("fkn,kji,fjm,nml->fil", Sphi, _SKEW_BASIS, Wi, _SKEW_BASIS, optimize=True)
         blocks.append(np.einsum("fji,fjk,fkl->il", R, E, R, optimize=True))
+        shrink = 0.5 * (Sphi - np.trace(Sphi, axis1=1, axis2=2)[:, None, None] * np.eye(3))
+        means.append(sign * shrink @ R)                                 # E[δM²] block
     if method == "pair":
-        return scipy.linalg.block_diag(*blocks)
-    return blocks[0] + blocks[1]
+        first = scipy.linalg.block_diag(*blocks)
+        M = np.concatenate([R0, -R1], axis=2)
+        D = np.concatenate(means, axis=2)
+    else:
+        first = blocks[0] + blocks[1]
+        M = R0 - R1
+        D = means[0] + means[1]
+    cross = np.einsum("fki,fkl,flj->ij", M, Wi, D, optimize=True)
+    return first + cross + cross.T
 
 
 def _lag1_autocorrelation(r: np.ndarray, Wi: np.ndarray, frames: np.ndarray) -> float:
@@ -794,15 +825,15 @@ def _lag1_autocorrelation(r: np.ndarray, Wi: np.ndarray, frames: np.ndarray) -> 
     return float(np.sum(z[:-1][pair] * z[1:][pair]) / pair.sum() / (den / len(z)))
 
 
-def _rotation_spread(R0: np.ndarray, R1: np.ndarray):
+def _rotation_spread(R0: np.ndarray, R1: np.ndarray) -> np.ndarray:
     """RMS spread (degrees, largest first) of the child's rotation relative to the parent about
-    its principal axes, and the first principal axis (parent frame)."""
+    its principal axes, shape (3,): a description of the motion for messages."""
     rel = Rotation.from_matrix(np.einsum("fji,fjk->fik", R0, R1))       # parent-from-child
     dev = (rel * rel.mean().inv()).as_rotvec()                          # left deviations, parent frame
-    _, sv, vt = np.linalg.svd(dev - dev.mean(axis=0), full_matrices=False)
+    sv = np.linalg.svd(dev - dev.mean(axis=0), compute_uv=False)
     spread = np.zeros(3)
     spread[:len(sv)] = np.rad2deg(sv / np.sqrt(len(dev)))
-    return spread, vt[0]
+    return spread
 
 
 def _procrustes(src: np.ndarray, dst: np.ndarray):
