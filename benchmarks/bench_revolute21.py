@@ -27,7 +27,6 @@ import argparse
 import datetime
 import math
 import os
-import platform
 import sys
 import time
 import warnings
@@ -40,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 
-from results_io import write_json  # noqa: E402  (benchmarks/ is on sys.path)
+from results_io import machine_info, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import DegenerateError  # noqa: E402
 from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, _cos_and_l, _is_real,  # noqa: E402
                                          generated, identify, solve_batch)
@@ -343,7 +342,7 @@ def run(args) -> dict:
                    "nsolve_problems": args.nsolve, "seed": args.seed, "quick": bool(args.quick),
                    "draws": "d,l ~ U(-200,200) mm; r,rho ~ U(30,200) mm; alpha ~ U(0.3, pi-0.3); theta,beta ~ U(-pi,pi)",
                    "timing": "time.perf_counter, best of 3 after warm-up (batched and loops); nsolve: sum of single runs", "forward_vs_explicit_dh_mm": fwd_gap},
-        "machine": machine_info(load_before, load_after),
+        "machine": machine_info(loadavg_before=list(load_before), loadavg_after=list(load_after)),
         "rows": rows, "accuracy": acc, "targets": targets,
     }
 
@@ -370,15 +369,6 @@ def classify_misses(res, best, prob, g, limit=12) -> dict:
                            "n_valid": int(res.valid[k].sum()), "cos_alpha": ca, "pivot_ratio": pr,
                            "root_gap": float(gap), "truth": prob["truth"][k].tolist()})
     return {"by_cause": causes, "first": detail}
-
-
-def machine_info(load_before, load_after) -> dict:
-    import sympy
-
-    return {"nproc": os.cpu_count(), "numpy": np.__version__, "sympy": sympy.__version__,
-            "python": platform.python_version(), "platform": platform.platform(),
-            "processor": platform.processor() or platform.machine(),
-            "loadavg_before": list(load_before), "loadavg_after": list(load_after)}
 
 
 # -- output ------------------------------------------------------------------------------------------

@@ -40,8 +40,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import sys
 import time
 import warnings
@@ -58,7 +56,7 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from results_io import write_json  # noqa: E402
+from results_io import machine_info, write_json  # noqa: E402
 from identcheck.errors import DegenerateError  # noqa: E402
 from identcheck.fit.poses import refine_local  # noqa: E402
 from identcheck.fit.seed001 import (EXPECTED_MEAN_V, INFO_FAIL, INFO_OK, fit_centre,  # noqa: E402
@@ -380,14 +378,6 @@ def figure(res: dict, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-
-
-def machine_info() -> dict:
-    import scipy
-
-    return {"nproc": os.cpu_count(), "numpy": np.__version__, "scipy": scipy.__version__,
-            "python": platform.python_version(), "platform": platform.platform(),
-            "loadavg": list(os.getloadavg())}
 
 
 def jsonable(x):

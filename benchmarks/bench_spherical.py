@@ -37,8 +37,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import sys
 import time
 import warnings
@@ -51,7 +49,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
     sys.path.insert(0, str(ROOT))
 
-from results_io import write_json  # noqa: E402  (benchmarks/ is on sys.path)
+from results_io import machine_info, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import IdentifiabilityWarning  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.solve.gamage_lasenby import distance_variance_cost, gamage_lasenby  # noqa: E402
@@ -259,14 +257,6 @@ def figure(rows, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
-
-
-def machine_info() -> dict:
-    import scipy
-
-    return {"nproc": os.cpu_count(), "numpy": np.__version__, "scipy": scipy.__version__,
-            "python": platform.python_version(), "platform": platform.platform(),
-            "loadavg": list(os.getloadavg())}
 
 
 # -- measured trial ---------------------------------------------------------------------------------

@@ -1,8 +1,9 @@
-"""Shared by every benchmark script: write one key of benchmarks/results.json safely."""
+"""Shared by every benchmark script: write one key of benchmarks/results.json safely, and describe the machine."""
 from __future__ import annotations
 
 import json
 import os
+import platform
 import tempfile
 from pathlib import Path
 
@@ -28,3 +29,14 @@ def write_json(path: Path, key: str, value: dict, merge: bool = False) -> None:
         fh.write("\n")
     os.chmod(tmp, 0o644)  # mkstemp makes it private; results.json is meant to be read by anyone
     os.replace(tmp, path)
+
+
+def machine_info(**extra) -> dict:
+    """The machine and library versions a benchmark ran on (plus ``extra`` keys, e.g. load averages)."""
+    import numpy
+    import scipy
+    import sympy
+
+    return {"nproc": os.cpu_count(), "numpy": numpy.__version__, "scipy": scipy.__version__,
+            "sympy": sympy.__version__, "python": platform.python_version(), "platform": platform.platform(),
+            "processor": platform.processor() or platform.machine(), "loadavg": list(os.getloadavg()), **extra}

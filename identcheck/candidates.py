@@ -23,14 +23,11 @@ import mpmath
 import sympy as sp
 
 from . import certify
+from .certify import rational_text as _q
 from .symbols import case
 
 DIGITS = 50
 SAMPLES_21 = 7      # more than the 5 the linear system needs: every candidate must rebuild all 7
-
-
-def _q(v) -> str:
-    return str(sp.Rational(v))
 
 
 def _mp(v) -> mpmath.mpf:
@@ -78,13 +75,9 @@ def revolute21(seed: int = 7) -> dict:
     }
 
 
-def _rot(t):
-    c, s = certify.half_angle(t)
-    return c, s
-
-
 def revolute22(seed: int = 11) -> dict:
     """Revolute (2,2) is unique: the pairs of (2,1) candidates of B1 and B2 that could form a joint."""
+    from .solve.minimal import hinge_mismatch
     from .solve.revolute21 import identify
 
     cs = case("revolute", 2, 1)
@@ -93,11 +86,11 @@ def revolute22(seed: int = 11) -> dict:
     second = certify.draw_parameters(cs, rng)
     params.update(l2=second["l"], rho2=second["rho"])
     t_gamma = sp.Rational(rng.randint(1, 40), rng.randint(7, 13))
-    cg, sg = _rot(t_gamma)
+    cg, sg = certify.half_angle(t_gamma)
     angles = certify.draw_angles(cs, rng, SAMPLES_21)
     angles2 = []
     for t_th, t_be in angles:          # B2 turns with B1, offset by the constant γ about the hinge
-        cb, sb = _rot(t_be)
+        cb, sb = certify.half_angle(t_be)
         c2, s2 = cb * cg - sb * sg, sb * cg + cb * sg
         t2 = s2 / (1 + c2)             # tan of the half angle of β + γ
         angles2.append((t_th, t2))
@@ -109,12 +102,9 @@ def revolute22(seed: int = 11) -> dict:
         pairs = []
         for j1 in c1:
             for j2 in c2:
-                gap = max(abs(j1.d - j2.d), abs(j1.r - j2.r), abs(j1.alpha - j2.alpha))
+                gap, dth, spread = hinge_mismatch(j1, j2, sin=mpmath.sin)
                 if gap > tol:
                     continue
-                dth = max(abs(mpmath.sin((a - b) / 2)) for a, b in zip(j1.theta, j2.theta))
-                dga = [(b2 - b1) for b1, b2 in zip(j1.beta, j2.beta)]
-                spread = max(abs(mpmath.sin((g - dga[0]) / 2)) for g in dga)
                 ok = dth <= tol and spread <= tol
                 pairs.append({"B1": _joint_dict(j1), "B2": _joint_dict(j2), "max_roll_mismatch": mpmath.nstr(dth, 5),
                               "gamma_spread": mpmath.nstr(spread, 5), "joint": ok})

@@ -26,7 +26,8 @@ from .symbols import Case, case as get_case
 FORMAT = "identcheck.rank-certificate/1"
 
 
-def _q(v) -> str:
+def rational_text(v) -> str:
+    """Exact text of a rational (as certificates store it)."""
     return str(sp.Rational(v))
 
 
@@ -190,10 +191,10 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
         joint=cs.joint, p=cs.p, q=cs.q, unknowns=names,
         unknown_exprs=[str(e) for e in dv.result("Y")], rank=rk, full_rank=full, exact=True,
         deterministic=full, seed=seed, n_samples=n,
-        parameters={k: _q(v) for k, v in params.items()},
-        samples=[{"t": [_q(t) for t in ts], "xyz": [_q(c) for c in pt]} for ts, pt in zip(angles, points)],
+        parameters={k: rational_text(v) for k, v in params.items()},
+        samples=[{"t": [rational_text(t) for t in ts], "xyz": [rational_text(c) for c in pt]} for ts, pt in zip(angles, points)],
         pivot_rows=prow, pivot_columns=pcol, minor_determinant=str(det), numeric_rank=numeric_rank,
-        statement=statement, matrix=[[_q(v) for v in row] for row in rows],
+        statement=statement, matrix=[[rational_text(v) for v in row] for row in rows],
     )
 
 
@@ -256,6 +257,6 @@ def verify(cert: dict) -> Verification:
         problems.append(f"minor recomputed as {det} on rows {prow}, columns {pcol}; certificate differs")
     if bool(cert["full_rank"]) != (rk == len(cert["unknowns"])):
         problems.append("full_rank flag does not match the recomputed rank")
-    if cert.get("matrix") and [[_q(v) for v in row] for row in rows] != cert["matrix"]:
+    if cert.get("matrix") and [[rational_text(v) for v in row] for row in rows] != cert["matrix"]:
         problems.append("the stored matrix differs from the one rebuilt from the sample points")
     return Verification(not problems, problems)

@@ -2,8 +2,6 @@
 import json
 from pathlib import Path
 
-import pytest
-
 from identcheck import cli
 from identcheck.io.model import Model
 from identcheck.simulate import simulate
@@ -67,3 +65,33 @@ def test_model_marker_missing_from_trial_is_bad_input(tmp_path, capsys):
     assert cli.main(["fit", str(EX / "sparse_leg.toml"), str(tmp_path / "t.trc")]) == 2
     err = capsys.readouterr().err
     assert "RTIB" in err and "Traceback" not in err
+
+
+def test_single_axis_hip_is_reported_as_degenerate_and_nothing_is_passed_down(tmp_path, capsys):
+    sim = simulate(Model.from_toml(EX / "sparse_leg.toml"), n_frames=200, seed=4, n_axes=1)
+    sim.trial.to_file(tmp_path / "t.trc")
+    assert cli.main(["fit", str(EX / "sparse_leg.toml"), str(tmp_path / "t.trc"), "--json"]) == 1
+    rep = json.loads(capsys.readouterr().out)
+    hip, knee = rep["joints"]["hip_r"], rep["joints"]["knee_r"]
+    assert hip["identifiable"] and not hip["excitation"]["ok"] and "degenerate" in hip["excitation"]["reason"]
+    assert not knee["identifiable"] and "hip_r.centre" not in knee["markers_used"]["parent_markers"]
+
+
+def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
+    model = tmp_path / "m.toml"
+    model.write_text((EX / "sparse_leg.toml").read_text() + '''
+[segments.foot_r]
+markers = ["RTOE"]
+
+[joints.ankle_r]
+type = "spherical"
+parent = "shank_r"
+child = "foot_r"
+''')
+    sim = simulate(Model.from_toml(model), n_frames=200, seed=4)
+    sim.trial.to_file(tmp_path / "t.trc")
+    cli.main(["fit", str(model), str(tmp_path / "t.trc"), "--json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert not rep["joints"]["knee_r"]["unique"]
+    ankle = rep["joints"]["ankle_r"]
+    assert not ankle["identifiable"] and not any("knee_r" in m for m in ankle["markers_used"]["parent_markers"])

@@ -170,3 +170,11 @@ def _remove_each_marker(rows, case):
             cx = C.construct(sub, sub_data, C.mpf(1) / 64)
             cx.truth_poses = poses
             assert cx.check().ok
+
+
+def test_engine_rows_universal_and_prismatic(rows):
+    """The README's summary of the engine-only rows."""
+    for p in range(4):
+        for q in range(4):
+            assert rows[("universal", p, q)]["local"] == (p >= 2 and q >= 2), (p, q)
+            assert rows[("prismatic", p, q)]["local"] == (p >= 1 and q >= 1 and p + q >= 3), (p, q)

@@ -17,7 +17,7 @@ from functools import lru_cache
 
 import sympy as sp
 
-from ..symbols import BETA, THETA, c_beta, c_theta, d, l, r, rho, s_beta, s_theta
+from ..symbols import c_beta, c_theta, d, l, r, rho, s_beta, s_theta
 from .algebra import equal, reduce_circle
 from .base import Derivation, Step
 

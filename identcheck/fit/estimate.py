@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import DegenerateError, IdentifiabilityWarning
 from ..solve import revolute21, spherical31
 from ..solve.frames import pair_frame
+from ..solve.gamage_lasenby import sphere_centre
 from ..solve.minimal import circle
 from .poses import segment_poses
 
@@ -90,8 +91,9 @@ def _rom_reason(angles_deg: float, what: str) -> str:
 
 # -- posed parent, 1-2 child markers ---------------------------------------------------------------
 def posed_sphere(parent: np.ndarray, child: np.ndarray, case: str) -> JointEstimate:
-    """Common centre of spheres through each child marker in the parent's frame (linear LS, then
-    the linearised covariance of the centre from the geometric residuals)."""
+    """Common centre of the spheres traced by the child markers in the parent's frame
+    (:func:`~identcheck.solve.gamage_lasenby.sphere_centre`), with the linearised covariance of the
+    centre from the geometric residuals."""
     poses = segment_poses(parent)
     local = poses.to_local(child)                                  # (F, q, 3)
     frames = _visible(local)
@@ -100,12 +102,8 @@ def posed_sphere(parent: np.ndarray, child: np.ndarray, case: str) -> JointEstim
                               "seen; a sphere needs at least 4")
     X = local[frames]
     q = X.shape[1]
-    rows = [np.hstack([2 * X[:, i], -np.eye(q)[i][None].repeat(len(X), 0)]) for i in range(q)]
-    A, b = np.vstack(rows), np.concatenate([np.sum(X[:, i] ** 2, axis=1) for i in range(q)])
-    scale = np.abs(A).max(axis=0)
-    sol = np.linalg.lstsq(A / scale, b, rcond=None)[0] / scale
-    c = sol[:3]
-    rho = np.sqrt(np.maximum(c @ c - sol[3:], 0))
+    sph = sphere_centre(X)                                           # common centre of the child markers' spheres
+    c, rho = sph.centre, sph.radii
     dist = np.linalg.norm(X - c, axis=2)                            # (n, q)
     res = dist - rho
     sigma = float(np.sqrt(np.mean(res**2)))

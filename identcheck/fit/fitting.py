@@ -2,7 +2,7 @@
 
 Joints are visited until nothing changes: a joint is fitted as soon as its links carry enough
 markers — real, or virtual ones left by joints already fitted (a centre, or two points of a hinge,
-sits still on both of its links) — and the estimator is the one :mod:`identcheck.fit.estimate`
+sits still on both of its links; only a unique joint is passed on) — and the estimator is the one :mod:`identcheck.fit.estimate`
 picks for the markers available. So three pelvis markers, one thigh and one shank marker give
 the hip by a (3,1) sphere and then the knee by Pham's (2,1) hinge on the hip centre and the thigh
 marker. A joint whose markers never suffice is reported as not identifiable, with the table's
@@ -25,22 +25,30 @@ def _case(kind: str, p: int, q: int) -> str:
     return f"{kind}({p},{q})"
 
 
-def _choose(kind: str, parent: dict, child: dict, case: str) -> E.JointEstimate:
-    """Run the estimator the markers allow (see the table in :mod:`identcheck.fit.estimate`)."""
-    P, C = list(parent.values()), list(child.values())
-    p, q = len(P), len(C)
-    if p < q:
-        return _choose(kind, child, parent, case)
+def _estimator(kind: str, p: int, q: int):
+    """The estimator for p parent and q child markers (p >= q; see :mod:`identcheck.fit.estimate`),
+    called as f(parent_list, child_list, case); None when the markers do not identify the joint."""
     stack = lambda xs: np.stack(xs, axis=1)  # noqa: E731
+    if q == 0 or p < q:
+        return None
     if p >= 3 and q >= 3:
-        return E.posed_pair(stack(P), stack(C), kind, case)
-    if p >= 3 and q >= 1:
-        return (E.posed_sphere if kind == "spherical" else E.posed_circle)(stack(P), stack(C), case)
+        return lambda P, C, case: E.posed_pair(stack(P), stack(C), kind, case)
+    if p >= 3:
+        fn = E.posed_sphere if kind == "spherical" else E.posed_circle
+        return lambda P, C, case: fn(stack(P), stack(C), case)
     if kind == "spherical" and (p, q) == (2, 2):
-        return E.pair_spherical(P[0], P[1], C[0], C[1], case)
-    if kind == "revolute" and p == 2 and q >= 1:
-        return E.pair_revolute(P[0], P[1], stack(C[:1]), case)
-    raise DegenerateError(f"{case} is not identifiable (identcheck table: {case})")
+        return lambda P, C, case: E.pair_spherical(P[0], P[1], C[0], C[1], case)
+    if kind == "revolute" and p == 2:
+        return lambda P, C, case: E.pair_revolute(P[0], P[1], stack(C[:1]), case)
+    return None
+
+
+def _choose(kind: str, parent: dict, child: dict):
+    """(estimator, parent markers, child markers) with the links ordered so that p >= q, or None."""
+    if len(parent) < len(child):
+        parent, child = child, parent
+    fn = _estimator(kind, len(parent), len(child))
+    return None if fn is None else (fn, list(parent.values()), list(child.values()))
 
 
 def _markers(model, points: dict, virtual: dict, seg: str) -> dict:
@@ -62,15 +70,24 @@ def fit_model(model, trial, progress=None) -> dict:
             par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
             p, q = len(par), len(chi)
             case = _case(jt.type, p, q)
-            if min(p, q) == 0 or (max(p, q) < 3 and not (p == q == 2 or (jt.type == "revolute" and min(p, q) >= 1
-                                                                             and max(p, q) == 2))):
+            chosen = _choose(jt.type, par, chi)
+            if chosen is None:
                 continue        # wait: a later joint may add virtual markers
             if progress:
                 progress(f"fitting {name}: {case} with {', '.join(par)} | {', '.join(chi)}")
-            est = _choose(jt.type, par, chi, case)
+            fn, P, C = chosen
+            try:
+                est = fn(P, C, case)
+            except DegenerateError as exc:   # degenerate motion: report this joint, fit the others
+                done[name] = (None, {"case": case, "parent_markers": list(par), "child_markers": list(chi),
+                                     "reason": f"degenerate data: {exc}"})
+                pending.remove(name)
+                progressed = True
+                continue
             done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
-            for seg in (jt.parent, jt.child):
-                virtual.setdefault(seg, {}).update(est.virtual_markers(name))
+            if est.unique:      # a joint among equally good alternatives must not be passed down as if known
+                for seg in (jt.parent, jt.child):
+                    virtual.setdefault(seg, {}).update(est.virtual_markers(name))
             pending.remove(name)
             progressed = True
         if not progressed:
@@ -95,9 +112,9 @@ def report(model, fitted: dict, points: dict) -> dict:
         adjacent = {m: points[seg][:, i] for seg in (jt.parent, jt.child)
                     for i, m in enumerate(model.segments[seg].markers)}
         if est is None:
-            out[name] = {"type": jt.type, "case": info["case"], "unique": False, "identifiable": False,
+            out[name] = {"type": jt.type, "case": info["case"], "unique": False, "identifiable": "reason" in info,
                          "marker_distances": {}, "alternatives": [], "rms_residual": None, "uncertainty_mm": None,
-                         "excitation": {"ok": False, "reason": (
+                         "excitation": {"ok": False, "reason": info.get("reason") or (
                              f"not identifiable: {info['case']} with markers {info['parent_markers']} | "
                              f"{info['child_markers']} (see `identcheck table`); add markers")},
                          "estimator": None, "markers_used": info}

@@ -12,7 +12,7 @@ paper puts the root.
 
 Edge weight: the RMS residual (mm), not eq. (19) as printed, which divides by √n once more and
 so favours pairs with more usable frames when occlusion differs between pairs (erratum O2 in
-``derivations/errata_seed002_draft.md``). With equal frame counts the two give the same tree.
+``derivations/ERRATA.md, seed 002``). With equal frame counts the two give the same tree.
 
 Section 3.4, playback: the articulated model made of the fitted joints, driven by the root's
 pose and each joint's measured relative rotation, rebuilds every segment's pose by eqs. (4) and

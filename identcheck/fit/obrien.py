@@ -31,7 +31,7 @@ prescribes for "near zero" singular values, for which the paper gives no scale):
   is returned), and the axis is the right singular vector of the smallest singular value, its
   first three components in the *child* (outboard) frame and the last three in the *parent*
   (inboard) frame (the paper prints them the other way round: erratum O1 in
-  ``derivations/errata_seed002_draft.md``);
+  ``derivations/ERRATA.md, seed 002``);
 - two or three: ``motion="none"``; the segments hardly rotate relative to each other, and any
   point fits.
 

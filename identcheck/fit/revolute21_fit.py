@@ -72,6 +72,19 @@ def _odr(x, R, z):
     return np.concatenate([np.hypot(xx, yy) - R, zz - z])
 
 
+def _odr_problem(N: int, scale: float) -> tuple:
+    """Jacobian sparsity and bounds of the ODR problem: 5 constants, then one β per sample."""
+    from scipy.sparse import lil_matrix
+
+    sparsity = lil_matrix((2 * N, 5 + N), dtype=int)
+    sparsity[:, :5] = 1
+    for i in range(N):
+        sparsity[i, 5 + i] = sparsity[N + i, 5 + i] = 1
+    lo = np.r_[[-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale], np.full(N, -np.inf)]
+    hi = np.r_[[np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf], np.full(N, np.inf)]
+    return sparsity, lo, hi
+
+
 def fit(local) -> list:
     """Distinct least-squares joints (d, r, α, l, ρ) with their RMS residual and 1-σ uncertainty (mm), best first.
 
@@ -79,19 +92,12 @@ def fit(local) -> list:
     Orthogonal distance regression: the constants and one β per sample are fitted together
     (a smooth problem with a sparse Jacobian), from each seed of the closed form.
     """
-    from scipy.sparse import lil_matrix
-
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
     N = len(local)
     scale = float(np.sqrt(np.mean(local**2)))
     seeds = [s for s in revolute21.solve_batch(local).params if np.all(np.isfinite(s))]
-    sparsity = lil_matrix((2 * N, 5 + N), dtype=int)
-    sparsity[:, :5] = 1
-    for i in range(N):
-        sparsity[i, 5 + i] = sparsity[N + i, 5 + i] = 1
-    lo = np.r_[[-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale], np.full(N, -np.inf)]
-    hi = np.r_[[np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf], np.full(N, np.inf)]
+    sparsity, lo, hi = _odr_problem(N, scale)
     found = []
     for s in seeds:
         s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
@@ -118,8 +124,6 @@ def bootstrap_uncertainty(params, local, n_boot: int = 8, seed: int = 0) -> floa
     linearised covariance this sees the flat, curved valleys of this problem (a hinge close to the
     line of the parent markers), where the linearisation is over-confident by orders of magnitude.
     """
-    from scipy.sparse import lil_matrix
-
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
     N = len(local)
@@ -128,13 +132,7 @@ def bootstrap_uncertainty(params, local, n_boot: int = 8, seed: int = 0) -> floa
     Rm = np.hypot(x, y)
     sigma = float(np.sqrt(np.mean((Rm - R) ** 2 + (zz - z) ** 2) / 2))
     rng = np.random.default_rng(seed)
-    sparsity = lil_matrix((2 * N, 5 + N), dtype=int)
-    sparsity[:, :5] = 1
-    for i in range(N):
-        sparsity[i, 5 + i] = sparsity[N + i, 5 + i] = 1
-    scale = float(np.sqrt(np.mean(local**2)))
-    lo = np.r_[[-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale], np.full(N, -np.inf)]
-    hi = np.r_[[np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf], np.full(N, np.inf)]
+    sparsity, lo, hi = _odr_problem(N, float(np.sqrt(np.mean(local**2))))
     out = []
     for _ in range(n_boot):
         Rb, zb = Rm + sigma * rng.standard_normal(N), zz + sigma * rng.standard_normal(N)

@@ -15,7 +15,7 @@ Two-stage estimator of seed 001 (``/work/shared/papers/001_9593b07cc1e5af33.txt`
 4. **Validation index** (eq. 16): ``v = sqrt(e/3)``, ``e`` the Mahalanobis distance of the
    estimate from the truth under the predicted covariance.
 
-Where this module departs from the print (see ``derivations/errata_seed001_draft.md``):
+Where this module departs from the print (see ``derivations/ERRATA.md, seed 001``):
 
 * Unknowns. Seed 001 makes both body frames coincide with the world at t = 0 and then solves
   for one point ``c = c0 = c1`` (eq. 9, "reduce by half the number of variables"). That hard

@@ -81,8 +81,23 @@ def _revolute21(a1, a2, b) -> list:
     return res.joints, float(np.mean(h))
 
 
+def hinge_mismatch(j1, j2, sin=np.sin) -> tuple:
+    """How far two markers' revolute (2,1) joints are from being one (2,2) joint.
+
+    Returns (constants gap: max |Δd|, |Δr|, |Δα|; roll mismatch: max over samples |sin(Δθ/2)|;
+    offset spread: max |sin((Δβ − Δβ₀)/2)|): a joint of both markers has the same (d, r, α), the same
+    parent roll θ in every sample and a constant angle between the markers about the hinge.
+    ``sin`` is ``numpy.sin`` for float joints or ``mpmath.sin`` for any-precision ones.
+    """
+    gap = max(abs(j1.d - j2.d), abs(j1.r - j2.r), abs(j1.alpha - j2.alpha))
+    roll = max(abs(sin((a - b) / 2)) for a, b in zip(j1.theta, j2.theta))
+    off = [b2 - b1 for b1, b2 in zip(j1.beta, j2.beta)]
+    spread = max(abs(sin((o - off[0]) / 2)) for o in off)
+    return gap, roll, spread
+
+
 def _revolute2q(parents, children) -> list:
-    """(2, q): each child marker's (2,1) joints; keep those sharing (d, r, α), the roll θ and a constant β offset."""
+    """(2, q): each child marker's (2,1) joints; keep those that are one joint (:func:`hinge_mismatch`)."""
     per_marker = [_revolute21(parents[0], parents[1], c) for c in children]
     h = per_marker[0][1]
     out = []
@@ -91,11 +106,8 @@ def _revolute2q(parents, children) -> list:
         for joints, _ in per_marker[1:]:
             match = None
             for j in joints:
-                same = np.allclose([j.d, j.r, j.alpha], [j0.d, j0.r, j0.alpha], rtol=ANGLE_TOL, atol=ANGLE_TOL * (1 + h))
-                roll = np.max(np.abs(np.sin((np.asarray(j.theta, float) - np.asarray(j0.theta, float)) / 2)))
-                off = np.asarray(j.beta, float) - np.asarray(j0.beta, float)
-                spread = np.max(np.abs(np.sin((off - off[0]) / 2)))
-                if same and roll < ANGLE_TOL and spread < ANGLE_TOL:
+                gap, roll, spread = hinge_mismatch(j0, j)
+                if gap < ANGLE_TOL * (1 + h) and roll < ANGLE_TOL and spread < ANGLE_TOL:
                     match = j
             if match is None:
                 break
