@@ -34,6 +34,9 @@ from .poses import segment_poses
 
 AXIS_HANDLE_MM = 100.0   # the second virtual marker of a hinge sits this far along the axis
 MIN_ROM_DEG = 15.0
+MAX_OFF_AXIS_DEG = 10.0   # a hinge whose relative rotation wobbles more than this is flagged
+MIN_SECOND_AXIS_DEG = 5.0  # a centre needs rotation about two axes: RMS spread about the second, at least
+MIN_TRAVEL_MM = 10.0      # child markers that move less than this in the parent frame are not excited
 
 
 @dataclass
@@ -89,6 +92,19 @@ def _rom_reason(angles_deg: float, what: str) -> str:
             "is poorly determined. Record a larger movement of the joint.")
 
 
+def _travel_reason(X: np.ndarray, sigma: float) -> str:
+    """Why child markers X (n, q, 3), seen from the parent, move too little to locate a joint ('' if they
+    move enough): the joint must be located from their travel, and travel comparable with the noise
+    (or a static trial) leaves it undetermined however well a curve fits the scatter."""
+    travel = float(max(np.ptp(X[:, i], axis=0).max() for i in range(X.shape[1])))
+    need = max(MIN_TRAVEL_MM, 10.0 * sigma)
+    if travel >= need:
+        return ""
+    return (f"too little motion: the child markers move at most {travel:.3g} mm relative to the parent "
+            f"(< {need:.3g} mm); a static or nearly static trial does not locate the joint. Record the "
+            "joint's functional movement.")
+
+
 # -- posed parent, 1-2 child markers ---------------------------------------------------------------
 def posed_sphere(parent: np.ndarray, child: np.ndarray, case: str) -> JointEstimate:
     """Common centre of the spheres traced by the child markers in the parent's frame
@@ -117,8 +133,9 @@ def posed_sphere(parent: np.ndarray, child: np.ndarray, case: str) -> JointEstim
     est = JointEstimate("spherical", "sphere in the parent frame (Pham IV-A, least squares)", case,
                         centre=_full(len(child), frames, poses.to_world(c[None])[frames, 0]),
                         rms_residual=sigma, uncertainty_mm=float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0))))
-    if not cond.ok:
-        est.excitation_ok, est.excitation_reason = False, cond.reason
+    why = _travel_reason(X, sigma) or ("" if cond.ok else cond.reason)
+    if why:
+        est.excitation_ok, est.excitation_reason = False, why
     return est
 
 
@@ -180,8 +197,10 @@ def posed_circle(parent: np.ndarray, child: np.ndarray, case: str) -> JointEstim
                         rms_residual=sigma, uncertainty_mm=spread)
     est.notes.append("uncertainty: largest change of a child marker's distance to the hinge between fits to the even "
                      "and the odd frames (an empirical spread, not a calibrated covariance)")
-    if rom < MIN_ROM_DEG:
-        est.excitation_ok, est.excitation_reason = False, _rom_reason(rom, "the child marker's angle about the hinge")
+    why = _travel_reason(X, sigma) or (_rom_reason(rom, "the child marker's angle about the hinge")
+                                      if rom < MIN_ROM_DEG else "")
+    if why:
+        est.excitation_ok, est.excitation_reason = False, why
     return est
 
 
@@ -233,7 +252,10 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     best.unique = not equal
     best.alternatives = equal
     best.uncertainty_mm = max(best.uncertainty_mm, revolute21_fit.bootstrap_uncertainty(sols[0][0], local))
-    if not best.uncertainty_mm < 0.5 * scale_of(local):
+    why = _travel_reason(local[:, None, :], best.rms_residual)
+    if why:
+        best.excitation_ok, best.excitation_reason = False, why
+    elif not best.uncertainty_mm < 0.5 * scale_of(local):
         best.excitation_ok = False
         best.excitation_reason = (f"the constants are poorly determined (1-sigma {best.uncertainty_mm:.3g} mm): the "
                                   "hinge passes close to the line of the two parent markers, or the motion is too "
@@ -271,10 +293,24 @@ def posed_pair(parent: np.ndarray, child: np.ndarray, kind: str, case: str) -> J
         est = JointEstimate("spherical", "seed 001 two-stage centre with Gauss-Markov covariance", case,
                             centre=centre, rms_residual=float(fit.rms_residual), uncertainty_mm=float(fit.uncertainty_mm),
                             excitation_ok=bool(fit.excitation_ok), excitation_reason=fit.excitation_reason)
+        second = float(fit.rotation_spread_deg[1])
+        if est.excitation_ok and second < MIN_SECOND_AXIS_DEG:
+            # the covariance knows only white marker noise; with rotation about essentially one axis, skin
+            # motion shifts the centre along that axis by far more than it says (gait: tens of mm)
+            est.excitation_ok = False
+            est.excitation_reason = (f"{fit.excitation_reason}; but the rotation about the second axis spreads only "
+                                     f"{second:.2g} deg RMS (< {MIN_SECOND_AXIS_DEG:g}): the centre is weakly "
+                                     "determined along the main rotation axis, where soft-tissue motion (not in the "
+                                     "covariance) moves it. Record a functional movement (star arc, circumduction).")
         return est
-    from .obrien import joint_location
+    from .obrien import HINGE_TOL_DEG, joint_location
 
     fit = joint_location(parent, child)
+    spread = fit.spread_deg                      # ascending rotation spreads about the least-exercised directions
+    if fit.motion == "general":
+        # a declared hinge: take the single-axis solution anyway (tolerance between the smallest and the
+        # next spread) and judge the off-axis wobble below, instead of giving no axis at all
+        fit = joint_location(parent, child, hinge_tol_deg=min(0.5 * float(spread[0] + spread[1]), 89.0))
     pp = segment_poses(parent)           # the same body frame joint_location used (same default)
     point = pp.to_world(fit.centre_parent[None])[:, 0]
     est = JointEstimate("revolute", "O'Brien et al. single-axis solution (= SARA)", case, point=point,
@@ -283,6 +319,16 @@ def posed_pair(parent: np.ndarray, child: np.ndarray, kind: str, case: str) -> J
         est.direction = np.full_like(point, np.nan)
         est.excitation_ok = False
         est.excitation_reason = f"no single hinge axis: {fit.reason}"
-    else:
-        est.direction = np.einsum("fij,j->fi", pp.R, fit.axis_parent)
+        return est
+    est.direction = np.einsum("fij,j->fi", pp.R, fit.axis_parent)
+    est.notes.append(f"off-axis rotation spread {spread[0]:.2g} deg, flexion spread {spread[1]:.3g} deg")
+    if spread[0] > MAX_OFF_AXIS_DEG:
+        est.excitation_ok = False
+        est.excitation_reason = (f"the relative rotation is not about one axis: it wobbles {spread[0]:.3g} deg off "
+                                 f"the best hinge (> {MAX_OFF_AXIS_DEG:g}): soft-tissue motion of the clusters, or "
+                                 "the joint is not a hinge (see `identcheck diagnose`)")
+    elif spread[1] < max(HINGE_TOL_DEG, MIN_ROM_DEG / 2):
+        est.excitation_ok = False
+        est.excitation_reason = (f"small range of motion: the rotation about the hinge has a spread of only "
+                                 f"{spread[1]:.3g} deg; record a larger flexion-extension")
     return est

@@ -54,7 +54,8 @@ def _choose(kind: str, parent: dict, child: dict):
 def _markers(model, points: dict, virtual: dict, seg: str) -> dict:
     real = dict(zip(model.segments[seg].markers, np.moveaxis(points[seg], 1, 0)))
     usable = {k: v for k, v in real.items() if np.isfinite(v).all(axis=1).any()}
-    return {**usable, **virtual.get(seg, {})}
+    known = {k: v for k, v in virtual.get(seg, {}).items() if np.isfinite(v).all(axis=1).any()}
+    return {**usable, **known}
 
 
 def fit_model(model, trial, progress=None) -> dict:
