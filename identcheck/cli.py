@@ -17,7 +17,6 @@ from .errors import DegenerateError, IdentifiabilityWarning, InputError
 log = logging.getLogger("identcheck")
 
 NOT_YET = {
-    "plan": "marker plans before capture",
     "diagnose": "the model/measurement discrepancy workflow",
 }
 
@@ -190,6 +189,25 @@ def _cmd_fit(a) -> int:
     return 0 if ok else 1
 
 
+def _cmd_plan(a) -> int:
+    from . import plan
+    from .io.model import Model
+
+    model = Model.from_toml(a.model)
+    plan.check_model_types(model)
+    doc = plan.plan_model(model, seed=a.seed, motion=not a.fast, robust=not a.fast, suggest=True)
+    if a.figure:
+        from .plan_figure import draw
+
+        draw(doc, {s: seg.markers for s, seg in model.segments.items()}, model.root, a.figure, title=a.model)
+        log.info("figure written to %s", a.figure)
+    if a.json:
+        _print_json(doc)
+    else:
+        print(plan.render_table(doc))
+    return 0 if doc["all_identifiable"] else 1
+
+
 def _not_yet(verb):
     def run(a) -> int:
         print(f"identcheck {verb}: {NOT_YET[verb]} is not available yet", file=sys.stderr)
@@ -262,6 +280,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_fit)
+
+    s = sub.add_parser("plan", help="check a marker plan before capture: which joints are identifiable, how; "
+                                    "the fewest markers to add")
+    s.add_argument("model")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG/SVG)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random prime and point")
+    s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
+    s.set_defaults(func=_cmd_plan)
 
     for verb in NOT_YET:
         s = sub.add_parser(verb, help=f"{NOT_YET[verb]} (not available yet)")

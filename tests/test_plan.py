@@ -1,0 +1,198 @@
+"""`identcheck plan`: whole-tree rank, Pham V-B propagation, suggestions, robustness — checked against
+simulation and against the exact-rational engine, not only against the rules."""
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from identcheck import cli, plan, tree_rank
+from identcheck.fit.fitting import fit_model, report
+from identcheck.io.model import Model
+from identcheck.simulate import simulate
+
+EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples"
+
+
+def chain_model(types, counts) -> Model:
+    """A chain root -> s1 -> ... with the given joint types and marker counts per segment."""
+    segs = {f"s{i}": {"markers": [f"m{i}_{k}" for k in range(n)]} for i, n in enumerate(counts)}
+    joints = {f"j{i + 1}": {"type": t, "parent": f"s{i}", "child": f"s{i + 1}"} for i, t in enumerate(types)}
+    return Model.from_dict({"segments": segs, "joints": joints})
+
+
+trees = st.integers(1, 3).flatmap(lambda n: st.tuples(
+    st.lists(st.sampled_from(tree_rank.TYPES), min_size=n, max_size=n),
+    st.lists(st.integers(0, 3), min_size=n + 1, max_size=n + 1)))
+
+
+def test_table_summary_matches_a_fresh_table():
+    """The packaged table copy plan reads is the certified table, recomputed."""
+    from identcheck.table import table
+
+    fresh = {(c["joint"], c["p"], c["q"]): c for c in table(joints=tree_rank.TYPES)["cases"]}
+    for key, row in plan.table_summary().items():
+        for k in ("identifiable", "local", "candidates", "min_samples"):
+            assert row[k] == fresh[key][k], (key, k)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(trees)
+def test_gfp_and_exact_rationals_agree(tree):
+    """The fast modular rank and the exact rational rank give the same verdicts and dim W."""
+    spec = tree_rank.TreeSpec.from_model(chain_model(*tree))
+    a, b = tree_rank.analyse(spec, "GFp", seed=1), tree_rank.analyse(spec, "QQ", seed=2)
+    assert a.dim_w == b.dim_w
+    assert {n: j.local for n, j in a.joints.items()} == {n: j.local for n, j in b.joints.items()}
+    assert a.failure_bound < 1e-9 and b.failure_bound < 1e-3
+
+
+@settings(max_examples=30, deadline=None)
+@given(trees)
+def test_propagation_never_claims_more_than_the_whole_tree(tree):
+    model = chain_model(*tree)
+    spec = tree_rank.TreeSpec.from_model(model)
+    p = plan.analyse(spec)                          # raises PlanInconsistency otherwise
+    for name, j in p.joints.items():
+        if j["settled_by"] == "propagation":
+            assert p.rank.joints[name].local
+        if j["identifiable"]:
+            assert j["local"] and j["candidates"] == 1
+
+
+@settings(max_examples=30, deadline=None)
+@given(trees)
+def test_single_joint_plans_agree_with_the_table(tree):
+    """A one-joint tree is exactly a table row: the whole-tree verdict must equal the row's."""
+    types, counts = tree
+    model = chain_model(types[:1], counts[:2])
+    j = plan.analyse(tree_rank.TreeSpec.from_model(model)).joints["j1"]
+    row = plan.table_summary()[(types[0], min(counts[0], 3), min(counts[1], 3))]
+    assert j["local"] == row["local"]
+    assert j["identifiable"] == row["identifiable"]
+
+
+def _true_distances(sim, model, name):
+    truth = sim.truth.joints[name]
+    out = {}
+    for seg, centre, axis in ((truth.parent, truth.centre_parent, truth.axis_parent),
+                              (truth.child, truth.centre_child, truth.axis_child)):
+        for m, x in sim.truth.segments[seg].marker_local.items():
+            w = x - centre
+            out[m] = float(np.linalg.norm(w if axis is None else w - (w @ axis) * axis))
+    return out
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(trees, st.integers(0, 10_000))
+def test_identified_joints_are_recovered_from_a_simulated_trial(tree, seed):
+    """Simulate the plan, run the estimators it names (``fit``); every joint the plan calls identifiable
+    is recovered, uniquely, with the true marker distances."""
+    model = chain_model(*tree)
+    doc = plan.plan_model(model, motion=False, robust=False, suggest=False)
+    if not any(j["identifiable"] for j in doc["joints"].values()):
+        return
+    sim = simulate(model, n_frames=60, seed=seed, noise_mm=0.0)
+    fitted, points = fit_model(model, sim.trial)
+    rep = report(model, fitted, points)["joints"]
+    for name, j in doc["joints"].items():
+        if not j["identifiable"]:
+            continue
+        assert rep[name]["unique"], (name, j["case"], rep[name])
+        want = _true_distances(sim, model, name)
+        for m, d in rep[name]["marker_distances"].items():
+            assert d == pytest.approx(want[m], abs=1e-3 + 1e-6 * want[m]), (name, m)
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(trees)
+def test_suggestions_fix_the_plan_and_are_fewest(tree):
+    model = chain_model(*tree)
+    spec = tree_rank.TreeSpec.from_model(model)
+    rows = plan.table_summary()
+    sugg = plan.suggestions(spec, rows, max_markers=4)
+    if plan.analyse(spec, rows).all_identifiable:
+        return
+    assert sugg is not None
+    extra = {s["segment"]: s["add_markers"] for s in sugg}
+    assert plan.analyse(plan._with_extra(spec, extra), rows).all_identifiable
+    k = sum(extra.values())
+    if k > 1:                                       # nothing with one marker fewer works
+        assert plan.suggestions(spec, rows, max_markers=k - 1) is None
+
+
+def test_body16_paper_plan():
+    """Pham V-B's 16-marker body: every joint is locally identifiable (the paper's claim, checked by the
+    whole tree); the knees and elbows are settled by revolute (2,1), which admits 4 joints, and the
+    ankles and wrists inherit them — so only neck, hips and shoulders are unique. Four markers fix it."""
+    doc = plan.plan_model(Model.from_toml(EXAMPLES / "body16.toml"))
+    j = doc["joints"]
+    assert len(j) == 13 and doc["all_local"] and not doc["all_identifiable"]
+    assert {n for n, v in j.items() if v["identifiable"]} == {"neck", "hip_l", "hip_r", "shoulder_l", "shoulder_r"}
+    for n in ("knee_l", "knee_r", "elbow_l", "elbow_r"):
+        assert j[n]["case"] == "revolute(2,1)" and j[n]["candidates"] == 4
+        assert any(v.endswith(".centre") for v in j[n]["uses_virtual_markers"])
+    for n in ("ankle_l", "wrist_r"):
+        assert j[n]["case"] == "spherical(3,1)" and j[n]["candidates"] == 4
+    assert sum(s["add_markers"] for s in doc["suggestions"]) == 4
+    assert not any(r["plan_survives"] for r in doc["robustness"].values())
+
+
+def test_shared_motion_is_reported():
+    """Two pelvis markers, one thigh, one shank marker: the hip (2,1) is not identifiable alone (table),
+    but the whole tree pins it together with the knee — the report says so."""
+    model = chain_model(["spherical", "revolute"], [2, 1, 1])
+    doc = plan.plan_model(model, motion=False, robust=False)
+    assert doc["joints"]["j1"]["local"] and doc["joints"]["j1"]["jointly_only"]
+    assert "shared_motion" in doc
+    assert not plan.table_summary()[("spherical", 2, 1)]["local"]
+
+
+def test_motion_needed_names_the_joint_itself():
+    doc = plan.plan_model(Model.from_toml(EXAMPLES / "sparse_leg.toml"), robust=False)
+    assert doc["joints"]["knee_r"]["motion_needed"] == ["knee_r"]
+
+
+def test_cli_plan_json_and_exit_codes(tmp_path, capsys):
+    fig = tmp_path / "plan.png"
+    rc = cli.main(["plan", str(EXAMPLES / "pig_lower_limb.toml"), "--json", "--figure", str(fig)])
+    doc = json.loads(capsys.readouterr().out)
+    assert rc == 0 and doc["all_identifiable"] and fig.stat().st_size > 10_000
+    for j in doc["joints"].values():
+        assert {"identifiable", "local", "candidates", "case", "min_samples", "uses_virtual_markers",
+                "reason"} <= set(j)
+    assert doc["suggestions"] == []
+    rc = cli.main(["plan", str(EXAMPLES / "sparse_leg.toml")])
+    out = capsys.readouterr().out
+    assert rc == 1 and "fewest markers to add: 1 on thigh_r" in out
+    assert math.isfinite(doc["certificate"]["failure_probability_bound"])
+
+
+def test_cli_plan_bad_model(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[segments.a]\nmarkers=["x"]\n[segments.b]\nmarkers=["y"]\n'
+                   '[joints.j]\ntype="screw"\nparent="a"\nchild="b"\n')
+    rc = cli.main(["plan", str(bad), "--json"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "screw" in err and "bad.toml" in err
+
+
+@pytest.mark.parametrize("types,counts", [
+    (["spherical", "revolute"], [2, 1, 1]),          # shared motion: hip (2,1) pinned through the knee
+    (["spherical"], [2, 1]),                         # table: not identifiable
+    (["revolute", "spherical"], [3, 1, 1]),
+    (["revolute"], [1, 1]),
+])
+def test_whole_tree_verdicts_agree_with_an_independent_float_jacobian(types, counts):
+    """Floating point only cross-checks here: an independently written finite-difference Jacobian of
+    plain forward kinematics must agree with the exact engine on the marker-distance quantities."""
+    from float_tree import FloatTree
+
+    spec = tree_rank.TreeSpec.from_model(chain_model(types, counts))
+    exact = tree_rank.analyse(spec)
+    ft = FloatTree(spec, n_frames=exact.frames + 4, seed=3)
+    for name, *_ in spec.joints:
+        quantities = [q for q in exact.joints[name].quantities if not q.startswith("axial")]
+        determined = [q for q in quantities if q not in exact.joints[name].undetermined]
+        assert ft.locally_identifiable(name) == (len(determined) == len(quantities) > 0), name
