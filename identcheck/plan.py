@@ -249,9 +249,14 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) 
 def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED,
                 target=_ok) -> list | None:
     """Fewest extra markers (segment -> count) after which every joint is identifiable: exhaustive over
-    multisets of segments, fewest first; the propagation screens candidates, the whole-tree rank checks.
+    multisets of the segments next to a joint not uniquely settled, fewest first; the propagation
+    screens candidates, the whole-tree rank checks.
     None when no addition of up to ``max_markers`` markers suffices."""
-    segs = list(spec.markers)
+    # only segments next to a joint not yet uniquely settled can change anything: the propagation reads
+    # a segment's points only for its own joints, and a uniquely settled joint's virtual markers are fixed
+    base = propagate(spec, rows)
+    open_joints = [j for j in spec.joints if not (j[0] in base and base[j[0]].candidates == 1)]
+    segs = [s for s in spec.markers if any(s in (j[2], j[3]) for j in open_joints)]
     for k in range(1, max_markers + 1):
         for combo in itertools.combinations_with_replacement(segs, k):
             extra = {}

@@ -196,3 +196,14 @@ def test_whole_tree_verdicts_agree_with_an_independent_float_jacobian(types, cou
         quantities = [q for q in exact.joints[name].quantities if not q.startswith("axial")]
         determined = [q for q in quantities if q not in exact.joints[name].undetermined]
         assert ft.locally_identifiable(name) == (len(determined) == len(quantities) > 0), name
+
+
+def test_broken_body16_gets_the_fewest_marker_fix():
+    """Losing the head marker breaks the neck; the fix names the head and still the four limb markers."""
+    spec = tree_rank.TreeSpec.from_model(Model.from_toml(EXAMPLES / "body16.toml")).without("HEAD")
+    rows = plan.table_summary()
+    p = plan.analyse(spec, rows)
+    assert not p.joints["neck"]["local"] and "head" in p.joints["neck"]["reason"]
+    sugg = {s["segment"]: s["add_markers"] for s in plan.suggestions(spec, rows)}
+    assert sugg.get("head") == 1 and sum(sugg.values()) == 5
+    assert plan.analyse(plan._with_extra(spec, sugg), rows).all_identifiable
