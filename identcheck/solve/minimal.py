@@ -50,7 +50,7 @@ def circle(points) -> tuple:
     """Centre, unit normal and radius of the circle through ≥ 3 points (least squares beyond 3)."""
     P = np.asarray(points, dtype=float)
     c0 = P.mean(axis=0)
-    _, s, vt = np.linalg.svd(P - c0)
+    _, s, vt = np.linalg.svd(P - c0, full_matrices=False)
     n = vt[2]
     if s[1] <= 1e-9 * max(s[0], 1e-300):
         raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
