@@ -196,6 +196,10 @@ def _cmd_plan(a) -> int:
     model = Model.from_toml(a.model)
     plan.check_model_types(model)
     doc = plan.plan_model(model, seed=a.seed, motion=not a.fast, robust=not a.fast, suggest=True)
+    if a.fewest:
+        from .tree_rank import TreeSpec
+
+        doc["fewest_local"] = plan.fewest_local(TreeSpec.from_model(model), plan.table_summary(), a.seed)
     if a.figure:
         from .plan_figure import draw
 
@@ -288,6 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG/SVG)")
     s.add_argument("--seed", type=int, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
+    s.add_argument("--fewest", action="store_true",
+                   help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.set_defaults(func=_cmd_plan)
 
     for verb in NOT_YET:

@@ -354,6 +354,10 @@ def render_table(doc: dict) -> str:
                                                              for s in doc["suggestions"]) or "none found")))
     if doc.get("shared_motion"):
         lines.append("shared motion: " + doc["shared_motion"])
+    if doc.get("fewest_local"):
+        f = doc["fewest_local"]
+        lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
+                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
     if "robustness" in doc:
         weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
         lines.append("markers the plan cannot lose: " + (", ".join(weak) or "none"))

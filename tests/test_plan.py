@@ -207,3 +207,18 @@ def test_broken_body16_gets_the_fewest_marker_fix():
     sugg = {s["segment"]: s["add_markers"] for s in plan.suggestions(spec, rows)}
     assert sugg.get("head") == 1 and sum(sugg.values()) == 5
     assert plan.analyse(plan._with_extra(spec, sugg), rows).all_identifiable
+
+
+def test_cli_fewest_local_finding(capsys):
+    """The finding of issue 7: dropping markers greedily, body16 stays locally identifiable with 13."""
+    rc = cli.main(["plan", str(EXAMPLES / "body16.toml"), "--json", "--fast", "--fewest"])
+    doc = json.loads(capsys.readouterr().out)
+    f = doc["fewest_local"]
+    assert rc == 1 and f["markers"] == 16 - len(f["removable"])
+    kept = tree_rank.TreeSpec.from_model(Model.from_toml(EXAMPLES / "body16.toml"))
+    for m in f["removable"]:
+        kept = kept.without(m)
+    assert all(j.local for j in tree_rank.analyse(kept).joints.values())
+    for seg, ms in f["per_segment"].items():       # and no single further marker can go
+        for m in ms:
+            assert not all(j.local for j in tree_rank.analyse(kept.without(m)).joints.values()), m
