@@ -194,12 +194,7 @@ def _cmd_plan(a) -> int:
     from .io.model import Model
 
     model = Model.from_toml(a.model)
-    plan.check_model_types(model)
-    doc = plan.plan_model(model, seed=a.seed, motion=not a.fast, robust=not a.fast, suggest=True)
-    if a.fewest:
-        from .tree_rank import TreeSpec
-
-        doc["fewest_local"] = plan.fewest_local(TreeSpec.from_model(model), plan.table_summary(), a.seed)
+    doc = plan.plan_model(model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest)
     if a.figure:
         from .plan_figure import draw
 

@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from . import tree_rank
-from .errors import InputError
 
 MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
 
@@ -156,7 +155,7 @@ class Plan:
         return all(j["local"] for j in self.joints.values())
 
 
-def _reason(spec, name, kind, par, chi, jr, st, rows) -> str:
+def _reason(spec, name, kind, par, chi, jr, st) -> str:
     np_, nc = len(spec.markers[par]), len(spec.markers[chi])
     if st is not None:
         via = f" with virtual markers {', '.join(st.virtual)}" if st.virtual else ""
@@ -211,7 +210,7 @@ def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str 
             "jointly_only": bool(jr.local and st is None),
             "depends_on": list(st.depends_on) if st else [],
             "step": st.step if st else None,
-            "reason": _reason(spec, name, kind, par, chi, jr, st, rows),
+            "reason": _reason(spec, name, kind, par, chi, jr, st),
         }
     return plan
 
@@ -229,10 +228,6 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0) -> dict:
     return need
 
 
-def _ok(plan: Plan) -> bool:
-    return plan.all_identifiable
-
-
 def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) -> dict:
     """For each marker: does the plan stay all-identifiable without it, and which joints would it lose."""
     out = {}
@@ -246,8 +241,7 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) 
     return out
 
 
-def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED,
-                target=_ok) -> list | None:
+def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED) -> list | None:
     """Fewest extra markers (segment -> count) after which every joint is identifiable: exhaustive over
     multisets of the segments next to a joint not uniquely settled, fewest first; the propagation
     screens candidates, the whole-tree rank checks.
@@ -266,7 +260,7 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
             settled = propagate(cand, rows)
             if not all(n in settled and settled[n].candidates == 1 for n, *_ in cand.joints):
                 continue
-            if target(analyse(cand, rows, seed=seed)):
+            if analyse(cand, rows, seed=seed).all_identifiable:
                 return [{"segment": s, "add_markers": c} for s, c in extra.items()]
     return None
 
@@ -299,7 +293,8 @@ def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
             "method": "greedy removal while every joint stays locally identifiable (whole-tree rank)"}
 
 
-def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True) -> dict:
+def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
+               fewest: bool = False) -> dict:
     """The contract's ``plan`` JSON for a model (plus explanation, motion, robustness and the certificate)."""
     spec = tree_rank.TreeSpec.from_model(model)
     rows = table_summary()
@@ -314,6 +309,8 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         doc["suggestions_note"] = f"no addition of up to {MAX_SUGGESTED} markers makes every joint identifiable"
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed)
+    if fewest:
+        doc["fewest_local"] = fewest_local(spec, rows, seed)
     jointly = [n for n, j in plan.joints.items() if j["jointly_only"]]
     if jointly:
         doc["shared_motion"] = (f"{', '.join(jointly)}: locally identifiable only together (the whole tree's rank), "
@@ -325,12 +322,6 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         "degree_bound": r.degree_bound, "failure_probability_bound": r.failure_bound,
         "seed": seed}
     return doc
-
-
-def check_model_types(model) -> None:
-    bad = [n for n, j in model.joints.items() if j.type not in tree_rank.TYPES]
-    if bad:
-        raise InputError([f"joint {n!r}: plan supports {', '.join(tree_rank.TYPES)} joints" for n in bad])
 
 
 def render_table(doc: dict) -> str:

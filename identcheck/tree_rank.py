@@ -87,10 +87,6 @@ class Field:
         flat = R.entries()
         return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
 
-    def rank(self, rows, ncols: int) -> int:
-        M = self.matrix(rows, ncols)
-        return 0 if M is None else M.rank()
-
 
 def _random_prime(rng: random.Random, bits: int) -> int:
     """A prime uniform among the odd primes of [2^(bits-1), 2^bits): uniform odd integers, kept when
@@ -196,11 +192,9 @@ class TreeSpec:
     frozen: frozenset = frozenset()   # joints held at one fixed angle in every frame (motion not exercised)
 
     @classmethod
-    def from_model(cls, model, extra: dict | None = None) -> "TreeSpec":
-        """From an :class:`identcheck.io.model.Model`; ``extra`` adds markers per segment (segment -> count)."""
+    def from_model(cls, model) -> "TreeSpec":
+        """From an :class:`identcheck.io.model.Model`; an unsupported joint type is an InputError."""
         markers = {s: tuple(seg.markers) for s, seg in model.segments.items()}
-        for s, k in (extra or {}).items():
-            markers[s] = markers[s] + tuple(f"{s}.extra{i + 1}" for i in range(k))
         joints = tuple((n, model.joints[n].type, model.joints[n].parent, model.joints[n].child)
                        for n in model.joint_order)
         for n, t, _, _ in joints:
@@ -226,20 +220,6 @@ class TreeSpec:
     @cached_property
     def parent_joint(self) -> dict:
         return {j[3]: j for j in self.joints}
-
-    @cached_property
-    def subtree(self) -> dict:
-        """Segments at or below each segment."""
-        out = {}
-
-        def walk(s):
-            segs = [s]
-            for j in self.children[s]:
-                segs += walk(j[3])
-            out[s] = segs
-            return segs
-        walk(self.root)
-        return out
 
 
 @dataclass
@@ -300,7 +280,6 @@ class TreeJacobian:
                 self.var_offset[name] = nv
                 nv += VARS_PER_JOINT[kind]
         self.n_vars = nv
-        self.rows_per_frame = 3 * sum(len(ms) for ms in spec.markers.values())
         self.W: list = []
         self.frames = 0
 
@@ -535,10 +514,10 @@ def degree_bound(spec: TreeSpec, frames: int) -> int:
 
     Entries of a row of J are, after clearing denominators, polynomials in the drawn coordinates:
     each rotation on the chain from the root contributes degree ≤ 2 to numerator and denominator
-    (quaternion / |q|² or half-angle over 1 + t²; a hinge also its axis' rotation), the constants
-    degree 1; a row through d joints therefore has degree ≤ 4(d + 2) + 2 once its denominators are
-    cleared, and a minor built from ≤ R rows (plus one gradient row) has degree ≤ the sum over
-    its rows, bounded by the sum over all rows.
+    (quaternion / |q|² or half-angle over 1 + t²), a joint at most two rotations (a hinge: its
+    axis' rotation and its angle), the constants degree 1; a row below d joints therefore has
+    degree ≤ 4(2d + 2) + 2 once its denominators are cleared, and a minor built from ≤ R rows (plus
+    one gradient row) has degree ≤ the sum over its rows, bounded by the sum over all rows.
     """
     depth = {spec.root: 0}
     for _, _, par, chi in spec.joints:

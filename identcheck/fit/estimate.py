@@ -305,12 +305,8 @@ def posed_pair(parent: np.ndarray, child: np.ndarray, kind: str, case: str) -> J
         return est
     from .obrien import HINGE_TOL_DEG, joint_location
 
-    fit = joint_location(parent, child)
-    spread = fit.spread_deg                      # ascending rotation spreads about the least-exercised directions
-    if fit.motion == "general":
-        # a declared hinge: take the single-axis solution anyway (tolerance between the smallest and the
-        # next spread) and judge the off-axis wobble below, instead of giving no axis at all
-        fit = joint_location(parent, child, hinge_tol_deg=min(0.5 * float(spread[0] + spread[1]), 89.0))
+    fit = joint_location(parent, child, hinge=True)
+    spread = fit.spread_deg                      # ascending: off-axis wobble, then the flexion, ...
     pp = segment_poses(parent)           # the same body frame joint_location used (same default)
     point = pp.to_world(fit.centre_parent[None])[:, 0]
     est = JointEstimate("revolute", "O'Brien et al. single-axis solution (= SARA)", case, point=point,

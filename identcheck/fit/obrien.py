@@ -263,7 +263,7 @@ def stacked_system(parent, child, names=("parent", "child")):
 
 
 def joint_location(parent, child, hinge_tol_deg: float = HINGE_TOL_DEG,
-                   names=("parent", "child")) -> JointFit:
+                   names=("parent", "child"), hinge: bool = False) -> JointFit:
     """Fit the joint between two segments by stacked SVD least squares (O'Brien et al., eqs. 11-19).
 
     Parameters
@@ -278,6 +278,10 @@ def joint_location(parent, child, hinge_tol_deg: float = HINGE_TOL_DEG,
         Rotation spread below which a direction counts as not exercised (module docstring).
     names : (str, str)
         Segment names for error messages.
+    hinge : bool
+        The joint is declared a hinge: take the single-axis solution even when every spread
+        exceeds the tolerance (real joints wobble off their axis); the smallest spread, the wobble,
+        is left for the caller to judge.
 
     Returns
     -------
@@ -302,6 +306,10 @@ def joint_location(parent, child, hinge_tol_deg: float = HINGE_TOL_DEG,
     U, W, Vt = np.linalg.svd(Q, full_matrices=False)               # eq. (16)
     spread = rotation_spread_deg(W[3:][::-1], n)                   # ascending
     motion, k, reason = classify_motion(spread, hinge_tol_deg)
+    if hinge and motion == "general":
+        motion, k = "single_axis", 1
+        reason = (f"declared hinge: single-axis solution; it wobbles {spread[0]:.3g} deg off the axis "
+                  f"(rotation spreads {', '.join(f'{x:.3g}' for x in spread)} deg)")
     keep = np.ones(6, dtype=bool)
     keep[6 - k:] = False                                           # W⁻¹ := 0 for those (3.1)
     keep &= W > 6 * np.finfo(float).eps * W[0]                     # exact zeros (tol 0)
