@@ -12,6 +12,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from .effects_inject import EFFECTS
 from .errors import DegenerateError, IdentifiabilityWarning, InputError
 
 log = logging.getLogger("identcheck")
@@ -116,17 +117,28 @@ def _cmd_table(a) -> int:
 def _cmd_simulate(a) -> int:
     from .simulate import simulate_file
 
-    if a.effect:
-        raise InputError([f"--effect {a.effect}: injecting effects is not available yet"])
-    sim = simulate_file(a.model, a.out, seed=a.seed, n_frames=a.frames, rate_hz=a.rate, rom_deg=a.rom_deg,
-                        noise_mm=a.noise_mm, occlusion=a.occlusion, n_axes=a.n_axes)
+    sim = simulate_file(a.model, a.out, seed=a.seed, effect=a.effect, n_frames=a.frames, rate_hz=a.rate,
+                        rom_deg=a.rom_deg, noise_mm=a.noise_mm, occlusion=a.occlusion, n_axes=a.n_axes)
     if a.truth:
         sim.save_truth(a.truth)
     log.info("wrote %s (%d frames, %d markers)", a.out, sim.trial.n_frames, sim.trial.n_markers)
+    effect = sim.settings.get("effect")
+    if effect:
+        log.info("injected effect %s at %s", effect["name"], json.dumps(_without_long_lists(effect["where"]), sort_keys=True))
     if a.json:
-        _print_json({"out": str(a.out), "n_frames": sim.trial.n_frames, "markers": list(sim.trial.labels),
-                     "truth": sim.truth.to_dict(poses=False)})
+        doc = {"out": str(a.out), "n_frames": sim.trial.n_frames, "markers": list(sim.trial.labels),
+               "truth": sim.truth.to_dict(poses=False)}
+        if effect:
+            doc["effect"] = _without_long_lists(effect)
+        _print_json(doc)
     return 0
+
+
+def _without_long_lists(doc: dict, longest: int = 20) -> dict:
+    """`doc` without the keys (at any depth) whose values are lists of more than `longest` items,
+    so that per-frame arrays stay out of the printed summary."""
+    return {k: _without_long_lists(v, longest) if isinstance(v, dict) else v for k, v in doc.items()
+            if not (isinstance(v, list) and len(v) > longest)}
 
 
 def _cmd_identify(a) -> int:
@@ -252,7 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="write a synthetic trial (TRC or C3D by extension)")
     s.add_argument("model")
     s.add_argument("--out", required=True)
-    s.add_argument("--effect", default=None, help="inject a named effect (not available yet)")
+    s.add_argument("--effect", default=None, choices=EFFECTS, metavar="NAME",
+                   help=f"inject one named effect ({', '.join(EFFECTS)}); drawn from --seed")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames", type=int, default=200)
     s.add_argument("--rate", type=float, default=100.0, help="Hz")

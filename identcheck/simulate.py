@@ -302,8 +302,10 @@ def simulate(model: Model, n_frames: int = 200, rate_hz: float = 100.0, rom_deg:
                       truth=truth, model=model, gaps=gaps, settings=settings)
 
 
-def simulate_file(model_path, out_path, seed: int = 0, **kw) -> Simulation:
-    """Load a model, simulate it and write the (noisy) trial as TRC or C3D by extension.
+def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None,
+                  effect_seed: int | None = None, **kw) -> Simulation:
+    """Load a model, simulate it, inject `effect` if given, and write the (noisy) trial as
+    TRC or C3D by extension.
 
     Parameters
     ----------
@@ -312,6 +314,10 @@ def simulate_file(model_path, out_path, seed: int = 0, **kw) -> Simulation:
     out_path : str or os.PathLike
         ``.trc`` or ``.c3d`` (any case).
     seed : int
+    effect : str, optional
+        An effect name of :data:`identcheck.effects_inject.EFFECTS`, injected before writing.
+    effect_seed : int, optional
+        Seed of the effect's draw; default ``seed + effects_inject.SEED_OFFSET``.
     **kw
         Passed to :func:`simulate`.
 
@@ -322,13 +328,18 @@ def simulate_file(model_path, out_path, seed: int = 0, **kw) -> Simulation:
     Raises
     ------
     InputError
-        Bad model, bad arguments or an unknown output extension (checked before simulating).
+        Bad model, bad arguments, an unknown output extension (checked before simulating),
+        or an effect the model cannot carry.
     """
     out_path = Path(out_path)
     if out_path.suffix.lower() not in FORMATS:
         raise InputError([f"unknown trial file extension {out_path.suffix or '(none)'!r} (expected "
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
     sim = simulate(Model.from_toml(model_path), seed=seed, **kw)
+    if effect is not None:
+        from identcheck.effects_inject import SEED_OFFSET, inject_effect
+
+        sim = inject_effect(sim, effect, seed=seed + SEED_OFFSET if effect_seed is None else effect_seed)
     sim.trial.to_file(out_path)
     return sim
 

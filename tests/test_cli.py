@@ -79,7 +79,11 @@ def test_verbs_not_built_yet_exit_2(capsys):
 def test_simulate_bad_extension_and_effect(tmp_path, capsys):
     assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.csv")]) == 2
     assert "x.csv" in capsys.readouterr().err
-    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "marker_slip"]) == 2
+    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "wobble"]) == 2
+    assert "invalid choice: 'wobble'" in capsys.readouterr().err
+    assert not (tmp_path / "x.trc").exists()
+    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "marker_slip"]) == 0
+    assert (tmp_path / "x.trc").exists()
 
 
 def test_flexion_only_hip_is_named_coplanar_with_the_motion_to_add(tmp_path, capsys):
