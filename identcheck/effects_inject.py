@@ -158,8 +158,11 @@ def _marker_slip(sim, rng) -> _Change:
 
 
 def _joint_translation(sim, rng) -> _Change:
-    """A joint centre moves in its parent frame along v by A a(t), a the joint angle scaled to
-    [0, 1]; the child segment and everything below it follow."""
+    """A joint centre moves in its parent frame along v by A a(t)², a the joint angle scaled to
+    [0, 1] (a roll-back profile: still at one end of the range, fastest at the other); the child
+    segment and everything below it follow. The profile is curved on purpose: a translation linear
+    in a hinge's angle is the same motion as a rigid hinge about a shifted axis, so no data could tell
+    it from one."""
     model = sim.model
     options = [j for j in model.joint_order if _subtree_columns(sim, model.joints[j].child)]
     if not options:
@@ -168,7 +171,7 @@ def _joint_translation(sim, rng) -> _Change:
     a = _normalised_angle(sim.truth.joints[joint], low=0.0)
     direction = _unit_vectors(rng, 1)[0]
     size = rng.uniform(8.0, 15.0)
-    delta = np.outer(size * a, direction)
+    delta = np.outer(size * a * a, direction)
     clean = sim.clean.as_array()
     cols = _subtree_columns(sim, model.joints[joint].child)
     clean[:, cols] += _rotate(_rotations(sim, model.joints[joint].parent), delta)[:, None]

@@ -1,0 +1,35 @@
+"""What every named effect provides: a detector that reads the residual structure and proposes where
+the effect acts, and an augmentation that adds it to the model with its own parameters and refits."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class Proposal:
+    """A detector's guess: where the effect acts, how strongly the residuals point to it, and what the
+    augmentation needs (bases, columns, frames)."""
+
+    effect: str
+    where: dict
+    strength: float
+    payload: dict = field(default_factory=dict)
+
+
+class Effect:
+    """A named effect (one of the contract's names). Subclasses set ``name`` and implement both steps."""
+
+    name = ""
+    max_proposals = 1       # how many of the detector's best proposals are fitted each round
+
+    def propose(self, ctx, hyp) -> list:
+        """Proposals, strongest first, from the residuals of hypothesis `hyp` (empty: no sign of it)."""
+        raise NotImplementedError
+
+    def apply(self, ctx, hyp, proposal: Proposal):
+        """Hypothesis `hyp` with the effect added where `proposal` says, its parameters fitted."""
+        raise NotImplementedError
+
+    def evidence(self, ctx, before, after, proposal: Proposal) -> dict:
+        """Arrays that show the effect (for the figures): by default the proposal's own."""
+        return dict(proposal.payload.get("evidence", {}))

@@ -1,0 +1,215 @@
+"""Diagnose a trial: fit the rigid-joint model, and while the gap exceeds the noise floor, let every named
+effect propose where it acts, fit the proposals, and adopt the one that earns its parameters best and
+keeps the joints identifiable; report the effects in order with the gap before and after each.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..fit.estimate import MIN_ROM_DEG
+from .chain import Chain, fit_chain, information, initial_state
+from .effects import EFFECTS
+from .hypothesis import Context, Hypothesis, consistency, joint_angles, score
+from .noise import noise_floor
+
+log = logging.getLogger("identcheck")
+
+MAX_STEPS = 4
+RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
+
+
+@dataclass
+class Step:
+    """One adopted effect: what, where, the gap before and after, and the evidence for the figures."""
+
+    name: str
+    where: dict
+    gap_before: float
+    gap_after: float
+    score: float
+    evidence: dict = field(default_factory=dict)
+    rejected: list = field(default_factory=list)    # the other candidates of this round: (name, where, score)
+
+
+@dataclass
+class Diagnosis:
+    """Everything ``diagnose`` found: the noise, the rigid fit, the steps, the final model."""
+
+    ctx: Context
+    before: Hypothesis
+    after: Hypothesis
+    steps: list
+    test_before: dict
+    test_after: dict
+
+    @property
+    def gap_before(self) -> float:
+        return self.before.gap(self.ctx)
+
+    @property
+    def gap_after(self) -> float:
+        return self.after.gap(self.ctx)
+
+    @property
+    def noise_floor(self) -> float:
+        return self.after.floor(self.ctx)
+
+    def to_json(self) -> dict:
+        """The contract's ``diagnose`` JSON, plus the noise estimate and the consistency tests."""
+        return {
+            "noise_floor": round(self.noise_floor, 4),
+            "noise_floor_before": round(self.before.floor(self.ctx), 4),
+            "noise_sigma_mm": round(self.ctx.noise.sigma_mm, 4),
+            "gap_before": round(self.gap_before, 4),
+            "gap_after": round(self.gap_after, 4),
+            "consistent_before": self.test_before, "consistent_after": self.test_after,
+            "effects": [{"name": s.name, "where": _plain(s.where), "gap_before": round(s.gap_before, 4),
+                         "gap_after": round(s.gap_after, 4), "score": round(s.score, 1)} for s in self.steps],
+            "joints": joint_report(self.ctx, self.after),
+        }
+
+
+def _plain(v):
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+# ---------------------------------------------------------------------- identifiability of a fit
+def undetermined(h: Hypothesis) -> int:
+    """Directions of the constants the data leave undetermined beyond the gauge (0: identifiable).
+
+    Floating point on the fitted information matrix, Jacobi-scaled; a practical check that an adopted
+    effect does not trade off against the joint parameters, not a structural certificate.
+    """
+    S = information(h.fit, h.data, h.weights)
+    if not np.isfinite(S).all():
+        return len(S)
+    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    try:
+        ev = np.linalg.eigvalsh(S / np.outer(d, d))
+    except np.linalg.LinAlgError:
+        return len(S)
+    null = int(np.sum(ev < RANK_TOL * ev.max()))
+    return max(null - h.chain.gauge(), 0)
+
+
+# ---------------------------------------------------------------------- the loop
+def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
+    """Noise floor and the rigid-joint fit of `trial`."""
+    missing = [m for m in model.markers if m not in trial.labels]
+    if missing:
+        raise InputError([f"marker {m!r} of the model is not in the trial" for m in missing], source=trial.source)
+    data = trial.select(model.markers).as_array()
+    seen = np.all(np.isfinite(data), axis=2)
+    never = [m for m, ok in zip(model.markers, seen.any(axis=0)) if not ok]
+    if never:
+        raise InputError([f"marker {m!r} is never visible" for m in never], source=trial.source)
+    noise = noise_floor(data, model.markers, {s: model.segments[s].markers for s in model.segments})
+    if noise.sigma_mm <= 0:
+        raise InputError(["the distances within every segment are exactly constant: no measurement noise to "
+                          "scale the gap against (a noise-free synthetic trial?)"], source=trial.source)
+    ctx = Context(model, tuple(model.markers), trial.rate_hz, data, noise, int(seen.sum()), trial.source)
+    chain = Chain.from_model(model)
+    if progress:
+        progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
+    state = initial_state(chain, data)
+    weights = seen.astype(float)
+    fit = fit_chain(chain, data, state, weights=weights)
+    return ctx, Hypothesis(chain, fit.terms, data, weights, fit)
+
+
+def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:
+    """Find, name and model what the rigid-joint model misses in `trial` (see the module docstring)."""
+    ctx, base = start(model, trial, progress)
+    test0 = consistency(ctx, base)
+    h, steps = base, []
+    while not consistency(ctx, h)["consistent"] and len(steps) < max_steps:
+        tried = []
+        for eff in EFFECTS:
+            for prop in eff.propose(ctx, h)[:eff.max_proposals]:
+                if progress:
+                    progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
+                try:
+                    cand = eff.apply(ctx, h, prop)
+                except (np.linalg.LinAlgError, ValueError) as exc:
+                    log.debug("%s %s failed: %s", eff.name, prop.where, exc)
+                    continue
+                tried.append((score(ctx, cand, h), eff, prop, cand))
+        tried.sort(key=lambda x: -x[0])
+        adopted = None
+        for sc, eff, prop, cand in tried:
+            if sc <= 0:
+                break
+            if undetermined(cand) == 0:
+                adopted = (sc, eff, prop, cand)
+                break
+            log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
+        if adopted is None:
+            break
+        sc, eff, prop, cand = adopted
+        cand = cand.polish()
+        steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
+                          [(e.name, p.where, s) for s, e, p, _ in tried if p is not prop][:8]))
+        if progress:
+            progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
+                     f"(floor {cand.floor(ctx):.3g})")
+        h = cand
+    return Diagnosis(ctx, base, h, steps, test0, consistency(ctx, h))
+
+
+# ---------------------------------------------------------------------- the joints, as `fit` reports them
+def joint_report(ctx: Context, h: Hypothesis) -> dict:
+    """Each joint as ``fit`` reports it, from the final model: marker distances to the centre or hinge,
+    their standard errors (σ² times the pseudo-inverse of the information), residual and excitation."""
+    ch, s = h.chain, h.fit.state
+    S = information(h.fit, h.data, h.weights)
+    cov = ctx.noise.sigma_mm ** 2 * np.linalg.pinv(S, rcond=1e-10, hermitian=True)
+    n_loc = 3 * ch.n_markers
+    offsets, c = {}, n_loc
+    for j in ch.joints:
+        offsets[j] = c
+        c += 6 + (5 if ch.types[j] == "revolute" else 0)
+    null = undetermined(h)
+    angles = joint_angles(h)
+    res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
+    out = {}
+    for j in ch.joints:
+        P, C = ch.parent[j], ch.child[j]
+        rev = ch.types[j] == "revolute"
+        dist, sds = {}, []
+        for side, seg in ((0, P), (1, C)):
+            centre = s.c_parent[j] if side == 0 else s.c_child[j]
+            axis = None
+            if rev:
+                axis = s.axis[j] if side == 0 else s.rest[j].T @ s.axis[j]
+            for col in ch.seg_markers[seg]:
+                v = s.local[col] - centre
+                if axis is not None:
+                    v = v - (v @ axis) * axis
+                d = float(np.linalg.norm(v))
+                dist[ch.labels[col]] = round(d, 3)
+                g = np.zeros(len(S))
+                u = v / max(d, 1e-12)
+                g[3 * col:3 * col + 3] = u
+                g[offsets[j] + 3 * side: offsets[j] + 3 * side + 3] = -u
+                sds.append(float(np.sqrt(max(g @ cov @ g, 0.0))))
+        idx = np.concatenate([ch.seg_markers[P], ch.seg_markers[C]])
+        rom = np.rad2deg(np.ptp(angles[j], axis=0))
+        ok = bool(rom[0] >= MIN_ROM_DEG) if rev else bool(np.sort(rom)[-2] >= MIN_ROM_DEG)
+        reason = "ok" if ok else (f"small range of motion: {', '.join(f'{x:.1f}' for x in rom)} deg "
+                                  f"(< {MIN_ROM_DEG:g} deg about {'the hinge' if rev else 'two axes'})")
+        out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type, "unique": null == 0,
+                  "marker_distances": dist, "alternatives": [],
+                  "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),
+                  "uncertainty_mm": round(max(sds), 4) if sds else None,
+                  "excitation": {"ok": ok, "reason": reason}}
+    return out
