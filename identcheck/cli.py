@@ -17,9 +17,7 @@ from .errors import DegenerateError, IdentifiabilityWarning, InputError
 
 log = logging.getLogger("identcheck")
 
-NOT_YET = {
-    "diagnose": "the model/measurement discrepancy workflow",
-}
+NOT_YET: dict = {}
 
 
 def _print_json(obj) -> None:
@@ -219,6 +217,43 @@ def _cmd_plan(a) -> int:
     return 0 if doc["all_identifiable"] else 1
 
 
+def _cmd_diagnose(a) -> int:
+    from .diagnose.workflow import diagnose
+    from .io.model import Model
+    from .trial import Trial
+
+    model = Model.from_toml(a.model)
+    trial = Trial.from_file(a.trial)
+    diag = diagnose(model, trial, progress=lambda msg: print(f"identcheck diagnose: {msg}", file=sys.stderr))
+    rep = diag.to_json()
+    if a.plots:
+        from .diagnose.figures import write_all
+        for path in write_all(diag, a.plots):
+            log.info("wrote %s", path)
+    if a.json:
+        _print_json(rep)
+    else:
+        print(f"noise: {rep['noise_sigma_mm']:.3g} mm per coordinate (within-segment distances, frame to frame; "
+              f"whole-trial scatter {diag.ctx.noise.sigma_scatter_mm:.3g} mm)")
+        print(f"gap of the rigid-joint model: {rep['gap_before']:.3g} mm (noise floor {rep['noise_floor_before']:.3g} mm)")
+        if not rep["effects"]:
+            print("no effect found: the rigid-joint model plus noise explains the trial" if rep["consistent_before"]
+                  ["consistent"] else "no named effect earns its parameters; the gap stays unexplained")
+        for k, e in enumerate(rep["effects"], 1):
+            where = ", ".join(f"{key}={val}" for key, val in e["where"].items() if key != "frames" or len(val) <= 4)
+            print(f"{k}. {e['name']:<18} {where}: gap {e['gap_before']:.3g} -> {e['gap_after']:.3g} mm")
+        test = rep["consistent_after"]
+        print(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
+              f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "
+              f"(gap²/floor² = {test['ratio']:.3g}, limit {test['limit']:.3g})")
+        for name, j in rep["joints"].items():
+            unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.2g}"
+            kind = j["type"] if j["type"] == j["declared_type"] else f"{j['type']} (declared {j['declared_type']})"
+            print(f"   {name}: {kind}; rms residual {j['rms_residual']:.3g} mm; uncertainty {unc} mm; "
+                  + ", ".join(f"{m} {d:.1f}" for m, d in j["marker_distances"].items()))
+    return 0 if rep["consistent_after"]["consistent"] else 1
+
+
 def _not_yet(verb):
     def run(a) -> int:
         print(f"identcheck {verb}: {NOT_YET[verb]} is not available yet", file=sys.stderr)
@@ -303,6 +338,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.set_defaults(func=_cmd_plan)
+
+    s = sub.add_parser("diagnose", help="where the rigid-joint model and a trial disagree: name the missing "
+                                        "effects, model them, show the gap shrink")
+    s.add_argument("model")
+    s.add_argument("trial")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--plots", metavar="DIR", default=None, help="write the figures into DIR")
+    s.set_defaults(func=_cmd_diagnose)
 
     for verb in NOT_YET:
         s = sub.add_parser(verb, help=f"{NOT_YET[verb]} (not available yet)")

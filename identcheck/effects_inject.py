@@ -158,11 +158,11 @@ def _marker_slip(sim, rng) -> _Change:
 
 
 def _joint_translation(sim, rng) -> _Change:
-    """A joint centre moves in its parent frame along v by A a(t)², a the joint angle scaled to
-    [0, 1] (a roll-back profile: still at one end of the range, fastest at the other); the child
-    segment and everything below it follow. The profile is curved on purpose: a translation linear
-    in a hinge's angle is the same motion as a rigid hinge about a shifted axis, so no data could tell
-    it from one."""
+    """A joint centre moves in its parent frame along v by A (2a(t) − 1)², a the joint angle scaled
+    to [0, 1]: at rest mid-range, A away at either end of the range; the child segment and everything
+    below it follow. The profile is even on purpose: a translation linear in a hinge's angle,
+    perpendicular to the axis, is to first order a rigid hinge about a shifted axis
+    ((I − Rot θ)Δc ≈ θ Δc × a), so data cannot tell that part from a rigid joint elsewhere."""
     model = sim.model
     options = [j for j in model.joint_order if _subtree_columns(sim, model.joints[j].child)]
     if not options:
@@ -171,7 +171,7 @@ def _joint_translation(sim, rng) -> _Change:
     a = _normalised_angle(sim.truth.joints[joint], low=0.0)
     direction = _unit_vectors(rng, 1)[0]
     size = rng.uniform(8.0, 15.0)
-    delta = np.outer(size * a * a, direction)
+    delta = np.outer(size * (2 * a - 1) ** 2, direction)
     clean = sim.clean.as_array()
     cols = _subtree_columns(sim, model.joints[joint].child)
     clean[:, cols] += _rotate(_rotations(sim, model.joints[joint].parent), delta)[:, None]

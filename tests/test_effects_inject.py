@@ -188,7 +188,7 @@ def test_joint_translation_keeps_the_subtree_rigid_about_the_moving_centre(name,
     assert not set(sim.model.segments[joint.parent].markers) & set(subtree)
     assert_markers_rigid_about_true_centres(out)
     shift = np.linalg.norm(true_centre_world(out, joint.name) - sim.truth.centre_world(joint.name), axis=1)
-    assert shift.min() == pytest.approx(0, abs=1e-9)
+    assert shift.min() <= 0.05 * shift.max()          # at rest near mid-range
     assert shift.max() == pytest.approx(effect["params"]["amplitude_mm"], rel=1e-9)
     assert 8 <= effect["params"]["amplitude_mm"] <= 15
 

@@ -131,13 +131,16 @@ def joint_angles(h: Hypothesis) -> dict:
     return out
 
 
-def angle_basis(angles: np.ndarray) -> np.ndarray:
-    """Smooth functions of a joint's angles (F, n): each angle scaled to [-1, 1], and its square
-    centred; (F, 2n). The shape of soft-tissue motion and of a translating joint."""
+def angle_basis(angles: np.ndarray, linear: bool = True) -> np.ndarray:
+    """Smooth functions of a joint's angles (F, n), each angle scaled to [-1, 1]: the angles themselves
+    (unless `linear` is False) and every product of two of them, centred; (F, n + n(n+1)/2) or
+    (F, n(n+1)/2). The shape of soft-tissue motion and of a translating joint."""
     lo, hi = angles.min(axis=0), angles.max(axis=0)
     a = (2 * angles - (hi + lo)) / np.where(hi > lo, hi - lo, 1.0)
-    sq = a * a
-    return np.concatenate([a, sq - sq.mean(axis=0)], axis=1)
+    i, j = np.triu_indices(a.shape[1])
+    quad = a[:, i] * a[:, j]
+    quad = quad - quad.mean(axis=0)
+    return np.concatenate([a, quad], axis=1) if linear else quad
 
 
 def segment_residuals(h: Hypothesis) -> np.ndarray:

@@ -20,6 +20,11 @@ log = logging.getLogger("identcheck")
 
 MAX_STEPS = 4
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
+MAX_SD_MM = 10.0
+"""A joint whose marker distances have a standard error beyond this is not determined in practice."""
+SD_GROWTH = 5.0
+"""An effect may not make the joints' worst standard error grow more than this factor and beyond
+:data:`MAX_SD_MM`: its parameters would be trading off against the joint's."""
 
 
 @dataclass
@@ -146,10 +151,11 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 tried.append((score(ctx, cand, h), eff, prop, cand))
         tried.sort(key=lambda x: -x[0])
         adopted = None
+        limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
         for sc, eff, prop, cand in tried:
             if sc <= 0:
                 break
-            if undetermined(cand) == 0:
+            if undetermined(cand) == 0 and worst_sd(ctx, cand) <= limit:
                 adopted = (sc, eff, prop, cand)
                 break
             log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
@@ -167,49 +173,75 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them
-def joint_report(ctx: Context, h: Hypothesis) -> dict:
-    """Each joint as ``fit`` reports it, from the final model: marker distances to the centre or hinge,
-    their standard errors (σ² times the pseudo-inverse of the information), residual and excitation."""
+def gauge_free_inverse(S: np.ndarray, gauge: int) -> np.ndarray:
+    """Pseudo-inverse of the information, Jacobi-scaled first so that millimetres and radians compare;
+    directions below :data:`RANK_TOL` (the gauge, whose count is ``gauge``) are left out. Directions the
+    data barely determine stay in, with the large variances they deserve."""
+    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
+    w, V = np.linalg.eigh(S / np.outer(d, d))
+    keep = w > RANK_TOL * w.max()
+    inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    return inv / np.outer(d, d)
+
+
+def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -> dict:
+    """Each joint's adjacent markers' distances to its centre (ball) or axis (hinge), mm, with their
+    standard errors: σ² times the pseudo-inverse of the information, carried through the gradient.
+    {joint: {marker: (distance, sd)}}."""
     ch, s = h.chain, h.fit.state
-    S = information(h.fit, h.data, h.weights)
-    cov = ctx.noise.sigma_mm ** 2 * np.linalg.pinv(S, rcond=1e-10, hermitian=True)
-    n_loc = 3 * ch.n_markers
-    offsets, c = {}, n_loc
+    S = information(h.fit, h.data, h.weights) if S is None else S
+    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge())
+    offsets, c = {}, 3 * ch.n_markers
     for j in ch.joints:
         offsets[j] = c
         c += 6 + (5 if ch.types[j] == "revolute" else 0)
-    null = undetermined(h)
-    angles = joint_angles(h)
-    res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:
-        P, C = ch.parent[j], ch.child[j]
-        rev = ch.types[j] == "revolute"
-        dist, sds = {}, []
-        for side, seg in ((0, P), (1, C)):
+        out[j] = {}
+        for side, seg in ((0, ch.parent[j]), (1, ch.child[j])):
             centre = s.c_parent[j] if side == 0 else s.c_child[j]
             axis = None
-            if rev:
+            if ch.types[j] == "revolute":
                 axis = s.axis[j] if side == 0 else s.rest[j].T @ s.axis[j]
             for col in ch.seg_markers[seg]:
                 v = s.local[col] - centre
                 if axis is not None:
                     v = v - (v @ axis) * axis
                 d = float(np.linalg.norm(v))
-                dist[ch.labels[col]] = round(d, 3)
-                g = np.zeros(len(S))
                 u = v / max(d, 1e-12)
+                g = np.zeros(len(S))
                 g[3 * col:3 * col + 3] = u
                 g[offsets[j] + 3 * side: offsets[j] + 3 * side + 3] = -u
-                sds.append(float(np.sqrt(max(g @ cov @ g, 0.0))))
+                out[j][ch.labels[col]] = (d, float(np.sqrt(max(g @ cov @ g, 0.0))))
+    return out
+
+
+def worst_sd(ctx: Context, h: Hypothesis) -> float:
+    """The largest standard error of any joint's marker distance, mm: how well the joints are determined."""
+    return max(sd for per in marker_distances(ctx, h).values() for _, sd in per.values())
+
+
+def joint_report(ctx: Context, h: Hypothesis) -> dict:
+    """Each joint as ``fit`` reports it, from the final model: marker distances to the centre or hinge,
+    their largest standard error, the residual of the joint's markers and the excitation."""
+    ch = h.chain
+    null = undetermined(h)
+    dists = marker_distances(ctx, h)
+    angles = joint_angles(h)
+    res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
+    out = {}
+    for j in ch.joints:
+        P, C = ch.parent[j], ch.child[j]
+        rev = ch.types[j] == "revolute"
         idx = np.concatenate([ch.seg_markers[P], ch.seg_markers[C]])
         rom = np.rad2deg(np.ptp(angles[j], axis=0))
         ok = bool(rom[0] >= MIN_ROM_DEG) if rev else bool(np.sort(rom)[-2] >= MIN_ROM_DEG)
         reason = "ok" if ok else (f"small range of motion: {', '.join(f'{x:.1f}' for x in rom)} deg "
                                   f"(< {MIN_ROM_DEG:g} deg about {'the hinge' if rev else 'two axes'})")
-        out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type, "unique": null == 0,
-                  "marker_distances": dist, "alternatives": [],
+        sd = max(v[1] for v in dists[j].values())
+        out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type,
+                  "unique": null == 0 and sd <= MAX_SD_MM,
+                  "marker_distances": {m: round(v[0], 3) for m, v in dists[j].items()}, "alternatives": [],
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),
-                  "uncertainty_mm": round(max(sds), 4) if sds else None,
-                  "excitation": {"ok": ok, "reason": reason}}
+                  "uncertainty_mm": round(sd, 4), "excitation": {"ok": ok, "reason": reason}}
     return out

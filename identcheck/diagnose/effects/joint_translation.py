@@ -3,6 +3,11 @@
 Detector: the residuals of every marker below the joint, seen from the parent segment, regressed on
 smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
 ``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree.
+
+The basis has the angles' products only, no linear terms: a translation linear in a hinge's angle,
+perpendicular to the axis, is to first order a rigid hinge about a shifted axis (and for a ball joint
+the skew part of a linear translation is a shifted centre), so linear terms would trade off against
+the joint's own parameters (their standard errors grow to several mm) rather than add information.
 """
 from __future__ import annotations
 
@@ -26,7 +31,7 @@ class JointTranslation(Effect):
         for j in ch.joints:
             idx = ch.downstream[j]
             seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
-            basis = angle_basis(angles[j])
+            basis = angle_basis(angles[j], linear=False)
             mean = np.nanmean(seen_from_parent, axis=1)
             gain = len(idx) * explained(mean, basis) / sig2 - 3 * basis.shape[1] * pen
             out.append(Proposal(self.name, {"joint": j}, float(gain), {"joint": j, "basis": basis}))

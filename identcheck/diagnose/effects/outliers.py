@@ -14,7 +14,7 @@ from scipy.stats import chi2
 from .base import Effect, Proposal
 
 ROUNDS = 6
-MAX_FRACTION = 0.02
+MAX_FRACTION = 0.05
 """Gross errors are sparse: beyond this fraction of the samples the residual is something else."""
 
 

@@ -58,6 +58,8 @@ class TimeOffset(Effect):
                 continue
             tau = -rv / vv
             gain = rv * rv / vv / sig2 - pen
+            if gain <= 0:          # the linearised delay explains nothing: not worth a refit
+                continue
             out.append(Proposal(self.name, {"segment": seg, "delay_ms": 1000 * tau}, float(gain),
                                 {"segment": seg, "tau": tau}))
         return sorted(out, key=lambda p: -p.strength)
