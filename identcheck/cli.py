@@ -5,15 +5,21 @@
 """
 from __future__ import annotations
 
-import argparse
-import json
-import logging
-import sys
-import warnings
-from pathlib import Path
+import os
 
-from .effects_inject import EFFECTS
-from .errors import DegenerateError, IdentifiabilityWarning, InputError
+# the solvers make many small dense solves: several BLAS threads per solve only fight each other
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import logging  # noqa: E402
+import sys  # noqa: E402
+import warnings  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from .effects_inject import EFFECTS  # noqa: E402
+from .errors import DegenerateError, IdentifiabilityWarning, InputError  # noqa: E402
 
 log = logging.getLogger("identcheck")
 

@@ -111,7 +111,7 @@ def test_named_effects_bring_the_joints_closer_to_the_truth(results):
 def test_where_is_reported_as_the_truth_says(results):
     """Where the effect acts: the marker(s), segment or joint (and a slip's frame within 3 frames, a delay
     within 15 %) match the hidden ones in at least 90 % of the correctly named trials."""
-    hits, total = 0, 0
+    hits, total, misses = 0, 0, []
     for r in results:
         if r["name"] == "none" or not named(r):
             continue
@@ -132,4 +132,8 @@ def test_where_is_reported_as_the_truth_says(results):
         if r["name"] == "outliers":
             ok &= abs(got["count"] - want["count"]) <= max(2, 0.2 * want["count"])
         hits += bool(ok)
-    assert total and hits / total >= 0.90, (hits, total)
+        if not ok:
+            misses.append((r["name"], r["seed"], got, {k: v for k, v in want.items() if k != "frames" or len(v) < 5}))
+    for m in misses:
+        print("where missed:", m)
+    assert total and hits / total >= 0.90, (hits, total, misses)

@@ -390,8 +390,9 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
     R, t, centre, pred = forward(fit.chain, fit.terms, s)
     A, B, C, _, _ = _normal(fit.chain, fit.terms, s, R, t, centre, pred, y, w)
     k = A.shape[1]
-    scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k + 1e-300
-    Ainv_B = np.linalg.solve(A + 1e-12 * scale * np.eye(k), B)
+    scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k
+    ridge = 1e-12 * np.maximum(scale, np.median(scale) + 1e-300)      # frames without markers stay finite
+    Ainv_B = np.linalg.solve(A + ridge * np.eye(k), B)
     B2 = B.reshape(-1, B.shape[-1])
     S = C - B2.T @ Ainv_B.reshape(B2.shape)
     return 0.5 * (S + S.T)
@@ -465,6 +466,10 @@ def initial_state(chain: Chain, data, frames: dict | None = None) -> State:
         s.c_parent[j], s.c_child[j] = fit.centre_parent.copy(), fit.centre_child.copy()
         rel = np.einsum("fji,fjk->fik", P.R, C.R)
         if rev:
+            if fit.axis_parent is None:
+                raise InputError([f"joint {j!r}: {chain.child[j]!r} does not move relative to {chain.parent[j]!r} "
+                                  f"({fit.reason}); a static trial leaves the hinge undefined, so there is no model "
+                                  "to compare with. Record the joint's functional movement."])
             s.axis[j] = fit.axis_parent / np.linalg.norm(fit.axis_parent)
             s.rest[j], s.theta[j] = _rest_and_theta(rel, s.axis[j], fit.axis_child / np.linalg.norm(fit.axis_child))
         else:

@@ -155,6 +155,10 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         for sc, eff, prop, cand in tried:
             if sc <= 0:
                 break
+            why = eff.implausible(prop)
+            if why:
+                log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
+                continue
             if undetermined(cand) == 0 and worst_sd(ctx, cand) <= limit:
                 adopted = (sc, eff, prop, cand)
                 break

@@ -30,6 +30,11 @@ class Effect:
         """Hypothesis `hyp` with the effect added where `proposal` says, its parameters fitted."""
         raise NotImplementedError
 
+    def implausible(self, proposal: Proposal) -> str:
+        """Why the fitted effect cannot be what it claims ('' if it can): e.g. a distortion too large for a
+        calibrated capture volume is something else the field is absorbing."""
+        return ""
+
     def evidence(self, ctx, before, after, proposal: Proposal) -> dict:
         """Arrays that show the effect (for the figures): by default the proposal's own."""
         return dict(proposal.payload.get("evidence", {}))

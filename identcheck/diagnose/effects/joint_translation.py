@@ -11,6 +11,8 @@ the joint's own parameters (their standard errors grow to several mm) rather tha
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..chain import Terms
@@ -32,7 +34,9 @@ class JointTranslation(Effect):
             idx = ch.downstream[j]
             seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
             basis = angle_basis(angles[j], linear=False)
-            mean = np.nanmean(seen_from_parent, axis=1)
+            with warnings.catch_warnings():          # frames where every such marker is hidden
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean = np.nanmean(seen_from_parent, axis=1)
             gain = len(idx) * explained(mean, basis) / sig2 - 3 * basis.shape[1] * pen
             out.append(Proposal(self.name, {"joint": j}, float(gain), {"joint": j, "basis": basis}))
         return sorted(out, key=lambda p: -p.strength)
@@ -47,7 +51,9 @@ class JointTranslation(Effect):
         idx = ch.downstream[j]
         def moved(h):  # noqa: E306
             r = np.where((h.weights > 0)[..., None], h.residuals(), np.nan)[:, idx]
-            return np.linalg.norm(np.nanmean(r, axis=1), axis=1)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return np.linalg.norm(np.nanmean(r, axis=1), axis=1)
         return {"x": np.rad2deg(joint_angles(before)[j][:, 0]), "x_label": f"{j} angle (deg)",
                 "y": moved(before), "y_after": moved(after),
                 "y_label": f"mean residual of the markers below {j} (mm)", "kind": "scatter"}

@@ -1,10 +1,10 @@
 """``outliers``: sparse gross errors (ghost markers, mislabelled single frames).
 
 Detector: samples whose 3-D residual is beyond what noise gives once in the whole trial (the χ²₃
-quantile at 1 % over all samples) and the largest of their segment in that frame (a gross error drags
-the segment's pose, so its partners fail the bound too, less). Augmentation: those samples are set
-aside (weight 0, three parameters each), the model refitted, and the test repeated until no new
-sample fails it.
+quantile at 1 % over all samples) and the largest of their frame (a gross error drags the poses of
+its frame, so other markers fail the bound too, less). Augmentation: those samples are set aside
+(weight 0, three parameters each), the model refitted, and the test repeated until no new sample
+fails it (a frame with two gross errors loses the second in the next round).
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from scipy.stats import chi2
 
 from .base import Effect, Proposal
 
-ROUNDS = 6
+ROUNDS = 8
 MAX_FRACTION = 0.05
 """Gross errors are sparse: beyond this fraction of the samples the residual is something else."""
 
@@ -22,10 +22,7 @@ def flagged(ctx, hyp) -> np.ndarray:
     """Samples (F, M) whose residual fails the trial-wide noise bound."""
     r2 = np.where(hyp.weights > 0, np.sum(np.nan_to_num(hyp.residuals()) ** 2, axis=2), 0.0)
     limit = ctx.noise.sigma_mm ** 2 * chi2.isf(0.01 / ctx.n_samples, 3)
-    worst = np.zeros_like(r2, dtype=bool)
-    for idx in hyp.chain.seg_markers.values():
-        top = r2[:, idx].max(axis=1, keepdims=True)
-        worst[:, idx] = r2[:, idx] >= top
+    worst = r2 >= r2.max(axis=1, keepdims=True)
     return (r2 > limit) & worst
 
 

@@ -14,6 +14,10 @@ import numpy as np
 from ..chain import Terms
 from .base import Effect, Proposal
 
+MAX_AMPLITUDE_MM = 25.0
+"""A calibrated volume is not distorted by more than this; a larger fitted field is absorbing something
+else (soft tissue on real data does this)."""
+
 _STRAIN = [np.diag([1.0, -1.0, 0.0]), np.diag([1.0, 1.0, -2.0]) / np.sqrt(3),
            np.array([[0, 1.0, 0], [1, 0, 0], [0, 0, 0]]), np.array([[0, 0, 1.0], [0, 0, 0], [1, 0, 0]]),
            np.array([[0, 0, 0], [0, 0, 1.0], [0, 1, 0]])]
@@ -63,6 +67,11 @@ class SpatialDistortion(Effect):
         proposal.where["amplitude_mm"] = round(float(np.max(np.linalg.norm(disp, axis=2))), 2)
         proposal.payload["displacement"] = disp
         return new
+
+    def implausible(self, proposal) -> str:
+        amp = proposal.where.get("amplitude_mm", 0.0)
+        return (f"the fitted distortion reaches {amp:.0f} mm (> {MAX_AMPLITUDE_MM:g} mm): not a calibration error"
+                if amp > MAX_AMPLITUDE_MM else "")
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         disp = proposal.payload.get("displacement")
