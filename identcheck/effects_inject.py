@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from identcheck.errors import InputError
+from identcheck.report import plain
 
 if TYPE_CHECKING:  # pragma: no cover
     from identcheck.simulate import Simulation
@@ -307,7 +308,7 @@ def _apply(sim, name: str, seed: int, change: _Change):
     else:
         trial, clean = change.trial, sim.clean
     gaps = np.array(sim.gaps if change.gaps is None else change.gaps, dtype=bool)
-    record = {"name": name, "where": _plain(change.where), "params": _plain(change.params), "seed": int(seed)}
+    record = {"name": name, "where": plain(change.where), "params": plain(change.params), "seed": int(seed)}
     return dataclasses.replace(sim, trial=sim.trial.replace(xyz=trial, source=sim.trial.source + tag),
                                clean=clean, gaps=gaps, settings={**sim.settings, "effect": record})
 
@@ -400,16 +401,3 @@ def _diameter(points: np.ndarray) -> float:
     return float(np.ptp(centred @ plane.T @ dirs, axis=0).max())
 
 
-def _plain(value):
-    """`value` with numpy arrays and scalars turned into lists, floats and ints (for JSON)."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.floating):
-        return float(value)
-    return value

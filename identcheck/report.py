@@ -1,6 +1,23 @@
 """Result objects → JSON-ready dictionaries with the keys of CONTRACT.md."""
 from __future__ import annotations
 
+import numpy as np
+
+
+def plain(value):
+    """`value` with numpy arrays and scalars turned into lists, floats and ints (for JSON)."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    return value
+
 
 def derive_report(derivations, out_dir, paths) -> dict:
     return {

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..fit.estimate import MIN_ROM_DEG
+from ..report import plain
 from .chain import Chain, fit_chain, information, initial_state
 from .effects import EFFECTS
 from .hypothesis import Context, Hypothesis, consistency, joint_angles, score
@@ -72,20 +73,12 @@ class Diagnosis:
             "gap_before": round(self.gap_before, 4),
             "gap_after": round(self.gap_after, 4),
             "consistent_before": self.test_before, "consistent_after": self.test_after,
-            "effects": [{"name": s.name, "where": _plain(s.where), "gap_before": round(s.gap_before, 4),
+            "effects": [{"name": s.name, "where": plain(s.where), "gap_before": round(s.gap_before, 4),
                          "gap_after": round(s.gap_after, 4), "score": round(s.score, 1)} for s in self.steps],
             "joints": joint_report(self.ctx, self.after),
         }
 
 
-def _plain(v):
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
 
 
 # ---------------------------------------------------------------------- identifiability of a fit
