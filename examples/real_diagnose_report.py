@@ -579,7 +579,7 @@ def problems(results) -> list[str]:
                 where = f" at {frames[-2] if len(frames) > 1 else frames[-1]}" if frames else ""
             out.append(f"`{r['model']}` x `{r['trial']}`: crash, `{r['error']}`{where} (the CLI prints a "
                        "traceback for it).")
-        elif not r["info_finite"]:
+        elif r["diag"] is not None and not r["info_finite"]:
             out.append(f"`{r['model']}` x `{r['trial']}`: the information matrix of the final fit is not finite, "
                        "so `undetermined()` refuses every effect and `uncertainty_mm` is NaN.")
         for wmsg in r["warnings"]:

@@ -29,7 +29,7 @@ from ..fit.obrien import joint_location
 from ..fit.poses import Poses, refine_local
 
 MAX_ITER = 60
-REL_TOL = 1e-10       # stop when the cost falls by less than this fraction
+REL_TOL = 1e-8        # stop when the cost falls by less than this fraction
 
 
 # ---------------------------------------------------------------------- structure
@@ -338,8 +338,8 @@ def fit_chain(chain: Chain, data, state: State, terms: Terms | None = None, weig
         improved = False
         for _ in range(12):
             Ad = A + lam * (A * np.eye(k)) + 1e-9 * scaleA[..., None] * np.eye(k)
-            Ainv_B = np.linalg.solve(Ad, B)
-            Ainv_g = np.linalg.solve(Ad, g[..., None])[..., 0]
+            sol = np.linalg.solve(Ad, np.concatenate([B, g[..., None]], axis=2))    # one factorisation
+            Ainv_B, Ainv_g = sol[..., :-1], sol[..., -1]
             Cd = C + lam * np.diag(np.diag(C)) + 1e-9 * (np.trace(C) / max(len(C), 1)) * np.eye(len(C))
             B2 = B.reshape(-1, B.shape[-1])
             S = Cd - B2.T @ Ainv_B.reshape(B2.shape)

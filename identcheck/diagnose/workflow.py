@@ -20,6 +20,7 @@ from .noise import noise_floor
 log = logging.getLogger("identcheck")
 
 MAX_STEPS = 4
+BASE_ITER = 30         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
@@ -121,7 +122,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     state = initial_state(chain, data)
     weights = seen.astype(float)
-    fit = fit_chain(chain, data, state, weights=weights)
+    fit = fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER)
     return ctx, Hypothesis(chain, fit.terms, data, weights, fit)
 
 

@@ -15,8 +15,9 @@ from scipy.interpolate import CubicSpline
 from ..chain import Terms
 from .base import Effect, Proposal
 
-NEWTON_STEPS = 5
-TAU_TOL_S = 2e-5
+NEWTON_STEPS = 4
+MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
+TAU_TOL_S = 5e-5
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0) -> np.ndarray:
@@ -58,7 +59,7 @@ class TimeOffset(Effect):
                 continue
             tau = -rv / vv
             gain = rv * rv / vv / sig2 - pen
-            if gain <= 0:          # the linearised delay explains nothing: not worth a refit
+            if gain <= 0 or abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES:   # explains nothing worth a refit
                 continue
             out.append(Proposal(self.name, {"segment": seg, "delay_ms": 1000 * tau}, float(gain),
                                 {"segment": seg, "tau": tau}))
@@ -75,7 +76,7 @@ class TimeOffset(Effect):
             data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
             vel = shifted(base[:, idx], ctx.rate_hz, tau, derivative=1)
             term = (idx, np.nan_to_num(vel))           # corrected(t) + dτ·v ≈ measured at t + τ + dτ
-            stepped = current.refit(data=data, terms=hyp.terms + Terms(world=[term]), max_iter=8)
+            stepped = current.refit(data=data, terms=hyp.terms + Terms(world=[term]), max_iter=5)
             dtau = -float(stepped.fit.state.term_params[-1][0])
             tau += dtau
             current = replace(stepped, terms=hyp.terms)
@@ -85,7 +86,7 @@ class TimeOffset(Effect):
         data = base.copy()
         data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
-        new = current.refit(data=data, weights=np.where(lost, 0.0, hyp.weights), max_iter=10)
+        new = current.refit(data=data, weights=np.where(lost, 0.0, hyp.weights), max_iter=8)
         new.extra_params = hyp.extra_params + 1 + 3 * int(lost.sum())     # a set-aside sample costs 3
         new.effects = hyp.effects + [proposal]
         proposal.where["delay_ms"] = round(1000 * tau, 2)
