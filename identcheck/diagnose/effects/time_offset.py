@@ -41,7 +41,7 @@ def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0)
 
 class TimeOffset(Effect):
     name = "time_offset"
-    max_proposals = 2
+    max_proposals = 3
 
     def propose(self, ctx, hyp) -> list:
         sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
