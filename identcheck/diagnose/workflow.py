@@ -25,7 +25,7 @@ SKIP_RATIO = 10.0
 below 1/SKIP_RATIO of the best score fitted so far is not fitted this round (detectors underestimate by
 5x at most in the hidden-effect trials), unless it is another place for the leading effect (a delay's
 linearised detector cannot tell which segment lags when the lag is several frames)."""
-BASE_ITER = 30         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
+BASE_ITER = 20         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""

@@ -15,7 +15,7 @@ from scipy.interpolate import CubicSpline
 from ..chain import Terms
 from .base import Effect, Proposal
 
-NEWTON_STEPS = 4
+NEWTON_STEPS = 3
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
 
@@ -76,7 +76,7 @@ class TimeOffset(Effect):
             data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
             vel = shifted(base[:, idx], ctx.rate_hz, tau, derivative=1)
             term = (idx, np.nan_to_num(vel))           # corrected(t) + dτ·v ≈ measured at t + τ + dτ
-            stepped = current.refit(data=data, terms=hyp.terms + Terms(world=[term]), max_iter=5)
+            stepped = current.refit(data=data, terms=hyp.terms + Terms(world=[term]), max_iter=3)
             dtau = -float(stepped.fit.state.term_params[-1][0])
             tau += dtau
             current = replace(stepped, terms=hyp.terms)
