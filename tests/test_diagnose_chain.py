@@ -125,3 +125,16 @@ def test_cli_diagnose_bad_trial_exits_2_naming_the_file(tmp_path, capsys):
     assert cli.main(["diagnose", str(EXAMPLES / "diagnose_leg.toml"), str(bad)]) == 2
     err = capsys.readouterr().err
     assert "bad.trc" in err and "Traceback" not in err
+
+
+def test_cli_diagnose_reads_c3d_with_gaps(tmp_path, capsys):
+    """The same workflow from a C3D file with occlusion gaps: the hidden swap is found, the gaps are not."""
+    trial = tmp_path / "t.c3d"
+    assert cli.main(["simulate", str(EXAMPLES / "diagnose_leg.toml"), "--out", str(trial), "--frames", "400",
+                     "--noise-mm", "0.5", "--occlusion", "0.05", "--effect", "marker_swap", "--seed", "6"]) == 0
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(EXAMPLES / "diagnose_leg.toml"), str(trial), "--json"]) == 0
+    import json
+    rep = json.loads(capsys.readouterr().out)
+    assert [e["name"] for e in rep["effects"]] == ["marker_swap"]
+    assert rep["gap_after"] <= 1.5 * rep["noise_floor"] < rep["gap_before"]
