@@ -46,42 +46,17 @@ from identcheck.errors import InputError  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.trial import Trial  # noqa: E402
 
-DATA = Path(os.environ.get("IDENTCHECK_REAL_DATA", "/work/shared/data/real"))
+sys.path.insert(0, str(HERE))
+# the same recordings and (trial, model file, role) pairs as the fitting report
+from real_fit_report import DATA, HIP, KNEE, RUNS, STATIC, WALK1, WALK2  # noqa: E402
+
 OUT_MD = HERE / "real_diagnose_report.md"
 FIG_PREFIX = "real_diagnose_"
 FULL = os.environ.get("IDENTCHECK_FULL", "") not in ("", "0")
 
-HIP, KNEE, STATIC = "biobuddy_right_hip.c3d", "biobuddy_right_knee.c3d", "biobuddy_anat_pose_ECH.c3d"
-WALK1, WALK2 = "opensim_subject01_walk1.trc", "opensim_walking2.c3d"
-
 # first frames kept per trial (None: all). The hip crop keeps frame 731/732 (see the report);
 # walking2's pelvis and right thigh are complete only in frames 387-881, so it is not cropped.
 MAX_FRAMES = {HIP: 1000, KNEE: 600, STATIC: 300, WALK1: None, WALK2: None}
-
-# the pairs of examples/real_fit_report.py (trial, model file, role)
-RUNS = [
-    (HIP, "real_right_hip.toml", "dense: cluster + RGT/RLFE/RMFE"),
-    (HIP, "real_right_hip_cluster.toml", "dense: cluster only"),
-    (HIP, "real_right_hip_sparse.toml", "sparse: Pham (3,1)"),
-    (HIP, "real_right_hip_s22.toml", "sparse: S22 (2,2)"),
-    (KNEE, "real_right_knee.toml", "dense: cluster + landmarks"),
-    (KNEE, "real_right_knee_cluster.toml", "dense: clusters only"),
-    (KNEE, "real_right_knee_circle.toml", "posed thigh + 2 malleoli"),
-    (KNEE, "real_right_knee_circle1.toml", "posed thigh + RLM"),
-    (KNEE, "real_right_knee_sparse.toml", "sparse: Pham (2,1)"),
-    (STATIC, "real_right_hip.toml", "static control"),
-    (STATIC, "real_right_hip_sparse.toml", "static control"),
-    (STATIC, "real_right_knee.toml", "static control"),
-    (STATIC, "real_right_knee_circle.toml", "static control"),
-    (STATIC, "real_right_knee_circle1.toml", "static control"),
-    (STATIC, "real_right_knee_sparse.toml", "static control"),
-    (WALK1, "real_walk_leg.toml", "dense: 3 markers per segment"),
-    (WALK1, "real_walk_leg_circle.toml", "dense hip + 2 shank markers"),
-    (WALK1, "real_walk_leg_sparse.toml", "sparse"),
-    (WALK2, "real_walking2_legs.toml", "dense: 3-4 markers per segment"),
-    (WALK2, "real_walking2_legs_circle.toml", "dense hips + 2 shank markers"),
-    (WALK2, "real_walking2_legs_sparse.toml", "sparse"),
-]
 
 DESCRIBE = {
     HIP: "hip functional trial (Qualisys, 100 Hz): thigh swung in flexion/extension and ab/adduction, still after 13.5 s",

@@ -138,3 +138,16 @@ def test_cli_diagnose_reads_c3d_with_gaps(tmp_path, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert [e["name"] for e in rep["effects"]] == ["marker_swap"]
     assert rep["gap_after"] <= 1.5 * rep["noise_floor"] < rep["gap_before"]
+
+
+def test_static_trial_and_never_seen_marker_are_clear_input_errors():
+    sim = simulate(MODEL, n_frames=200, noise_mm=0.5, seed=3)
+    xyz = sim.clean.as_array()
+    rng = np.random.default_rng(0)
+    static = np.repeat(xyz[:1], 200, axis=0) + rng.normal(0, 0.5, xyz.shape)
+    with pytest.raises(InputError, match="does not move"):
+        start(MODEL, sim.trial.replace(xyz=static))
+    hidden = sim.trial.as_array().copy()
+    hidden[:, MODEL.markers.index("RKNE")] = np.nan
+    with pytest.raises(InputError, match="RKNE.*never visible"):
+        start(MODEL, sim.trial.replace(xyz=hidden))
