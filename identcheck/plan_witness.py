@@ -1,0 +1,59 @@
+"""Evidence for a plan's negative verdicts: simulate the plan and build, for every joint it does not
+identify, a whole-tree alternative verified at 50 digits (:mod:`identcheck.tree_witness`).
+
+The search is the one the verdict calls for: along the family of equally good skeletons when the
+joint is not locally identifiable; from the table case's other candidates (and those of the joints
+whose virtual markers it uses) when it is. When a search that finds the candidates of a lone case
+finds none in the tree, markers further down the tree are telling them apart; that is reported,
+not claimed as a proof of uniqueness.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import tree_kinematics as K
+from . import tree_witness as W
+from .simulate import simulate
+
+MIN_FRAMES = 20
+
+
+def simulated_truth(model, spec, n_frames: int, seed: int = 0) -> tuple:
+    """(construction vector, held-out vector): the simulator's subject over ``n_frames`` even frames and as
+    many odd frames in between, in :mod:`identcheck.tree_kinematics`'s layout."""
+    L = K.Layout(spec)
+    sim = simulate(model, n_frames=2 * n_frames, rate_hz=20.0, seed=seed)
+    x = K.from_truth(L, sim.truth)
+    const, frames = L.split(x, 2 * n_frames)
+    return (np.concatenate([const, frames[0::2].ravel()]), np.concatenate([const, frames[1::2].ravel()]))
+
+
+def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
+    """joint -> witness dict (``verified`` true) or a dict saying what the search found, for every joint the
+    plan does not identify."""
+    todo = [n for n, j in plan.joints.items() if not j["identifiable"]]
+    if not todo:
+        return {}
+    F = max(MIN_FRAMES, 2 * plan.rank.frames)
+    truth, held = simulated_truth(model, spec, F, seed)
+    out = {}
+    for name in todo:
+        j = plan.joints[name]
+        if progress:
+            progress(f"searching for an alternative to {name}")
+        method = "isolated" if j["local"] else "family"
+        if not plan.rank.joints[name].quantities:
+            out[name] = {"joint": name, "method": None, "verified": False, "found": None,
+                         "note": "no marker measures this joint: there is no quantity a second skeleton could change"}
+            continue
+        w = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
+                        held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]), seed=seed)
+        if w is not None and w.verified:
+            out[name] = w.to_dict()
+        else:
+            out[name] = {"joint": name, "method": method, "verified": False,
+                         "found": None if w is None else w.to_dict(),
+                         "note": ("no whole-tree alternative found: markers elsewhere in the tree appear to tell "
+                                  "the candidates apart (evidence from one simulated trial, not a proof)"
+                                  if j["local"] else "the search along the undetermined family failed")}
+    return out

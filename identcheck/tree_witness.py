@@ -1,0 +1,373 @@
+"""Whole-tree counterexamples: a second skeleton that puts every marker of a trial where it was measured
+while one joint's gauge-invariant quantities differ — the evidence behind a plan's "not identifiable".
+
+The exact rank of :mod:`identcheck.tree_rank` says *that* a joint's quantities are undetermined;
+a witness shows it on data. Given a trial (every marker in every frame) and the skeleton that
+produced it, :func:`construct` searches the whole tree — every constant and every frame's pose
+and angles — for another skeleton that reproduces the trial:
+
+- ``"family"``: when the joint is not locally identifiable, the data leave a curve of skeletons
+  through the true one. Gauss-Newton on [markers; one undetermined quantity] walks along it until
+  that quantity has moved by ``change`` (a fraction of its value).
+- ``"isolated"``: when the joint is locally identifiable with several candidates (revolute (2,1):
+  ERRATA E1, E2), the others are isolated points. Gauss-Newton starts from each of the closed form's
+  other joints, the rest of the tree re-posed around it (and, optionally, from ``starts`` random
+  scramblings of the joint's constants), and keeps a solution whose quantities differ.
+
+Either way the alternative is then *verified*, nothing taken from the search: at 50 digits its
+markers are refined (the residual evaluated in mpmath, the correction from the float Jacobian's
+pseudo-inverse) until every marker of every frame is reproduced to ``TOL_VERIFIED`` mm, and the
+same constants must also reproduce frames the search never saw (held-out frames: only their poses
+and angles are solved for), so the alternative explains the motion, not just the frames it was
+built on. The joint constraints hold exactly for every parameter value (:mod:`identcheck.tree_kinematics`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mpmath
+import numpy as np
+
+from . import tree_kinematics as K
+from .tree_rank import TreeSpec
+
+TOL_VERIFIED = 1e-30       # mm: every marker of every frame, construction and held-out, at 50 digits
+TOL_FLOAT = 1e-8           # mm: the float search must get this close before the refinement takes over
+MIN_CHANGE = 1e-3          # relative change of some quantity for the alternative to count as different
+RCOND = 1e-10
+STALL = 6                  # Gauss-Newton gives up when the residual has not halved in this many steps
+
+
+def relative_changes(true: dict, alt: dict) -> dict:
+    """label -> |alt − true| / max(|true|, 1). A hinge's direction has no sign, so its axial offsets are
+    compared after the sign that brings them closest (flipping the axis flips them all)."""
+    ax = [k for k in true if k.startswith("axial")]
+    sign = 1.0
+    if ax:
+        plus = sum((alt[k] - true[k]) ** 2 for k in ax)
+        minus = sum((alt[k] + true[k]) ** 2 for k in ax)
+        sign = -1.0 if minus < plus else 1.0
+    return {k: abs((sign if k in ax else 1.0) * alt[k] - v) / max(abs(v), 1.0) for k, v in true.items()}
+
+
+@dataclass
+class Witness:
+    """An alternative skeleton for a trial, with what its verification found."""
+
+    joint: str
+    method: str                     # "family" | "isolated"
+    quantities_true: dict           # label -> value (float)
+    quantities_alt: dict
+    residual_mm: float              # max marker error over the construction frames, at 50 digits
+    held_out_residual_mm: float     # max marker error over the held-out frames, at 50 digits
+    n_frames: int
+    n_held_out: int
+    x: np.ndarray = field(repr=False, default=None)     # the alternative (mpf), constants then frames
+
+    @property
+    def change(self) -> tuple:
+        """(label, relative change) of the quantity that moved most."""
+        rel = relative_changes(self.quantities_true, self.quantities_alt)
+        k = max(rel, key=rel.get)
+        return k, rel[k]
+
+    @property
+    def verified(self) -> bool:
+        return (self.residual_mm <= TOL_VERIFIED and self.held_out_residual_mm <= TOL_VERIFIED
+                and self.change[1] >= MIN_CHANGE)
+
+    def to_dict(self) -> dict:
+        label, rel = self.change
+        return {"joint": self.joint, "method": self.method, "verified": self.verified,
+                "quantity": label, "true": self.quantities_true[label], "alternative": self.quantities_alt[label],
+                "relative_change": rel, "max_marker_error_mm": self.residual_mm,
+                "held_out_max_marker_error_mm": self.held_out_residual_mm,
+                "frames": self.n_frames, "held_out_frames": self.n_held_out,
+                "precision_digits": K.DPS}
+
+
+# -- float Gauss-Newton -----------------------------------------------------------------------------------
+def jacobian(L: K.Layout, x: np.ndarray, F: int, frames_only: bool = False) -> np.ndarray:
+    """d positions / d x by central differences, using that a frame's variables move only that frame:
+    one evaluation per constant and one per frame variable (all frames at once)."""
+    n_c, per = L.n_const, L.per_frame
+    rows = F * len(L.markers) * 3
+    J = np.zeros((rows, L.size(F)))
+
+    def diff(dx):
+        return (K.positions(L, x + dx, F) - K.positions(L, x - dx, F)).reshape(F, -1)
+
+    if not frames_only:
+        for k in range(n_c):
+            h = 1e-6 * max(1.0, abs(x[k]))
+            dx = np.zeros_like(x); dx[k] = h
+            J[:, k] = diff(dx).ravel() / (2 * h)
+    per_rows = len(L.markers) * 3
+    for k in range(per):
+        idx = n_c + np.arange(F) * per + k
+        h = 1e-6 * np.maximum(1.0, np.abs(x[idx]))
+        dx = np.zeros_like(x); dx[idx] = h
+        d = diff(dx) / (2 * h[:, None])
+        for i in range(F):
+            J[i * per_rows:(i + 1) * per_rows, idx[i]] = d[i]
+    return J[:, n_c:] if frames_only else J
+
+
+def trial(L: K.Layout, x: np.ndarray, F: int) -> np.ndarray:
+    """The markers of skeleton ``x`` at 50 digits, (F, M, 3) of mpf: a trial that the rigid model
+    reproduces exactly (float data would not: rounding breaks rigidity at 1e-14 mm)."""
+    mpmath.mp.dps = K.DPS
+    return K.positions(L, K.to_mp(x), F)
+
+
+def _residual(L, x, F, data):
+    return (K.positions(L, x, F) - data).ravel()
+
+
+def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, frames_only: bool = False):
+    """Minimum-norm Gauss-Newton to a zero residual; ``extra(x) -> (value, gradient)`` adds one equation.
+    Returns (x, max |marker error|)."""
+    x = x.copy()
+    data = np.asarray(data, dtype=float)
+    history = []
+    for _ in range(max_iter):
+        r = _residual(L, x, F, data)
+        history.append(np.abs(r).max())
+        if len(history) > STALL and history[-1] > 0.5 * history[-1 - STALL] and history[-1] > TOL_FLOAT:
+            break                                          # not converging: a wrong basin
+        J = jacobian(L, x, F, frames_only)
+        rows, rhs = [J], [-r]
+        if extra is not None:
+            val, grad = extra(x)
+            w = 1.0 / max(np.linalg.norm(grad), 1e-12)
+            g = np.zeros(J.shape[1])
+            g[:len(grad)] = grad                 # the quantities depend on the constants only
+            rows.append(w * g[None])
+            rhs.append([-w * val])
+        dx = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=RCOND)[0]
+        step = np.abs(dx).max()
+        if frames_only:
+            x[L.n_const:] += dx
+        else:
+            x += dx
+        if step < 1e-12 * max(1.0, np.abs(x).max()):
+            break
+    return x, float(np.abs(_residual(L, x, F, data)).max())
+
+
+# -- 50-digit refinement ---------------------------------------------------------------------------------
+def refine(L: K.Layout, x: np.ndarray, F: int, data, frames_only: bool = False, iterations: int = 8,
+           const_mp=None):
+    """Refine ``x`` (float) at 50 digits: mpmath residual, float pseudo-inverse correction. Returns
+    (x as mpf, max |marker error| in mm at 50 digits). ``frames_only``: the constants stay fixed, at
+    ``const_mp`` (mpf) when given."""
+    mpmath.mp.dps = K.DPS
+    J = jacobian(L, x, F, frames_only)
+    pinv = np.linalg.pinv(J, rcond=RCOND)
+    xm = K.to_mp(x)
+    if const_mp is not None:
+        xm[:L.n_const] = const_mp
+    dm = data
+    err = None
+    for _ in range(iterations):
+        r = (K.positions(L, xm, F) - dm).ravel()
+        err = max((abs(v) for v in r), default=mpmath.mpf(0))
+        if err < mpmath.mpf(TOL_VERIFIED) * 1e-5:
+            break
+        dx = K.to_mp(pinv @ r.astype(float))
+        if frames_only:
+            xm[L.n_const:] -= dx
+        else:
+            xm -= dx
+    r = (K.positions(L, xm, F) - dm).ravel()
+    err = max((abs(v) for v in r), default=mpmath.mpf(0))
+    return xm, float(err)
+
+
+# -- the construction ------------------------------------------------------------------------------------
+def _quantity_fn(L, label, joint):
+    def f(x):
+        return K.joint_quantities(L, x[:L.n_const], joint)[label]
+
+    def with_grad(x, target):
+        g = np.zeros(L.n_const)
+        for k in range(L.n_const):
+            h = 1e-6 * max(1.0, abs(x[k]))
+            xp, xm = x.copy(), x.copy()
+            xp[k] += h; xm[k] -= h
+            g[k] = (f(xp) - f(xm)) / (2 * h)
+        return f(x) - target, g
+    return f, with_grad
+
+
+def _along_family(L, x0, F, data, joint, label, change, stages=4):
+    f, with_grad = _quantity_fn(L, label, joint)
+    v0 = f(x0)
+    x = x0
+    for s in range(1, stages + 1):
+        target = v0 * (1 + change * s / stages)
+        x, err = gauss_newton(L, x, F, data, extra=lambda z: with_grad(z, target), max_iter=15)
+    x, err = gauss_newton(L, x, F, data, max_iter=10)
+    return x, err
+
+
+def _scrambled(L, x0, joint, kind, rng):
+    """The truth with the joint's own constants (centre in parent and child, hinge direction, rest
+    orientation) moved at random by about the size of the segment."""
+    x = x0.copy()
+    scale = max(1.0, float(np.abs(x0[:L.n_const]).max()))
+    for key in ("c:", "e:") + (("a:", "rest:") if kind == "revolute" else ()):
+        sl = L.const[key + joint]
+        amp = scale * 0.5 if key in ("c:", "e:") else np.abs(x[sl]).max()
+        x[sl] = x[sl] + rng.normal(0.0, amp, sl.stop - sl.start)
+    return x
+
+
+def _differs(L, x, x0, joint) -> bool:
+    qa, qt = K.joint_quantities(L, x[:L.n_const], joint), K.joint_quantities(L, x0[:L.n_const], joint)
+    return any(v >= 10 * MIN_CHANGE for v in relative_changes(_floats(qt), _floats(qa)).values())
+
+
+def _points(L: K.Layout, const, seg: str) -> list:
+    """The known points of a segment in its own frame: its markers, then the centres of its ball joints."""
+    pts = [np.array(const[L.const["m:" + m]], dtype=float) for m in L.spec.markers[seg]]
+    for name, kind, par, chi in L.spec.joints:
+        if kind == "spherical" and seg in (par, chi):
+            pts.append(np.array(const[L.const[("c:" if seg == par else "e:") + name]], dtype=float))
+    return pts
+
+
+def _twin_starts(L: K.Layout, x0: np.ndarray, F: int, joint: str) -> list:
+    """Starting skeletons at the other joints of Pham's revolute (2,1) (ERRATA E1, E2), when the hinge's
+    parent carries exactly two known points A1, A2: the closed form's other solutions (d, r, α, l, ρ) in the
+    frame of A1A2, each with the parent rolled about A1A2 per frame (a roll the two points cannot see) and
+    the child re-posed about the new hinge; the rest of the tree keeps its world poses."""
+    from .fit import revolute21_fit
+    from .solve.frames import pair_frame
+
+    name, kind, par, chi = next(j for j in L.spec.joints if j[0] == joint)
+    const, frames = L.split(x0, F)
+    A, B = _points(L, const, par), _points(L, const, chi)
+    if kind != "revolute" or len(A) != 2 or not B:
+        return []
+    Rw, tw = K.segment_poses(L, const, frames)
+    a1, a2 = A
+    # the frame of A1A2 in the parent: E's columns; canonical = Eᵀ (p − A1)
+    cols, _ = pair_frame(a1[None, None], a2[None, None], a1[None, None] + np.eye(3)[None])
+    E = cols[0]                                                 # columns: the A1A2 frame's axes
+    b_world = Rw[chi] @ B[0] + tw[chi]
+    b_par = np.einsum("fji,fj->fi", Rw[par], b_world - tw[par])
+    local = (b_par - a1) @ E
+    out = []
+    truth_q = K.joint_quantities(L, const, joint)
+    for params, rms, _ in revolute21_fit.fit(local):
+        if rms > 1e-6 * np.sqrt(np.mean(local ** 2)):
+            continue
+        d, r, alpha, l, rho = params
+        u = np.array([0.0, -np.sin(alpha), np.cos(alpha)])
+        roll = revolute21_fit.thetas(params, local)
+        beta = revolute21_fit._nearest_beta(params, np.hypot(local[:, 0], local[:, 1]), local[:, 2])
+        c, s_ = np.cos(roll), np.sin(roll)
+        Rz = np.zeros((F, 3, 3)); Rz[:, 0, 0] = Rz[:, 1, 1] = c; Rz[:, 0, 1] = -s_; Rz[:, 1, 0] = s_; Rz[:, 2, 2] = 1
+        roll_par = E @ Rz @ E.T                                    # roll about A1A2, parent frame
+        R2, t2 = dict(Rw), dict(tw)
+        R2[par] = Rw[par] @ roll_par
+        t2[par] = tw[par] + np.einsum("fij,fj->fi", Rw[par], a1 - np.einsum("fij,j->fi", roll_par, a1))
+        hinge_pt, hinge_dir = a1 + E @ np.array([r, 0.0, d]), E @ u
+        R2[chi] = R2[par] @ K.axis_rotation(hinge_dir, beta)
+        t2[chi] = np.einsum("fij,j->fi", R2[par], hinge_pt) + t2[par]
+        local_m, cp, cc, ax = K.constants(L, const)
+        cp[name], cc[name], ax[name] = hinge_pt, np.zeros(3), hinge_dir
+        b_new = E @ (rho * np.array([1.0, 0, 0]) + l * u)
+        for m in L.spec.markers[chi]:                                 # the child's point B, and any others by frame 0
+            local_m[m] = np.linalg.solve(R2[chi][0], Rw[chi][0] @ local_m[m] + tw[chi][0] - t2[chi][0])
+        for k, kk, pk, ck in L.spec.joints:                           # joints on the re-posed segments, by frame 0
+            for seg, store in ((pk, cp), (ck, cc)):
+                if k != name and seg in (par, chi):
+                    w = Rw[seg][0] @ store[k] + tw[seg][0]
+                    store[k] = np.linalg.solve(R2[seg][0], w - t2[seg][0])
+        if L.spec.markers[chi]:
+            local_m[L.spec.markers[chi][0]] = b_new if np.allclose(B[0], const[L.const["m:" + L.spec.markers[chi][0]]]) \
+                else local_m[L.spec.markers[chi][0]]
+        x = K.from_poses(L, R2, t2, local_m, cp, cc, ax)
+        if not _differs(L, x, x0, joint) and truth_q:
+            continue                                                   # the truth itself (or its mirror view)
+        out.append(x)
+    return out
+
+
+def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, method: str,
+              undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
+              change: float = 0.05, starts: int = 0, seed: int = 0, via: tuple = ()) -> Witness | None:
+    """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
+    the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
+    truth's markers evaluated at 50 digits (the truth's float parameters taken as exact), so truth and
+    alternative are held to the same data. The truth's vector over ``n_held_out`` further frames,
+    ``held_out_truth``, gives frames the alternative's constants must also reproduce. ``via``: for an
+    ``"isolated"`` search, further joints whose other candidates may carry this one's (a joint that uses
+    their virtual markers inherits them).
+
+    Returns the first verified witness, else the best unverified attempt (``verified`` False), else None
+    when the search finds nothing (not a proof that nothing exists)."""
+    L = K.Layout(spec)
+    F = n_frames
+    data = trial(L, truth_x, F)
+    kind = next(j[1] for j in spec.joints if j[0] == joint)
+    held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
+    best = None
+    for cand in _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via):
+        w = _verify(L, cand, truth_x, F, data, joint, method, held_out, held_out_truth, n_held_out)
+        if w.verified:
+            return w
+        if best is None or w.held_out_residual_mm < best.held_out_residual_mm:
+            best = w
+    return best
+
+
+def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via=()):
+    """Float alternatives reproducing the construction frames, most promising first (a generator)."""
+    if method == "family":
+        for label in (undetermined or []):
+            for ch in (change, -change, change / 5, -change / 5, change / 25):
+                cand, err = _along_family(L, truth_x, F, data, joint, label, ch)
+                if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
+                    yield cand
+        return
+    if method != "isolated":
+        raise ValueError(f"unknown method {method!r}")
+    for start in (x for j in (joint, *via) for x in _twin_starts(L, truth_x, F, j)):
+        cand, err = gauss_newton(L, start, F, data)
+        if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
+            yield cand
+    rng = np.random.default_rng(seed)
+    for _ in range(starts):
+        cand, err = gauss_newton(L, _scrambled(L, truth_x, joint, kind, rng), F, data)
+        if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
+            yield cand
+
+
+def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) -> Witness:
+    xm, err = refine(L, x, F, data)
+    held_err = 0.0
+    if H:
+        xh = _held_out_start(L, x, F, held_out_truth, truth_x, H)
+        xh, _ = gauss_newton(L, xh, H, held_out, frames_only=True)
+        _, held_err = refine(L, xh, H, held_out, frames_only=True, const_mp=xm[:L.n_const])
+    const = np.array([float(v) for v in xm[:L.n_const]])
+    return Witness(joint, method, _floats(K.joint_quantities(L, truth_x[:L.n_const], joint)),
+                   _floats(K.joint_quantities(L, const, joint)), err, held_err, F, H, xm)
+
+
+def _held_out_start(L, x_alt, F, held_truth, truth_x, H):
+    """Held-out frames start from the alternative's pose in the construction frame whose true pose is
+    nearest (the alternative differs from the truth by a smooth change of the poses)."""
+    _, fa = L.split(x_alt, F)
+    _, ft = L.split(truth_x, F)
+    _, fh = L.split(held_truth, H)
+    nearest = np.argmin(((fh[:, None, :] - ft[None, :, :]) ** 2).sum(axis=2), axis=1)
+    start = fa[nearest] + (fh - ft[nearest])
+    return np.concatenate([x_alt[:L.n_const], start.ravel()])
+
+
+def _floats(d: dict) -> dict:
+    return {k: float(v) for k, v in d.items()}
