@@ -294,12 +294,19 @@ def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
 
 
 def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
-               fewest: bool = False) -> dict:
-    """The contract's ``plan`` JSON for a model (plus explanation, motion, robustness and the certificate)."""
+               fewest: bool = False, witness: bool = False, progress=None) -> dict:
+    """The contract's ``plan`` JSON for a model (plus explanation, motion, robustness and the certificate).
+    ``witness``: also simulate the plan and search every joint it does not identify for a second skeleton
+    verified at 50 digits (:mod:`identcheck.plan_witness`; seconds to a minute)."""
     spec = tree_rank.TreeSpec.from_model(model)
     rows = table_summary()
     plan = analyse(spec, rows, seed=seed)
     doc = {"all_identifiable": plan.all_identifiable, "all_local": plan.all_local, "joints": plan.joints}
+    if witness:
+        from . import plan_witness
+
+        for n, w in plan_witness.witnesses(model, spec, plan, seed, progress).items():
+            doc["joints"][n]["alternative"] = w
     if motion:
         for n, needs in motion_needed(spec, plan, seed).items():
             doc["joints"][n]["motion_needed"] = needs
@@ -324,6 +331,14 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     return doc
 
 
+def _witness_text(w: dict) -> str:
+    if w["verified"]:
+        return (f"verified on a simulated trial: a second skeleton reproduces every marker of {w['frames']} frames "
+                f"and of {w['held_out_frames']} held-out frames to {max(w['max_marker_error_mm'], w['held_out_max_marker_error_mm']):.0e} mm "
+                f"({w['precision_digits']} digits) with {w['quantity']} changed by {100 * w['relative_change']:.1f}%")
+    return w["note"]
+
+
 def render_table(doc: dict) -> str:
     """A readable terminal report of ``plan`` JSON."""
     head = f"{'joint':<12} {'verdict':<13} {'case':<16} {'cand.':>5} {'samples':>7}  uses / reason"
@@ -336,6 +351,9 @@ def render_table(doc: dict) -> str:
         lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
         if not j["identifiable"]:
             lines.append(f"{'':<12} {j['reason']}")
+        if "alternative" in j:
+            lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
+                         + _witness_text(j["alternative"]))
         if j.get("motion_needed"):
             lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
     lines.append("")

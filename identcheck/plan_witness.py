@@ -36,6 +36,7 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
         return {}
     F = max(MIN_FRAMES, 2 * plan.rank.frames)
     truth, held = simulated_truth(model, spec, F, seed)
+    case_points = {n: (st.parent_points, st.child_points) for n, st in plan.settled.items()}
     out = {}
     for name in todo:
         j = plan.joints[name]
@@ -46,14 +47,25 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
             out[name] = {"joint": name, "method": None, "verified": False, "found": None,
                          "note": "no marker measures this joint: there is no quantity a second skeleton could change"}
             continue
-        w = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
-                        held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]), seed=seed)
+        search = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
+                             held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]), seed=seed,
+                             case_points=case_points)
+        w = search.witness
         if w is not None and w.verified:
             out[name] = w.to_dict()
+            continue
+        if method == "isolated" and search.attempts == 0:
+            note = ("not searched: no table case with several candidates settles this joint, so there is no "
+                    "candidate to start from; how many skeletons generic data admit is not known")
+        elif method == "isolated":
+            miss = ("" if search.closest_miss_mm is None else
+                    f"; from each of the {search.attempts} other candidates Gauss-Newton stalls with markers still "
+                    f"{search.closest_miss_mm:.2g} mm or more off")
+            note = ("no whole-tree alternative found: markers elsewhere in the tree appear to tell the table case's "
+                    f"candidates apart{miss} (evidence from one simulated trial, not a proof of uniqueness)")
         else:
-            out[name] = {"joint": name, "method": method, "verified": False,
-                         "found": None if w is None else w.to_dict(),
-                         "note": ("no whole-tree alternative found: markers elsewhere in the tree appear to tell "
-                                  "the candidates apart (evidence from one simulated trial, not a proof)"
-                                  if j["local"] else "the search along the undetermined family failed")}
+            note = "the search along the undetermined family failed (the verdict rests on the exact rank alone)"
+        out[name] = {"joint": name, "method": method, "verified": False, "attempts": search.attempts,
+                     "closest_miss_mm": search.closest_miss_mm, "found": None if w is None else w.to_dict(),
+                     "note": note}
     return out

@@ -35,6 +35,7 @@ TOL_VERIFIED = 1e-30       # mm: every marker of every frame, construction and h
 TOL_FLOAT = 1e-8           # mm: the float search must get this close before the refinement takes over
 MIN_CHANGE = 1e-3          # relative change of some quantity for the alternative to count as different
 RCOND = 1e-10
+AXIS_HANDLE_MM = 100.0     # the second point of a hinge taken as a virtual marker
 STALL = 6                  # Gauss-Newton gives up when the residual has not halved in this many steps
 
 
@@ -125,16 +126,21 @@ def _residual(L, x, F, data):
 
 
 def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, frames_only: bool = False):
-    """Minimum-norm Gauss-Newton to a zero residual; ``extra(x) -> (value, gradient)`` adds one equation.
+    """Minimum-norm Gauss-Newton to a zero residual, halving a step that would raise the residual;
+    ``extra(x) -> (value, gradient)`` adds one equation (kept exactly, not traded against the markers).
     Returns (x, max |marker error|)."""
     x = x.copy()
     data = np.asarray(data, dtype=float)
-    history = []
+    cols = slice(L.n_const, None) if frames_only else slice(None)
+
+    def cost(z):
+        r = _residual(L, z, F, data)
+        e = 0.0 if extra is None else extra(z)[0] / max(np.linalg.norm(extra(z)[1]), 1e-12)
+        return float(r @ r + e * e), r
+
+    c, r = cost(x)
+    history = [np.abs(r).max(initial=0.0)]
     for _ in range(max_iter):
-        r = _residual(L, x, F, data)
-        history.append(np.abs(r).max())
-        if len(history) > STALL and history[-1] > 0.5 * history[-1 - STALL] and history[-1] > TOL_FLOAT:
-            break                                          # not converging: a wrong basin
         J = jacobian(L, x, F, frames_only)
         rows, rhs = [J], [-r]
         if extra is not None:
@@ -145,14 +151,21 @@ def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, f
             rows.append(w * g[None])
             rhs.append([-w * val])
         dx = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=RCOND)[0]
-        step = np.abs(dx).max()
-        if frames_only:
-            x[L.n_const:] += dx
+        for _ in range(8):                       # backtrack: never accept a worse skeleton (a continuation
+            trial_x = x.copy()                   # step along a family may need a worse one first)
+            trial_x[cols] += dx
+            c2, r2 = cost(trial_x)
+            if c2 <= c or c2 < 1e-24 or extra is not None:
+                break
+            dx = dx / 2
         else:
-            x += dx
-        if step < 1e-12 * max(1.0, np.abs(x).max()):
-            break
-    return x, float(np.abs(_residual(L, x, F, data)).max())
+            break                                # no descent along the step: a local minimum
+        small = np.abs(dx).max() < 1e-12 * max(1.0, np.abs(x).max())
+        x, c, r = trial_x, c2, r2
+        history.append(np.abs(r).max(initial=0.0))
+        if small or (len(history) > STALL and history[-1] > 0.5 * history[-1 - STALL] and history[-1] > TOL_FLOAT):
+            break                                # converged, or stalled in a wrong basin
+    return x, float(np.abs(r).max(initial=0.0))
 
 
 # -- 50-digit refinement ---------------------------------------------------------------------------------
@@ -228,122 +241,161 @@ def _differs(L, x, x0, joint) -> bool:
     return any(v >= 10 * MIN_CHANGE for v in relative_changes(_floats(qt), _floats(qa)).values())
 
 
-def _points(L: K.Layout, const, seg: str) -> list:
-    """The known points of a segment in its own frame: its markers, then the centres of its ball joints."""
-    pts = [np.array(const[L.const["m:" + m]], dtype=float) for m in L.spec.markers[seg]]
-    for name, kind, par, chi in L.spec.joints:
-        if kind == "spherical" and seg in (par, chi):
-            pts.append(np.array(const[L.const[("c:" if seg == par else "e:") + name]], dtype=float))
-    return pts
+def _points(L: K.Layout, const, seg: str, names=None) -> list:
+    """Known points of a segment in its own frame: the named ones (markers, ``J.centre``, ``J.axis[0|1]`` as
+    the propagation names them), or by default its markers and the centres of its ball joints."""
+    if names is None:
+        names = list(L.spec.markers[seg]) + [f"{n}.centre" for n, k, p, c in L.spec.joints
+                                             if k == "spherical" and seg in (p, c)]
+    out = []
+    for label in names:
+        if f"m:{label}" in L.const:
+            out.append(np.array(const[L.const["m:" + label]], dtype=float))
+            continue
+        joint, _, what = label.partition(".")
+        _, kind, par, chi = next(j for j in L.spec.joints if j[0] == joint)
+        centre = np.array(const[L.const[("c:" if seg == par else "e:") + joint]], dtype=float)
+        if what == "axis[1]":
+            a = np.array(const[L.const["a:" + joint]], dtype=float)
+            a /= np.linalg.norm(a)
+            if seg == chi:
+                a = K.quat_matrix(np.array(const[L.const["rest:" + joint]], dtype=float)).T @ a
+            centre = centre + AXIS_HANDLE_MM * a
+        out.append(centre)
+    return out
 
 
-def _twin_starts(L: K.Layout, x0: np.ndarray, F: int, joint: str) -> list:
-    """Starting skeletons at the other joints of Pham's revolute (2,1) (ERRATA E1, E2), when the hinge's
-    parent carries exactly two known points A1, A2: the closed form's other solutions (d, r, α, l, ρ) in the
-    frame of A1A2, each with the parent rolled about A1A2 per frame (a roll the two points cannot see) and
-    the child re-posed about the new hinge; the rest of the tree keeps its world poses."""
+def _twin_starts(L: K.Layout, x0: np.ndarray, F: int, joint: str, case_points: dict | None = None) -> list:
+    """Starting skeletons at the other joints of Pham's revolute (2,1) (ERRATA E1, E2), when one side of the
+    hinge carries exactly two known points A1, A2 and the other at least one, B: the closed form's other
+    solutions (d, r, α, l, ρ) in the frame of A1A2; the two-point segment rolled about A1A2 per frame (a roll
+    its points cannot see), the other turned about the new hinge to put B back; the rest of the tree keeps
+    its world poses (joints on the moved segments are re-expressed at frame 0). ``case_points``: joint ->
+    (parent point names, child point names) the propagation settled it with (default: markers and ball
+    centres)."""
     from .fit import revolute21_fit
     from .solve.frames import pair_frame
 
     name, kind, par, chi = next(j for j in L.spec.joints if j[0] == joint)
-    const, frames = L.split(x0, F)
-    A, B = _points(L, const, par), _points(L, const, chi)
-    if kind != "revolute" or len(A) != 2 or not B:
+    if kind != "revolute":
         return []
+    const, frames = L.split(x0, F)
+    names = (case_points or {}).get(joint, (None, None))
+    pts = {par: _points(L, const, par, names[0]), chi: _points(L, const, chi, names[1])}
+    two = par if len(pts[par]) == 2 and pts[chi] else (chi if len(pts[chi]) == 2 and pts[par] else None)
+    if two is None:
+        return []
+    one = chi if two == par else par
     Rw, tw = K.segment_poses(L, const, frames)
-    a1, a2 = A
-    # the frame of A1A2 in the parent: E's columns; canonical = Eᵀ (p − A1)
+    a1, a2 = pts[two]
     cols, _ = pair_frame(a1[None, None], a2[None, None], a1[None, None] + np.eye(3)[None])
-    E = cols[0]                                                 # columns: the A1A2 frame's axes
-    b_world = Rw[chi] @ B[0] + tw[chi]
-    b_par = np.einsum("fji,fj->fi", Rw[par], b_world - tw[par])
-    local = (b_par - a1) @ E
+    E = cols[0]                                                 # columns: the A1A2 frame's axes, in `two`
+    b_world = Rw[one] @ pts[one][0] + tw[one]
+    local = (np.einsum("fji,fj->fi", Rw[two], b_world - tw[two]) - a1) @ E
     out = []
-    truth_q = K.joint_quantities(L, const, joint)
     for params, rms, _ in revolute21_fit.fit(local):
         if rms > 1e-6 * np.sqrt(np.mean(local ** 2)):
             continue
-        d, r, alpha, l, rho = params
-        u = np.array([0.0, -np.sin(alpha), np.cos(alpha)])
+        d, r, alpha, _, _ = params
         roll = revolute21_fit.thetas(params, local)
         beta = revolute21_fit._nearest_beta(params, np.hypot(local[:, 0], local[:, 1]), local[:, 2])
-        c, s_ = np.cos(roll), np.sin(roll)
-        Rz = np.zeros((F, 3, 3)); Rz[:, 0, 0] = Rz[:, 1, 1] = c; Rz[:, 0, 1] = -s_; Rz[:, 1, 0] = s_; Rz[:, 2, 2] = 1
-        roll_par = E @ Rz @ E.T                                    # roll about A1A2, parent frame
+        roll_two = E @ axis_rotation_z(roll) @ E.T                  # roll about A1A2, in `two`'s frame
+        hinge_pt, hinge_dir = a1 + E @ np.array([r, 0.0, d]), E @ np.array([0.0, -np.sin(alpha), np.cos(alpha)])
         R2, t2 = dict(Rw), dict(tw)
-        R2[par] = Rw[par] @ roll_par
-        t2[par] = tw[par] + np.einsum("fij,fj->fi", Rw[par], a1 - np.einsum("fij,j->fi", roll_par, a1))
-        hinge_pt, hinge_dir = a1 + E @ np.array([r, 0.0, d]), E @ u
-        R2[chi] = R2[par] @ K.axis_rotation(hinge_dir, beta)
-        t2[chi] = np.einsum("fij,j->fi", R2[par], hinge_pt) + t2[par]
+        R2[two] = Rw[two] @ roll_two
+        t2[two] = tw[two] + np.einsum("fij,fj->fi", Rw[two], a1 - roll_two @ a1)
+        turn = K.axis_rotation(hinge_dir, beta)                      # `one` = `two` turned about the hinge
+        R2[one] = R2[two] @ turn
+        t2[one] = np.einsum("fij,fj->fi", R2[two], hinge_pt - turn @ hinge_pt) + t2[two]
         local_m, cp, cc, ax = K.constants(L, const)
-        cp[name], cc[name], ax[name] = hinge_pt, np.zeros(3), hinge_dir
-        b_new = E @ (rho * np.array([1.0, 0, 0]) + l * u)
-        for m in L.spec.markers[chi]:                                 # the child's point B, and any others by frame 0
-            local_m[m] = np.linalg.solve(R2[chi][0], Rw[chi][0] @ local_m[m] + tw[chi][0] - t2[chi][0])
-        for k, kk, pk, ck in L.spec.joints:                           # joints on the re-posed segments, by frame 0
-            for seg, store in ((pk, cp), (ck, cc)):
-                if k != name and seg in (par, chi):
-                    w = Rw[seg][0] @ store[k] + tw[seg][0]
-                    store[k] = np.linalg.solve(R2[seg][0], w - t2[seg][0])
-        if L.spec.markers[chi]:
-            local_m[L.spec.markers[chi][0]] = b_new if np.allclose(B[0], const[L.const["m:" + L.spec.markers[chi][0]]]) \
-                else local_m[L.spec.markers[chi][0]]
+        for seg in (two, one):                                       # re-express what they carry, at frame 0
+            for m in L.spec.markers[seg]:
+                local_m[m] = _reexpress(Rw, tw, R2, t2, seg, local_m[m])
+            for k, _, pk, ck in L.spec.joints:
+                if k != name and seg in (pk, ck):
+                    store = cp if seg == pk else cc
+                    store[k] = _reexpress(Rw, tw, R2, t2, seg, store[k])
+        cp[name], cc[name], ax[name] = hinge_pt, hinge_pt, hinge_dir
         x = K.from_poses(L, R2, t2, local_m, cp, cc, ax)
-        if not _differs(L, x, x0, joint) and truth_q:
-            continue                                                   # the truth itself (or its mirror view)
-        out.append(x)
+        if _differs(L, x, x0, joint):                                # not the truth (or its mirror view)
+            out.append(x)
     return out
+
+
+def axis_rotation_z(angle: np.ndarray) -> np.ndarray:
+    """Rotations about z by ``angle`` (F,): (F, 3, 3)."""
+    return K.axis_rotation(np.array([0.0, 0.0, 1.0]), angle)
+
+
+def _reexpress(Rw, tw, R2, t2, seg, v):
+    """A point fixed in ``seg`` re-expressed in its new frame, at frame 0."""
+    return np.linalg.solve(R2[seg][0], Rw[seg][0] @ v + tw[seg][0] - t2[seg][0])
 
 
 def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, method: str,
               undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
-              change: float = 0.05, starts: int = 0, seed: int = 0, via: tuple = ()) -> Witness | None:
+              change: float = 0.05, starts: int = 0, seed: int = 0, via: tuple = (),
+              case_points: dict | None = None) -> "Search":
     """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
     the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
     truth's markers evaluated at 50 digits (the truth's float parameters taken as exact), so truth and
     alternative are held to the same data. The truth's vector over ``n_held_out`` further frames,
     ``held_out_truth``, gives frames the alternative's constants must also reproduce. ``via``: for an
     ``"isolated"`` search, further joints whose other candidates may carry this one's (a joint that uses
-    their virtual markers inherits them).
+    their virtual markers inherits them); ``case_points``: the points the propagation settled each with.
 
-    Returns the first verified witness, else the best unverified attempt (``verified`` False), else None
-    when the search finds nothing (not a proof that nothing exists)."""
+    Returns a :class:`Search`: the first verified witness, else the best unverified attempt (``verified``
+    False), else none — which is not a proof that nothing exists."""
     L = K.Layout(spec)
     F = n_frames
     data = trial(L, truth_x, F)
     kind = next(j[1] for j in spec.joints if j[0] == joint)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
-    best = None
-    for cand in _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via):
+    best, misses = None, []
+    for cand, err in _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via,
+                                 case_points):
+        if err is None:
+            continue
+        if err >= TOL_FLOAT:
+            misses.append(err)
+            continue
         w = _verify(L, cand, truth_x, F, data, joint, method, held_out, held_out_truth, n_held_out)
         if w.verified:
-            return w
+            return Search(w, len(misses) + 1, min(misses, default=None))
         if best is None or w.held_out_residual_mm < best.held_out_residual_mm:
             best = w
-    return best
+    return Search(best, len(misses) + (best is not None), min(misses, default=None))
 
 
-def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via=()):
-    """Float alternatives reproducing the construction frames, most promising first (a generator)."""
+@dataclass
+class Search:
+    """What :func:`construct` found: the witness (``None`` if no start converged; check ``verified``), how
+    many starts it tried, and the smallest max marker error at which the others stalled (mm)."""
+
+    witness: Witness | None
+    attempts: int
+    closest_miss_mm: float | None
+
+
+def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via=(),
+                case_points=None):
+    """(skeleton, max marker error) after Gauss-Newton from each start, most promising first (a generator):
+    an error below ``TOL_FLOAT`` is a candidate alternative, None a start that led back to the truth."""
+    def done(cand, err):        # err None: it converged back to the truth
+        return cand, (err if err >= TOL_FLOAT or _differs(L, cand, truth_x, joint) else None)
+
     if method == "family":
         for label in (undetermined or []):
             for ch in (change, -change, change / 5, -change / 5, change / 25):
-                cand, err = _along_family(L, truth_x, F, data, joint, label, ch)
-                if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
-                    yield cand
+                yield done(*_along_family(L, truth_x, F, data, joint, label, ch))
         return
     if method != "isolated":
         raise ValueError(f"unknown method {method!r}")
-    for start in (x for j in (joint, *via) for x in _twin_starts(L, truth_x, F, j)):
-        cand, err = gauss_newton(L, start, F, data)
-        if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
-            yield cand
+    for start in (x for j in (joint, *via) for x in _twin_starts(L, truth_x, F, j, case_points)):
+        yield done(*gauss_newton(L, start, F, data))
     rng = np.random.default_rng(seed)
     for _ in range(starts):
-        cand, err = gauss_newton(L, _scrambled(L, truth_x, joint, kind, rng), F, data)
-        if err < TOL_FLOAT and _differs(L, cand, truth_x, joint):
-            yield cand
+        yield done(*gauss_newton(L, _scrambled(L, truth_x, joint, kind, rng), F, data))
 
 
 def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) -> Witness:

@@ -265,3 +265,38 @@ def test_non_identified_joints_admit_a_verified_alternative(tree, seed):
         if w["verified"]:
             assert w["max_marker_error_mm"] <= 1e-30 and w["held_out_max_marker_error_mm"] <= 1e-30
             assert w["relative_change"] >= 1e-3 and w["held_out_frames"] >= 20
+
+
+def test_downstream_markers_tell_the_knee_candidates_apart():
+    """A leg with three pelvis markers and one on each of thigh, shank and foot: the knee is Pham's revolute
+    (2,1) on the hip centre, 4 candidates by the table. Its other candidates are found and verified when
+    nothing below the shank is measured, and rejected (markers left millimetres off) once the foot marker is:
+    the plan reports both."""
+    from identcheck import plan_witness
+
+    leg = chain_model(["spherical", "revolute", "spherical"], [3, 1, 1, 1])
+    spec = tree_rank.TreeSpec.from_model(leg)
+    p = plan.analyse(spec)
+    assert p.joints["j2"]["case"] == "revolute(2,1)" and p.joints["j2"]["candidates"] == 4
+    w = plan_witness.witnesses(leg, spec, p, seed=2)["j2"]
+    assert not w["verified"] and w["attempts"] >= 1 and w["closest_miss_mm"] > 0.1
+    assert "tell the table case's candidates apart" in w["note"]
+
+    no_foot = spec.without("m3_0")
+    p2 = plan.analyse(no_foot)
+    w2 = plan_witness.witnesses(leg, no_foot, p2, seed=2)["j2"]
+    assert w2["verified"] and w2["max_marker_error_mm"] <= 1e-30 and w2["held_out_max_marker_error_mm"] <= 1e-30
+
+
+def test_cli_plan_witness(capsys):
+    """`plan --witness` on the sparse leg: the knee's second joint is built and verified; the hip needs none."""
+    rc = cli.main(["plan", str(EXAMPLES / "sparse_leg.toml"), "--json", "--fast", "--witness"])
+    doc = json.loads(capsys.readouterr().out)
+    assert rc == 1
+    assert "alternative" not in doc["joints"]["hip_r"]
+    w = doc["joints"]["knee_r"]["alternative"]
+    assert w["verified"] and w["method"] == "isolated" and w["precision_digits"] == 50
+    assert w["max_marker_error_mm"] <= 1e-30 and w["held_out_max_marker_error_mm"] <= 1e-30
+    assert w["relative_change"] >= 1e-3
+    cli.main(["plan", str(EXAMPLES / "sparse_leg.toml"), "--fast", "--witness"])
+    assert "alternative: VERIFIED" in capsys.readouterr().out
