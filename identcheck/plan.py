@@ -184,10 +184,12 @@ def _reason(spec, name, kind, par, chi, jr, st) -> str:
             f"{missing} undetermined; add markers (see suggestions)")
 
 
-def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0) -> Plan:
-    """Whole-tree verdict plus propagation explanation for one marker plan."""
+def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0,
+            warm_frames: int = 0) -> Plan:
+    """Whole-tree verdict plus propagation explanation for one marker plan (``warm_frames``: see
+    :func:`identcheck.tree_rank.analyse`; only for plans whose ``min_samples`` are not reported)."""
     rows = rows or table_summary()
-    rank = tree_rank.analyse(spec, field_kind, seed)
+    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames)
     settled = propagate(spec, rows)
     plan = Plan(spec, rank, settled)
     for name, kind, par, chi in spec.joints:
@@ -221,7 +223,7 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0) -> dict:
     every frame, they would leave it undetermined (whole-tree rank with that joint frozen)."""
     need = {n: [] for n in plan.joints}
     for name, *_ in spec.joints:
-        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed)
+        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1)
         for other, jr in frozen.joints.items():
             if plan.joints[other]["local"] and not jr.local:
                 need[other].append(name)
@@ -233,7 +235,7 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) 
     out = {}
     for seg, ms in spec.markers.items():
         for m in ms:
-            alt = analyse(spec.without(m), rows, seed=seed)
+            alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1)
             lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
             lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
             out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
@@ -242,26 +244,57 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) 
 
 
 def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED) -> list | None:
-    """Fewest extra markers (segment -> count) after which every joint is identifiable: exhaustive over
-    multisets of the segments next to a joint not uniquely settled, fewest first; the propagation
-    screens candidates, the whole-tree rank checks.
-    None when no addition of up to ``max_markers`` markers suffices."""
-    # only segments next to a joint not yet uniquely settled can change anything: the propagation reads
-    # a segment's points only for its own joints, and a uniquely settled joint's virtual markers are fixed
+    """Fewest extra markers (segment -> count) after which every joint is identifiable, or None when no
+    addition of up to ``max_markers`` markers suffices.
+
+    Only segments next to a joint not yet uniquely settled can change anything (the propagation reads a
+    segment's points only for its own joints, and a uniquely settled joint's virtual markers are fixed).
+    Such joints linked by a shared segment form a component; components share no segment, so their
+    fewest additions are independent and add up. Each is found exhaustively over multisets of its
+    segments, fewest first, screened by the propagation; the whole-tree rank checks the union (and on
+    the rare failure the search is repeated over all the segments at once)."""
     base = propagate(spec, rows)
     open_joints = [j for j in spec.joints if not (j[0] in base and base[j[0]].candidates == 1)]
-    segs = [s for s in spec.markers if any(s in (j[2], j[3]) for j in open_joints)]
+    if not open_joints:
+        return []
+    extra: dict = {}
+    for comp in _components(open_joints):
+        found = _fewest(spec, rows, comp, max_markers - sum(extra.values()))
+        if found is None:
+            return None
+        extra.update(found)
+    if analyse(_with_extra(spec, extra), rows, seed=seed).all_identifiable:
+        return [{"segment": s, "add_markers": c} for s, c in extra.items()]
+    found = _fewest(spec, rows, open_joints, max_markers, seed=seed)
+    return None if found is None else [{"segment": s, "add_markers": c} for s, c in found.items()]
+
+
+def _components(joints: list) -> list:
+    """Joints grouped by shared segments (connected components)."""
+    comps: list = []
+    for j in joints:
+        touching = [c for c in comps if any({j[2], j[3]} & {k[2], k[3]} for k in c)]
+        merged = [j] + [k for c in touching for k in c]
+        comps = [c for c in comps if c not in touching] + [merged]
+    return comps
+
+
+def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None) -> dict | None:
+    """Fewest extra markers on the segments of ``joints`` after which the propagation settles all of them
+    uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan)."""
+    names = {j[0] for j in joints}
+    segs = [s for s in spec.markers if any(s in (j[2], j[3]) for j in joints)]
     for k in range(1, max_markers + 1):
         for combo in itertools.combinations_with_replacement(segs, k):
-            extra = {}
+            extra: dict = {}
             for s in combo:
                 extra[s] = extra.get(s, 0) + 1
             cand = _with_extra(spec, extra)
             settled = propagate(cand, rows)
-            if not all(n in settled and settled[n].candidates == 1 for n, *_ in cand.joints):
+            if not all(n in settled and settled[n].candidates == 1 for n in names):
                 continue
-            if analyse(cand, rows, seed=seed).all_identifiable:
-                return [{"segment": s, "add_markers": c} for s, c in extra.items()]
+            if seed is None or analyse(cand, rows, seed=seed).all_identifiable:
+                return extra
     return None
 
 

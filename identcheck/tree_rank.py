@@ -348,15 +348,16 @@ class TreeJacobian:
             rows.extend(block)
         return rows
 
-    def add_frame(self) -> int:
-        """Add one generic frame; returns dim W."""
-        rows = self._frame_rows()
+    def add_frame(self, count: int = 1) -> int:
+        """Add ``count`` generic frames (W reduced once, after the last); returns dim W."""
         ncols = self.n_vars + self.cols.n
-        red = self.F.rref_rows(rows, ncols)
-        new = [r[self.n_vars:] for r in red if all(v == 0 for v in r[:self.n_vars])]
+        new = []
+        for _ in range(count):
+            red = self.F.rref_rows(self._frame_rows(), ncols)
+            new += [r[self.n_vars:] for r in red if all(v == 0 for v in r[:self.n_vars])]
+            self.frames += 1
         self.W = self.F.rref_rows(self.W + new, self.cols.n)
         self.pivots = [next(j for j, v in enumerate(r) if v != 0) for r in self.W]
-        self.frames += 1
         return len(self.W)
 
     def gradient_rows(self, grads) -> list:
@@ -561,8 +562,12 @@ def failure_bound(spec: TreeSpec, frames: int, n_claims: int, prime: int | None,
     return min(1.0, n_claims * per)
 
 
-def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES) -> TreeRank:
-    """Scan frames until one more generic frame changes neither dim W nor any joint's verdict."""
+def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
+            warm_frames: int = 0) -> TreeRank:
+    """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
+
+    ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
+    plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count)."""
     tj = TreeJacobian(spec, field_kind, seed)
     qs = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     labels = [(n, q.label) for n, ql in qs.items() for q in ql]
@@ -570,7 +575,7 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     first = {}
     prev = None
     while tj.frames < max_frames:
-        dim = tj.add_frame()
+        dim = tj.add_frame(max(1, warm_frames - tj.frames))
         verdict = {n: [] for n in qs}
         for (n, label), ok in zip(labels, tj.in_span(G)):
             if not ok:

@@ -225,19 +225,13 @@ def test_cli_fewest_local_finding(capsys):
 
 
 def _nothing_else_can_tell(spec, p, name) -> bool:
-    """The joint was settled by a case with several candidates and no marker below its child, other than
-    the case's own, could reject them."""
+    """The joint was settled by a case with several candidates from real markers only, and those are the
+    only markers of the whole tree: nothing else could reject the case's other candidates."""
     st = p.settled.get(name)
-    if st is None or st.case_candidates == 1 or st.depends_on:
+    if st is None or st.case_candidates == 1 or st.virtual:
         return False
-    chi = next(j[3] for j in spec.joints if j[0] == name)
-    below, frontier = set(), [chi]
-    while frontier:
-        seg = frontier.pop()
-        for j in spec.children[seg]:
-            below.add(j[3]); frontier.append(j[3])
-    extra_child = [m for m in spec.markers[chi] if m not in st.child_points]
-    return not extra_child and not any(spec.markers[s] for s in below)
+    every = {m for ms in spec.markers.values() for m in ms}
+    return every == set(st.parent_points) | set(st.child_points)
 
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
