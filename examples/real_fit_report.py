@@ -222,6 +222,14 @@ def main() -> int:
     for i, (t, m, jn, why) in enumerate(reasons, 1):
         w(f"{i}. {t}, `{m}`, {jn}: {why}")
     w("")
+    label_rows = [(r, msg) for r in results if r["doc"] for msg in r["doc"].get("warnings", [])]
+    if label_rows:
+        w("Label warnings (verbatim from the JSON's `warnings`; `fit` screens every trial for swapped labels with "
+          "the model-free distance check of `diagnose`, and leaves the flagged span out for the two markers):")
+        w("")
+        for r, msg in label_rows:
+            w(f"- `{r['model']}`: {msg}")
+        w("")
     alt_rows = [(r, jn, j) for r in results if r["doc"] for jn, j in r["doc"]["joints"].items() if j["alternatives"]]
     if alt_rows:
         w("Alternatives (the other joints that explain the trial as well, revolute (2,1), ERRATA E1/E2):")

@@ -176,13 +176,18 @@ def _cmd_identify(a) -> int:
 
 def _cmd_fit(a) -> int:
     from .fit.fitting import fit_model, report
+    from .fit.label_check import screen
     from .io.model import Model
     from .trial import Trial
 
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
+    trial, warnings = screen(model, trial)
+    for w in warnings:
+        print(f"identcheck fit: warning: {w}", file=sys.stderr)
     fitted, points = fit_model(model, trial, progress=lambda msg: print(f"identcheck fit: {msg}", file=sys.stderr))
     rep = report(model, fitted, points)
+    rep["warnings"] = warnings
     if a.json:
         _print_json(rep)
     else:

@@ -54,31 +54,42 @@ def longest_run(flag: np.ndarray, doubt: np.ndarray) -> tuple[int, int]:
     return best
 
 
+def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
+    """Label swaps the within-segment distances show, strongest first: dicts with the two columns, the
+    frame span (first, last), the evidence ``gain`` (log-likelihood gain net of a BIC penalty for 3
+    parameters), the per-frame misfits as labelled (``keep``) and exchanged (``swap``), mm², and the
+    margin ``clear`` a frame's improvement had to exceed."""
+    sig2, pen = sigma_mm ** 2, np.log(max(n_obs, 2))
+    out = []
+    for i in range(chain.n_markers):
+        for j in range(i + 1, chain.n_markers):
+            keep, swap = swap_costs(data, chain, i, j)
+            if keep is None:
+                continue
+            n_terms = len(_partners(chain, i, {i, j})) + len(_partners(chain, j, {i, j}))
+            clear = 2 * sig2 * n_terms * 9          # well beyond the distances' own noise
+            better = (keep - swap > clear)
+            doubt = ~np.isfinite(keep) | (np.abs(keep - swap) <= clear)
+            a, b = longest_run(np.nan_to_num(better, nan=0).astype(bool), doubt)
+            if a < 0 or b - a + 1 < MIN_RUN:
+                continue
+            gain = np.nansum((keep - swap)[a:b + 1]) / (2 * sig2) - 3 * pen
+            if gain > 0:
+                out.append({"cols": (i, j), "span": (int(a), int(b)), "gain": float(gain), "keep": keep, "swap": swap,
+                            "clear": float(clear)})
+    return sorted(out, key=lambda d: -d["gain"])
+
+
 class MarkerSwap(Effect):
     name = "marker_swap"
     max_proposals = 2
 
     def propose(self, ctx, hyp) -> list:
-        sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
-        ch, data = hyp.chain, hyp.data
-        out = []
-        for i in range(ch.n_markers):
-            for j in range(i + 1, ch.n_markers):
-                keep, swap = swap_costs(data, ch, i, j)
-                if keep is None:
-                    continue
-                n_terms = len(_partners(ch, i, {i, j})) + len(_partners(ch, j, {i, j}))
-                clear = 2 * sig2 * n_terms * 9          # well beyond the distances' own noise
-                better = (keep - swap > clear)
-                doubt = ~np.isfinite(keep) | (np.abs(keep - swap) <= clear)
-                a, b = longest_run(np.nan_to_num(better, nan=0).astype(bool), doubt)
-                if a < 0 or b - a + 1 < MIN_RUN:
-                    continue
-                gain = np.nansum((keep - swap)[a:b + 1]) / (2 * sig2) - 3 * pen
-                if gain > 0:
-                    out.append(Proposal(self.name, {"markers": [ch.labels[i], ch.labels[j]], "frames": [int(a), int(b)]},
-                                        float(gain), {"cols": (i, j), "span": (a, b), "keep": keep, "swap": swap}))
-        return sorted(out, key=lambda p: -p.strength)
+        ch = hyp.chain
+        return [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
+                                     "frames": list(d["span"])},
+                         d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"]})
+                for d in detect(hyp.data, ch, ctx.noise.sigma_mm, ctx.n_obs)]
 
     def apply(self, ctx, hyp, proposal):
         (i, j), (a, b) = proposal.payload["cols"], proposal.payload["span"]
