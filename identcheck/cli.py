@@ -399,5 +399,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def run() -> None:
-    """Console-script entry point."""
-    sys.exit(main())
+    """Console-script entry point. A reader that closes the pipe early (``| head``) ends the output quietly."""
+    try:
+        sys.exit(main())
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)       # keep Python from failing again on flushing stdout
+        os.dup2(devnull, sys.stdout.fileno())
+        sys.exit(0)

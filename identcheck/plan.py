@@ -25,7 +25,7 @@ import math
 from dataclasses import dataclass, field
 from importlib import resources
 
-from . import tree_rank
+from . import tree_rank, twin_certificate
 
 MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
 
@@ -75,6 +75,19 @@ class Settled:
     case_min_samples: int
     depends_on: list                # joints whose virtual markers it uses
     step: int                       # propagation round (1 = from real markers only)
+    rejected_by: dict | None = None  # the marker beyond another joint that rejects the case's other candidates
+
+
+def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str) -> dict | None:
+    """A real marker beyond another joint of ``one_side`` (the one-point segment of a revolute (2,1)):
+    it stays at a fixed distance from a point fixed in that segment, which rejects the case's other
+    candidates (:mod:`identcheck.twin_certificate`)."""
+    for k, kind, par, chi in spec.joints:
+        if k != name and one_side in (par, chi):
+            far = chi if one_side == par else par
+            if spec.markers[far]:
+                return {"marker": spec.markers[far][0], "segment": far, "joint": k, "joint_type": kind}
+    return None
 
 
 def _count(points: list) -> int:
@@ -105,8 +118,17 @@ def propagate(spec: tree_rank.TreeSpec, rows: dict) -> dict:
         virt = [m for m in P + C if m in origin]
         deps = sorted({origin[m] for m in virt})
         inherited = math.prod(settled[d].candidates for d in deps) if deps else 1
-        return Settled(f"{kind}({p},{q})", p, q, P, C, virt, row["candidates"], row["candidates"] * inherited,
-                       row["min_samples"], deps, step)
+        own, rejected = row["candidates"], None
+        if kind == "revolute" and own > 1 and (p, q) in ((2, 1), (1, 2)):
+            rejected = far_marker(spec, name, chi if (p, q) == (2, 1) else par)
+            if rejected is not None:
+                cert = twin_certificate.certify(0, rejected["joint_type"])
+                if cert["certified"]:
+                    own, rejected = 1, dict(rejected, certificate=cert)
+                else:
+                    rejected = None
+        return Settled(f"{kind}({p},{q})", p, q, P, C, virt, row["candidates"], own * inherited,
+                       row["min_samples"], deps, step, rejected)
 
     def settle(name, kind, par, chi, st):
         fresh = name not in settled
@@ -161,7 +183,15 @@ def _reason(spec, name, kind, par, chi, jr, st) -> str:
         via = f" with virtual markers {', '.join(st.virtual)}" if st.virtual else ""
         txt = (f"settled by {st.case}: {', '.join(st.parent_points) or '-'} on {par} | "
                f"{', '.join(st.child_points) or '-'} on {chi}{via}")
-        if st.case_candidates > 1:
+        if st.rejected_by is not None:
+            r = st.rejected_by
+            txt += (f"; {st.case} alone admits {st.case_candidates} joints (mirror images count), but marker "
+                    f"{r['marker']} on {r['segment']}, beyond {r['joint_type']} joint {r['joint']}, must stay at a "
+                    f"fixed distance from a point of {chi if st.q == 1 else par}, and that rejects the other "
+                    f"{st.case_candidates - 1} (exact certificate, identcheck.twin_certificate)")
+            txt += "; unique" if st.candidates == 1 else (f"; it inherits the {st.candidates} candidates of "
+                                                          f"{', '.join(st.depends_on)} (at most)")
+        elif st.case_candidates > 1:
             txt += (f"; {st.case} admits {st.case_candidates} joints that explain generic data equally well (mirror "
                     "images count), so it is locally, not uniquely, identifiable")
         elif st.candidates > 1:
@@ -212,6 +242,8 @@ def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str 
             "jointly_only": bool(jr.local and st is None),
             "depends_on": list(st.depends_on) if st else [],
             "step": st.step if st else None,
+            "rejected_by": ({k: v for k, v in st.rejected_by.items() if k != "certificate"}
+                            if st and st.rejected_by else None),
             "reason": _reason(spec, name, kind, par, chi, jr, st),
         }
     return plan
@@ -384,6 +416,10 @@ def render_table(doc: dict) -> str:
         lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
         if not j["identifiable"]:
             lines.append(f"{'':<12} {j['reason']}")
+        elif j.get("rejected_by"):
+            r = j["rejected_by"]
+            lines.append(f"{'':<12} {j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
+                         "(exact certificate)")
         if "alternative" in j:
             lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
                          + _witness_text(j["alternative"]))

@@ -3,9 +3,9 @@ identify, a whole-tree alternative verified at 50 digits (:mod:`identcheck.tree_
 
 The search is the one the verdict calls for: along the family of equally good skeletons when the
 joint is not locally identifiable; from the table case's other candidates (and those of the joints
-whose virtual markers it uses) when it is. When a search that finds the candidates of a lone case
-finds none in the tree, markers further down the tree are telling them apart; that is reported,
-not claimed as a proof of uniqueness.
+whose virtual markers it uses) when it is. When such a search finds nothing, the note says how each
+start ended; that is evidence, not a proof of uniqueness (for the revolute (2,1) pattern with a
+marker beyond the one-point segment, :mod:`identcheck.twin_certificate` gives the proof).
 """
 from __future__ import annotations
 
@@ -38,6 +38,10 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
     truth, held = simulated_truth(model, spec, F, seed)
     case_points = {n: (st.parent_points, st.child_points) for n, st in plan.settled.items()}
     out = {}
+    if not any(spec.markers.values()):
+        return {n: {"joint": n, "method": None, "verified": False, "found": None,
+                    "note": "the plan has no markers: there is no trial for a second skeleton to reproduce"}
+                for n in todo}
     for name in todo:
         j = plan.joints[name]
         if progress:
@@ -58,14 +62,20 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
             note = ("not searched: no table case with several candidates settles this joint, so there is no "
                     "candidate to start from; how many skeletons generic data admit is not known")
         elif method == "isolated":
-            miss = ("" if search.closest_miss_mm is None else
-                    f"; from each of the {search.attempts} other candidates Gauss-Newton stalls with markers still "
-                    f"{search.closest_miss_mm:.2g} mm or more off")
-            note = ("no whole-tree alternative found: markers elsewhere in the tree appear to tell the table case's "
-                    f"candidates apart{miss} (evidence from one simulated trial, not a proof of uniqueness)")
+            parts = []
+            if search.back_to_truth:
+                parts.append(f"{search.back_to_truth} led back to the true joint")
+            if search.closest_miss_mm is not None:
+                parts.append(f"Gauss-Newton stalled with markers still {search.closest_miss_mm:.2g} mm or more off")
+            if w is not None:
+                parts.append(f"one fitted the construction frames but missed held-out frames by "
+                             f"{w.held_out_residual_mm:.2g} mm")
+            note = (f"no whole-tree alternative found from {search.attempts} start(s) at the table case's other "
+                    f"candidates: {'; '.join(parts)} (evidence from one simulated trial, not a proof of uniqueness)")
         else:
             note = "the search along the undetermined family failed (the verdict rests on the exact rank alone)"
         out[name] = {"joint": name, "method": method, "verified": False, "attempts": search.attempts,
+                     "back_to_truth": search.back_to_truth,
                      "closest_miss_mm": search.closest_miss_mm, "found": None if w is None else w.to_dict(),
                      "note": note}
     return out

@@ -19,7 +19,8 @@ markers are refined (the residual evaluated in mpmath, the correction from the f
 pseudo-inverse) until every marker of every frame is reproduced to ``TOL_VERIFIED`` mm, and the
 same constants must also reproduce frames the search never saw (held-out frames: only their poses
 and angles are solved for), so the alternative explains the motion, not just the frames it was
-built on. The joint constraints hold exactly for every parameter value (:mod:`identcheck.tree_kinematics`).
+built on (when its frames' poses cannot absorb every marker coordinate: ``held_out_informative``).
+The joint constraints hold exactly for every parameter value (:mod:`identcheck.tree_kinematics`).
 """
 from __future__ import annotations
 
@@ -36,18 +37,23 @@ TOL_FLOAT = 1e-8           # mm: the float search must get this close before the
 MIN_CHANGE = 1e-3          # relative change of some quantity for the alternative to count as different
 RCOND = 1e-10
 AXIS_HANDLE_MM = 100.0     # the second point of a hinge taken as a virtual marker
+FAMILY_FLOOR = 100.0       # a quantity near 0 (an axial offset) is moved by change × this (mm or mm²)
 STALL = 6                  # Gauss-Newton gives up when the residual has not halved in this many steps
+
+
+def _axis_sign(true: dict, alt: dict) -> float:
+    """−1 when the alternative's axial offsets are closer to the truth's with the hinge direction flipped."""
+    ax = [k for k in true if k.startswith("axial")]
+    plus = sum((alt[k] - true[k]) ** 2 for k in ax)
+    minus = sum((alt[k] + true[k]) ** 2 for k in ax)
+    return -1.0 if ax and minus < plus else 1.0
 
 
 def relative_changes(true: dict, alt: dict) -> dict:
     """label -> |alt − true| / max(|true|, 1). A hinge's direction has no sign, so its axial offsets are
     compared after the sign that brings them closest (flipping the axis flips them all)."""
     ax = [k for k in true if k.startswith("axial")]
-    sign = 1.0
-    if ax:
-        plus = sum((alt[k] - true[k]) ** 2 for k in ax)
-        minus = sum((alt[k] + true[k]) ** 2 for k in ax)
-        sign = -1.0 if minus < plus else 1.0
+    sign = _axis_sign(true, alt)
     return {k: abs((sign if k in ax else 1.0) * alt[k] - v) / max(abs(v), 1.0) for k, v in true.items()}
 
 
@@ -64,6 +70,8 @@ class Witness:
     n_frames: int
     n_held_out: int
     x: np.ndarray = field(repr=False, default=None)     # the alternative (mpf), constants then frames
+    held_out_informative: bool = False   # could the held-out frames have failed? (False: their poses absorb
+    #                                      every marker coordinate, so they test nothing)
 
     @property
     def change(self) -> tuple:
@@ -79,8 +87,11 @@ class Witness:
 
     def to_dict(self) -> dict:
         label, rel = self.change
+        alt = self.quantities_alt[label]
+        flipped = label.startswith("axial") and _axis_sign(self.quantities_true, self.quantities_alt) < 0
         return {"joint": self.joint, "method": self.method, "verified": self.verified,
-                "quantity": label, "true": self.quantities_true[label], "alternative": self.quantities_alt[label],
+                "quantity": label, "true": self.quantities_true[label], "alternative": -alt if flipped else alt,
+                "hinge_direction_flipped": flipped, "held_out_informative": self.held_out_informative,
                 "relative_change": rel, "max_marker_error_mm": self.residual_mm,
                 "held_out_max_marker_error_mm": self.held_out_residual_mm,
                 "frames": self.n_frames, "held_out_frames": self.n_held_out,
@@ -117,8 +128,8 @@ def jacobian(L: K.Layout, x: np.ndarray, F: int, frames_only: bool = False) -> n
 def trial(L: K.Layout, x: np.ndarray, F: int) -> np.ndarray:
     """The markers of skeleton ``x`` at 50 digits, (F, M, 3) of mpf: a trial that the rigid model
     reproduces exactly (float data would not: rounding breaks rigidity at 1e-14 mm)."""
-    mpmath.mp.dps = K.DPS
-    return K.positions(L, K.to_mp(x), F)
+    with mpmath.workdps(K.DPS):
+        return K.positions(L, K.to_mp(x), F)
 
 
 def _residual(L, x, F, data):
@@ -127,7 +138,8 @@ def _residual(L, x, F, data):
 
 def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, frames_only: bool = False):
     """Minimum-norm Gauss-Newton to a zero residual, halving a step that would raise the residual;
-    ``extra(x) -> (value, gradient)`` adds one equation (kept exactly, not traded against the markers).
+    ``extra(x) -> (value, gradient)`` adds one equation, as one more least-squares row (met exactly when
+    the system is consistent, as along a family of exact solutions).
     Returns (x, max |marker error|)."""
     x = x.copy()
     data = np.asarray(data, dtype=float)
@@ -174,27 +186,23 @@ def refine(L: K.Layout, x: np.ndarray, F: int, data, frames_only: bool = False, 
     """Refine ``x`` (float) at 50 digits: mpmath residual, float pseudo-inverse correction. Returns
     (x as mpf, max |marker error| in mm at 50 digits). ``frames_only``: the constants stay fixed, at
     ``const_mp`` (mpf) when given."""
-    mpmath.mp.dps = K.DPS
-    J = jacobian(L, x, F, frames_only)
-    pinv = np.linalg.pinv(J, rcond=RCOND)
-    xm = K.to_mp(x)
-    if const_mp is not None:
-        xm[:L.n_const] = const_mp
-    dm = data
-    err = None
-    for _ in range(iterations):
-        r = (K.positions(L, xm, F) - dm).ravel()
-        err = max((abs(v) for v in r), default=mpmath.mpf(0))
-        if err < mpmath.mpf(TOL_VERIFIED) * 1e-5:
-            break
-        dx = K.to_mp(pinv @ r.astype(float))
-        if frames_only:
-            xm[L.n_const:] -= dx
-        else:
-            xm -= dx
-    r = (K.positions(L, xm, F) - dm).ravel()
-    err = max((abs(v) for v in r), default=mpmath.mpf(0))
-    return xm, float(err)
+    with mpmath.workdps(K.DPS):
+        J = jacobian(L, x, F, frames_only)
+        pinv = np.linalg.pinv(J, rcond=RCOND)
+        xm = K.to_mp(x)
+        if const_mp is not None:
+            xm[:L.n_const] = const_mp
+        for _ in range(iterations):
+            r = (K.positions(L, xm, F) - data).ravel()
+            if max((abs(v) for v in r), default=mpmath.mpf(0)) < mpmath.mpf(TOL_VERIFIED) * 1e-5:
+                break
+            dx = K.to_mp(pinv @ r.astype(float))
+            if frames_only:
+                xm[L.n_const:] -= dx
+            else:
+                xm -= dx
+        r = (K.positions(L, xm, F) - data).ravel()
+        return xm, float(max((abs(v) for v in r), default=mpmath.mpf(0)))
 
 
 # -- the construction ------------------------------------------------------------------------------------
@@ -218,7 +226,7 @@ def _along_family(L, x0, F, data, joint, label, change, stages=4):
     v0 = f(x0)
     x = x0
     for s in range(1, stages + 1):
-        target = v0 * (1 + change * s / stages)
+        target = v0 + change * s / stages * max(abs(v0), FAMILY_FLOOR)
         x, err = gauss_newton(L, x, F, data, extra=lambda z: with_grad(z, target), max_iter=15)
     x, err = gauss_newton(L, x, F, data, max_iter=10)
     return x, err
@@ -238,7 +246,7 @@ def _scrambled(L, x0, joint, kind, rng):
 
 def _differs(L, x, x0, joint) -> bool:
     qa, qt = K.joint_quantities(L, x[:L.n_const], joint), K.joint_quantities(L, x0[:L.n_const], joint)
-    return any(v >= 10 * MIN_CHANGE for v in relative_changes(_floats(qt), _floats(qa)).values())
+    return any(v >= MIN_CHANGE for v in relative_changes(_floats(qt), _floats(qa)).values())
 
 
 def _points(L: K.Layout, const, seg: str, names=None) -> list:
@@ -351,29 +359,32 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     data = trial(L, truth_x, F)
     kind = next(j[1] for j in spec.joints if j[0] == joint)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
-    best, misses = None, []
+    best, misses, back = None, [], 0
     for cand, err in _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via,
                                  case_points):
         if err is None:
+            back += 1
             continue
         if err >= TOL_FLOAT:
             misses.append(err)
             continue
         w = _verify(L, cand, truth_x, F, data, joint, method, held_out, held_out_truth, n_held_out)
         if w.verified:
-            return Search(w, len(misses) + 1, min(misses, default=None))
+            return Search(w, back + len(misses) + 1, back, min(misses, default=None))
         if best is None or w.held_out_residual_mm < best.held_out_residual_mm:
             best = w
-    return Search(best, len(misses) + (best is not None), min(misses, default=None))
+    return Search(best, back + len(misses) + (best is not None), back, min(misses, default=None))
 
 
 @dataclass
 class Search:
-    """What :func:`construct` found: the witness (``None`` if no start converged; check ``verified``), how
-    many starts it tried, and the smallest max marker error at which the others stalled (mm)."""
+    """What :func:`construct` found: the witness (``None`` if no start converged; check ``verified``: one
+    that converged but failed at 50 digits or on the held-out frames is kept), how many starts it tried,
+    how many of them led back to the truth, and the smallest max marker error at which others stalled (mm)."""
 
     witness: Witness | None
     attempts: int
+    back_to_truth: int
     closest_miss_mm: float | None
 
 
@@ -386,7 +397,7 @@ def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, 
 
     if method == "family":
         for label in (undetermined or []):
-            for ch in (change, -change, change / 5, -change / 5, change / 25):
+            for ch in (change, -change, change / 5, -change / 5):
                 yield done(*_along_family(L, truth_x, F, data, joint, label, ch))
         return
     if method != "isolated":
@@ -400,14 +411,16 @@ def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, 
 
 def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) -> Witness:
     xm, err = refine(L, x, F, data)
-    held_err = 0.0
+    held_err, informative = 0.0, False
     if H:
         xh = _held_out_start(L, x, F, held_out_truth, truth_x, H)
         xh, _ = gauss_newton(L, xh, H, held_out, frames_only=True)
         _, held_err = refine(L, xh, H, held_out, frames_only=True, const_mp=xm[:L.n_const])
+        Jh = jacobian(L, xh, H, frames_only=True)
+        informative = bool(Jh.shape[0]) and np.linalg.matrix_rank(Jh, tol=1e-9 * max(np.abs(Jh).max(), 1.0)) < Jh.shape[0]
     const = np.array([float(v) for v in xm[:L.n_const]])
     return Witness(joint, method, _floats(K.joint_quantities(L, truth_x[:L.n_const], joint)),
-                   _floats(K.joint_quantities(L, const, joint)), err, held_err, F, H, xm)
+                   _floats(K.joint_quantities(L, const, joint)), err, held_err, F, H, xm, informative)
 
 
 def _held_out_start(L, x_alt, F, held_truth, truth_x, H):

@@ -43,7 +43,7 @@ matplotlib.use("Agg")
 from IPython.display import Image, display  # noqa: E402
 
 import identcheck  # noqa: E402
-from identcheck import plan, plan_witness, tree_rank  # noqa: E402
+from identcheck import plan, plan_witness, tree_rank, tree_witness  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.plan_figure import draw  # noqa: E402
 
@@ -54,18 +54,21 @@ FIGS = Path(tempfile.mkdtemp(prefix="plan_walkthrough_"))
 # ## The 16-marker body of Pham et al.
 #
 # Three markers sit on the trunk and one on each other link: 14 links, 13 joints. The paper
-# argues that every joint can be identified. The whole-tree rank agrees that every joint is
-# **locally** identifiable. The knees and elbows, however, are settled by the revolute (2,1)
-# case: the hip (or shoulder) centre and one thigh marker against one shank marker. By ERRATA E1
-# and E2 that case admits four joints, not one.
+# argues that every joint can be identified, and the plan agrees, but not for the paper's reason.
+# The knees and elbows are settled by the revolute (2,1) case: the hip (or shoulder) centre and one
+# thigh marker against one shank marker. By ERRATA E1 and E2 that case alone admits four joints.
+# What decides among them is the single foot (or hand) marker beyond the ankle (or wrist). It must
+# stay at a fixed distance from a point of the shank, and that rejects the other three joints.
+# `identcheck.twin_certificate` proves this exactly, on a random rational subject with modular
+# arithmetic over every conjugate.
 
 # %%
 body = Model.from_toml(ROOT / "examples" / "body16.toml")
 doc = plan.plan_model(body, robust=False)
 print(plan.render_table(doc))
-assert doc["all_local"] and not doc["all_identifiable"]
-assert doc["joints"]["knee_l"]["case"] == "revolute(2,1)" and doc["joints"]["knee_l"]["candidates"] == 4
-assert sum(s["add_markers"] for s in doc["suggestions"]) == 4
+assert doc["all_identifiable"]
+knee = doc["joints"]["knee_l"]
+assert knee["case"] == "revolute(2,1)" and knee["candidates"] == 1 and knee["rejected_by"]["marker"] == "LANKLE"
 
 # %%
 draw(doc, {s: seg.markers for s, seg in body.segments.items()}, body.root, FIGS / "body16.png", title="body16")
@@ -94,13 +97,13 @@ assert w["verified"] and w["max_marker_error_mm"] < 1e-30 and w["held_out_max_ma
 assert abs(w["alternative"] - w["true"]) > 1e-3 * abs(w["true"])
 
 # %% [markdown]
-# ## Markers further down can tell the candidates apart
+# ## A marker further down tells the candidates apart
 #
-# Add a foot, with one marker, on a ball joint below the shank. The table still gives the knee
-# four candidates. In the whole tree, though, the foot marker seen through the ankle must stay at
-# a fixed distance from a point fixed in the shank. The knee's twin moves the shank differently,
-# so the twin cannot satisfy that, and the search ends with markers visibly off. This is evidence
-# from one simulated trial, not a proof, so the plan keeps `identifiable: false` and says so.
+# Add a foot with one marker, on a ball joint below the shank. The table still gives the knee four
+# candidates, but in the whole tree the foot marker, seen through the ankle, must stay at a fixed
+# distance from a point fixed in the shank. The knee's twin moves the shank differently and cannot
+# keep that distance. The plan now calls the knee identifiable, backed by the exact certificate.
+# The whole-tree search agrees: from the twin, Gauss-Newton stalls with markers visibly off.
 
 # %%
 with_foot = Model.from_dict({
@@ -111,9 +114,15 @@ with_foot = Model.from_dict({
                "ankle": {"type": "spherical", "parent": "shank", "child": "foot"}}})
 spec = tree_rank.TreeSpec.from_model(with_foot)
 p = plan.analyse(spec)
-found = plan_witness.witnesses(with_foot, spec, p, seed=2)["knee"]
-print(found["note"])
-assert not found["verified"] and found["closest_miss_mm"] > 0.1
+print(p.joints["knee"]["reason"])
+assert p.joints["knee"]["identifiable"] and p.joints["knee"]["rejected_by"]["marker"] == "TOE"
+
+truth, held = plan_witness.simulated_truth(with_foot, spec, 20, seed=2)
+st = p.settled["knee"]
+search = tree_witness.construct(spec, truth, 20, "knee", "isolated", held_out_truth=held, n_held_out=20,
+                                case_points={"knee": (st.parent_points, st.child_points)})
+print(f"from the twin, the search stalls with markers {search.closest_miss_mm:.2g} mm off")
+assert search.witness is None and search.closest_miss_mm > 0.1
 
 no_toe = spec.without("TOE")
 found = plan_witness.witnesses(with_foot, no_toe, plan.analyse(no_toe), seed=2)["knee"]

@@ -123,19 +123,20 @@ def test_suggestions_fix_the_plan_and_are_fewest(tree):
 
 
 def test_body16_paper_plan():
-    """Pham V-B's 16-marker body: every joint is locally identifiable (the paper's claim, checked by the
-    whole tree); the knees and elbows are settled by revolute (2,1), which admits 4 joints, and the
-    ankles and wrists inherit them — so only neck, hips and shoulders are unique. Four markers fix it."""
+    """Pham V-B's 16-marker body: every joint is identifiable, as the paper says, but not for its reason. The
+    knees and elbows are settled by revolute (2,1) on the hip or shoulder centre, which alone admits 4 joints
+    (ERRATA E1, E2); the single foot and hand markers, beyond the ankles and wrists, reject the other 3
+    (an exact certificate), and the ankles and wrists follow uniquely."""
     doc = plan.plan_model(Model.from_toml(EXAMPLES / "body16.toml"))
     j = doc["joints"]
-    assert len(j) == 13 and doc["all_local"] and not doc["all_identifiable"]
-    assert {n for n, v in j.items() if v["identifiable"]} == {"neck", "hip_l", "hip_r", "shoulder_l", "shoulder_r"}
-    for n in ("knee_l", "knee_r", "elbow_l", "elbow_r"):
-        assert j[n]["case"] == "revolute(2,1)" and j[n]["candidates"] == 4
+    assert len(j) == 13 and doc["all_local"] and doc["all_identifiable"] and doc["suggestions"] == []
+    far = {"knee_l": "LANKLE", "knee_r": "RANKLE", "elbow_l": "LWRIST", "elbow_r": "RWRIST"}
+    for n, marker in far.items():
+        assert j[n]["case"] == "revolute(2,1)" and j[n]["candidates"] == 1
+        assert j[n]["rejected_by"]["marker"] == marker
         assert any(v.endswith(".centre") for v in j[n]["uses_virtual_markers"])
     for n in ("ankle_l", "wrist_r"):
-        assert j[n]["case"] == "spherical(3,1)" and j[n]["candidates"] == 4
-    assert sum(s["add_markers"] for s in doc["suggestions"]) == 4
+        assert j[n]["case"] == "spherical(3,1)" and j[n]["candidates"] == 1 and j[n]["depends_on"]
     assert not any(r["plan_survives"] for r in doc["robustness"].values())
 
 
@@ -199,14 +200,20 @@ def test_whole_tree_verdicts_agree_with_an_independent_float_jacobian(types, cou
 
 
 def test_broken_body16_gets_the_fewest_marker_fix():
-    """Losing the head marker breaks the neck; the fix names the head and still the four limb markers."""
-    spec = tree_rank.TreeSpec.from_model(Model.from_toml(EXAMPLES / "body16.toml")).without("HEAD")
+    """Losing the head marker breaks the neck; the fix is one head marker. Losing a foot marker leaves the
+    knee's candidates undecided; the fix is one more marker on the thigh or the shank."""
+    body = tree_rank.TreeSpec.from_model(Model.from_toml(EXAMPLES / "body16.toml"))
     rows = plan.table_summary()
+    spec = body.without("HEAD")
     p = plan.analyse(spec, rows)
     assert not p.joints["neck"]["local"] and "head" in p.joints["neck"]["reason"]
-    sugg = {s["segment"]: s["add_markers"] for s in plan.suggestions(spec, rows)}
-    assert sugg.get("head") == 1 and sum(sugg.values()) == 5
-    assert plan.analyse(plan._with_extra(spec, sugg), rows).all_identifiable
+    assert plan.suggestions(spec, rows) == [{"segment": "head", "add_markers": 1}]
+    spec = body.without("LANKLE")
+    p = plan.analyse(spec, rows)
+    assert p.joints["knee_l"]["candidates"] == 4 and not p.joints["knee_l"]["identifiable"]
+    sugg = plan.suggestions(spec, rows)
+    assert sum(s["add_markers"] for s in sugg) == 1
+    assert plan.analyse(plan._with_extra(spec, {s["segment"]: s["add_markers"] for s in sugg}), rows).all_identifiable
 
 
 def test_cli_fewest_local_finding(capsys):
@@ -214,7 +221,7 @@ def test_cli_fewest_local_finding(capsys):
     rc = cli.main(["plan", str(EXAMPLES / "body16.toml"), "--json", "--fast", "--fewest"])
     doc = json.loads(capsys.readouterr().out)
     f = doc["fewest_local"]
-    assert rc == 1 and f["markers"] == 16 - len(f["removable"])
+    assert rc == 0 and f["markers"] == 16 - len(f["removable"])
     kept = tree_rank.TreeSpec.from_model(Model.from_toml(EXAMPLES / "body16.toml"))
     for m in f["removable"]:
         kept = kept.without(m)
@@ -251,7 +258,7 @@ def test_non_identified_joints_admit_a_verified_alternative(tree, seed):
         if j["identifiable"]:
             continue
         w = ws[name]
-        if not p.rank.joints[name].quantities:       # no marker on either side: nothing to change
+        if not p.rank.joints[name].quantities or not any(spec.markers.values()):   # nothing to reproduce
             assert w["method"] is None and not w["verified"]
             continue
         if not j["local"] or _nothing_else_can_tell(spec, p, name):
@@ -261,25 +268,39 @@ def test_non_identified_joints_admit_a_verified_alternative(tree, seed):
             assert w["relative_change"] >= 1e-3 and w["held_out_frames"] >= 20
 
 
-def test_downstream_markers_tell_the_knee_candidates_apart():
+def test_a_far_marker_decides_the_knee_in_plan_fit_and_search():
     """A leg with three pelvis markers and one on each of thigh, shank and foot: the knee is Pham's revolute
-    (2,1) on the hip centre, 4 candidates by the table. Its other candidates are found and verified when
-    nothing below the shank is measured, and rejected (markers left millimetres off) once the foot marker is:
-    the plan reports both."""
-    from identcheck import plan_witness
+    (2,1) on the hip centre, 4 candidates by the table alone. The foot marker, beyond the ankle, rejects the
+    other 3: the plan says identifiable (exact certificate), `fit` picks the true knee from a simulated
+    trial, and the whole-tree search finds no second skeleton. Without the foot marker, the search finds
+    and verifies the twin."""
+    from identcheck import plan_witness, tree_kinematics as K, tree_witness as W
 
     leg = chain_model(["spherical", "revolute", "spherical"], [3, 1, 1, 1])
     spec = tree_rank.TreeSpec.from_model(leg)
     p = plan.analyse(spec)
-    assert p.joints["j2"]["case"] == "revolute(2,1)" and p.joints["j2"]["candidates"] == 4
-    w = plan_witness.witnesses(leg, spec, p, seed=2)["j2"]
-    assert not w["verified"] and w["attempts"] >= 1 and w["closest_miss_mm"] > 0.1
-    assert "tell the table case's candidates apart" in w["note"]
+    knee = p.joints["j2"]
+    assert knee["case"] == "revolute(2,1)" and knee["identifiable"] and knee["rejected_by"]["marker"] == "m3_0"
+
+    sim = simulate(leg, n_frames=120, seed=3, noise_mm=0.0)
+    fitted, points = fit_model(leg, sim.trial)
+    rep = report(leg, fitted, points)["joints"]["j2"]
+    assert rep["unique"] and any("chosen among 4" in n for n in rep["notes"])
+    for m, d in rep["marker_distances"].items():
+        assert d == pytest.approx(_true_distances(sim, leg, "j2")[m], abs=1e-3)
+
+    truth, held = plan_witness.simulated_truth(leg, spec, 20, seed=2)
+    search = W.construct(spec, truth, 20, "j2", "isolated", held_out_truth=held, n_held_out=20,
+                         case_points={"j2": (p.settled["j2"].parent_points, p.settled["j2"].child_points)})
+    assert search.attempts >= 1 and (search.witness is None or not search.witness.verified)
+    assert search.closest_miss_mm is not None and search.closest_miss_mm > 0.1
 
     no_foot = spec.without("m3_0")
     p2 = plan.analyse(no_foot)
+    assert p2.joints["j2"]["candidates"] == 4 and not p2.joints["j2"]["identifiable"]
     w2 = plan_witness.witnesses(leg, no_foot, p2, seed=2)["j2"]
     assert w2["verified"] and w2["max_marker_error_mm"] <= 1e-30 and w2["held_out_max_marker_error_mm"] <= 1e-30
+    assert K.Layout(no_foot).markers == ["m0_0", "m0_1", "m0_2", "m1_0", "m2_0"]
 
 
 def test_cli_plan_witness(capsys):

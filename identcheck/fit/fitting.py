@@ -19,6 +19,7 @@ from ..errors import DegenerateError
 from . import estimate as E
 
 log = logging.getLogger("identcheck")
+SPHERE_MARGIN_MM = 0.5     # a far marker decides among revolute (2,1) candidates by at least this much
 
 
 def _case(kind: str, p: int, q: int) -> str:
@@ -85,6 +86,9 @@ def fit_model(model, trial, progress=None) -> dict:
                 pending.remove(name)
                 progressed = True
                 continue
+            if not est.unique and jt.type == "revolute" and len(C) == 1:
+                one_side = jt.child if len(par) >= len(chi) else jt.parent
+                est = _rejected_by_far_marker(model, name, one_side, est, C[0], points)
             done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
             if est.unique:      # a joint among equally good alternatives must not be passed down as if known
                 for seg in (jt.parent, jt.child):
@@ -99,6 +103,57 @@ def fit_model(model, trial, progress=None) -> dict:
         done[name] = (None, {"case": _case(jt.type, len(par), len(chi)), "parent_markers": list(par),
                              "child_markers": list(chi)})
     return {n: done[n] for n in model.joint_order}, points
+
+
+def _sphere_rms(p: np.ndarray) -> float:
+    """RMS distance of points (N, 3) from their least-squares sphere (algebraic fit), mm."""
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) < 5:
+        return float("nan")
+    A = np.c_[2 * p, np.ones(len(p))]
+    sol = np.linalg.lstsq(A, np.sum(p * p, axis=1), rcond=None)[0]
+    c = sol[:3]
+    radius = np.sqrt(max(sol[3] + c @ c, 0.0))
+    return float(np.sqrt(np.mean((np.linalg.norm(p - c, axis=1) - radius) ** 2)))
+
+
+def _rejected_by_far_marker(model, name, one_side, est, b, points):
+    """Pham's revolute (2,1) leaves 4 joints (ERRATA E1, E2); a marker beyond another joint of the one-point
+    segment stays on a sphere in that segment's frame only for the true one (twin_certificate). Each
+    candidate gives the segment's frame per frame (its hinge and the point B); the candidate whose view of
+    the far markers is clearly the most spherical is kept."""
+    far = []
+    for k in model.joint_order:
+        jk = model.joints[k]
+        if k != name and one_side in (jk.parent, jk.child):
+            seg = jk.child if one_side == jk.parent else jk.parent
+            far += [(m, points[seg][:, i]) for i, m in enumerate(model.segments[seg].markers)]
+    if not far:
+        return est
+    cands = [est] + list(est.alternatives)
+    scores = []
+    for cand in cands:
+        o = cand.point + np.sum((b - cand.point) * cand.direction, axis=1, keepdims=True) * cand.direction
+        x = b - o
+        x = x / np.linalg.norm(x, axis=1, keepdims=True)
+        z = cand.direction
+        frame = np.stack([x, np.cross(z, x), z], axis=1)            # rows: the segment's axes, per frame
+        scores.append(np.nanmean([_sphere_rms(np.einsum("fij,fj->fi", frame, f - o)) for _, f in far]))
+    order = np.argsort(scores)
+    best, second = scores[order[0]], scores[order[1]]
+    if not (np.isfinite(best) and second > 3 * best and second - best > SPHERE_MARGIN_MM):
+        est.notes.append(f"the far markers ({', '.join(m for m, _ in far)}) could not tell the candidates apart: "
+                         f"sphere residuals {', '.join(f'{v:.2g}' for v in scores)} mm")
+        return est
+    chosen = cands[order[0]]
+    chosen.unique, chosen.alternatives = True, []
+    chosen.notes = [n for n in est.notes if "explain the samples equally well" not in n]
+    chosen.notes.append(f"chosen among {len(cands)} revolute (2,1) joints by {', '.join(m for m, _ in far)}, which must "
+                        f"stay on a sphere in {one_side}'s frame: residual {best:.2g} mm, next {second:.2g} mm "
+                        "(identcheck.twin_certificate proves generic data always decide)")
+    chosen.excitation_ok, chosen.excitation_reason = est.excitation_ok, est.excitation_reason
+    chosen.uncertainty_mm = est.uncertainty_mm
+    return chosen
 
 
 def _num(x):
