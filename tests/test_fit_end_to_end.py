@@ -1,5 +1,7 @@
 """`identcheck fit` end to end: simulated C3D/TRC trials with gaps, truth known."""
 import json
+
+import pytest
 from pathlib import Path
 
 from identcheck import cli
@@ -78,6 +80,30 @@ def test_single_axis_hip_is_reported_as_degenerate_and_nothing_is_passed_down(tm
 
 
 def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
+    """The sparse knee (Pham (2,1), 4 joints) with a one-marker patella on the thigh: nothing beyond the
+    shank decides the knee, so it stays ambiguous and its hinge is not handed to the patella joint."""
+    model = tmp_path / "m.toml"
+    model.write_text((EX / "sparse_leg.toml").read_text() + '''
+[segments.patella_r]
+markers = ["RPAT"]
+
+[joints.patella_joint_r]
+type = "spherical"
+parent = "thigh_r"
+child = "patella_r"
+''')
+    sim = simulate(Model.from_toml(model), n_frames=200, seed=4)
+    sim.trial.to_file(tmp_path / "t.trc")
+    cli.main(["fit", str(model), str(tmp_path / "t.trc"), "--json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert not rep["joints"]["knee_r"]["unique"]
+    pat = rep["joints"]["patella_joint_r"]
+    assert not pat["identifiable"] and not any("knee_r" in m for m in pat["markers_used"]["parent_markers"])
+
+
+def test_a_foot_marker_decides_the_sparse_knee(tmp_path, capsys):
+    """The same knee with a one-marker foot on a ball ankle: the foot marker must stay on a sphere in the
+    shank's frame, which only the true knee allows (ERRATA E8); fit keeps it, and the ankle follows."""
     model = tmp_path / "m.toml"
     model.write_text((EX / "sparse_leg.toml").read_text() + '''
 [segments.foot_r]
@@ -92,6 +118,8 @@ child = "foot_r"
     sim.trial.to_file(tmp_path / "t.trc")
     cli.main(["fit", str(model), str(tmp_path / "t.trc"), "--json"])
     rep = json.loads(capsys.readouterr().out)
-    assert not rep["joints"]["knee_r"]["unique"]
-    ankle = rep["joints"]["ankle_r"]
-    assert not ankle["identifiable"] and not any("knee_r" in m for m in ankle["markers_used"]["parent_markers"])
+    knee = rep["joints"]["knee_r"]
+    assert knee["unique"] and any("RTOE" in n for n in knee["notes"])
+    for m, d in knee["marker_distances"].items():
+        assert d == pytest.approx(sim.truth.marker_distances("knee_r")[m], abs=0.05)
+    assert rep["joints"]["ankle_r"]["identifiable"]

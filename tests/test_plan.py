@@ -96,8 +96,14 @@ def test_identified_joints_are_recovered_from_a_simulated_trial(tree, seed):
     sim = simulate(model, n_frames=60, seed=seed, noise_mm=0.0)
     fitted, points = fit_model(model, sim.trial)
     rep = report(model, fitted, points)["joints"]
+    pham21 = {n for n, j in doc["joints"].items() if j.get("rejected_by")}
     for name, j in doc["joints"].items():
         if not j["identifiable"]:
+            continue
+        if (name in pham21 or set(j["depends_on"]) & pham21) and not rep[name]["excitation"]["ok"]:
+            # Pham (2,1) decided by a far marker: a hinge passing close to the two parent points is
+            # generic but ill-conditioned, and the estimator says so instead of returning a number
+            assert rep[name]["excitation"]["reason"]
             continue
         assert rep[name]["unique"], (name, j["case"], rep[name])
         want = _true_distances(sim, model, name)

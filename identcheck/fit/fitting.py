@@ -19,7 +19,7 @@ from ..errors import DegenerateError
 from . import estimate as E
 
 log = logging.getLogger("identcheck")
-SPHERE_MARGIN_MM = 0.5     # a far marker decides among revolute (2,1) candidates by at least this much
+SPHERE_MARGIN = 3.0        # a far marker decides among revolute (2,1) candidates by 3x and this many (2,1) rms
 
 
 def _case(kind: str, p: int, q: int) -> str:
@@ -65,6 +65,9 @@ def fit_model(model, trial, progress=None) -> dict:
     virtual: dict = {}
     done: dict = {}
     pending = list(model.joint_order)
+    # Pham (2,1) leaves 4 joints: fit one only when no other joint can go first (level 0), and prefer one
+    # whose far marker can decide it (level 1) to one that will stay ambiguous (level 2)
+    level = 0
     while pending:
         progressed = False
         for name in list(pending):
@@ -75,6 +78,10 @@ def fit_model(model, trial, progress=None) -> dict:
             chosen = _choose(jt.type, par, chi)
             if chosen is None:
                 continue        # wait: a later joint may add virtual markers
+            if jt.type == "revolute" and sorted((p, q)) == [1, 2]:
+                one_side = jt.child if p >= q else jt.parent
+                if level == 0 or (level == 1 and not _far_markers(model, name, one_side, points)):
+                    continue    # wait: another joint's virtual markers may make it unique
             if progress:
                 progress(f"fitting {name}: {case} with {', '.join(par)} | {', '.join(chi)}")
             fn, P, C = chosen
@@ -95,8 +102,11 @@ def fit_model(model, trial, progress=None) -> dict:
                     virtual.setdefault(seg, {}).update(est.virtual_markers(name))
             pending.remove(name)
             progressed = True
+            level = 0
         if not progressed:
-            break
+            if level == 2:
+                break
+            level += 1
     for name in pending:
         jt = model.joints[name]
         par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
@@ -117,17 +127,23 @@ def _sphere_rms(p: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.linalg.norm(p - c, axis=1) - radius) ** 2)))
 
 
-def _rejected_by_far_marker(model, name, one_side, est, b, points):
-    """Pham's revolute (2,1) leaves 4 joints (ERRATA E1, E2); a marker beyond another joint of the one-point
-    segment stays on a sphere in that segment's frame only for the true one (twin_certificate). Each
-    candidate gives the segment's frame per frame (its hinge and the point B); the candidate whose view of
-    the far markers is clearly the most spherical is kept."""
+def _far_markers(model, name, one_side, points) -> list:
+    """(name, trajectory) of the markers beyond the other joints of ``one_side``."""
     far = []
     for k in model.joint_order:
         jk = model.joints[k]
         if k != name and one_side in (jk.parent, jk.child):
             seg = jk.child if one_side == jk.parent else jk.parent
             far += [(m, points[seg][:, i]) for i, m in enumerate(model.segments[seg].markers)]
+    return far
+
+
+def _rejected_by_far_marker(model, name, one_side, est, b, points):
+    """Pham's revolute (2,1) leaves 4 joints (ERRATA E1, E2); a marker beyond another joint of the one-point
+    segment stays on a sphere in that segment's frame only for the true one (twin_certificate). Each
+    candidate gives the segment's frame per frame (its hinge and the point B); the candidate whose view of
+    the far markers is clearly the most spherical is kept."""
+    far = _far_markers(model, name, one_side, points)
     if not far:
         return est
     cands = [est] + list(est.alternatives)
@@ -141,7 +157,8 @@ def _rejected_by_far_marker(model, name, one_side, est, b, points):
         scores.append(np.nanmean([_sphere_rms(np.einsum("fij,fj->fi", frame, f - o)) for _, f in far]))
     order = np.argsort(scores)
     best, second = scores[order[0]], scores[order[1]]
-    if not (np.isfinite(best) and second > 3 * best and second - best > SPHERE_MARGIN_MM):
+    margin = SPHERE_MARGIN * max(est.rms_residual, 0.0) if np.isfinite(est.rms_residual) else np.inf
+    if not (np.isfinite(best) and second > 3 * best + margin):
         est.notes.append(f"the far markers ({', '.join(m for m, _ in far)}) could not tell the candidates apart: "
                          f"sphere residuals {', '.join(f'{v:.2g}' for v in scores)} mm")
         return est
