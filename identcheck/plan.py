@@ -279,10 +279,11 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
     """Fewest extra markers (segment -> count) after which every joint is identifiable, or None when no
     addition of up to ``max_markers`` markers suffices.
 
-    Only segments next to a joint not yet uniquely settled can change anything (the propagation reads a
-    segment's points only for its own joints, and a uniquely settled joint's virtual markers are fixed).
-    Such joints linked by a shared segment form a component; components share no segment, so their
-    fewest additions are independent and add up. Each is found exhaustively over multisets of its
+    A marker on segment X can change a joint not yet uniquely settled only if the joint touches X (X's
+    points) or a neighbour of X (a far marker beyond its one-point segment); a uniquely settled joint's
+    virtual markers are fixed. So each open joint is influenced by its segments and their neighbours;
+    open joints whose influencing segments overlap form a component, components are independent, and
+    their fewest additions add up. Each is found exhaustively over multisets of its influencing
     segments, fewest first, screened by the propagation; the whole-tree rank checks the union (and on
     the rare failure the search is repeated over all the segments at once)."""
     base = propagate(spec, rows)
@@ -290,7 +291,7 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
     if not open_joints:
         return []
     extra: dict = {}
-    for comp in _components(open_joints):
+    for comp in _components(spec, open_joints):
         found = _fewest(spec, rows, comp, max_markers - sum(extra.values()))
         if found is None:
             return None
@@ -301,21 +302,29 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
     return None if found is None else [{"segment": s, "add_markers": c} for s, c in found.items()]
 
 
-def _components(joints: list) -> list:
-    """Joints grouped by shared segments (connected components)."""
+def _influencing(spec, joints: list) -> set:
+    """Segments where a marker could change how ``joints`` settle: theirs and their neighbours."""
+    own = {s for j in joints for s in (j[2], j[3])}
+    return own | {s for k in spec.joints if {k[2], k[3]} & own for s in (k[2], k[3])}
+
+
+def _components(spec, joints: list) -> list:
+    """Joints grouped by overlapping influencing segments (connected components)."""
     comps: list = []
     for j in joints:
-        touching = [c for c in comps if any({j[2], j[3]} & {k[2], k[3]} for k in c)]
+        mine = _influencing(spec, [j])
+        touching = [c for c in comps if mine & _influencing(spec, c)]
         merged = [j] + [k for c in touching for k in c]
         comps = [c for c in comps if c not in touching] + [merged]
     return comps
 
 
 def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None) -> dict | None:
-    """Fewest extra markers on the segments of ``joints`` after which the propagation settles all of them
-    uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan)."""
+    """Fewest extra markers on the influencing segments of ``joints`` after which the propagation settles
+    all of them uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan)."""
     names = {j[0] for j in joints}
-    segs = [s for s in spec.markers if any(s in (j[2], j[3]) for j in joints)]
+    near = _influencing(spec, joints)
+    segs = [s for s in spec.markers if s in near]
     for k in range(1, max_markers + 1):
         for combo in itertools.combinations_with_replacement(segs, k):
             extra: dict = {}

@@ -32,7 +32,11 @@ from fractions import Fraction
 from functools import lru_cache
 
 import flint
-from sympy.ntheory import sqrt_mod
+
+try:                                   # where python-flint 0.6+ keeps it
+    from flint.utils.flint_exceptions import DomainError
+except ImportError:                    # pragma: no cover
+    DomainError = ValueError
 
 from .tree_rank import _random_prime
 
@@ -214,8 +218,11 @@ def _second_root_radicands(J):
 
 
 def _field_sqrt(a: "flint.nmod", p: int):
-    roots = sqrt_mod(int(a), p, all_roots=True)
-    return None if not roots else flint.nmod(roots[0], p)
+    """A square root of a modulo p (FLINT), or None when a is not a square."""
+    try:
+        return a.sqrt()
+    except DomainError:            # no square root modulo p
+        return None
 
 
 def _conjugates_mod_p(J, B, F, p: int) -> list | None:

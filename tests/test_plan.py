@@ -321,3 +321,18 @@ def test_cli_plan_witness(capsys):
     assert w["relative_change"] >= 1e-3
     cli.main(["plan", str(EXAMPLES / "sparse_leg.toml"), "--fast", "--witness"])
     assert "alternative: VERIFIED" in capsys.readouterr().out
+
+
+def test_fewest_markers_can_sit_beyond_the_joint():
+    """Pelvis 3, thigh 1, shank 1 and a markerless foot: one foot marker fixes both the knee (it rejects the
+    (2,1) twin from beyond the ankle) and the ankle, where markers next to the open joints would need two."""
+    model = Model.from_dict({
+        "segments": {"pelvis": {"markers": ["A", "B", "C"]}, "thigh": {"markers": ["T"]},
+                     "shank": {"markers": ["S"]}, "foot": {"markers": []}},
+        "joints": {"hip": {"type": "spherical", "parent": "pelvis", "child": "thigh"},
+                   "knee": {"type": "revolute", "parent": "thigh", "child": "shank"},
+                   "ankle": {"type": "spherical", "parent": "shank", "child": "foot"}}})
+    spec = tree_rank.TreeSpec.from_model(model)
+    rows = plan.table_summary()
+    assert plan.suggestions(spec, rows) == [{"segment": "foot", "add_markers": 1}]
+    assert plan.suggestions(spec, rows, max_markers=0) is None
