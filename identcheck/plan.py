@@ -78,11 +78,15 @@ class Settled:
     rejected_by: dict | None = None  # the marker beyond another joint that rejects the case's other candidates
 
 
-def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str) -> dict | None:
-    """A real marker beyond another joint of ``one_side`` (the one-point segment of a revolute (2,1)):
-    it stays at a fixed distance from a point fixed in that segment, which rejects the case's other
-    candidates (:mod:`identcheck.twin_certificate`)."""
+def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str, one_points=()) -> dict | None:
+    """A real marker beyond another joint k of ``one_side`` (the one-point segment of a revolute (2,1)):
+    it stays at a fixed distance from k's centre, a point fixed in that segment, which rejects the case's
+    other candidates (:mod:`identcheck.twin_certificate`). Not when the case's own point on ``one_side``
+    is k's centre or on k's axis (``one_points``): the far marker then keeps its distance in every
+    candidate's frame."""
     for k, kind, par, chi in spec.joints:
+        if any(str(pt).startswith(k + ".") for pt in one_points):
+            continue
         if k != name and one_side in (par, chi):
             far = chi if one_side == par else par
             if spec.markers[far]:
@@ -120,7 +124,7 @@ def propagate(spec: tree_rank.TreeSpec, rows: dict) -> dict:
         inherited = math.prod(settled[d].candidates for d in deps) if deps else 1
         own, rejected = row["candidates"], None
         if kind == "revolute" and own > 1 and (p, q) in ((2, 1), (1, 2)):
-            rejected = far_marker(spec, name, chi if (p, q) == (2, 1) else par)
+            rejected = far_marker(spec, name, chi if (p, q) == (2, 1) else par, C if (p, q) == (2, 1) else P)
             if rejected is not None:
                 cert = twin_certificate.certify(0, rejected["joint_type"])
                 if cert["certified"]:

@@ -336,3 +336,19 @@ def test_fewest_markers_can_sit_beyond_the_joint():
     rows = plan.table_summary()
     assert plan.suggestions(spec, rows) == [{"segment": "foot", "add_markers": 1}]
     assert plan.suggestions(spec, rows, max_markers=0) is None
+
+
+def test_no_rejection_when_the_one_point_is_the_far_joints_centre():
+    """A far marker rejects the (2,1) twin only through a point of the one-point segment other than the
+    case's own point: if that point is the far joint's centre (or on its axis), the far marker keeps its
+    distance in every candidate's frame and decides nothing."""
+    model = Model.from_dict({
+        "segments": {"pelvis": {"markers": ["A", "B", "C"]}, "thigh": {"markers": ["T"]},
+                     "shank": {"markers": ["S"]}, "foot": {"markers": ["F"]}},
+        "joints": {"hip": {"type": "spherical", "parent": "pelvis", "child": "thigh"},
+                   "knee": {"type": "revolute", "parent": "thigh", "child": "shank"},
+                   "ankle": {"type": "spherical", "parent": "shank", "child": "foot"}}})
+    spec = tree_rank.TreeSpec.from_model(model)
+    assert plan.far_marker(spec, "knee", "shank", ["S"])["marker"] == "F"
+    assert plan.far_marker(spec, "knee", "shank", ["ankle.centre"]) is None
+    assert plan.far_marker(spec, "knee", "shank", ["ankle.axis[0]"]) is None
