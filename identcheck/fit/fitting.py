@@ -93,9 +93,9 @@ def fit_model(model, trial, progress=None) -> dict:
                 pending.remove(name)
                 progressed = True
                 continue
-            if not est.unique and jt.type == "revolute" and len(C) == 1:
+            if not est.unique and jt.type == "revolute" and len(P) == 2:
                 one_side = jt.child if len(par) >= len(chi) else jt.parent
-                est = _rejected_by_far_marker(model, name, one_side, est, C[0], points)
+                est = _decide_revolute21(model, name, one_side, est, C, points)
             done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
             if est.unique:      # a joint among equally good alternatives must not be passed down as if known
                 for seg in (jt.parent, jt.child):
@@ -138,13 +138,21 @@ def _far_markers(model, name, one_side, points) -> list:
     return far
 
 
-def _rejected_by_far_marker(model, name, one_side, est, b, points):
-    """Pham's revolute (2,1) leaves 4 joints (ERRATA E1, E2); a marker beyond another joint of the one-point
-    segment stays on a sphere in that segment's frame only for the true one (twin_certificate). Each
-    candidate gives the segment's frame per frame (its hinge and the point B); the candidate whose view of
-    the far markers is clearly the most spherical is kept."""
+def _fixed_rms(p: np.ndarray) -> float:
+    """RMS distance of points (N, 3) from their mean: zero for a point fixed in the frame, mm."""
+    p = p[np.all(np.isfinite(p), axis=1)]
+    return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1)))) if len(p) >= 2 else float("nan")
+
+
+def _decide_revolute21(model, name, one_side, est, one_points, points):
+    """Pham's revolute (2,1) leaves 4 joints (ERRATA E1, E2); more data on the one-point segment decide.
+    Each candidate gives that segment's frame per frame (its hinge and the first point B). Seen in it,
+    another point of the segment (revolute (2,2)) must stand still, and a marker beyond another joint of
+    the segment must stay on a sphere (twin_certificate proves it does only for the true joint). The
+    candidate that is clearly best on these is kept; otherwise all stay, with the scores in a note."""
+    b, others = one_points[0], list(one_points[1:])
     far = _far_markers(model, name, one_side, points)
-    if not far:
+    if not others and not far:
         return est
     cands = [est] + list(est.alternatives)
     scores = []
@@ -154,20 +162,23 @@ def _rejected_by_far_marker(model, name, one_side, est, b, points):
         x = x / np.linalg.norm(x, axis=1, keepdims=True)
         z = cand.direction
         frame = np.stack([x, np.cross(z, x), z], axis=1)            # rows: the segment's axes, per frame
-        scores.append(np.nanmean([_sphere_rms(np.einsum("fij,fj->fi", frame, f - o)) for _, f in far]))
+        local = lambda f: np.einsum("fij,fj->fi", frame, f - o)    # noqa: E731
+        scores.append(np.nanmean([_fixed_rms(local(f)) for f in others]
+                                 + [_sphere_rms(local(f)) for _, f in far]))
+    what = (["the segment's other points"] if others else []) + [m for m, _ in far]
     order = np.argsort(scores)
     best, second = scores[order[0]], scores[order[1]]
     margin = SPHERE_MARGIN * max(est.rms_residual, 0.0) if np.isfinite(est.rms_residual) else np.inf
     if not (np.isfinite(best) and second > 3 * best + margin):
-        est.notes.append(f"the far markers ({', '.join(m for m, _ in far)}) could not tell the candidates apart: "
-                         f"sphere residuals {', '.join(f'{v:.2g}' for v in scores)} mm")
+        est.notes.append(f"{', '.join(what)} could not tell the candidates apart: residuals "
+                         f"{', '.join(f'{v:.2g}' for v in scores)} mm")
         return est
     chosen = cands[order[0]]
     chosen.unique, chosen.alternatives = True, []
     chosen.notes = [n for n in est.notes if "explain the samples equally well" not in n]
-    chosen.notes.append(f"chosen among {len(cands)} revolute (2,1) joints by {', '.join(m for m, _ in far)}, which must "
-                        f"stay on a sphere in {one_side}'s frame: residual {best:.2g} mm, next {second:.2g} mm "
-                        "(identcheck.twin_certificate proves generic data always decide)")
+    chosen.notes.append(f"chosen among {len(cands)} revolute (2,1) joints by {', '.join(what)} (fixed in, or on a "
+                        f"sphere in, {one_side}'s frame only for the true joint): residual {best:.2g} mm, next "
+                        f"{second:.2g} mm")
     chosen.excitation_ok, chosen.excitation_reason = est.excitation_ok, est.excitation_reason
     chosen.uncertainty_mm = est.uncertainty_mm
     return chosen
