@@ -527,9 +527,18 @@ def reading(results, summary) -> list[str]:
                    "poorly determined along that axis, where skin-marker motion pushes it. The excitation check "
                    "compares that spread with pose noise only and passes; gait alone is not a functional hip "
                    "calibration, and the report says so rather than the JSON.")
-    out.append("Sparse walking knees, Pham (2,1) on (hip centre, thigh marker | shank marker): exit 1, "
-               "flagged as poorly determined (uncertainty ~300 mm), and 190-230 mm from Vicon's knee centres: the "
-               "JSON's flag is right, the distances must not be used.")
+    knees = [_joint(results, WALK2, "real_walking2_legs_sparse.toml", k) for k in ("knee_l", "knee_r")]
+    knees = [k for k in knees if k]
+    if knees:
+        unc = ", ".join(fmt(k["uncertainty_mm"], 0) for k in knees)
+        flagged_all = all(not k["excitation"]["ok"] for k in knees)
+        vic = [v for (role, jn), v in summary["vicon"].items() if "sparse" in role and jn.startswith("knee")]
+        vtxt = (f", and {min(vic):.0f}-{max(vic):.0f} mm from Vicon's knee centres" if vic else "")
+        out.append("Sparse walking knees, Pham (2,1) on (hip centre, thigh marker | shank marker): "
+                   + ("flagged" if flagged_all else "not all flagged")
+                   + f" as poorly determined (uncertainty {unc} mm){vtxt}: "
+                   + ("the JSON's flag is right, the distances must not be used." if flagged_all else
+                      "check the flags."))
     return out
 
 

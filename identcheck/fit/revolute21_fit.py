@@ -19,7 +19,10 @@ from scipy.optimize import least_squares
 from ..solve import revolute21
 
 GRID = 256
-NEWTON = 4
+NEWTON = 6
+BRANCHES = 4      # local minima of the grid distance refined per sample
+MAX_NFEV = 400    # the valley of a hinge near the A1A2 line is long and flat: stop on tolerance, not budget
+TOL = 1e-12
 
 
 def _meridian(params, beta):
@@ -31,20 +34,28 @@ def _meridian(params, beta):
 
 
 def _nearest_beta(params, R, z):
-    """β of the meridian point nearest each sample (grid, then Newton on the squared distance)."""
+    """β of the meridian point nearest each sample: every local minimum of the distance on a grid is
+    refined by Newton and the nearest kept. (The grid alone is ~2πρ/GRID coarse in arc length, so the
+    best grid point can sit on another branch of the meridian that passes close by.)"""
     grid = np.linspace(-np.pi, np.pi, GRID, endpoint=False)
     x, y, zz = _meridian(params, grid)
     Rg = np.hypot(x, y)
-    k = np.argmin((R[:, None] - Rg[None]) ** 2 + (z[:, None] - zz[None]) ** 2, axis=1)
-    b = grid[k]
+    d = (R[:, None] - Rg[None]) ** 2 + (z[:, None] - zz[None]) ** 2          # (N, GRID), periodic
+    is_min = (d <= np.roll(d, 1, axis=1)) & (d <= np.roll(d, -1, axis=1))
+    d_min = np.where(is_min, d, np.inf)
+    starts = np.argsort(d_min, axis=1)[:, :BRANCHES]                        # the best few local minima
+    b = grid[starts]                                                         # (N, BRANCHES)
+    Rb, zb = np.repeat(R[:, None], b.shape[1], axis=1), np.repeat(z[:, None], b.shape[1], axis=1)
     h = 1e-4
     for _ in range(NEWTON):
-        f = [_dist2(params, b + s * h, R, z) for s in (-1, 0, 1)]
+        f = [_dist2(params, b + s * h, Rb, zb) for s in (-1, 0, 1)]
         g1 = (f[2] - f[0]) / (2 * h)
         g2 = (f[2] - 2 * f[1] + f[0]) / h**2
         step = np.where(g2 > 0, -g1 / np.where(g2 > 0, g2, 1), 0.0)
         b = b + np.clip(step, -0.1, 0.1)
-    return b
+    best = np.argmin(np.where(np.isfinite(np.take_along_axis(d_min, starts, 1)), _dist2(params, b, Rb, zb), np.inf),
+                     axis=1)
+    return b[np.arange(len(R)), best]
 
 
 def _dist2(params, b, R, z):
@@ -103,7 +114,7 @@ def fit(local) -> list:
         s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
         x0 = np.r_[s, _nearest_beta(s, R, z)]
         sol = least_squares(_odr, x0, args=(R, z), bounds=(lo, hi), jac_sparsity=sparsity, x_scale="jac",
-                            max_nfev=100)
+                            max_nfev=MAX_NFEV, ftol=TOL, xtol=TOL, gtol=TOL)
         p = sol.x[:5]
         rms = float(np.sqrt(np.mean(residuals(p, R, z) ** 2)))
         found.append((p, rms, _uncertainty(sol, N)))
