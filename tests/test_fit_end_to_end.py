@@ -80,23 +80,22 @@ def test_single_axis_hip_is_reported_as_degenerate_and_nothing_is_passed_down(tm
     assert not knee["identifiable"] and "hip_r.centre" not in knee["markers_used"]["parent_markers"]
 
 
-def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
-    """The sparse knee (Pham (2,1), 4 joints) with a one-marker patella on the thigh: nothing beyond the
-    shank decides the knee, so it stays ambiguous and its hinge is not handed to the patella joint."""
+def _fit_sparse_leg_with(tmp_path, capsys, segment: str, marker: str, joint: str, parent: str):
+    """Fit a simulated trial of the sparse leg plus one ball-jointed, one-marker segment; (JSON, simulation)."""
     model = tmp_path / "m.toml"
-    model.write_text((EX / "sparse_leg.toml").read_text() + '''
-[segments.patella_r]
-markers = ["RPAT"]
-
-[joints.patella_joint_r]
-type = "spherical"
-parent = "thigh_r"
-child = "patella_r"
-''')
+    model.write_text((EX / "sparse_leg.toml").read_text()
+                     + f'\n[segments.{segment}]\nmarkers = ["{marker}"]\n\n[joints.{joint}]\ntype = "spherical"\n'
+                       f'parent = "{parent}"\nchild = "{segment}"\n')
     sim = simulate(Model.from_toml(model), n_frames=200, seed=4)
     sim.trial.to_file(tmp_path / "t.trc")
     cli.main(["fit", str(model), str(tmp_path / "t.trc"), "--json"])
-    rep = json.loads(capsys.readouterr().out)
+    return json.loads(capsys.readouterr().out), sim
+
+
+def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
+    """The sparse knee (Pham (2,1), 4 joints) with a one-marker patella on the thigh: nothing beyond the
+    shank decides the knee, so it stays ambiguous and its hinge is not handed to the patella joint."""
+    rep, _ = _fit_sparse_leg_with(tmp_path, capsys, "patella_r", "RPAT", "patella_joint_r", "thigh_r")
     assert not rep["joints"]["knee_r"]["unique"]
     pat = rep["joints"]["patella_joint_r"]
     assert not pat["identifiable"] and not any("knee_r" in m for m in pat["markers_used"]["parent_markers"])
@@ -105,20 +104,7 @@ child = "patella_r"
 def test_a_foot_marker_decides_the_sparse_knee(tmp_path, capsys):
     """The same knee with a one-marker foot on a ball ankle: the foot marker must stay on a sphere in the
     shank's frame, which only the true knee allows (ERRATA E8); fit keeps it, and the ankle follows."""
-    model = tmp_path / "m.toml"
-    model.write_text((EX / "sparse_leg.toml").read_text() + '''
-[segments.foot_r]
-markers = ["RTOE"]
-
-[joints.ankle_r]
-type = "spherical"
-parent = "shank_r"
-child = "foot_r"
-''')
-    sim = simulate(Model.from_toml(model), n_frames=200, seed=4)
-    sim.trial.to_file(tmp_path / "t.trc")
-    cli.main(["fit", str(model), str(tmp_path / "t.trc"), "--json"])
-    rep = json.loads(capsys.readouterr().out)
+    rep, sim = _fit_sparse_leg_with(tmp_path, capsys, "foot_r", "RTOE", "ankle_r", "shank_r")
     knee = rep["joints"]["knee_r"]
     assert knee["unique"] and any("RTOE" in n for n in knee["notes"])
     for m, d in knee["marker_distances"].items():
