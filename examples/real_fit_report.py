@@ -28,6 +28,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
 from identcheck import cli  # noqa: E402
+from identcheck.figure_io import pyplot, save  # noqa: E402
 from identcheck.fit.fitting import fit_model  # noqa: E402
 from identcheck.fit.obrien import as_poses  # noqa: E402
 from identcheck.fit.score_sara import sara, score  # noqa: E402
@@ -73,6 +74,15 @@ PELVIS = {  # ISB pelvis frame markers: right ASIS, left ASIS, posterior markers
 
 
 # ------------------------------------------------------------------ running
+def _plane_view(ax, i: int, j: int, title: str) -> None:
+    """An equal-aspect view of coordinates i (x axis) and j (y axis), in mm."""
+    ax.set_title(title)
+    ax.set_xlabel("xyz"[i] + " (mm)")
+    ax.set_ylabel("xyz"[j] + " (mm)")
+    ax.set_aspect("equal", "datalim")
+    ax.grid(alpha=0.3)
+
+
 def run_cli(model: Path, trial: Path) -> tuple[int, dict | None, str]:
     """(exit code, parsed JSON or None, stderr) of ``identcheck fit MODEL TRIAL --json``."""
     out, err = io.StringIO(), io.StringIO()
@@ -159,9 +169,7 @@ def fmt(x, digits: int = 1) -> str:
 
 # ------------------------------------------------------------------ the report
 def main() -> int:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     trials = {name: Trial.from_file(DATA / name) for name in {t for t, _, _ in RUNS}}
     results = []
@@ -288,16 +296,10 @@ def main() -> int:
     for ax, (i, j), title in zip(axs, [(0, 1), (2, 1)], ["sagittal (x anterior, y superior)",
                                                          "frontal (z right, y superior)"]):
         ax.plot(h[i], h[j], "k*", ms=14, label="Harrington 2007" if ax is axs[0] else None)
-        ax.set_title(title)
-        ax.set_xlabel("xyz"[i] + " (mm)")
-        ax.set_ylabel("xyz"[j] + " (mm)")
-        ax.set_aspect("equal", "datalim")
-        ax.grid(alpha=0.3)
+        _plane_view(ax, i, j, title)
     fig.legend(loc="lower center", ncol=3, fontsize=8)
     fig.suptitle("Right hip centre in the ISB pelvis frame, biobuddy_right_hip.c3d (dots: every 5th frame)")
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
-    fig.savefig(HERE / "real_fit_hip_centres.png", dpi=110)
-    plt.close(fig)
+    save(fig, HERE / "real_fit_hip_centres.png", rect=(0, 0.12, 1, 1))
 
     # ---- knee agreement (biobuddy knee trial)
     w("## Knee axis: agreement between estimators (biobuddy knee trial)")
@@ -364,16 +366,10 @@ def main() -> int:
             ql = np.nanmedian(to_frame(Rk, mid, q), axis=0)
             ax.plot(ql[i], ql[j], "ks", ms=7)
             ax.annotate(name, (ql[i], ql[j]), textcoords="offset points", xytext=(4, 4))
-        ax.set_title(title)
-        ax.set_xlabel("xyz"[i] + " (mm)")
-        ax.set_ylabel("xyz"[j] + " (mm)")
-        ax.set_aspect("equal", "datalim")
-        ax.grid(alpha=0.3)
+        _plane_view(ax, i, j, title)
     fig.legend(loc="lower center", ncol=2, fontsize=7)
     fig.suptitle("Right knee hinge axes in a knee frame (origin mid-epicondyle), biobuddy_right_knee.c3d")
-    fig.tight_layout(rect=(0, 0.2, 1, 1))
-    fig.savefig(HERE / "real_fit_knee_axes.png", dpi=110)
-    plt.close(fig)
+    save(fig, HERE / "real_fit_knee_axes.png", rect=(0, 0.2, 1, 1))
 
     # ---- walking: hip centres in the pelvis frame, and comparison with Vicon's centres
     w("## Walking trials")
@@ -450,9 +446,7 @@ def main() -> int:
     for ax in axs[1]:
         ax.set_xlabel("time (s)")
     fig.suptitle("opensim_walking2.c3d: fitted joints against Vicon's virtual joint centres (gaps: no centre)")
-    fig.tight_layout()
-    fig.savefig(HERE / "real_fit_vicon_distance.png", dpi=110)
-    plt.close(fig)
+    save(fig, HERE / "real_fit_vicon_distance.png")
 
     # ---- reading
     w("## Reading the numbers")

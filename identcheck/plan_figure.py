@@ -1,6 +1,8 @@
 """Figure of a marker plan: the skeleton tree, joints coloured by verdict, marker counts on segments."""
 from __future__ import annotations
 
+from .figure_io import pyplot, save
+
 COLOURS = {"identifiable": "#2e7d32", "local": "#f9a825", "not": "#c62828"}
 
 
@@ -26,10 +28,9 @@ def _layout(joints: dict, root: str) -> dict:
 
 def draw(doc: dict, markers: dict, root: str, path, title: str = "") -> None:
     """Write the plan figure (PNG/SVG by extension) from ``plan`` JSON and segment -> marker names."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
+
+    plt = pyplot()
 
     joints = doc["joints"]
     pos = _layout(joints, root)
@@ -58,6 +59,4 @@ def draw(doc: dict, markers: dict, root: str, path, title: str = "") -> None:
     ax.legend(handles=handles, loc="lower left", fontsize=7, frameon=False, ncol=5, bbox_to_anchor=(0, -0.12))
     ax.set_title(title or "marker plan", fontsize=9)
     ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
+    save(fig, path, dpi=130)

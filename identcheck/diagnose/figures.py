@@ -6,12 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+from ..figure_io import pyplot as _plt, save
 
 
 def residual_map(diag, path) -> Path:
@@ -35,10 +30,7 @@ def residual_map(diag, path) -> Path:
     axes[2].set_xticks(x, ctx.labels, fontsize=7)
     axes[2].set_ylabel("RMS (mm)")
     axes[2].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return save(fig, path)
 
 
 def gap_steps(diag, path) -> Path:
@@ -54,10 +46,7 @@ def gap_steps(diag, path) -> Path:
     ax.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
     ax.set_ylabel("gap: RMS 3-D marker error (mm)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return save(fig, path)
 
 
 def evidence(step, path) -> Path:
@@ -91,10 +80,7 @@ def evidence(step, path) -> Path:
     where = ", ".join(f"{k}={v}" for k, v in step.where.items() if k not in ("frames",))
     ax.set_title(f"{step.name} ({where}): gap {step.gap_before:.3g} → {step.gap_after:.3g} mm", fontsize=9)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+    return save(fig, path)
 
 
 def write_all(diag, directory) -> list:

@@ -38,6 +38,11 @@ class Context:
     def n_obs(self) -> int:
         return 3 * self.n_samples
 
+    def bic_gain(self, explained_mm2: float, n_params: int) -> float:
+        """Bayesian information criterion gain with the noise known: the squared residual a change
+        explains over σ², less ln(3N) per parameter it costs; > 0 means it earns its parameters."""
+        return float(explained_mm2 / self.noise.sigma_mm ** 2 - n_params * np.log(self.n_obs))
+
 
 @dataclass
 class Hypothesis:
@@ -97,10 +102,8 @@ def carry_params(old: Terms, params: list, new: Terms) -> list:
 
 
 def score(ctx: Context, new: Hypothesis, old: Hypothesis) -> float:
-    """Bayesian information criterion gain with the noise known: ΔRSS/σ² − ΔP·ln(3N); > 0 means the
-    new hypothesis earns its extra parameters."""
-    sigma2 = ctx.noise.sigma_mm ** 2
-    return float((old.rss - new.rss) / sigma2 - (new.n_params() - old.n_params()) * np.log(ctx.n_obs))
+    """:meth:`Context.bic_gain` of going from ``old`` to ``new``: ΔRSS/σ² − ΔP·ln(3N)."""
+    return ctx.bic_gain(old.rss - new.rss, new.n_params() - old.n_params())
 
 
 def consistency(ctx: Context, h: Hypothesis) -> dict:

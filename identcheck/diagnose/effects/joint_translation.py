@@ -26,7 +26,6 @@ class JointTranslation(Effect):
     max_proposals = 3
 
     def propose(self, ctx, hyp) -> list:
-        sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
         ch, angles = hyp.chain, joint_angles(hyp)
         res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
         out = []
@@ -37,7 +36,7 @@ class JointTranslation(Effect):
             with warnings.catch_warnings():          # frames where every such marker is hidden
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(seen_from_parent, axis=1)
-            gain = len(idx) * explained(mean, basis) / sig2 - 3 * basis.shape[1] * pen
+            gain = ctx.bic_gain(len(idx) * explained(mean, basis), 3 * basis.shape[1])
             out.append(Proposal(self.name, {"joint": j}, float(gain), {"joint": j, "basis": basis}))
         return sorted(out, key=lambda p: -p.strength)
 

@@ -38,13 +38,12 @@ class MarkerSlip(Effect):
     max_proposals = 2
 
     def propose(self, ctx, hyp) -> list:
-        sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
         seg_res = segment_residuals(hyp)
         ch = hyp.chain
         out = []
         for col in range(ch.n_markers):
             frame, ss = best_step(seg_res[:, col])
-            gain = ss / sig2 - 4 * pen
+            gain = ctx.bic_gain(ss, 4)
             if frame >= 0 and gain > 0:
                 step = (np.arange(len(seg_res)) >= frame).astype(float)[:, None]
                 out.append(Proposal(self.name, {"markers": [ch.labels[col]], "segment": ch.marker_seg[col],

@@ -40,7 +40,7 @@ class Outliers(Effect):
         if not mask.any() or mask.sum() > MAX_FRACTION * ctx.n_samples:
             return []
         r2 = np.sum(np.nan_to_num(hyp.residuals()) ** 2, axis=2)
-        gain = float(np.sum(r2[mask]) / ctx.noise.sigma_mm ** 2 - 3 * mask.sum() * np.log(ctx.n_obs))
+        gain = ctx.bic_gain(float(np.sum(r2[mask])), 3 * int(mask.sum()))
         return [Proposal(self.name, _where(ctx, mask), gain, {"mask": mask})]
 
     def apply(self, ctx, hyp, proposal):

@@ -30,7 +30,6 @@ class SoftTissue(Effect):
     max_proposals = 2
 
     def propose(self, ctx, hyp) -> list:
-        sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
         seg_res = segment_residuals(hyp)
         angles = joint_angles(hyp)
         ch = hyp.chain
@@ -39,7 +38,7 @@ class SoftTissue(Effect):
             basis = angle_basis(angles[j])
             for seg in (ch.parent[j], ch.child[j]):
                 for col in ch.seg_markers[seg]:
-                    gain = explained(seg_res[:, col], basis) / sig2 - 3 * basis.shape[1] * pen
+                    gain = ctx.bic_gain(explained(seg_res[:, col], basis), 3 * basis.shape[1])
                     if gain > 0:
                         out.append(Proposal(self.name, {"markers": [ch.labels[col]], "segment": seg, "joint": j},
                                             gain, {"col": int(col), "basis": basis, "joint": j}))

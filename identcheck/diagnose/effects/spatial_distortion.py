@@ -54,7 +54,7 @@ class SpatialDistortion(Effect):
         res = np.where(w[..., None], np.nan_to_num(hyp.residuals()), 0.0).reshape(-1)
         X = np.stack([np.where(w[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
         coef = np.linalg.lstsq(X, res, rcond=None)[0]
-        gain = float(np.sum((X @ coef) ** 2) / ctx.noise.sigma_mm ** 2 - len(flds) * np.log(ctx.n_obs))
+        gain = ctx.bic_gain(float(np.sum((X @ coef) ** 2)), len(flds))
         return [Proposal(self.name, {}, gain, {"fields": flds})] if gain > 0 else []
 
     def apply(self, ctx, hyp, proposal):

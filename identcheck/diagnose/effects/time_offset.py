@@ -44,7 +44,6 @@ class TimeOffset(Effect):
     max_proposals = 3
 
     def propose(self, ctx, hyp) -> list:
-        sig2, pen = ctx.noise.sigma_mm ** 2, np.log(ctx.n_obs)
         ch = hyp.chain
         res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
         out = []
@@ -58,7 +57,7 @@ class TimeOffset(Effect):
             if vv <= 0:
                 continue
             tau = -rv / vv
-            gain = rv * rv / vv / sig2 - pen
+            gain = ctx.bic_gain(rv * rv / vv, 1)
             if gain <= 0 or abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES:   # explains nothing worth a refit
                 continue
             out.append(Proposal(self.name, {"segment": seg, "delay_ms": 1000 * tau}, float(gain),
