@@ -41,6 +41,9 @@ from functools import cached_property
 import flint
 
 from .errors import InputError
+from .exact_algebra import (add as _add, axis_rotation as _axis_rotation, cross as _cross, dot as _dot,
+                            half_angle, mm as _mm, mv as _mv, quaternion_rotation, random_prime as _random_prime,
+                            scale as _scale, sub as _sub, transpose as _T)
 
 SET_BITS = 40
 PRIME_BITS = 61
@@ -88,48 +91,6 @@ class Field:
         return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
 
 
-def _random_prime(rng: random.Random, bits: int) -> int:
-    """A prime uniform among the odd primes of [2^(bits-1), 2^bits): uniform odd integers, kept when
-    prime (FLINT's fmpz_is_prime proves primality)."""
-    while True:
-        n = rng.getrandbits(bits) | (1 << (bits - 1)) | 1
-        if flint.fmpz(n).is_prime():
-            return n
-
-
-# -- small exact vector algebra ------------------------------------------------------------------------
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
-def _mv(R, v):
-    return [_dot(R[0], v), _dot(R[1], v), _dot(R[2], v)]
-
-
-def _mm(A, B):
-    return [[A[i][0] * B[0][j] + A[i][1] * B[1][j] + A[i][2] * B[2][j] for j in range(3)] for i in range(3)]
-
-
-def _T(A):
-    return [[A[j][i] for j in range(3)] for i in range(3)]
-
-
-def _add(a, b):
-    return [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-
-
-def _sub(a, b):
-    return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-
-
-def _scale(s, a):
-    return [s * a[0], s * a[1], s * a[2]]
-
-
 class _Draw:
     """Random elements of a field: uniform on GF(p), or on S = {k / 2^20 : |k| < 2^39} ⊂ QQ."""
 
@@ -146,32 +107,18 @@ class _Draw:
         return [self.scalar() for _ in range(3)]
 
     def rotation(self):
-        """A rational rotation from a quaternion (w, x, y, z): entries are quadratic forms / |q|²."""
+        """A rational rotation from a random quaternion (w, x, y, z) ≠ 0."""
         while True:
-            w, x, y, z = (self.scalar() for _ in range(4))
-            n = w * w + x * x + y * y + z * z
-            if n != 0:
-                break
-        inv = 1 / n
-        return [[(w * w + x * x - y * y - z * z) * inv, 2 * (x * y - w * z) * inv, 2 * (x * z + w * y) * inv],
-                [2 * (x * y + w * z) * inv, (w * w - x * x + y * y - z * z) * inv, 2 * (y * z - w * x) * inv],
-                [2 * (x * z - w * y) * inv, 2 * (y * z + w * x) * inv, (w * w - x * x - y * y + z * z) * inv]]
+            q = [self.scalar() for _ in range(4)]
+            if sum(v * v for v in q) != 0:
+                return quaternion_rotation(*q)
 
     def angle(self):
-        """(cos θ, sin θ) from the half-angle tangent t: ((1 − t²), 2t) / (1 + t²)."""
+        """(cos θ, sin θ) from a random half-angle tangent t with 1 + t² ≠ 0."""
         while True:
             t = self.scalar()
-            d = 1 + t * t
-            if d != 0:
-                return (1 - t * t) / d, 2 * t / d
-
-
-def _axis_rotation(a, c, s):
-    """Rot(a, θ) = c I + s [a]× + (1 − c) a aᵀ for a unit vector a."""
-    one = 1 - c
-    return [[c + one * a[0] * a[0], one * a[0] * a[1] - s * a[2], one * a[0] * a[2] + s * a[1]],
-            [one * a[1] * a[0] + s * a[2], c + one * a[1] * a[1], one * a[1] * a[2] - s * a[0]],
-            [one * a[2] * a[0] - s * a[1], one * a[2] * a[1] + s * a[0], c + one * a[2] * a[2]]]
+            if 1 + t * t != 0:
+                return half_angle(t)
 
 
 def _axis_rotation_derivative(a, u, c, s):

@@ -38,7 +38,8 @@ try:                                   # where python-flint 0.6+ keeps it
 except ImportError:                    # pragma: no cover
     DomainError = ValueError
 
-from .tree_rank import _random_prime
+from .exact_algebra import add as _add, axis_rotation, dot as _dot, half_angle as _half_angle, mv as _mv
+from .exact_algebra import quaternion_rotation as _quat_matrix, random_prime as _random_prime, sub as _sub
 
 N_FRAMES = 9
 PRIME_BITS = 61
@@ -46,43 +47,9 @@ MAX_PRIMES = 4000
 
 
 # -- exact rational subject ------------------------------------------------------------------------------
-def _half_angle(t: Fraction) -> tuple:
-    """(cos, sin) of the angle whose half-tangent is t: rational."""
-    return (1 - t * t) / (1 + t * t), 2 * t / (1 + t * t)
-
-
-def _quat_matrix(w, x, y, z) -> list:
-    n = w * w + x * x + y * y + z * z
-    return [[(w * w + x * x - y * y - z * z) / n, 2 * (x * y - w * z) / n, 2 * (x * z + w * y) / n],
-            [2 * (x * y + w * z) / n, (w * w - x * x + y * y - z * z) / n, 2 * (y * z - w * x) / n],
-            [2 * (x * z - w * y) / n, 2 * (y * z + w * x) / n, (w * w - x * x - y * y + z * z) / n]]
-
-
-def _mv(M, v):
-    return [sum(M[i][k] * v[k] for k in range(3)) for i in range(3)]
-
-
-def _add(a, b):
-    return [a[i] + b[i] for i in range(3)]
-
-
-def _sub(a, b):
-    return [a[i] - b[i] for i in range(3)]
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-
-
 def _rot_axis(u, c, s, v):
-    """Rot(u, φ) v with (cos φ, sin φ) = (c, s), u a unit vector (Rodrigues)."""
-    ucv = _cross(u, v)
-    k = _dot(u, v) * (1 - c)
-    return [v[i] * c + ucv[i] * s + u[i] * k for i in range(3)]
+    """Rot(u, φ) v with (cos φ, sin φ) = (c, s), u a unit vector."""
+    return _mv(axis_rotation(u, c, s), v)
 
 
 def _rz(c, s, v):
