@@ -153,3 +153,20 @@ def test_joint_below_a_knee_without_axis_is_fitted(tmp_path, capsys):
     capsys.readouterr()
     rc = cli.main(["fit", str(model), str(KNEE), "--json"])
     assert rc in (0, 1)
+
+
+def test_the_real_label_swap_is_caught_and_clean_trials_are_not_flagged(capsys):
+    """The hip trial's RLFE/RMFE labels are exchanged over a span (examples/real_diagnose_report.md): fit names
+    the pair and leaves the span out, which lowers the dense hip's rms residual; the knee, static and
+    walking trials (gap edges and all) get no swap warning."""
+    capsys.readouterr()
+    cli.main(["fit", str(EX / "real_right_hip.toml"), str(HIP), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["warnings"]) == 1 and "RLFE and RMFE" in doc["warnings"][0]
+    assert doc["joints"]["hip_r"]["rms_residual"] < 8.5           # 9.0 mm with the swapped span in
+    walking2 = DATA / "opensim_walking2.c3d"
+    runs = [("real_right_knee.toml", KNEE), ("real_right_knee_cluster.toml", KNEE),
+            ("real_right_hip.toml", STATIC)] + ([("real_walking2_legs.toml", walking2)] if walking2.exists() else [])
+    for model, trial in runs:
+        cli.main(["fit", str(EX / model), str(trial), "--json"])
+        assert json.loads(capsys.readouterr().out)["warnings"] == [], (model, trial.name)
