@@ -52,7 +52,7 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
                          "note": "no marker measures this joint: there is no quantity a second skeleton could change"}
             continue
         search = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
-                             held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]), seed=seed,
+                             held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]),
                              case_points=case_points)
         w = search.witness
         if w is not None and w.verified:

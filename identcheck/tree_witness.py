@@ -11,8 +11,7 @@ and angles — for another skeleton that reproduces the trial:
   that quantity has moved by ``change`` (a fraction of its value).
 - ``"isolated"``: when the joint is locally identifiable with several candidates (revolute (2,1):
   ERRATA E1, E2), the others are isolated points. Gauss-Newton starts from each of the closed form's
-  other joints, the rest of the tree re-posed around it (and, optionally, from ``starts`` random
-  scramblings of the joint's constants), and keeps a solution whose quantities differ.
+  other joints, the rest of the tree re-posed around it, and keeps a solution whose quantities differ.
 
 Either way the alternative is then *verified*, nothing taken from the search: at 50 digits its
 markers are refined (the residual evaluated in mpmath, the correction from the float Jacobian's
@@ -232,18 +231,6 @@ def _along_family(L, x0, F, data, joint, label, change, stages=4):
     return x, err
 
 
-def _scrambled(L, x0, joint, kind, rng):
-    """The truth with the joint's own constants (centre in parent and child, hinge direction, rest
-    orientation) moved at random by about the size of the segment."""
-    x = x0.copy()
-    scale = max(1.0, float(np.abs(x0[:L.n_const]).max()))
-    for key in ("c:", "e:") + (("a:", "rest:") if kind == "revolute" else ()):
-        sl = L.const[key + joint]
-        amp = scale * 0.5 if key in ("c:", "e:") else np.abs(x[sl]).max()
-        x[sl] = x[sl] + rng.normal(0.0, amp, sl.stop - sl.start)
-    return x
-
-
 def _differs(L, x, x0, joint) -> bool:
     qa, qt = K.joint_quantities(L, x[:L.n_const], joint), K.joint_quantities(L, x0[:L.n_const], joint)
     return any(v >= MIN_CHANGE for v in relative_changes(_floats(qt), _floats(qa)).values())
@@ -342,7 +329,7 @@ def _reexpress(Rw, tw, R2, t2, seg, v):
 
 def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, method: str,
               undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
-              change: float = 0.05, starts: int = 0, seed: int = 0, via: tuple = (),
+              change: float = 0.05, via: tuple = (),
               case_points: dict | None = None) -> "Search":
     """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
     the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
@@ -357,11 +344,9 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     L = K.Layout(spec)
     F = n_frames
     data = trial(L, truth_x, F)
-    kind = next(j[1] for j in spec.joints if j[0] == joint)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
     best, misses, back = None, [], 0
-    for cand, err in _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via,
-                                 case_points):
+    for cand, err in _candidates(L, truth_x, F, data, joint, method, undetermined, change, via, case_points):
         if err is None:
             back += 1
             continue
@@ -388,8 +373,7 @@ class Search:
     closest_miss_mm: float | None
 
 
-def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, starts, seed, via=(),
-                case_points=None):
+def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=(), case_points=None):
     """(skeleton, max marker error) after Gauss-Newton from each start, most promising first (a generator):
     an error below ``TOL_FLOAT`` is a candidate alternative, None a start that led back to the truth."""
     def done(cand, err):        # err None: it converged back to the truth
@@ -404,9 +388,6 @@ def _candidates(L, truth_x, F, data, joint, kind, method, undetermined, change, 
         raise ValueError(f"unknown method {method!r}")
     for start in (x for j in (joint, *via) for x in _twin_starts(L, truth_x, F, j, case_points)):
         yield done(*gauss_newton(L, start, F, data))
-    rng = np.random.default_rng(seed)
-    for _ in range(starts):
-        yield done(*gauss_newton(L, _scrambled(L, truth_x, joint, kind, rng), F, data))
 
 
 def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) -> Witness:
