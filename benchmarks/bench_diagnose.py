@@ -1,7 +1,7 @@
 """Speed of `identcheck diagnose` end to end, and of its core fit against scipy's sparse least squares.
 
 Three sections, all on ``examples/diagnose_leg.toml`` (nine markers, ball hip, hinge knee) simulated at
-100 Hz with 0.5 mm noise (``identcheck.simulate.simulate``, seed 1, no gaps):
+100 Hz with 0.5 mm noise (``identcheck.simulate.rigid.simulate``, seed 1, no gaps):
 
 1. **diagnose, end to end** (the issue's row): a 15 s trial (1500 frames) without an effect and with
    each of the eight named effects hidden in it (``inject_effect(sim, name, seed=1)``), diagnosed by
@@ -12,7 +12,7 @@ Three sections, all on ``examples/diagnose_leg.toml`` (nine markers, ball hip, h
    not fail on it.
 2. **The core fit against the obvious alternative**: the rigid whole-chain least-squares problem
    (root pose and joint angles per frame, marker positions, joint centres and hinge axes as constants)
-   solved by ``identcheck.diagnose.chain.fit_chain`` (Levenberg-Marquardt, Schur complement over the
+   solved by ``identcheck.bundle.chain.fit_chain`` (Levenberg-Marquardt, Schur complement over the
    frames) and by ``scipy.optimize.least_squares(method="trf", jac_sparsity=..., x_scale="jac")``
    with finite-difference Jacobians, from the same ``initial_state``. The scipy parametrisation
    (:class:`ScipyChain`) is this script's own: rotation vectors composed on the left of the starting
@@ -62,13 +62,14 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
-from identcheck.diagnose.chain import (REL_TOL, Chain, State, Terms, _tangents, fit_chain, forward,  # noqa: E402
+from identcheck.skeleton import Skeleton  # noqa: E402
+from identcheck.bundle.chain import (REL_TOL, State, Terms, _tangents, fit_chain, forward,  # noqa: E402
                                        initial_state)
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
-from identcheck.effects_inject import EFFECTS, inject_effect  # noqa: E402
+from identcheck.effects.inject import EFFECTS, inject_effect  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
-from identcheck.simulate import simulate  # noqa: E402
-from identcheck.report import plain  # noqa: E402
+from identcheck.simulate.rigid import simulate  # noqa: E402
+from identcheck.io.jsonable import plain  # noqa: E402
 
 KEY = "diagnose"
 RESULTS = ROOT / "benchmarks" / "results.json"
@@ -274,7 +275,7 @@ class ScipyChain:
     the rest rotation's rotation vector (on the left) and the axis step in its tangent plane (5).
     """
 
-    def __init__(self, chain: Chain, start: State, data: np.ndarray):
+    def __init__(self, chain: Skeleton, start: State, data: np.ndarray):
         self.chain, self.s0 = chain, start
         self.F, self.k, self.M = start.root_R.shape[0], chain.frame_dof(), chain.n_markers
         self.P = 3 * self.M + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints)
@@ -354,7 +355,7 @@ class ScipyChain:
 
 def lm_fit(frames: int, repeats: int) -> dict:
     m = model()
-    chain = Chain.from_model(m)
+    chain = Skeleton.from_model(m)
     data = rigid(frames).trial.select(m.markers).as_array()
     start = initial_state(chain, data)
     walls, fit = [], None

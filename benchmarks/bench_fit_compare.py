@@ -4,7 +4,7 @@ Grids after Ehrig et al. (2006, centre: SCoRE vs others; 2007, axis: SARA vs oth
 noise, range of motion (ROM) and number of frames, one varied at a time around a default cell
 (1 mm, 30°, 200 frames at 100 Hz). Every trial draws a random two-segment geometry (3-4 markers
 per segment, 50-150 mm from the joint, in a 35° cone either side of it), moves the parent in the
-world (rotation and sway of ``identcheck.simulate``'s root motion) and the child relative to it:
+world (rotation and sway of ``identcheck.simulate.rigid``'s root motion) and the child relative to it:
 
 * spherical: star-arc (swings of ±ROM/2 in four planes through the neutral position), a
   circumduction rosette of radius ROM/2, and axial rotation ±ROM/4 throughout (3 DoF);
@@ -56,12 +56,12 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
-from identcheck.fit import estimate  # noqa: E402
-from identcheck.fit.obrien import joint_location  # noqa: E402
-from identcheck.fit.poses import segment_poses  # noqa: E402
-from identcheck.fit.score_sara import sara, score  # noqa: E402
-from identcheck.fit.seed001 import fit_centre  # noqa: E402
-from identcheck.simulate import ROOT_HEIGHT_MM, ROOT_ROM_DEG, ROOT_SWAY_MM, _smooth  # noqa: E402
+from identcheck.estimate import joint as estimate  # noqa: E402
+from identcheck.estimate.obrien import joint_location  # noqa: E402
+from identcheck.geometry.poses import segment_poses  # noqa: E402
+from identcheck.estimate.score_sara import sara, score  # noqa: E402
+from identcheck.estimate.seed001 import fit_centre  # noqa: E402
+from identcheck.simulate.rigid import ROOT_HEIGHT_MM, ROOT_ROM_DEG, ROOT_SWAY_MM, _smooth  # noqa: E402
 
 KEY = "fit_compare"
 RESULTS = ROOT / "benchmarks" / "results.json"
@@ -81,20 +81,20 @@ MIN_AXIS_MM = 20.0             # markers at least this far from the hinge axis
 AXIS_TILT = 0.15
 
 SPHERICAL = {   # name -> (description, slow)
-    "seed001": ("identcheck.fit.seed001.fit_centre, method='pair' (6 unknowns, Gauss-Markov, bias-corrected)", False),
+    "seed001": ("identcheck.estimate.seed001.fit_centre, method='pair' (6 unknowns, Gauss-Markov, bias-corrected)", False),
     "seed001 eq9": ("fit_centre(method='paper', bias_correction=False): seed 001 as printed, eq. 9", False),
-    "O'Brien": ("identcheck.fit.obrien.joint_location (stacked SVD)", False),
-    "SCoRE": ("identcheck.fit.score_sara.score (3x3 mean-rotation route)", False),
+    "O'Brien": ("identcheck.estimate.obrien.joint_location (stacked SVD)", False),
+    "SCoRE": ("identcheck.estimate.score_sara.score (3x3 mean-rotation route)", False),
     "SCoRE loop": ("this file: per-frame Python loop (Kabsch by np.linalg.svd, 6x6 normal equations)", False),
-    "sphere 3,q": ("identcheck.fit.estimate.posed_sphere, all child markers (Gamage-Lasenby style)", False),
+    "sphere 3,q": ("identcheck.estimate.joint.posed_sphere, all child markers (Gamage-Lasenby style)", False),
     "sphere 3,1": ("estimate.posed_sphere on the first child marker (Pham (3,1))", False),
     "S22": ("estimate.pair_spherical (Pham V-A), first two parent + first two child markers", True),
 }
 HINGE = {
-    "SARA": ("identcheck.fit.score_sara.sara", False),
+    "SARA": ("identcheck.estimate.score_sara.sara", False),
     "SARA loop": ("this file: per-frame Python loop (Kabsch, 6x6 normal matrix, its null vector)", False),
     "O'Brien": ("joint_location single-axis solution (axis only when motion == 'single_axis')", False),
-    "circle 3,q": ("identcheck.fit.estimate.posed_circle, all child markers", False),
+    "circle 3,q": ("identcheck.estimate.joint.posed_circle, all child markers", False),
     "circle 3,1": ("estimate.posed_circle on the first child marker", False),
     "Pham 2,1": ("estimate.pair_revolute (Pham III-A, ODR), first two parent markers + first child marker; "
                  "error of the candidate nearest the truth among the equally good ones (ERRATA E1/E2)", True),

@@ -21,7 +21,8 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import results_io  # noqa: E402
-from identcheck import plan, tree_rank  # noqa: E402
+from identcheck.plan import analysis as plan  # noqa: E402
+from identcheck.certify import tree_rank
 from identcheck.io.model import Model  # noqa: E402
 PLANS = ["examples/body16.toml", "examples/pig_lower_limb.toml", "examples/sparse_leg.toml", "examples/leg.toml"]
 

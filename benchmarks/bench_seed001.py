@@ -1,7 +1,7 @@
 """Benchmark of seed 001's joint-centre estimator: is its predicted covariance calibrated?
 
-Monte-Carlo trials with a known centre (``identcheck.simulate``), fitted by
-:func:`identcheck.fit.seed001.fit_centre` three ways:
+Monte-Carlo trials with a known centre (``identcheck.simulate.rigid``), fitted by
+:func:`identcheck.estimate.seed001.fit_centre` three ways:
 
 * ``this``: 6 unknowns (centre in each body frame), noise-corrected Gauss–Markov (default);
 * ``no-bc``: the same without the O(σ²) corrections (eqs. 22–23 as printed, 6 unknowns);
@@ -58,11 +58,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
 from identcheck.errors import DegenerateError  # noqa: E402
-from identcheck.fit.poses import refine_local  # noqa: E402
-from identcheck.fit.seed001 import (EXPECTED_MEAN_V, INFO_FAIL, INFO_OK, fit_centre,  # noqa: E402
+from identcheck.geometry.poses import refine_local  # noqa: E402
+from identcheck.estimate.seed001 import (EXPECTED_MEAN_V, INFO_FAIL, INFO_OK, fit_centre,  # noqa: E402
                                     marker_noise, validation_index)
 from identcheck.io.model import Model  # noqa: E402
-from identcheck.simulate import simulate  # noqa: E402
+from identcheck.simulate.rigid import simulate  # noqa: E402
 
 KEY = "seed001"
 FIGURE = ROOT / "benchmarks" / "seed001_calibration.png"

@@ -38,9 +38,9 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
-from identcheck.diagnose import figures  # noqa: E402
-from identcheck.diagnose.chain import information  # noqa: E402
-from identcheck.diagnose.hypothesis import joint_angles  # noqa: E402
+from identcheck.report import diagnose_figures as figures  # noqa: E402
+from identcheck.bundle.chain import information  # noqa: E402
+from identcheck.bundle.hypothesis import joint_angles  # noqa: E402
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
 from identcheck.errors import InputError  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402

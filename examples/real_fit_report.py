@@ -2,9 +2,9 @@
 
 Runs ``identcheck fit MODEL TRIAL --json`` (in process, through :func:`identcheck.cli.main`, so the
 JSON and the exit code are exactly the CLI's) for every model/trial pair below, and the package
-API (:func:`identcheck.fit.fitting.fit_model`) for the fitted trajectories the JSON does not carry
+API (:func:`identcheck.fit.workflow.fit_model`) for the fitted trajectories the JSON does not carry
 (centres, hinge points and directions), which the agreement tables and the figures need. SCoRE and
-SARA (:mod:`identcheck.fit.score_sara`) are run directly as extra references.
+SARA (:mod:`identcheck.estimate.score_sara`) are run directly as extra references.
 
     PYTHONPATH=. python3 examples/real_fit_report.py        # about a minute
 
@@ -28,10 +28,10 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
 from identcheck import cli  # noqa: E402
-from identcheck.figure_io import pyplot, save  # noqa: E402
-from identcheck.fit.fitting import fit_model  # noqa: E402
-from identcheck.fit.obrien import as_poses  # noqa: E402
-from identcheck.fit.score_sara import sara, score  # noqa: E402
+from identcheck.report.figure_io import pyplot, save  # noqa: E402
+from identcheck.fit.workflow import fit_model  # noqa: E402
+from identcheck.estimate.obrien import as_poses  # noqa: E402
+from identcheck.estimate.score_sara import sara, score  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.trial import Trial  # noqa: E402
 

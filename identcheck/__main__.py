@@ -1,6 +1,6 @@
 """``python -m identcheck``: the same command line as the ``identcheck`` script."""
 import sys
 
-from .cli import main
+from identcheck.cli import main
 
 sys.exit(main())

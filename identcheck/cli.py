@@ -18,8 +18,8 @@ import sys  # noqa: E402
 import warnings  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from .effects_inject import EFFECTS  # noqa: E402
-from .errors import DegenerateError, IdentifiabilityWarning, InputError  # noqa: E402
+from identcheck.effects.inject import EFFECTS  # noqa: E402
+from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError  # noqa: E402
 
 log = logging.getLogger("identcheck")
 
@@ -31,8 +31,9 @@ def _print_json(obj) -> None:
 
 
 def _cmd_derive(a) -> int:
-    from . import derive, report
-    from .derive import render
+    from identcheck.report import documents as report
+    from identcheck import derive
+    from identcheck.derive import render
 
     dvs = derive.derive_all()
     paths = render.write(dvs, a.out)
@@ -50,7 +51,7 @@ def _cmd_derive(a) -> int:
 
 
 def _cmd_rank(a) -> int:
-    from . import certify
+    from identcheck.certify import exact_rank as certify
 
     cert = certify.rank(a.joint, a.p, a.q, n_samples=a.samples, seed=a.seed)
     if a.save:
@@ -66,7 +67,10 @@ def _cmd_rank(a) -> int:
 
 
 def _cmd_verify(a) -> int:
-    from . import certify, counterexamples, jacobian, table
+    from identcheck.certify import exact_rank as certify
+    from identcheck.certify import counterexamples
+    from identcheck.certify import jacobian
+    from identcheck.certify import table
 
     try:
         cert = json.loads(Path(a.certificate).read_text(encoding="utf-8"))
@@ -94,7 +98,7 @@ def _cmd_verify(a) -> int:
 
 
 def _cmd_table(a) -> int:
-    from .table import table
+    from identcheck.certify.table import table
 
     doc = table(seed=a.seed, joints=tuple(a.joint) if a.joint else None)
     if a.save:
@@ -119,7 +123,7 @@ def _cmd_table(a) -> int:
 
 
 def _cmd_simulate(a) -> int:
-    from .simulate import simulate_file
+    from identcheck.api import simulate_file
 
     sim = simulate_file(a.model, a.out, seed=a.seed, effect=a.effect, n_frames=a.frames, rate_hz=a.rate,
                         rom_deg=a.rom_deg, noise_mm=a.noise_mm, occlusion=a.occlusion, n_axes=a.n_axes)
@@ -146,10 +150,10 @@ def _without_long_lists(doc: dict, longest: int = 20) -> dict:
 
 
 def _cmd_identify(a) -> int:
-    from . import report
-    from .identify import identify_joint
-    from .io.model import Model
-    from .trial import Trial
+    from identcheck.report import documents as report
+    from identcheck.identify import identify_joint
+    from identcheck.io.model import Model
+    from identcheck.trial import Trial
 
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
@@ -175,10 +179,10 @@ def _cmd_identify(a) -> int:
 
 
 def _cmd_fit(a) -> int:
-    from .fit.fitting import fit_model, report
-    from .fit.label_check import screen
-    from .io.model import Model
-    from .trial import Trial
+    from identcheck.fit.workflow import fit_model, report
+    from identcheck.estimate.labels import screen
+    from identcheck.io.model import Model
+    from identcheck.trial import Trial
 
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
@@ -211,14 +215,14 @@ def _cmd_fit(a) -> int:
 
 
 def _cmd_plan(a) -> int:
-    from . import plan
-    from .io.model import Model
+    from identcheck.plan import analysis as plan
+    from identcheck.io.model import Model
 
     model = Model.from_toml(a.model)
     doc = plan.plan_model(model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest,
                           witness=a.witness, progress=lambda msg: print(f"identcheck plan: {msg}", file=sys.stderr))
     if a.figure:
-        from .plan_figure import draw
+        from identcheck.report.plan_figure import draw
 
         draw(doc, {s: seg.markers for s, seg in model.segments.items()}, model.root, a.figure, title=a.model)
         log.info("figure written to %s", a.figure)
@@ -230,16 +234,16 @@ def _cmd_plan(a) -> int:
 
 
 def _cmd_diagnose(a) -> int:
-    from .diagnose.workflow import diagnose
-    from .io.model import Model
-    from .trial import Trial
+    from identcheck.diagnose.workflow import diagnose
+    from identcheck.io.model import Model
+    from identcheck.trial import Trial
 
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
     diag = diagnose(model, trial, progress=lambda msg: print(f"identcheck diagnose: {msg}", file=sys.stderr))
     rep = diag.to_json()
     if a.plots:
-        from .diagnose.figures import write_all
+        from identcheck.report.diagnose_figures import write_all
         for path in write_all(diag, a.plots):
             log.info("wrote %s", path)
     if a.json:

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
-from .io.model import Model
-from .solve import revolute21, spherical22, spherical31
-from .solve.frames import pair_frame, parent_frame, to_local
-from .trial import Trial
+from identcheck.errors import InputError
+from identcheck.io.model import Model
+from identcheck.solve import revolute21, spherical22, spherical31
+from identcheck.geometry.frames import pair_frame, parent_frame, to_local
+from identcheck.trial import Trial
 
 
 @dataclass

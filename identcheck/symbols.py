@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import sympy as sp
 
-from .errors import InputError
+from identcheck.errors import InputError
 
 # sample coordinates of a child marker in the frame F of the parent's markers
 x, y, z = sp.symbols("x y z", real=True)

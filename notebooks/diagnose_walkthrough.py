@@ -24,7 +24,7 @@
 #
 # This notebook hides one effect in a synthetic trial, where the truth is known, and walks
 # through what `diagnose` finds. Every cell asserts what it shows, so executing the notebook
-# (`tests/test_notebooks.py`) is a test.
+# (`tests/notebooks/test_notebooks.py`) is a test.
 
 # %%
 import os
@@ -46,12 +46,12 @@ import numpy as np  # noqa: E402
 from IPython.display import Image, display  # noqa: E402
 
 import identcheck  # noqa: E402
-from identcheck.diagnose import figures  # noqa: E402
-from identcheck.diagnose.hypothesis import centre_world  # noqa: E402
+from identcheck.report import diagnose_figures as figures  # noqa: E402
+from identcheck.bundle.hypothesis import centre_world  # noqa: E402
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
-from identcheck.effects_inject import inject_effect, true_centre_world  # noqa: E402
+from identcheck.effects.inject import inject_effect, true_centre_world  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
-from identcheck.simulate import simulate  # noqa: E402
+from identcheck.simulate.rigid import simulate  # noqa: E402
 
 ROOT = Path(identcheck.__file__).resolve().parents[1]
 FIGS = Path(tempfile.mkdtemp(prefix="diagnose_walkthrough_"))

@@ -26,7 +26,7 @@
 # - **Evidence (`--witness`).** For a joint the plan does not identify, a second skeleton that
 #   reproduces every marker of a simulated trial, checked at 50 digits.
 #
-# Every cell asserts what it shows, so executing this notebook (`tests/test_notebooks.py`) is a test.
+# Every cell asserts what it shows, so executing this notebook (`tests/notebooks/test_notebooks.py`) is a test.
 
 # %%
 import os
@@ -43,9 +43,12 @@ matplotlib.use("Agg")
 from IPython.display import Image, display  # noqa: E402
 
 import identcheck  # noqa: E402
-from identcheck import plan, plan_witness, tree_rank, tree_witness  # noqa: E402
+from identcheck.plan import analysis as plan  # noqa: E402
+from identcheck.plan import witness as plan_witness
+from identcheck.certify import tree_rank
+from identcheck.plan import witness_search as tree_witness
 from identcheck.io.model import Model  # noqa: E402
-from identcheck.plan_figure import draw  # noqa: E402
+from identcheck.report.plan_figure import draw  # noqa: E402
 
 ROOT = Path(identcheck.__file__).resolve().parents[1]
 FIGS = Path(tempfile.mkdtemp(prefix="plan_walkthrough_"))
@@ -59,7 +62,7 @@ FIGS = Path(tempfile.mkdtemp(prefix="plan_walkthrough_"))
 # thigh marker against one shank marker. By ERRATA E1 and E2 that case alone admits four joints.
 # What decides among them is the single foot (or hand) marker beyond the ankle (or wrist). It must
 # stay at a fixed distance from a point of the shank, and that rejects the other three joints.
-# `identcheck.twin_certificate` proves this exactly, on a random rational subject with modular
+# `identcheck.certify.twin` proves this exactly, on a random rational subject with modular
 # arithmetic over every conjugate.
 
 # %%

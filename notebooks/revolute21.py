@@ -20,7 +20,7 @@
 # from five samples and shows the finding the paper misses: **generic data admit two
 # joint-parameter sets, four joints with mirror images** (derivations/ERRATA.md, E1 and E2).
 #
-# Every cell asserts what it shows, so executing the notebook (`tests/test_notebooks.py`) is a
+# Every cell asserts what it shows, so executing the notebook (`tests/notebooks/test_notebooks.py`) is a
 # test. Run it as a notebook (`jupytext --to ipynb`) or as a script.
 
 # %%
@@ -37,7 +37,8 @@ import numpy as np  # noqa: E402
 import sympy as sp  # noqa: E402
 from IPython.display import Image, Markdown, display  # noqa: E402
 
-from identcheck import certify, codegen, derive  # noqa: E402
+from identcheck.certify import exact_rank as certify  # noqa: E402
+from identcheck import codegen, derive
 from identcheck.derive import printed  # noqa: E402
 from identcheck.solve.revolute21 import CASE, generated, identify, solve_batch  # noqa: E402
 from identcheck.symbols import c_theta, s_theta  # noqa: E402

@@ -9,3 +9,19 @@ from hypothesis import HealthCheck, settings
 settings.register_profile("ci", max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("dev", max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+import sys
+from pathlib import Path
+
+import pytest
+
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+if str(TESTS) not in sys.path:           # shared helpers (strategies, float_tree) for tests in every subfolder
+    sys.path.insert(0, str(TESTS))
+
+
+@pytest.fixture(scope="session")
+def examples() -> Path:
+    """The repository's bundled example models."""
+    return ROOT / "examples"

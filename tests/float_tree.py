@@ -1,5 +1,5 @@
 """An independent floating-point whole-tree Jacobian (finite differences of plain forward kinematics),
-used only to cross-check :mod:`identcheck.tree_rank`'s exact verdicts in tests."""
+used only to cross-check :mod:`identcheck.certify.tree_rank`'s exact verdicts in tests."""
 import numpy as np
 from scipy.spatial.transform import Rotation
 

@@ -1,5 +1,5 @@
 """Symbolic derivations (SymPy only). Each returns a :class:`~identcheck.derive.base.Derivation`."""
-from .base import Check, Derivation, Step
+from identcheck.derive.base import Check, Derivation, Step
 
 DERIVATIONS = {
     "revolute21": "identcheck.derive.revolute",

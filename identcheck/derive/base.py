@@ -37,7 +37,7 @@ class Check:
     @property
     def ok(self) -> bool:
         """True when the print agrees, or disagrees exactly as ERRATA.md records."""
-        from .errata import ERRATA
+        from identcheck.derive.errata import ERRATA
 
         return self.agrees or self.erratum in ERRATA
 

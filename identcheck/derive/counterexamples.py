@@ -17,9 +17,9 @@ from functools import lru_cache
 
 import sympy as sp
 
-from ..symbols import c_beta, c_theta, d, l, r, rho, s_beta, s_theta
-from .algebra import equal, reduce_circle
-from .base import Derivation, Step
+from identcheck.symbols import c_beta, c_theta, d, l, r, rho, s_beta, s_theta
+from identcheck.derive.algebra import equal, reduce_circle
+from identcheck.derive.base import Derivation, Step
 
 SOURCE = "Pham et al., sections III-B and IV-B"
 

@@ -20,5 +20,5 @@ ERRATA.update({
           "radius rho' about every B of the output set when rho > r (samples near the A1A2 axis are lost), so "
           "S n S' = S is false; S n S' still has positive measure and the conclusion stands",
     "E8": "Pham V-B: the 16-marker body is identifiable, but the knee's (2,1) step leaves 4 joints (E1, E2); the "
-          "foot marker beyond the ankle rejects the other 3 (exact certificate, identcheck.twin_certificate)",
+          "foot marker beyond the ankle rejects the other 3 (exact certificate, identcheck.certify.twin)",
 })

@@ -7,8 +7,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from ..symbols import (A, B, Q, R2, Z, c_alpha as ca, c_theta as ct, d, l, r, rho,
-                       s_alpha as sa, s_theta as st, x, y, z)
+from identcheck.symbols import A, B, Q, R2, Z, c_alpha as ca, c_theta as ct, d, l, r, rho, s_alpha as sa, s_theta as st, x, y, z
 
 SOURCE = "Pham, Ayusawa, Kubota, Nakamura: On the structural identifiability of joint parameters from motion capture data"
 
@@ -49,7 +48,7 @@ CLAIM_JOINTS = 1             # "there remains a unique Q_k, associated with uniq
 CLAIM_ALPHA_BRANCHES = 1     # alpha_k = asin(...): one alpha per root
 
 # --- section IV-C: spherical joint, two markers on each link ---------------------------------
-from ..symbols import rho1, rho2, x1, x2, y1, y2, z1, z2  # noqa: E402
+from identcheck.symbols import rho1, rho2, x1, x2, y1, y2, z1, z2  # noqa: E402
 
 DELTA = x1 * y2 - x2 * y1                                             # below (14)
 H = (x1**2 + y1**2 + (z1 - d) ** 2 + r**2 - rho1**2) / 2              # (15)

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import sympy as sp
 
-from .base import Derivation, as_latex
-from .errata import ERRATA
+from identcheck.derive.base import Derivation, as_latex
+from identcheck.derive.errata import ERRATA
 
 
 def _cell(obj, limit=160) -> str:

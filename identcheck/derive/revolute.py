@@ -16,12 +16,10 @@ from functools import lru_cache
 
 import sympy as sp
 
-from ..symbols import (A, B, Q, R2, Z, c_alpha as ca, c_beta as cb, c_theta as ct, case,
-                       cos_sign, d, l, r, rho, s_alpha as sa, s_beta as sb, s_theta as st,
-                       x, y, z)
-from . import printed
-from .algebra import equal, linear_form, reduce_circle
-from .base import Derivation, Step
+from identcheck.symbols import A, B, Q, R2, Z, c_alpha as ca, c_beta as cb, c_theta as ct, case, cos_sign, d, l, r, rho, s_alpha as sa, s_beta as sb, s_theta as st, x, y, z
+from identcheck.derive import printed
+from identcheck.derive.algebra import equal, linear_form, reduce_circle
+from identcheck.derive.base import Derivation, Step
 
 CASE = case("revolute", 2, 1)
 TRIG = CASE.trig_pairs

@@ -13,11 +13,10 @@ from functools import lru_cache
 
 import sympy as sp
 
-from ..symbols import (c_gamma, c_phi, c_psi, c_theta, c_xi, case, d, r, rho1, rho2, s_gamma, s_phi,
-                       s_psi, s_theta, s_xi, x1, x2, y1, y2, z1, z2)
-from . import printed
-from .algebra import equal, linear_form_in_parameters, polynomial_relations, reduce_circle
-from .base import Derivation, Step
+from identcheck.symbols import c_gamma, c_phi, c_psi, c_theta, c_xi, case, d, r, rho1, rho2, s_gamma, s_phi, s_psi, s_theta, s_xi, x1, x2, y1, y2, z1, z2
+from identcheck.derive import printed
+from identcheck.derive.algebra import equal, linear_form_in_parameters, polynomial_relations, reduce_circle
+from identcheck.derive.base import Derivation, Step
 
 CASE = case("spherical", 2, 2)
 TRIG = CASE.trig_pairs

@@ -12,9 +12,9 @@ from functools import lru_cache
 
 import sympy as sp
 
-from ..symbols import R2, c_phi, c_psi, case, rho, s_phi, s_psi, x, x_J, y, y_J, z, z_J
-from .algebra import equal, linear_form, reduce_circle
-from .base import Derivation, Step
+from identcheck.symbols import R2, c_phi, c_psi, case, rho, s_phi, s_psi, x, x_J, y, y_J, z, z_J
+from identcheck.derive.algebra import equal, linear_form, reduce_circle
+from identcheck.derive.base import Derivation, Step
 
 CASE = case("spherical", 3, 1)
 TRIG = CASE.trig_pairs

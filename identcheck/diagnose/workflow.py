@@ -9,13 +9,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from ..fit.estimate import MIN_ROM_DEG
-from ..report import plain
-from .chain import Chain, fit_chain, information, initial_state
-from .effects import EFFECTS
-from .hypothesis import Context, Hypothesis, consistency, joint_angles, score
-from .noise import noise_floor
+from identcheck.skeleton import Skeleton
+from identcheck.errors import InputError
+from identcheck.estimate.joint import MIN_ROM_DEG
+from identcheck.io.jsonable import plain
+from identcheck.bundle.chain import fit_chain, information, initial_state
+from identcheck.effects.registry import EFFECTS
+from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, joint_angles, score
+from identcheck.estimate.noise import noise_floor
 
 log = logging.getLogger("identcheck")
 
@@ -122,7 +123,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         raise InputError(["the distances within every segment are exactly constant: no measurement noise to "
                           "scale the gap against (a noise-free synthetic trial?)"], source=trial.source)
     ctx = Context(model, tuple(model.markers), trial.rate_hz, data, noise, int(seen.sum()), trial.source)
-    chain = Chain.from_model(model)
+    chain = Skeleton.from_model(model)
     if progress:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     state = initial_state(chain, data)

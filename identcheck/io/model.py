@@ -12,7 +12,7 @@ The model file is the one described in CONTRACT.md::
     parent = "pelvis"
     child = "thigh_r"
 
-Optional extensions, used by :mod:`identcheck.simulate` to make a synthetic subject
+Optional extensions, used by :mod:`identcheck.simulate.rigid` to make a synthetic subject
 deterministic (all coordinates in the file's ``units``, converted to mm on load):
 
 - ``[segments.NAME.positions]`` ``MARKER = [x, y, z]``: marker position in the segment frame;

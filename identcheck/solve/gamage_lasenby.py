@@ -16,7 +16,7 @@ the frame F_GL (origin A1, u1 along A1A2, u2 from A3 - A1 by Gram-Schmidt, u3 = 
 child markers are expressed in F_GL, and the sphere centre found there is constant in F_GL,
 hence gives a per-frame world centre. With three child markers this is the classic "3 + 3" use.
 
-Local coordinates in this module put A1A2 on +z, as :func:`identcheck.solve.frames.pair_frame`
+Local coordinates in this module put A1A2 on +z, as :func:`identcheck.geometry.frames.pair_frame`
 does (section II-A): a point's local (x, y, z) are its components along (u2, u3, u1).
 """
 from __future__ import annotations
@@ -27,8 +27,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..errors import DegenerateError, IdentifiabilityWarning, InputError
-from .frames import parent_frame, to_local, to_world
+from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
+from identcheck.geometry.frames import parent_frame, to_local, to_world
 
 GL_MIN_FRAMES = 4
 """Fewest complete frames the sphere fit accepts (4 points fix a sphere)."""

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import DegenerateError, InputError
-from . import revolute21, spherical22, spherical31
-from .frames import pair_frame, parent_frame, to_local
+from identcheck.errors import DegenerateError, InputError
+from identcheck.solve import revolute21, spherical22, spherical31
+from identcheck.geometry.frames import pair_frame, parent_frame, to_local
 
 ANGLE_TOL = 1e-6
 

@@ -1,7 +1,7 @@
 """Revolute joint from two parent markers and one child marker (Pham et al., section III-A).
 
 Input: samples of the child marker B in the frame F of the parent's markers (A1 at the
-origin, A2 on +z; see :func:`identcheck.solve.frames.pair_frame`). Output: *every* joint the
+origin, A2 on +z; see :func:`identcheck.geometry.frames.pair_frame`). Output: *every* joint the
 samples admit. The linear system M·Z = K (eq. 10) is solved, the cubic (13) gives three roots,
 each root and each sign of cos α (the mirror image) is back-substituted, and each candidate is
 kept only if it reproduces every sample (per-sample θ, β constructed and the sample rebuilt).
@@ -22,10 +22,10 @@ from types import SimpleNamespace
 import mpmath
 import numpy as np
 
-from .. import codegen, derive
-from ..errors import DegenerateError, IdentifiabilityWarning, InputError
-from ..symbols import Q, Z, case, cos_sign, l as l_sym
-from .linalg import cubic_roots, lstsq_stacked, solve_stacked
+from identcheck import codegen, derive
+from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
+from identcheck.symbols import Q, Z, case, cos_sign, l as l_sym
+from identcheck.solve.linalg import cubic_roots, lstsq_stacked, solve_stacked
 
 CASE = case("revolute", 2, 1)
 PARAMS = ("d", "r", "alpha", "l", "rho")

@@ -36,9 +36,9 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..errors import DegenerateError, InputError
-from .frames import parent_frame, to_local, to_world
-from .gamage_lasenby import complete_frames, distance_variance_cost, sphere_centre
+from identcheck.errors import DegenerateError, InputError
+from identcheck.geometry.frames import parent_frame, to_local, to_world
+from identcheck.solve.gamage_lasenby import complete_frames, distance_variance_cost, sphere_centre
 
 S22_MIN_FRAMES = 9
 """The (2, 2) case is 9-identifiable (section IV-C): fewer complete frames are refused."""
@@ -376,7 +376,7 @@ def _linear_seed(b1, b2):
     """The linear (2, 2) solution of section IV-C, or None when it is unavailable or has no real
     solution for these data."""
     try:
-        from .spherical22 import solve_linear
+        from identcheck.solve.spherical22 import solve_linear
     except ImportError:
         return None
     try:

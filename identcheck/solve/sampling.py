@@ -4,7 +4,7 @@ from __future__ import annotations
 import mpmath
 import numpy as np
 
-from ..errors import DegenerateError, InputError
+from identcheck.errors import DegenerateError, InputError
 
 
 def check_samples(xyz, n_min: int, name: str, case_label: str) -> np.ndarray:

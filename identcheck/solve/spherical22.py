@@ -1,7 +1,7 @@
 """Spherical joint from two parent markers and two child markers (Pham et al., section IV-C).
 
 Input: per-sample coordinates of B1, B2 in the frame F of the parent's markers (A1 at the
-origin, A2 on +z; :func:`identcheck.solve.frames.pair_frame`). The derivation
+origin, A2 on +z; :func:`identcheck.geometry.frames.pair_frame`). The derivation
 (:mod:`identcheck.derive.spherical22`) gives a full-rank linear system in nine unknowns (not
 the printed (17); errata E4, E5) from which d, r², ρ1², ρ2² follow linearly: exact data admit
 exactly one joint. Each sample's centre J = (r cos θ, r sin θ, d) is constructed and the joint
@@ -18,10 +18,10 @@ from functools import lru_cache
 import mpmath
 import numpy as np
 
-from .. import codegen, derive
-from ..errors import DegenerateError, IdentifiabilityWarning, InputError
-from ..symbols import case, d, r, rho1, rho2
-from .sampling import check_samples, column_scaled_lstsq, mp_solve
+from identcheck import codegen, derive
+from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
+from identcheck.symbols import case, d, r, rho1, rho2
+from identcheck.solve.sampling import check_samples, column_scaled_lstsq, mp_solve
 
 CASE = case("spherical", 2, 2)
 PARAMS = ("d", "r", "rho1", "rho2")

@@ -15,10 +15,10 @@ from functools import lru_cache
 import mpmath
 import numpy as np
 
-from .. import codegen, derive
-from ..errors import DegenerateError, IdentifiabilityWarning
-from ..symbols import case
-from .sampling import check_samples, column_scaled_lstsq, mp_solve
+from identcheck import codegen, derive
+from identcheck.errors import DegenerateError, IdentifiabilityWarning
+from identcheck.symbols import case
+from identcheck.solve.sampling import check_samples, column_scaled_lstsq, mp_solve
 
 CASE = case("spherical", 3, 1)
 N_UNKNOWNS = 4

@@ -1,0 +1,164 @@
+"""A hypothesis about a trial: the rigid-joint chain plus the effects adopted so far, fitted.
+
+Effects change a hypothesis in one of four ways: extra terms in the chain (:class:`~.chain.Terms`),
+corrected data (labels swapped back, a delay undone), weights (gross errors dropped), or a joint
+re-declared. Every hypothesis is scored on the same measured samples, so that they compare: a sample
+an effect sets aside counts as three parameters spent, not as a sample removed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from identcheck.skeleton import Skeleton
+from identcheck.bundle.chain import Fit, State, Terms, fit_chain, forward
+from identcheck.estimate.noise import NoiseFloor
+
+SCREEN_ITER = 6          # LM iterations when screening a candidate (warm start)
+CONSISTENCY_MARGIN = 0.02
+"""Allowance on gap²/floor² beyond its sampling spreads before the residual counts as unexplained
+(1 % of the gap): the floor's model of noise (white, isotropic, the same on every marker) is never
+exact."""
+
+
+@dataclass(frozen=True)
+class Context:
+    """What every step of a diagnosis shares: the model, the raw trial, the noise and its sample count."""
+
+    model: object
+    labels: tuple
+    rate_hz: float
+    raw: np.ndarray              # (F, M, 3) as measured, NaN = occluded
+    noise: NoiseFloor
+    n_samples: int               # visible marker samples of the raw trial
+    source: str = ""
+
+    @property
+    def n_obs(self) -> int:
+        return 3 * self.n_samples
+
+    def bic_gain(self, explained_mm2: float, n_params: int) -> float:
+        """Bayesian information criterion gain with the noise known: the squared residual a change
+        explains over σ², less ln(3N) per parameter it costs; > 0 means it earns its parameters."""
+        return float(explained_mm2 / self.noise.sigma_mm ** 2 - n_params * np.log(self.n_obs))
+
+
+@dataclass
+class Hypothesis:
+    """The chain, its terms, the (corrected) data and weights it is fitted to, and the fit."""
+
+    chain: Skeleton
+    terms: Terms
+    data: np.ndarray
+    weights: np.ndarray
+    fit: Fit
+    extra_params: int = 0        # discrete choices and set-aside samples, counted as parameters
+    effects: list = field(default_factory=list)
+
+    @property
+    def rss(self) -> float:
+        return self.fit.rss
+
+    def n_params(self) -> int:
+        return self.fit.n_params + self.extra_params
+
+    def gap(self, ctx: Context) -> float:
+        """RMS 3-D distance over every measured sample (set-aside samples count as explained), mm."""
+        return float(np.sqrt(self.rss / ctx.n_samples))
+
+    def floor(self, ctx: Context) -> float:
+        return ctx.noise.floor(ctx.n_samples, self.n_params())
+
+    def residuals(self) -> np.ndarray:
+        """Measured minus predicted, (F, M, 3), NaN where occluded (uses the corrected data)."""
+        return self.data - self.fit.pred
+
+    def refit(self, terms: Terms | None = None, data=None, weights=None, chain: Skeleton | None = None,
+              state: State | None = None, extra_params: int = 0, effect=None,
+              max_iter: int = SCREEN_ITER) -> "Hypothesis":
+        """A new hypothesis with the given changes, fitted from this one's state (warm start)."""
+        terms = self.terms if terms is None else terms
+        state = (state or self.fit.state).copy()
+        state.term_params = carry_params(self.terms, self.fit.state.term_params, terms)
+        data = self.data if data is None else data
+        weights = self.weights if weights is None else weights
+        chain = chain or self.chain
+        fit = fit_chain(chain, data, state, terms, weights, max_iter=max_iter)
+        return Hypothesis(chain, terms, data, weights, fit, self.extra_params + extra_params,
+                          self.effects + ([effect] if effect is not None else []))
+
+    def polish(self, max_iter: int = 40) -> "Hypothesis":
+        """The same hypothesis fitted to convergence."""
+        fit = fit_chain(self.chain, self.data, self.fit.state, self.terms, self.weights, max_iter=max_iter)
+        return replace(self, fit=fit)
+
+
+def carry_params(old: Terms, params: list, new: Terms) -> list:
+    """Parameters for `new` terms: those it shares with `old` (the same term objects) keep their values."""
+    by_id = {id(t): p for t, p in zip(old.markers + old.centres + old.world, params)}
+    return [np.array(by_id[id(t)]) if id(t) in by_id else np.zeros(shape)
+            for t, shape in zip(new.markers + new.centres + new.world, new.shapes())]
+
+
+def score(ctx: Context, new: Hypothesis, old: Hypothesis) -> float:
+    """:meth:`Context.bic_gain` of going from ``old`` to ``new``: ΔRSS/σ² − ΔP·ln(3N)."""
+    return ctx.bic_gain(old.rss - new.rss, new.n_params() - old.n_params())
+
+
+def consistency(ctx: Context, h: Hypothesis) -> dict:
+    """The stated test that the residual is noise: RSS/σ² is χ²(ν), ν = 3N − P, so gap²/floor² ≈ 1 with
+    spread √(2/ν); σ itself is estimated with relative standard error s, which moves the ratio by 2s.
+    Consistent when ratio ≤ 1 + 3√(2/ν) + 4s + :data:`CONSISTENCY_MARGIN` (about 3 and 2 standard
+    errors). A trial that fails it only by chance still adopts nothing unless an effect earns its
+    parameters (:func:`score`)."""
+    nu = max(ctx.n_obs - h.n_params(), 1)
+    ratio = h.rss / (nu * ctx.noise.sigma_mm ** 2) if ctx.noise.sigma_mm > 0 else np.inf
+    limit = 1 + 3 * np.sqrt(2 / nu) + 4 * ctx.noise.rel_se + CONSISTENCY_MARGIN
+    return {"ratio": float(ratio), "limit": float(limit), "dof": int(nu), "consistent": bool(ratio <= limit)}
+
+
+# ---------------------------------------------------------------------- joint angles
+def joint_angles(h: Hypothesis) -> dict:
+    """Each joint's angles from the fit: a hinge's angle (F, 1); a ball joint's rotation vector relative
+    to its median pose, in the parent frame (F, 3); radians."""
+    s = h.fit.state
+    out = {}
+    for j in h.chain.joints:
+        if h.chain.types[j] == "revolute":
+            out[j] = s.theta[j][:, None]
+        else:
+            rel = s.rel_R[j]
+            ref = Rotation.from_matrix(rel).mean().as_matrix()
+            out[j] = Rotation.from_matrix(rel @ ref.T).as_rotvec()
+    return out
+
+
+def angle_basis(angles: np.ndarray, linear: bool = True) -> np.ndarray:
+    """Smooth functions of a joint's angles (F, n), each angle scaled to [-1, 1]: the angles themselves
+    (unless `linear` is False) and every product of two of them, centred; (F, n + n(n+1)/2) or
+    (F, n(n+1)/2). The shape of soft-tissue motion and of a translating joint."""
+    lo, hi = angles.min(axis=0), angles.max(axis=0)
+    a = (2 * angles - (hi + lo)) / np.where(hi > lo, hi - lo, 1.0)
+    i, j = np.triu_indices(a.shape[1])
+    quad = a[:, i] * a[:, j]
+    quad = quad - quad.mean(axis=0)
+    return np.concatenate([a, quad], axis=1) if linear else quad
+
+
+def segment_residuals(h: Hypothesis) -> np.ndarray:
+    """Each marker's residual in its own segment's frame, (F, M, 3), NaN where occluded or weighted out."""
+    r = h.residuals()
+    out = np.full_like(r, np.nan)
+    for seg in h.chain.segments:
+        idx = h.chain.seg_markers[seg]
+        out[:, idx] = np.einsum("fji,fkj->fki", h.fit.seg_R[seg], r[:, idx])
+    out[h.weights <= 0] = np.nan
+    return out
+
+
+def centre_world(h: Hypothesis, joint: str) -> np.ndarray:
+    """The joint's centre (a hinge: its point nearest the parent frame's origin) in the world, (F, 3)."""
+    _, _, centre, _ = forward(h.chain, h.terms, h.fit.state)
+    return centre[joint]

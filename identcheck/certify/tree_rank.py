@@ -1,0 +1,541 @@
+"""Local identifiability of every joint of a whole skeleton at once, from the exact rank of its Jacobian.
+
+The per-joint table reasons about two links with the rest of the body out of sight. A marker plan
+is a tree: the root's free pose, every joint's angles in every frame, and constant parameters —
+each marker's position on its segment, each joint's centre in its parent, each hinge's direction.
+J is the Jacobian of all marker coordinates over N frames with respect to all of these. A
+gauge-invariant quantity f of the constants (a marker's distance to a joint centre or hinge axis,
+a marker's offset along a hinge relative to another's) is locally identifiable iff ∇f lies in the
+row space of J restricted to the constants (:mod:`identcheck.certify.jacobian` explains why; this module
+is the same idea for a whole tree).
+
+Parametrisation (the gauge is free, so any generic one works). The child of joint j has its origin
+at the joint (a point of the hinge for a revolute joint) and the orientation of its parent turned
+by the joint: R_C = R_P Q_j, t_C = R_P c_j + t_P, with Q_j a free rotation (spherical) or
+Rot(a_j, θ) (revolute, a_j a unit direction in the parent). A marker of segment s sits at
+x = R_s m + t_s. In frame i the columns are the per-frame variables (root rotation and
+translation, each joint's rotation) and the constants (m, c_j, the two tangent directions of a_j).
+
+Block structure. Frame i has rows [V_i | C_i]; the row space of J restricted to the constants
+is W = Σ_i {λ C_i : λ V_i = 0}, read off the reduced row echelon form of [V_i | C_i] (rows whose
+pivot lies in the constant columns). W only grows with N; frames are added until a new generic
+frame changes neither dim W nor any verdict (the stopping rule of :mod:`identcheck.certify.jacobian`).
+
+Exactness. Every rank is exact, in one of two fields (python-flint matrices): ``"GFp"``, the
+integers modulo a prime p drawn uniformly among the 61-bit primes, with the point uniform on
+GF(p)^n (the default: fast), or ``"QQ"``, exact rationals, the point's coordinates uniform on a set
+S of 2^40 rationals (slower; a cross-check). A rank at one point is never above the generic rank
+over QQ, and equals it unless one non-zero integer polynomial of degree ≤ D (:func:`degree_bound`)
+vanishes there (probability ≤ D/|S| over QQ) or — over GF(p) — p divides all its coefficients
+or the point is a root mod p; :func:`failure_bound` turns this into the probability, stated with
+every verdict, that any verdict is wrong.
+"""
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import cached_property
+
+import flint
+
+from identcheck.errors import InputError
+from identcheck.exact.algebra import add as _add, axis_rotation as _axis_rotation, cross as _cross, dot as _dot, half_angle, mm as _mm, mv as _mv, quaternion_rotation, random_prime as _random_prime, scale as _scale, sub as _sub, transpose as _T
+
+SET_BITS = 40
+PRIME_BITS = 61
+MAX_FRAMES = 60
+TYPES = ("spherical", "revolute")
+VARS_PER_JOINT = {"spherical": 3, "revolute": 1}
+
+
+# -- fields ----------------------------------------------------------------------------------------
+class Field:
+    """Scalars and matrices of QQ (exact) or GF(p) (a random prime, for fast search)."""
+
+    def __init__(self, kind: str, rng: random.Random):
+        self.kind = kind
+        if kind == "QQ":
+            self.p = None
+        elif kind == "GFp":
+            self.p = _random_prime(rng, PRIME_BITS)
+        else:
+            raise ValueError(f"unknown field {kind!r}")
+
+    def __call__(self, x):
+        if self.p is None:
+            if isinstance(x, Fraction):
+                return flint.fmpq(x.numerator, x.denominator)
+            return flint.fmpq(x)
+        if isinstance(x, Fraction):
+            return flint.nmod(x.numerator, self.p) / flint.nmod(x.denominator, self.p)
+        return flint.nmod(x, self.p)
+
+    def matrix(self, rows, ncols: int):
+        if not rows:
+            return None
+        if self.p is None:
+            return flint.fmpq_mat(len(rows), ncols, [v for r in rows for v in r])
+        return flint.nmod_mat(rows, self.p)
+
+    def rref_rows(self, rows, ncols: int) -> list:
+        """Non-zero rows of the reduced row echelon form (a basis of the row space)."""
+        M = self.matrix(rows, ncols)
+        if M is None:
+            return []
+        R, rank = M.rref()
+        flat = R.entries()
+        return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
+
+
+class _Draw:
+    """Random elements of a field: uniform on GF(p), or on S = {k / 2^20 : |k| < 2^39} ⊂ QQ."""
+
+    def __init__(self, F: Field, rng: random.Random):
+        self.F, self.rng = F, rng
+
+    def scalar(self):
+        if self.F.p is not None:                       # uniform on GF(p)
+            return self.F(self.rng.randrange(self.F.p))
+        k = self.rng.randrange(-(1 << (SET_BITS - 1)), 1 << (SET_BITS - 1))
+        return self.F(Fraction(k, 1 << 20))
+
+    def vector(self):
+        return [self.scalar() for _ in range(3)]
+
+    def rotation(self):
+        """A rational rotation from a random quaternion (w, x, y, z) ≠ 0."""
+        while True:
+            q = [self.scalar() for _ in range(4)]
+            if sum(v * v for v in q) != 0:
+                return quaternion_rotation(*q)
+
+    def angle(self):
+        """(cos θ, sin θ) from a random half-angle tangent t with 1 + t² ≠ 0."""
+        while True:
+            t = self.scalar()
+            if 1 + t * t != 0:
+                return half_angle(t)
+
+
+def _axis_rotation_derivative(a, u, c, s):
+    """d Rot(a, θ) along a → a + ε u (u ⟂ a): s [u]× + (1 − c)(u aᵀ + a uᵀ)."""
+    one = 1 - c
+    skew = [[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]]
+    return [[s * skew[i][j] + one * (u[i] * a[j] + a[i] * u[j]) for j in range(3)] for i in range(3)]
+
+
+# -- the tree ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TreeSpec:
+    """A skeleton as the engine needs it: segments with marker counts, joints (name, type, parent, child)."""
+
+    root: str
+    markers: dict                  # segment -> tuple of marker names
+    joints: tuple                  # ((name, type, parent, child), ...) parents before children
+    frozen: frozenset = frozenset()   # joints held at one fixed angle in every frame (motion not exercised)
+
+    @classmethod
+    def from_model(cls, model) -> "TreeSpec":
+        """From an :class:`identcheck.io.model.Model`; an unsupported joint type is an InputError."""
+        markers = {s: tuple(seg.markers) for s, seg in model.segments.items()}
+        joints = tuple((n, model.joints[n].type, model.joints[n].parent, model.joints[n].child)
+                       for n in model.joint_order)
+        for n, t, _, _ in joints:
+            if t not in TYPES:
+                raise InputError([f"joint {n!r}: type {t!r} is not supported by the whole-tree analysis "
+                                  f"(supported: {', '.join(TYPES)})"])
+        return cls(model.root, markers, joints)
+
+    def without(self, marker: str) -> "TreeSpec":
+        return TreeSpec(self.root, {s: tuple(m for m in ms if m != marker) for s, ms in self.markers.items()},
+                        self.joints, self.frozen)
+
+    def freezing(self, names) -> "TreeSpec":
+        return TreeSpec(self.root, self.markers, self.joints, frozenset(names))
+
+    @cached_property
+    def children(self) -> dict:
+        out = {s: [] for s in self.markers}
+        for j in self.joints:
+            out[j[2]].append(j)
+        return out
+
+    @cached_property
+    def parent_joint(self) -> dict:
+        return {j[3]: j for j in self.joints}
+
+
+@dataclass
+class _Columns:
+    """Indices of the constant columns (markers, joint centres, hinge tangents)."""
+
+    marker: dict = field(default_factory=dict)     # marker -> first of 3 columns
+    centre: dict = field(default_factory=dict)     # joint -> first of 3 columns
+    tangent: dict = field(default_factory=dict)    # joint -> first of 2 columns
+    frozen: dict = field(default_factory=dict)     # frozen joint -> columns of its constant angle(s)
+    n: int = 0
+
+    def take(self, k: int) -> int:
+        self.n += k
+        return self.n - k
+
+
+@dataclass
+class _Constants:
+    m: dict            # marker -> local position
+    c: dict            # joint -> centre in the parent
+    a: dict            # revolute joint -> (a, u, v) unit direction and tangents in the parent
+
+
+class TreeJacobian:
+    """Frames of the whole-tree Jacobian at one random point, accumulated into W (see module docstring)."""
+
+    def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0):
+        self.spec = spec
+        rng = random.Random(f"identcheck.certify.tree_rank/{seed}/{field_kind}")
+        self.F = Field(field_kind, rng)
+        self.draw = _Draw(self.F, rng)
+        cols = _Columns()
+        for s, ms in spec.markers.items():
+            for m in ms:
+                cols.marker[m] = cols.take(3)
+        for name, kind, _, _ in spec.joints:
+            cols.centre[name] = cols.take(3)
+            if kind == "revolute":
+                cols.tangent[name] = cols.take(2)
+            if name in spec.frozen:
+                cols.frozen[name] = cols.take(VARS_PER_JOINT[kind])
+        self.cols = cols
+        d = self.draw
+        axes = {}
+        for name, kind, _, _ in spec.joints:
+            if kind == "revolute":
+                R = d.rotation()
+                axes[name] = ([R[i][2] for i in range(3)], [R[i][0] for i in range(3)], [R[i][1] for i in range(3)])
+        self.k = _Constants(m={m: d.vector() for ms in spec.markers.values() for m in ms},
+                            c={j[0]: d.vector() for j in spec.joints}, a=axes)
+        self.frozen_angles = {name: self._joint_rotation(name, kind) for name, kind, _, _ in spec.joints
+                              if name in spec.frozen}
+        self.var_offset = {}
+        nv = 6
+        for name, kind, _, _ in spec.joints:
+            if name not in spec.frozen:
+                self.var_offset[name] = nv
+                nv += VARS_PER_JOINT[kind]
+        self.n_vars = nv
+        self.W: list = []
+        self.frames = 0
+
+    def _joint_rotation(self, name, kind):
+        if kind == "spherical":
+            return (self.draw.rotation(), None)
+        c, s = self.draw.angle()
+        return (_axis_rotation(self.k.a[name][0], c, s), (c, s))
+
+    def _frame_rows(self) -> list:
+        """Rows [V_i | C_i] of one generic frame."""
+        spec, k, F = self.spec, self.k, self.F
+        zero = F(0)
+        pose = {spec.root: (self.draw.rotation(), self.draw.vector())}
+        joint_frame = {}
+        for name, kind, par, chi in spec.joints:
+            RP, tP = pose[par]
+            Q, cs = self.frozen_angles.get(name) or self._joint_rotation(name, kind)
+            pose[chi] = (_mm(RP, Q), _add(_mv(RP, k.c[name]), tP))
+            joint_frame[name] = (RP, tP, Q, cs)
+        ncols = self.n_vars + self.cols.n
+        rows = []
+        seg_of = {m: s for s, ms in spec.markers.items() for m in ms}
+        for m, s in seg_of.items():
+            R, t = pose[s]
+            x = _add(_mv(R, k.m[m]), t)
+            block = [[zero] * ncols for _ in range(3)]
+            e = [[F(1), zero, zero], [zero, F(1), zero], [zero, zero, F(1)]]
+            for a in range(3):                                  # root rotation about the world origin
+                col = _cross(e[a], x)
+                for r in range(3):
+                    block[r][a] = col[r]
+                    block[r][3 + a] = e[a][r]                   # root translation
+            base = self.n_vars
+            for a in range(3):                                  # the marker's own position
+                for r in range(3):
+                    block[r][base + self.cols.marker[m] + a] = R[r][a]
+            seg = s
+            while seg != spec.root:                             # every joint above the marker
+                name, kind, par, _ = spec.parent_joint[seg]
+                RP, tP, Q, cs = joint_frame[name]
+                rel = _sub(x, pose[seg][1])                     # from the joint's centre (the child origin)
+                v0 = self.var_offset[name] if name in self.var_offset else base + self.cols.frozen[name]
+                if kind == "spherical":
+                    for a in range(3):                          # about the parent's axes (a constant
+                        col = _cross([RP[0][a], RP[1][a], RP[2][a]], rel)   # basis when frozen)
+                        for r in range(3):
+                            block[r][v0 + a] = col[r]
+                else:
+                    col = _cross(_mv(RP, k.a[name][0]), rel)
+                    for r in range(3):
+                        block[r][v0] = col[r]
+                c0 = base + self.cols.centre[name]
+                for a in range(3):
+                    for r in range(3):
+                        block[r][c0 + a] = RP[r][a]
+                if kind == "revolute":
+                    a_, u_, w_ = k.a[name]
+                    c, s_ = cs
+                    z = _mv(_T(Q), _sub(_mv(_T(RP), _sub(x, tP)), k.c[name]))       # y in the child frame
+                    for b, tv in enumerate((u_, w_)):
+                        col = _mv(RP, _mv(_axis_rotation_derivative(a_, tv, c, s_), z))
+                        for r in range(3):
+                            block[r][base + self.cols.tangent[name] + b] = col[r]
+                seg = par
+            rows.extend(block)
+        return rows
+
+    def add_frame(self, count: int = 1) -> int:
+        """Add ``count`` generic frames (W reduced once, after the last); returns dim W."""
+        ncols = self.n_vars + self.cols.n
+        new = []
+        for _ in range(count):
+            red = self.F.rref_rows(self._frame_rows(), ncols)
+            new += [r[self.n_vars:] for r in red if all(v == 0 for v in r[:self.n_vars])]
+            self.frames += 1
+        self.W = self.F.rref_rows(self.W + new, self.cols.n)
+        self.pivots = [next(j for j, v in enumerate(r) if v != 0) for r in self.W]
+        return len(self.W)
+
+    def gradient_rows(self, grads) -> list:
+        """Dense rows of constant-gradients given as {column: value}."""
+        out = []
+        for grad in grads:
+            g = [self.F(0)] * self.cols.n
+            for i, v in grad.items():
+                g[i] = g[i] + v
+            out.append(g)
+        return out
+
+    def in_span(self, rows) -> list:
+        """For each dense row, is it in W? (Reduce by the echelon basis: one matrix product.)"""
+        if not rows:
+            return []
+        n = self.cols.n
+        if not self.W:
+            return [all(v == 0 for v in r) for r in rows]
+        G = self.F.matrix(rows, n)
+        P = self.F.matrix([[r[j] for j in self.pivots] for r in rows], len(self.pivots))
+        flat = (G - P * self.F.matrix(self.W, n)).entries()
+        return [not any(flat[i * n:(i + 1) * n]) for i in range(len(rows))]
+
+
+# -- what is asked: gauge-invariant quantities of each joint ------------------------------------------
+@dataclass(frozen=True)
+class Point:
+    """A point fixed in a segment that a joint is measured against: a marker, or another joint's centre."""
+
+    name: str
+    segment: str
+    kind: str           # "marker" | "centre"
+
+
+def adjacent_points(spec: TreeSpec, joint: str) -> tuple:
+    """(parent-side points, child-side points) a joint's parameters are measured against: the markers
+    of each adjacent segment; for a segment without markers, the centres of its other spherical
+    joints (so a markerless shank still relates the knee to the ankle)."""
+    name, kind, par, chi = next(j for j in spec.joints if j[0] == joint)
+    sides = []
+    for seg in (par, chi):
+        pts = [Point(m, seg, "marker") for m in spec.markers[seg]]
+        if not pts:
+            others = [j for j in spec.children[seg] if j[0] != joint]
+            pj = spec.parent_joint.get(seg)
+            if pj is not None and pj[0] != joint:
+                others.append(pj)
+            pts = [Point(o[0], seg, "centre") for o in others if o[1] == "spherical"]
+        sides.append(tuple(pts))
+    return tuple(sides)
+
+
+class _Quantity:
+    """A gauge-invariant quantity of one joint and its gradient on the constants (column -> value)."""
+
+    def __init__(self, label: str, grad: dict):
+        self.label, self.grad = label, grad
+
+
+def _point_local(tj: "TreeJacobian", pt: Point, seg: str):
+    """(coordinates in ``seg``'s frame, {column: d coords / d column} as 3-vectors per column)."""
+    spec, k, F = tj.spec, tj.k, tj.F
+    if pt.kind == "marker":
+        i = tj.cols.marker[pt.name]
+        return k.m[pt.name], {i + a: a for a in range(3)}
+    j = next(j for j in spec.joints if j[0] == pt.name)
+    if j[2] == seg:              # a child joint of seg: its centre in seg's frame is c_j
+        i = tj.cols.centre[pt.name]
+        return k.c[pt.name], {i + a: a for a in range(3)}
+    return [F(0), F(0), F(0)], {}  # seg's own parent joint: its centre is seg's origin
+
+
+def quantities(tj: "TreeJacobian", joint: str) -> list:
+    """Squared distances of the adjacent points to the centre (spherical) or to the hinge, and the
+    hinge's axial offsets between the adjacent points (revolute)."""
+    spec, k, F = tj.spec, tj.k, tj.F
+    name, kind, par, chi = next(j for j in spec.joints if j[0] == joint)
+    parent_pts, child_pts = adjacent_points(spec, joint)
+    ci = tj.cols.centre[name]
+    out, axial = [], []
+    for side, pts in ((par, parent_pts), (chi, child_pts)):
+        for pt in pts:
+            y, dy = _point_local(tj, pt, side)
+            w = _sub(y, k.c[name]) if side == par else y     # from the centre / a point of the hinge
+            grad: dict = {}
+
+            def put(col, val):
+                grad[col] = grad.get(col, F(0)) + val
+
+            if kind == "spherical":
+                for col, a in dy.items():
+                    put(col, 2 * w[a])
+                if side == par:
+                    for a in range(3):
+                        put(ci + a, -2 * w[a])
+                out.append(_Quantity(f"|{pt.name} - centre|^2", grad))
+                continue
+            a_, u_, v_ = k.a[name]
+            h = _dot(w, a_)
+            perp = _sub(w, _scale(h, a_))
+            for col, a in dy.items():
+                put(col, 2 * perp[a])
+            if side == par:
+                for a in range(3):
+                    put(ci + a, -2 * perp[a])
+            ti = tj.cols.tangent[name]
+            put(ti, -2 * h * _dot(w, u_))
+            put(ti + 1, -2 * h * _dot(w, v_))
+            out.append(_Quantity(f"dist({pt.name}, hinge)^2", grad))
+            hg: dict = {}
+            for col, a in dy.items():
+                hg[col] = hg.get(col, F(0)) + a_[a]
+            if side == par:
+                for a in range(3):
+                    hg[ci + a] = hg.get(ci + a, F(0)) - a_[a]
+            hg[ti] = hg.get(ti, F(0)) + _dot(w, u_)
+            hg[ti + 1] = hg.get(ti + 1, F(0)) + _dot(w, v_)
+            axial.append((pt.name, hg))
+    for (n0, g0), (n1, g1) in zip(axial, axial[1:]):
+        g = dict(g1)
+        for col, val in g0.items():
+            g[col] = g.get(col, F(0)) - val
+        out.append(_Quantity(f"axial({n1}) - axial({n0})", g))
+    return out
+
+
+# -- the analysis ------------------------------------------------------------------------------------
+@dataclass
+class JointRank:
+    """The whole-tree verdict for one joint."""
+
+    local: bool
+    min_frames: int | None            # fewest generic frames after which it is locally identifiable
+    quantities: list                  # labels of the gauge-invariant quantities asked about
+    undetermined: list                # labels not in W (empty when local)
+
+
+@dataclass
+class TreeRank:
+    """Whole-tree verdicts, with what the certificate rests on."""
+
+    joints: dict                      # name -> JointRank
+    frames: int                       # frames used (the scan stopped: one more changed nothing)
+    dim_w: int                        # dim W: constants combinations the data determine
+    n_constants: int
+    field: str
+    prime: int | None
+    degree_bound: int
+    failure_bound: float              # probability the verdicts are wrong (QQ) / guidance only (GFp)
+
+
+def degree_bound(spec: TreeSpec, frames: int) -> int:
+    """D: a bound on the degree, in the drawn coordinates, of the minors the verdicts rest on.
+
+    Entries of a row of J are, after clearing denominators, polynomials in the drawn coordinates:
+    each rotation on the chain from the root contributes degree ≤ 2 to numerator and denominator
+    (quaternion / |q|² or half-angle over 1 + t²), a joint at most two rotations (a hinge: its
+    axis' rotation and its angle), the constants degree 1; a row below d joints therefore has
+    degree ≤ 4(2d + 2) + 2 once its denominators are cleared, and a minor built from ≤ R rows (plus
+    one gradient row) has degree ≤ the sum over its rows, bounded by the sum over all rows.
+    """
+    depth = {spec.root: 0}
+    for _, _, par, chi in spec.joints:
+        depth[chi] = depth[par] + 2
+    per_frame = sum(3 * len(ms) * (4 * (depth[s] + 2) + 2) for s, ms in spec.markers.items())
+    grad_row = 8
+    return per_frame * frames + grad_row
+
+
+def content_bits(spec: TreeSpec, frames: int, ncols: int) -> int:
+    """L: a bound on log2 of the largest coefficient (over Z) of a minor the verdicts rest on.
+
+    A minor's coefficient 1-norm is at most the product over its rows of the row's summed entry
+    1-norms (expand the determinant). An entry, denominators cleared, is a sum of ≤ 3 products per
+    joint on the chain of quaternion / half-angle numerators and constants, each of 1-norm ≤ 4:
+    ≤ 2^(8 (d + 3)) for a chain of d joints is generous. So L ≤ Σ_rows (log2 ncols + 8 (d + 3)).
+    """
+    depth = {spec.root: 0}
+    for _, _, par, chi in spec.joints:
+        depth[chi] = depth[par] + 1
+    per_frame = sum(3 * len(ms) * (math.ceil(math.log2(max(ncols, 2))) + 8 * (depth[s] + 3))
+                    for s, ms in spec.markers.items())
+    return per_frame * frames + 64
+
+
+def failure_bound(spec: TreeSpec, frames: int, n_claims: int, prime: int | None, ncols: int) -> float:
+    """Probability that any of ``n_claims`` verdicts is wrong (the rank at the drawn point is not generic).
+
+    QQ: Schwartz–Zippel, D/|S| per claim. GF(p), p uniform among the primes of [2^60, 2^61): the
+    critical minor P ∈ Z[x] is non-zero; it vanishes identically mod p only if p divides all its
+    coefficients — at most L/60 primes of that size divide one non-zero coefficient (< 2^L), out of
+    more than 2^60 / (2 ln 2^61) primes there — else it vanishes at the uniform point of GF(p)^n
+    with probability ≤ D/p. Union bound over the claims.
+    """
+    D = degree_bound(spec, frames)
+    if prime is None:
+        per = D / 2.0 ** SET_BITS
+    else:
+        n_primes = 2.0 ** (PRIME_BITS - 1) / (2 * PRIME_BITS * math.log(2))
+        per = D / prime + (content_bits(spec, frames, ncols) / (PRIME_BITS - 1)) / n_primes
+    return min(1.0, n_claims * per)
+
+
+def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
+            warm_frames: int = 0) -> TreeRank:
+    """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
+
+    ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
+    plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count)."""
+    tj = TreeJacobian(spec, field_kind, seed)
+    qs = {j[0]: quantities(tj, j[0]) for j in spec.joints}
+    labels = [(n, q.label) for n, ql in qs.items() for q in ql]
+    G = tj.gradient_rows([q.grad for ql in qs.values() for q in ql])
+    first = {}
+    prev = None
+    while tj.frames < max_frames:
+        dim = tj.add_frame(max(1, warm_frames - tj.frames))
+        verdict = {n: [] for n in qs}
+        for (n, label), ok in zip(labels, tj.in_span(G)):
+            if not ok:
+                verdict[n].append(label)
+        for name, qlist in qs.items():
+            if qlist and not verdict[name] and name not in first:
+                first[name] = tj.frames
+        state = (dim, {n: len(m) for n, m in verdict.items()})
+        if state == prev:
+            break
+        prev = state
+    joints = {n: JointRank(local=bool(qs[n]) and not verdict[n], min_frames=first.get(n),
+                           quantities=[q.label for q in qs[n]], undetermined=verdict[n]) for n in qs}
+    D = degree_bound(spec, tj.frames)
+    n_claims = sum(len(q) for q in qs.values()) + 1
+    fail = failure_bound(spec, tj.frames, n_claims, tj.F.p, tj.n_vars * tj.frames + tj.cols.n)
+    return TreeRank(joints=joints, frames=tj.frames, dim_w=len(tj.W), n_constants=tj.cols.n, field=field_kind,
+                    prime=tj.F.p, degree_bound=D, failure_bound=fail)

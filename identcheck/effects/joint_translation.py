@@ -1,0 +1,58 @@
+"""``joint_translation``: the joint's centre (or hinge) moves in its parent as the joint turns.
+
+Detector: the residuals of every marker below the joint, seen from the parent segment, regressed on
+smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
+``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree.
+
+The basis has the angles' products only, no linear terms: a translation linear in a hinge's angle,
+perpendicular to the axis, is to first order a rigid hinge about a shifted axis (and for a ball joint
+the skew part of a linear translation is a shifted centre), so linear terms would trade off against
+the joint's own parameters (their standard errors grow to several mm) rather than add information.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from identcheck.bundle.chain import Terms
+from identcheck.bundle.hypothesis import angle_basis, joint_angles
+from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.soft_tissue import explained
+
+
+class JointTranslation(Effect):
+    name = "joint_translation"
+    max_proposals = 3
+
+    def propose(self, ctx, hyp) -> list:
+        ch, angles = hyp.chain, joint_angles(hyp)
+        res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
+        out = []
+        for j in ch.joints:
+            idx = ch.downstream[j]
+            seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
+            basis = angle_basis(angles[j], linear=False)
+            with warnings.catch_warnings():          # frames where every such marker is hidden
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean = np.nanmean(seen_from_parent, axis=1)
+            gain = ctx.bic_gain(len(idx) * explained(mean, basis), 3 * basis.shape[1])
+            out.append(Proposal(self.name, {"joint": j}, float(gain), {"joint": j, "basis": basis}))
+        return sorted(out, key=lambda p: -p.strength)
+
+    def apply(self, ctx, hyp, proposal):
+        term = (proposal.payload["joint"], proposal.payload["basis"])
+        return hyp.refit(terms=hyp.terms + Terms(centres=[term]), effect=proposal, max_iter=10)
+
+    def evidence(self, ctx, before, after, proposal) -> dict:
+        j = proposal.payload["joint"]
+        ch = before.chain
+        idx = ch.downstream[j]
+        def moved(h):  # noqa: E306
+            r = np.where((h.weights > 0)[..., None], h.residuals(), np.nan)[:, idx]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                return np.linalg.norm(np.nanmean(r, axis=1), axis=1)
+        return {"x": np.rad2deg(joint_angles(before)[j][:, 0]), "x_label": f"{j} angle (deg)",
+                "y": moved(before), "y_after": moved(after),
+                "y_label": f"mean residual of the markers below {j} (mm)", "kind": "scatter"}

@@ -1,0 +1,43 @@
+"""``marker_swap``: two markers' labels exchanged over a span of frames.
+
+Detector (needs no joint model): markers on one segment keep their distances apart, so for every pair
+of labels and every frame the distances to each one's segment partners are compared with their
+medians as labelled and as exchanged; the longest run of frames that fits clearly better exchanged
+is the span. Augmentation: the two columns are exchanged back over the span (the pair and the two
+ends count as three parameters).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.chain import initial_state
+from identcheck.effects.base import Effect, Proposal
+from identcheck.estimate.labels import detect
+
+
+class MarkerSwap(Effect):
+    name = "marker_swap"
+    max_proposals = 2
+
+    def propose(self, ctx, hyp) -> list:
+        ch = hyp.chain
+        return [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
+                                     "frames": list(d["span"])},
+                         d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"]})
+                for d in detect(hyp.data, ch, ctx.noise.sigma_mm, ctx.n_obs)]
+
+    def apply(self, ctx, hyp, proposal):
+        (i, j), (a, b) = proposal.payload["cols"], proposal.payload["span"]
+        data, w = hyp.data.copy(), hyp.weights.copy()
+        data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]
+        w[a:b + 1, [i, j]] = w[a:b + 1, [j, i]]
+        fresh = initial_state(hyp.chain, data)       # the swapped frames pulled the old fit far off
+        fresh.term_params = hyp.fit.state.term_params
+        return hyp.refit(data=data, weights=w, state=fresh, extra_params=3, effect=proposal, max_iter=15)
+
+    def evidence(self, ctx, before, after, proposal) -> dict:
+        keep, swap = proposal.payload["keep"], proposal.payload["swap"]
+        return {"x": np.arange(len(keep)), "x_label": "frame", "y": np.sqrt(np.maximum(keep, 0)),
+                "y_after": np.sqrt(np.maximum(swap, 0)),
+                "y_label": "within-segment distance misfit (mm): as labelled / exchanged",
+                "span": list(proposal.payload["span"]), "kind": "series"}

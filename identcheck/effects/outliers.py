@@ -1,0 +1,66 @@
+"""``outliers``: sparse gross errors (ghost markers, mislabelled single frames).
+
+Detector: samples whose 3-D residual is beyond what noise gives once in the whole trial (the χ²₃
+quantile at 1 % over all samples) and the largest of their frame (a gross error drags the poses of
+its frame, so other markers fail the bound too, less). Augmentation: those samples are set aside
+(weight 0, three parameters each), the model refitted, and the test repeated until no new sample
+fails it (a frame with two gross errors loses the second in the next round).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+from identcheck.effects.base import Effect, Proposal
+
+ROUNDS = 8
+MAX_FRACTION = 0.05
+"""Gross errors are sparse: beyond this fraction of the samples the residual is something else."""
+
+
+def flagged(ctx, hyp) -> np.ndarray:
+    """Samples (F, M) whose residual fails the trial-wide noise bound."""
+    r2 = np.where(hyp.weights > 0, np.sum(np.nan_to_num(hyp.residuals()) ** 2, axis=2), 0.0)
+    limit = ctx.noise.sigma_mm ** 2 * chi2.isf(0.01 / ctx.n_samples, 3)
+    worst = r2 >= r2.max(axis=1, keepdims=True)
+    return (r2 > limit) & worst
+
+
+def _where(ctx, mask) -> dict:
+    f, m = np.nonzero(mask)
+    return {"markers": sorted({ctx.labels[i] for i in m}), "frames": sorted({int(x) for x in f}),
+            "count": int(mask.sum())}
+
+
+class Outliers(Effect):
+    name = "outliers"
+
+    def propose(self, ctx, hyp) -> list:
+        mask = flagged(ctx, hyp)
+        if not mask.any() or mask.sum() > MAX_FRACTION * ctx.n_samples:
+            return []
+        r2 = np.sum(np.nan_to_num(hyp.residuals()) ** 2, axis=2)
+        gain = ctx.bic_gain(float(np.sum(r2[mask])), 3 * int(mask.sum()))
+        return [Proposal(self.name, _where(ctx, mask), gain, {"mask": mask})]
+
+    def apply(self, ctx, hyp, proposal):
+        mask = proposal.payload["mask"].copy()
+        new = hyp
+        for _ in range(ROUNDS):
+            w = np.where(mask, 0.0, hyp.weights)
+            new = hyp.refit(weights=w, extra_params=3 * int(mask.sum()), effect=proposal)
+            more = flagged(ctx, new)
+            if not more.any() or (mask | more).sum() > MAX_FRACTION * ctx.n_samples:
+                break
+            mask |= more
+        proposal.where.update(_where(ctx, mask))
+        proposal.payload["mask"] = mask
+        return new
+
+    def evidence(self, ctx, before, after, proposal) -> dict:
+        r = np.linalg.norm(np.nan_to_num(before.residuals()), axis=2)
+        mask = proposal.payload["mask"]
+        return {"x": np.arange(len(r)), "x_label": "frame", "y": r.max(axis=1),
+                "y_after": np.where(mask, 0, np.linalg.norm(np.nan_to_num(after.residuals()), axis=2)).max(axis=1),
+                "y_label": "largest marker residual in the frame (mm)", "mark": sorted(set(np.nonzero(mask)[0])),
+                "kind": "series"}

@@ -1,0 +1,82 @@
+"""``spatial_distortion``: the capture volume is distorted by a smooth field (calibration error).
+
+A rigid body moved through a distorted volume appears to stretch; the part of a smooth field that a
+rigid motion cannot absorb is its strain. The field is modelled as ``f(u) = E u + Σ q_k m_k(u)``
+over normalised coordinates ``u`` of the volume the markers occupy: E symmetric and traceless (a
+rotation or uniform scale would be absorbed by the segments; 5 parameters) and 6 quadratic
+monomials times 3-vectors (18). Detector: the residuals regressed on these fields. Augmentation: the
+fields added to every prediction, their 23 coefficients fitted with everything else.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.chain import Terms
+from identcheck.effects.base import Effect, Proposal
+
+MAX_AMPLITUDE_MM = 25.0
+"""A calibrated volume is not distorted by more than this; a larger fitted field is absorbing something
+else (soft tissue on real data does this)."""
+
+_STRAIN = [np.diag([1.0, -1.0, 0.0]), np.diag([1.0, 1.0, -2.0]) / np.sqrt(3),
+           np.array([[0, 1.0, 0], [1, 0, 0], [0, 0, 0]]), np.array([[0, 0, 1.0], [0, 0, 0], [1, 0, 0]]),
+           np.array([[0, 0, 0], [0, 0, 1.0], [0, 1, 0]])]
+_PAIRS = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+
+
+def volume(data: np.ndarray):
+    """Centre and half-extent (per axis, ≥ 1 mm) of the volume the visible markers occupy."""
+    lo, hi = np.nanmin(data, axis=(0, 1)), np.nanmax(data, axis=(0, 1))
+    return (lo + hi) / 2, np.maximum((hi - lo) / 2, 1.0)
+
+
+def fields(data: np.ndarray) -> list:
+    """The 23 distortion fields at the measured positions, each (F, M, 3) mm per unit coefficient."""
+    c, h = volume(data)
+    u = np.nan_to_num((data - c) / h)
+    scale = float(np.mean(h))
+    out = [scale * np.einsum("ij,fmj->fmi", E, u) for E in _STRAIN]
+    for a, b in _PAIRS:
+        mono = u[..., a] * u[..., b]
+        for d in range(3):
+            f = np.zeros_like(u)
+            f[..., d] = mono
+            out.append(f)
+    return out
+
+
+class SpatialDistortion(Effect):
+    name = "spatial_distortion"
+
+    def propose(self, ctx, hyp) -> list:
+        flds = fields(hyp.data)
+        w = hyp.weights > 0
+        res = np.where(w[..., None], np.nan_to_num(hyp.residuals()), 0.0).reshape(-1)
+        X = np.stack([np.where(w[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
+        coef = np.linalg.lstsq(X, res, rcond=None)[0]
+        gain = ctx.bic_gain(float(np.sum((X @ coef) ** 2)), len(flds))
+        return [Proposal(self.name, {}, gain, {"fields": flds})] if gain > 0 else []
+
+    def apply(self, ctx, hyp, proposal):
+        cols = np.arange(hyp.chain.n_markers)
+        terms = Terms(world=[(cols, f) for f in proposal.payload["fields"]])
+        new = hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
+        k = len(proposal.payload["fields"])
+        coef = np.array([p[0] for p in new.fit.state.term_params[-k:]])
+        disp = np.einsum("k,kfmi->fmi", coef, np.stack(proposal.payload["fields"]))
+        proposal.where["amplitude_mm"] = round(float(np.max(np.linalg.norm(disp, axis=2))), 2)
+        proposal.payload["displacement"] = disp
+        return new
+
+    def implausible(self, proposal) -> str:
+        amp = proposal.where.get("amplitude_mm", 0.0)
+        return (f"the fitted distortion reaches {amp:.0f} mm (> {MAX_AMPLITUDE_MM:g} mm): not a calibration error"
+                if amp > MAX_AMPLITUDE_MM else "")
+
+    def evidence(self, ctx, before, after, proposal) -> dict:
+        disp = proposal.payload.get("displacement")
+        z = before.data[..., 2].reshape(-1)
+        r = np.linalg.norm(np.nan_to_num(before.residuals()), axis=2).reshape(-1)
+        return {"x": z, "x_label": "height in the volume (mm)", "y": r,
+                "y_after": None if disp is None else np.linalg.norm(disp, axis=2).reshape(-1),
+                "y_label": "residual before (mm); fitted distortion (mm)", "kind": "scatter"}

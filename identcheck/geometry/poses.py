@@ -1,0 +1,191 @@
+"""Segment poses from three or more markers by SVD (Kabsch/Horn/Challis), vectorised over frames.
+
+A segment's markers have body-fixed coordinates ``local`` (m, 3); in frame f they are measured
+at ``points[f]`` (m, 3, NaN where occluded). The least-squares rotation and translation with
+``points[f] ≈ R[f] @ local + t[f]`` come from the SVD of the weighted cross-covariance
+(Challis 1995), with the reflection guard. Frames with fewer than three visible markers, or
+with visible markers (nearly) collinear, get no pose (``valid`` False, NaN R and t).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_MARKERS = 3
+COLLINEAR_RATIO = 1e-6   # second singular value of the centred local points / first
+REFINE_MAX_ITER = 20
+"""Default iteration cap of :func:`refine_local` (it needs 2-4 on simulated data)."""
+REFINE_TOL_MM = 1e-9
+"""Default convergence threshold of :func:`refine_local`: largest change of a body-fixed
+coordinate between iterations, mm."""
+
+
+@dataclass(frozen=True)
+class Poses:
+    """Per-frame rigid poses of one segment: ``points[f] ≈ R[f] @ local.T + t[f]``."""
+
+    R: np.ndarray        # (F, 3, 3)
+    t: np.ndarray        # (F, 3)
+    valid: np.ndarray    # (F,) bool
+    local: np.ndarray    # (m, 3) body-fixed marker coordinates used
+    rms: np.ndarray      # (F,) RMS marker residual (mm) of the fit, NaN where not valid
+
+    def to_world(self, local_points) -> np.ndarray:
+        """Body-fixed points (k, 3) → world (F, k, 3); NaN in frames without a pose."""
+        p = np.asarray(local_points, dtype=float)
+        return np.einsum("fij,kj->fki", self.R, p) + self.t[:, None, :]
+
+    def to_local(self, world_points) -> np.ndarray:
+        """World points (F, k, 3) → body-fixed (F, k, 3)."""
+        w = np.asarray(world_points, dtype=float) - self.t[:, None, :]
+        return np.einsum("fji,fkj->fki", self.R, w)
+
+
+def reference_shape(points) -> np.ndarray:
+    """Body-fixed coordinates from the first frame in which every marker is visible.
+
+    Any rigid placement works as the reference (poses are relative to it); seed 001's eq. (5)
+    refinement (``identcheck.geometry.poses.refine_local``, where provided) averages it over frames.
+    """
+    pts = np.asarray(points, dtype=float)
+    full = np.all(np.isfinite(pts), axis=(1, 2))
+    if not full.any():
+        raise ValueError("no frame has every marker of the segment visible")
+    ref = pts[np.argmax(full)]
+    return ref - ref.mean(axis=0)
+
+
+def segment_poses(points, local=None) -> Poses:
+    """Least-squares poses of one segment in every frame.
+
+    Parameters
+    ----------
+    points : array (F, m, 3)
+        Measured marker positions, NaN where occluded; m ≥ 3.
+    local : array (m, 3), optional
+        Body-fixed marker coordinates; by default :func:`reference_shape` of ``points``.
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 3 or pts.shape[2] != 3:
+        raise ValueError(f"points must have shape (F, m, 3), got {pts.shape}")
+    if pts.shape[1] < MIN_MARKERS:
+        raise ValueError(f"a segment pose needs at least {MIN_MARKERS} markers, got {pts.shape[1]}")
+    loc = reference_shape(pts) if local is None else np.asarray(local, dtype=float)
+    w = np.all(np.isfinite(pts), axis=2).astype(float)            # (F, m) visibility
+    n = w.sum(axis=1)
+    P = np.where(w[..., None] > 0, pts, 0.0)
+    safe = np.maximum(n, 1)[:, None]
+    cp = (w[..., None] * P).sum(axis=1) / safe                     # (F, 3) measured centroid
+    cl = (w[..., None] * loc[None]).sum(axis=1) / safe             # (F, 3) local centroid
+    Pc = (P - cp[:, None]) * w[..., None]
+    Lc = (loc[None] - cl[:, None]) * w[..., None]
+    H = np.einsum("fki,fkj->fij", Pc, Lc)                          # Σ p lᵀ
+    U, S, Vt = np.linalg.svd(H)
+    D = np.ones((len(pts), 3))
+    D[:, 2] = np.sign(np.linalg.det(U @ Vt))
+    R = np.einsum("fij,fj,fjk->fik", U, D, Vt)
+    t = cp - np.einsum("fij,fj->fi", R, cl)
+    sl = np.linalg.svd(Lc, compute_uv=False)
+    valid = (n >= MIN_MARKERS) & (sl[:, 1] > COLLINEAR_RATIO * np.maximum(sl[:, 0], 1e-300))
+    R[~valid] = np.nan
+    t[~valid] = np.nan
+    pred = np.einsum("fij,kj->fki", R, loc) + t[:, None, :]
+    res = np.where(w > 0, np.sum((pred - P) ** 2, axis=2), 0.0)
+    rms = np.where(valid, np.sqrt(res.sum(axis=1) / np.maximum(n, 1)), np.nan)
+    return Poses(R=R, t=t, valid=valid, local=loc, rms=rms)
+
+
+def refine_local(points, n_iter: int = REFINE_MAX_ITER, tol: float = REFINE_TOL_MM,
+                 ref_frame: int | None = None) -> tuple[np.ndarray, Poses]:
+    """Body-fixed marker coordinates refined by averaging over every frame (seed 001, eq. 5).
+
+    Alternates the two steps of seed 001 (section 5) until the body-fixed coordinates stop
+    moving: (1) given ``local``, the least-squares pose ``f(t)`` of every frame (eq. 4,
+    :func:`segment_poses`); (2) ``local_i = f(t_ref) · mean_t f(t)⁻¹ y_i(t)`` (eq. 5), the
+    average over the frames in which marker i is seen of its position mapped back into the
+    body frame, re-expressed in the body frame that coincides with the world at ``t_ref``.
+    Step (2) with the poses fixed is the exact minimiser of ``Σ_t Σ_i |y_i(t) − f(t) x_i|²``
+    over the ``x_i``, so the loop is block-coordinate descent on that joint least-squares
+    problem (generalised Procrustes analysis); its fixed point has ``f(t_ref) = I``.
+
+    Why: the first-frame shape carries that frame's noise into every pose; the refined shape
+    carries noise of order ``noise/sqrt(n_frames)`` only, and to first order even that only
+    moves the body frame rigidly (a gauge change), never the relative poses.
+
+    Parameters
+    ----------
+    points : array_like, shape (n_frames, n_markers, 3)
+        Marker positions of one rigid segment, mm, NaN where occluded; n_markers ≥ 3.
+    n_iter : int
+        Most iterations; a ``RuntimeWarning`` says so if they do not reach `tol`.
+    tol : float
+        Stop when no body-fixed coordinate moves by more than this (mm).
+    ref_frame : int, optional
+        The frame ``t_ref`` whose pose becomes the identity (seed 001 uses t = 0). Default: the
+        first frame with a valid pose. It must have a valid pose.
+
+    Returns
+    -------
+    local : numpy.ndarray, shape (n_markers, 3)
+        Refined body-fixed coordinates, mm, in the world frame of ``t_ref``.
+    poses : Poses
+        The poses of every frame for that ``local`` (``poses.R[t_ref] ≈ I``).
+
+    Raises
+    ------
+    ValueError
+        Bad shape, fewer than three markers, no frame with a valid pose, a `ref_frame` without
+        one, or a marker never seen in a frame with a valid pose.
+
+    Examples
+    --------
+    >>> local, poses = refine_local(points)                         # doctest: +SKIP
+    >>> np.allclose(poses.R[0], np.eye(3)), np.allclose(poses.t[0], 0)   # doctest: +SKIP
+    (True, True)
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 3 or pts.shape[2] != 3:
+        raise ValueError(f"points must have shape (F, m, 3), got {pts.shape}")
+    if pts.shape[1] < MIN_MARKERS:
+        raise ValueError(f"a segment pose needs at least {MIN_MARKERS} markers, got {pts.shape[1]}")
+    if not (isinstance(n_iter, (int, np.integer)) and n_iter >= 1):
+        raise ValueError(f"n_iter must be a positive integer, got {n_iter!r}")
+    local = reference_shape(pts)
+    seen = np.isfinite(pts).all(axis=2)                                   # (F, m)
+    step = np.inf
+    for _ in range(int(n_iter)):
+        poses = segment_poses(pts, local)
+        if not poses.valid.any():
+            raise ValueError("no frame has a valid pose (three non-collinear visible markers)")
+        ref = _reference_frame(poses.valid, ref_frame)
+        use = seen & poses.valid[:, None]
+        count = use.sum(axis=0)
+        if (count == 0).any():
+            never = ", ".join(str(i) for i in np.flatnonzero(count == 0))
+            raise ValueError(f"marker(s) {never} never seen in a frame with a valid pose")
+        body = np.where(use[..., None], poses.to_local(np.where(use[..., None], pts, 0.0)), 0.0)
+        mean = body.sum(axis=0) / count[:, None]                           # mean_t f(t)^-1 y(t)
+        new = mean @ poses.R[ref].T + poses.t[ref]                         # eq. (5): f(t_ref) · mean
+        step = float(np.max(np.abs(new - local)))
+        local = new
+        if step <= tol:
+            break
+    else:
+        warnings.warn(f"refine_local: body-fixed coordinates still moved by {step:.3g} mm after "
+                      f"{n_iter} iterations (tol {tol:g} mm)", RuntimeWarning, stacklevel=2)
+    return local, segment_poses(pts, local)
+
+
+def _reference_frame(valid: np.ndarray, ref_frame: int | None) -> int:
+    """Index of the gauge frame: `ref_frame` if given (checked), else the first valid frame."""
+    if ref_frame is None:
+        return int(np.argmax(valid))
+    ref = int(ref_frame)
+    if not -len(valid) <= ref < len(valid):
+        raise ValueError(f"ref_frame {ref_frame} is outside the {len(valid)} frames")
+    if not valid[ref]:
+        raise ValueError(f"ref_frame {ref_frame} has no valid pose (fewer than three visible, "
+                         "non-collinear markers)")
+    return ref % len(valid)

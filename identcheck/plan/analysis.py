@@ -1,0 +1,458 @@
+"""Check a marker plan before capture: which joints the markers identify, how, and the fewest markers to add.
+
+Two layers (issue 7):
+
+- *The verdict* is the whole tree's (:mod:`identcheck.certify.tree_rank`): a joint is locally identifiable
+  when its gauge-invariant quantities are determined by the exact Jacobian of all markers over
+  enough generic frames. That sees what per-joint reasoning cannot — joints that share an unknown
+  motion can be identifiable together and not alone.
+- *The explanation* is Pham et al.'s section V-B: propagate through the tree to a fixed point. A
+  joint is settled by the identifiability table's case for the points its two segments carry,
+  real markers or virtual ones (an identified centre is one point on both segments, a hinge two),
+  from the root outwards and from the leaves inwards. The case's candidate count says whether the
+  joint is unique; a joint that depends on virtual markers of a joint with several candidates
+  inherits them (at most the product).
+
+A joint is ``identifiable`` only when the explanation settles it with one candidate through
+uniquely identified joints; ``local`` is the whole tree's verdict. The explanation never claims
+more than the whole tree (checked on every plan: :class:`PlanInconsistency` otherwise).
+"""
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+
+from identcheck.certify import tree_rank
+from identcheck.certify import twin as twin_certificate
+
+MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
+
+
+class PlanInconsistency(RuntimeError):
+    """The propagation settled a joint the whole-tree rank says is not locally identifiable (a bug)."""
+
+
+# -- the identifiability table, as plan needs it --------------------------------------------------------
+def table_summary() -> dict:
+    """(type, p, q) -> row of ``identcheck table`` (identifiable, local, candidates, min_samples), p, q ≤ 3.
+
+    Read from the package's copy (``identcheck/data/table_summary.json``, written by
+    :func:`write_table_summary` from :func:`identcheck.certify.table.table`; a test recomputes it).
+    """
+    text = resources.files("identcheck").joinpath("data/table_summary.json").read_text(encoding="utf-8")
+    return {(r["joint"], r["p"], r["q"]): r for r in json.loads(text)["cases"]}
+
+
+def write_table_summary(path, seed: int = 0) -> dict:
+    """Recompute the certified table (revolute, spherical) and keep the columns plan reads."""
+    from identcheck.certify.table import table
+
+    doc = table(seed=seed, joints=tree_rank.TYPES)
+    keep = ("joint", "p", "q", "identifiable", "local", "candidates", "min_samples")
+    out = {"format": "identcheck.certify.table-summary/1", "seed": seed,
+           "cases": [{k: c[k] for k in keep} for c in doc["cases"]]}
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(out, fh, indent=1)
+        fh.write("\n")
+    return out
+
+
+# -- the explanation: propagation to a fixed point --------------------------------------------------------
+@dataclass
+class Settled:
+    """How the propagation settled one joint."""
+
+    case: str
+    p: int
+    q: int
+    parent_points: list
+    child_points: list
+    virtual: list                   # virtual markers among them
+    case_candidates: int
+    candidates: int                 # including those inherited from the joints whose virtual markers it uses
+    case_min_samples: int
+    depends_on: list                # joints whose virtual markers it uses
+    step: int                       # propagation round (1 = from real markers only)
+    rejected_by: dict | None = None  # the marker beyond another joint that rejects the case's other candidates
+
+
+def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str, one_points=()) -> dict | None:
+    """A real marker beyond another joint k of ``one_side`` (the one-point segment of a revolute (2,1)):
+    it stays at a fixed distance from k's centre, a point fixed in that segment, which rejects the case's
+    other candidates (:mod:`identcheck.certify.twin`). Not when the case's own point on ``one_side``
+    is k's centre or on k's axis (``one_points``): the far marker then keeps its distance in every
+    candidate's frame."""
+    for k, kind, par, chi in spec.joints:
+        if any(str(pt).startswith(k + ".") for pt in one_points):
+            continue
+        if k != name and one_side in (par, chi):
+            far = chi if one_side == par else par
+            if spec.markers[far]:
+                return {"marker": spec.markers[far][0], "segment": far, "joint": k, "joint_type": kind}
+    return None
+
+
+def _count(points: list) -> int:
+    """Known points of a segment for the table, capped at 3 (an axis gives two, collinear points)."""
+    return min(len(points), 3)
+
+
+def propagate(spec: tree_rank.TreeSpec, rows: dict) -> dict:
+    """Pham V-B: settle joints whose segments carry enough known points; add their virtual markers; repeat.
+
+    Unique cases are taken first, to a fixed point; only when none is left is a locally identifiable
+    case with several candidates taken (its virtual markers carry the ambiguity down). A joint settled
+    ambiguously is settled again if more virtual markers later give it a case with fewer candidates.
+    """
+    known = {s: list(ms) for s, ms in spec.markers.items()}
+    origin: dict = {}                # virtual marker -> joint
+    settled: dict = {}
+    step = 0
+
+    def best(name, kind, par, chi):
+        P = [m for m in known[par] if origin.get(m) != name]
+        C = [m for m in known[chi] if origin.get(m) != name]
+        p, q = _count(P), _count(C)
+        row = rows[(kind, p, q)]
+        if not row["local"]:
+            return None
+        P, C = P[:3], C[:3]
+        virt = [m for m in P + C if m in origin]
+        deps = sorted({origin[m] for m in virt})
+        inherited = math.prod(settled[d].candidates for d in deps) if deps else 1
+        own, rejected = row["candidates"], None
+        if kind == "revolute" and own > 1 and (p, q) in ((2, 1), (1, 2)):
+            rejected = far_marker(spec, name, chi if (p, q) == (2, 1) else par, C if (p, q) == (2, 1) else P)
+            if rejected is not None:
+                cert = twin_certificate.certify(0, rejected["joint_type"])
+                if cert["certified"]:
+                    own, rejected = 1, dict(rejected, certificate=cert)
+                else:
+                    rejected = None
+        return Settled(f"{kind}({p},{q})", p, q, P, C, virt, row["candidates"], own * inherited,
+                       row["min_samples"], deps, step, rejected)
+
+    def settle(name, kind, par, chi, st):
+        fresh = name not in settled
+        settled[name] = st
+        if fresh:
+            pts = [f"{name}.centre"] if kind == "spherical" else [f"{name}.axis[0]", f"{name}.axis[1]"]
+            for seg in (par, chi):
+                for v in pts:
+                    known[seg].append(v)
+                    origin[v] = name
+
+    while True:
+        step += 1
+        changed = False
+        for unique_only in (True, False):
+            for name, kind, par, chi in spec.joints:
+                st = best(name, kind, par, chi)
+                if st is None or (unique_only and st.candidates > 1):
+                    continue
+                old = settled.get(name)
+                if old is None or st.candidates < old.candidates:
+                    settle(name, kind, par, chi, st)
+                    changed = True
+            if changed:
+                break
+        if not changed:
+            return settled
+
+
+# -- the plan ----------------------------------------------------------------------------------------------
+@dataclass
+class Plan:
+    """Verdict and explanation for every joint of a marker plan."""
+
+    spec: tree_rank.TreeSpec
+    rank: tree_rank.TreeRank
+    settled: dict
+    joints: dict = field(default_factory=dict)     # name -> contract dict
+
+    @property
+    def all_identifiable(self) -> bool:
+        return all(j["identifiable"] for j in self.joints.values())
+
+    @property
+    def all_local(self) -> bool:
+        return all(j["local"] for j in self.joints.values())
+
+
+def _reason(spec, name, kind, par, chi, jr, st) -> str:
+    np_, nc = len(spec.markers[par]), len(spec.markers[chi])
+    if st is not None:
+        via = f" with virtual markers {', '.join(st.virtual)}" if st.virtual else ""
+        txt = (f"settled by {st.case}: {', '.join(st.parent_points) or '-'} on {par} | "
+               f"{', '.join(st.child_points) or '-'} on {chi}{via}")
+        if st.rejected_by is not None:
+            r = st.rejected_by
+            txt += (f"; {st.case} alone admits {st.case_candidates} joints (mirror images count), but marker "
+                    f"{r['marker']} on {r['segment']}, beyond {r['joint_type']} joint {r['joint']}, must stay at a "
+                    f"fixed distance from a point of {chi if st.q == 1 else par}, and that rejects the other "
+                    f"{st.case_candidates - 1} (exact certificate, identcheck.certify.twin)")
+            txt += "; unique" if st.candidates == 1 else (f"; it inherits the {st.candidates} candidates of "
+                                                          f"{', '.join(st.depends_on)} (at most)")
+        elif st.case_candidates > 1:
+            txt += (f"; {st.case} admits {st.case_candidates} joints that explain generic data equally well (mirror "
+                    "images count), so it is locally, not uniquely, identifiable")
+        elif st.candidates > 1:
+            txt += (f"; it inherits the {st.candidates} candidates of {', '.join(st.depends_on)} (at most; whether "
+                    "markers further down tell them apart is not decided here)")
+        else:
+            txt += "; unique"
+        return txt
+    if jr.local:
+        return (f"locally identifiable only through the whole tree: with its own markers ({kind}({min(np_, 3)},"
+                f"{min(nc, 3)}) on {par} | {chi}) and any virtual markers the propagation finds, no table case "
+                "settles it, but the segments share unknown motion with other joints that pins it; how many "
+                "candidates generic data admit is not known")
+    if not jr.quantities:
+        return (f"nothing measures it: {chi if not spec.markers[chi] else par} carries no markers and no other ball "
+                "joint to measure the joint against")
+    missing = ", ".join(jr.undetermined[:4]) + (" ..." if len(jr.undetermined) > 4 else "")
+    return (f"not identifiable: {kind}({min(np_, 3)},{min(nc, 3)}) with the markers of {par} | {chi} (and any "
+            f"virtual markers) is not locally identifiable (see `identcheck table`), and the whole tree leaves "
+            f"{missing} undetermined; add markers (see suggestions)")
+
+
+def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0,
+            warm_frames: int = 0) -> Plan:
+    """Whole-tree verdict plus propagation explanation for one marker plan (``warm_frames``: see
+    :func:`identcheck.certify.tree_rank.analyse`; only for plans whose ``min_samples`` are not reported)."""
+    rows = rows or table_summary()
+    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames)
+    settled = propagate(spec, rows)
+    plan = Plan(spec, rank, settled)
+    for name, kind, par, chi in spec.joints:
+        jr, st = rank.joints[name], settled.get(name)
+        if st is not None and not jr.local:
+            raise PlanInconsistency(f"joint {name}: propagation settled it by {st.case} but the whole-tree rank "
+                                    f"leaves {jr.undetermined} undetermined")
+        identifiable = st is not None and st.candidates == 1
+        min_samples = None
+        if jr.local:
+            min_samples = max(jr.min_frames, st.case_min_samples if st else 0)
+        plan.joints[name] = {
+            "type": kind, "parent": par, "child": chi,
+            "identifiable": identifiable, "local": jr.local,
+            "candidates": (st.candidates if st else None),
+            "case": st.case if st else f"{kind}({_count(spec.markers[par])},{_count(spec.markers[chi])})",
+            "min_samples": min_samples,
+            "uses_virtual_markers": list(st.virtual) if st else [],
+            "settled_by": ("propagation" if st else ("whole tree (shared motion)" if jr.local else None)),
+            "jointly_only": bool(jr.local and st is None),
+            "depends_on": list(st.depends_on) if st else [],
+            "step": st.step if st else None,
+            "rejected_by": ({k: v for k, v in st.rejected_by.items() if k != "certificate"}
+                            if st and st.rejected_by else None),
+            "reason": _reason(spec, name, kind, par, chi, jr, st),
+        }
+    return plan
+
+
+# -- motion, robustness, suggestions ---------------------------------------------------------------------
+def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0) -> dict:
+    """For each locally identifiable joint, the joints whose motion must be exercised: held at one angle in
+    every frame, they would leave it undetermined (whole-tree rank with that joint frozen)."""
+    need = {n: [] for n in plan.joints}
+    for name, *_ in spec.joints:
+        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1)
+        for other, jr in frozen.joints.items():
+            if plan.joints[other]["local"] and not jr.local:
+                need[other].append(name)
+    return need
+
+
+def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) -> dict:
+    """For each marker: does the plan stay all-identifiable without it, and which joints would it lose."""
+    out = {}
+    for seg, ms in spec.markers.items():
+        for m in ms:
+            alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1)
+            lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
+            lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
+            out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
+                      "joints_lost": lost, "joints_no_longer_local": lost_local}
+    return out
+
+
+def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED) -> list | None:
+    """Fewest extra markers (segment -> count) after which every joint is identifiable, or None when no
+    addition of up to ``max_markers`` markers suffices.
+
+    A marker on segment X can change a joint not yet uniquely settled only if the joint touches X (X's
+    points) or a neighbour of X (a far marker beyond its one-point segment); a uniquely settled joint's
+    virtual markers are fixed. So each open joint is influenced by its segments and their neighbours;
+    open joints whose influencing segments overlap form a component, components are independent, and
+    their fewest additions add up. Each is found exhaustively over multisets of its influencing
+    segments, fewest first, screened by the propagation; the whole-tree rank checks the union (and on
+    the rare failure the search is repeated over all the segments at once)."""
+    base = propagate(spec, rows)
+    open_joints = [j for j in spec.joints if not (j[0] in base and base[j[0]].candidates == 1)]
+    if not open_joints:
+        return []
+    extra: dict = {}
+    for comp in _components(spec, open_joints):
+        found = _fewest(spec, rows, comp, max_markers - sum(extra.values()))
+        if found is None:
+            return None
+        extra.update(found)
+    if analyse(_with_extra(spec, extra), rows, seed=seed).all_identifiable:
+        return [{"segment": s, "add_markers": c} for s, c in extra.items()]
+    found = _fewest(spec, rows, open_joints, max_markers, seed=seed)
+    return None if found is None else [{"segment": s, "add_markers": c} for s, c in found.items()]
+
+
+def _influencing(spec, joints: list) -> set:
+    """Segments where a marker could change how ``joints`` settle: theirs and their neighbours."""
+    own = {s for j in joints for s in (j[2], j[3])}
+    return own | {s for k in spec.joints if {k[2], k[3]} & own for s in (k[2], k[3])}
+
+
+def _components(spec, joints: list) -> list:
+    """Joints grouped by overlapping influencing segments (connected components)."""
+    comps: list = []
+    for j in joints:
+        mine = _influencing(spec, [j])
+        touching = [c for c in comps if mine & _influencing(spec, c)]
+        merged = [j] + [k for c in touching for k in c]
+        comps = [c for c in comps if c not in touching] + [merged]
+    return comps
+
+
+def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None) -> dict | None:
+    """Fewest extra markers on the influencing segments of ``joints`` after which the propagation settles
+    all of them uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan)."""
+    names = {j[0] for j in joints}
+    near = _influencing(spec, joints)
+    segs = [s for s in spec.markers if s in near]
+    for k in range(1, max_markers + 1):
+        for combo in itertools.combinations_with_replacement(segs, k):
+            extra: dict = {}
+            for s in combo:
+                extra[s] = extra.get(s, 0) + 1
+            cand = _with_extra(spec, extra)
+            settled = propagate(cand, rows)
+            if not all(n in settled and settled[n].candidates == 1 for n in names):
+                continue
+            if seed is None or analyse(cand, rows, seed=seed).all_identifiable:
+                return extra
+    return None
+
+
+def _with_extra(spec: tree_rank.TreeSpec, extra: dict) -> tree_rank.TreeSpec:
+    markers = {s: ms + tuple(f"+{s}.{i + 1}" for i in range(extra.get(s, 0))) for s, ms in spec.markers.items()}
+    return tree_rank.TreeSpec(spec.root, markers, spec.joints, spec.frozen)
+
+
+def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
+    """A finding: the fewest markers, kept from this plan, for which every joint stays locally identifiable
+    (greedy removal, each removal checked by the whole-tree rank)."""
+    current = spec
+    removed = []
+    changed = True
+    while changed:
+        changed = False
+        for seg, ms in current.markers.items():
+            for m in ms:
+                cand = current.without(m)
+                if all(j.local for j in tree_rank.analyse(cand, "GFp", seed).joints.values()):
+                    current, changed = cand, True
+                    removed.append(m)
+                    break
+            if changed:
+                break
+    kept = sum(len(ms) for ms in current.markers.values())
+    return {"markers": kept, "removable": removed,
+            "per_segment": {s: list(ms) for s, ms in current.markers.items()},
+            "method": "greedy removal while every joint stays locally identifiable (whole-tree rank)"}
+
+
+def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
+               fewest: bool = False, witness: bool = False, progress=None) -> dict:
+    """The contract's ``plan`` JSON for a model (plus explanation, motion, robustness and the certificate).
+    ``witness``: also simulate the plan and search every joint it does not identify for a second skeleton
+    verified at 50 digits (:mod:`identcheck.plan.witness`; seconds to a minute)."""
+    spec = tree_rank.TreeSpec.from_model(model)
+    rows = table_summary()
+    plan = analyse(spec, rows, seed=seed)
+    doc = {"all_identifiable": plan.all_identifiable, "all_local": plan.all_local, "joints": plan.joints}
+    if witness:
+        from identcheck.plan import witness as plan_witness
+
+        for n, w in plan_witness.witnesses(model, spec, plan, seed, progress).items():
+            doc["joints"][n]["alternative"] = w
+    if motion:
+        for n, needs in motion_needed(spec, plan, seed).items():
+            doc["joints"][n]["motion_needed"] = needs
+    sugg = [] if plan.all_identifiable else (suggestions(spec, rows, seed) if suggest else None)
+    doc["suggestions"] = sugg if sugg is not None else []
+    if sugg is None and suggest:
+        doc["suggestions_note"] = f"no addition of up to {MAX_SUGGESTED} markers makes every joint identifiable"
+    if robust:
+        doc["robustness"] = robustness(spec, plan, rows, seed)
+    if fewest:
+        doc["fewest_local"] = fewest_local(spec, rows, seed)
+    jointly = [n for n, j in plan.joints.items() if j["jointly_only"]]
+    if jointly:
+        doc["shared_motion"] = (f"{', '.join(jointly)}: locally identifiable only together (the whole tree's rank), "
+                                "not by any joint's own markers and the virtual markers propagation finds")
+    r = plan.rank
+    doc["certificate"] = {
+        "method": "exact rank of the whole-tree Jacobian at a random point over GF(p), p a uniform 61-bit prime",
+        "prime": r.prime, "frames": r.frames, "constants": r.n_constants, "dim_determined": r.dim_w,
+        "degree_bound": r.degree_bound, "failure_probability_bound": r.failure_bound,
+        "seed": seed}
+    return doc
+
+
+def _witness_text(w: dict) -> str:
+    if w["verified"]:
+        return (f"verified on a simulated trial: a second skeleton reproduces every marker of {w['frames']} frames "
+                f"and of {w['held_out_frames']} held-out frames to {max(w['max_marker_error_mm'], w['held_out_max_marker_error_mm']):.0e} mm "
+                f"({w['precision_digits']} digits) with {w['quantity']} changed by {100 * w['relative_change']:.1f}%")
+    return w["note"]
+
+
+def render_table(doc: dict) -> str:
+    """A readable terminal report of ``plan`` JSON."""
+    head = f"{'joint':<12} {'verdict':<13} {'case':<16} {'cand.':>5} {'samples':>7}  uses / reason"
+    lines = [head, "-" * len(head)]
+    for name, j in doc["joints"].items():
+        verdict = "identifiable" if j["identifiable"] else ("local" if j["local"] else "NOT")
+        cand = "-" if j["candidates"] is None else str(j["candidates"])
+        ms = "-" if j["min_samples"] is None else str(j["min_samples"])
+        uses = ", ".join(j["uses_virtual_markers"]) or ""
+        lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
+        if not j["identifiable"]:
+            lines.append(f"{'':<12} {j['reason']}")
+        elif j.get("rejected_by"):
+            r = j["rejected_by"]
+            lines.append(f"{'':<12} {j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
+                         "(exact certificate)")
+        if "alternative" in j:
+            lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
+                         + _witness_text(j["alternative"]))
+        if j.get("motion_needed"):
+            lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
+    lines.append("")
+    lines.append("all joints identifiable: " + ("yes" if doc["all_identifiable"] else "no")
+                 + ("" if doc["all_identifiable"] else
+                    "; fewest markers to add: " + (", ".join(f"{s['add_markers']} on {s['segment']}"
+                                                             for s in doc["suggestions"]) or "none found")))
+    if doc.get("shared_motion"):
+        lines.append("shared motion: " + doc["shared_motion"])
+    if doc.get("fewest_local"):
+        f = doc["fewest_local"]
+        lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
+                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
+    if "robustness" in doc:
+        weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
+        lines.append("markers the plan cannot lose: " + (", ".join(weak) or "none"))
+    c = doc["certificate"]
+    lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
+    return "\n".join(lines)

@@ -1,0 +1,94 @@
+"""Figures of a diagnosis: where the residual sits before and after, the gap per step against the noise
+floor, and for each adopted effect the evidence that named it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from identcheck.report.figure_io import pyplot as _plt, save
+
+
+def residual_map(diag, path) -> Path:
+    """Residual size per marker and frame, before and after the effects, and each marker's RMS."""
+    plt = _plt()
+    ctx = diag.ctx
+    maps = [np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
+            for h in (diag.before, diag.after)]
+    top = np.nanpercentile(maps[0], 99.5) or 1.0
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8), gridspec_kw={"height_ratios": [2, 2, 1.4]})
+    for ax, m, what in zip(axes[:2], maps, ("rigid-joint model", "with the named effects")):
+        im = ax.imshow(m.T, aspect="auto", interpolation="nearest", cmap="magma", vmin=0, vmax=top)
+        ax.set_yticks(range(len(ctx.labels)), ctx.labels, fontsize=7)
+        ax.set_title(f"residual |measured − model| (mm), {what}; gap {np.sqrt(np.nanmean(m ** 2)):.3g} mm", fontsize=9)
+        fig.colorbar(im, ax=ax, pad=0.01)
+    axes[1].set_xlabel("frame")
+    x = np.arange(len(ctx.labels))
+    for k, (m, what) in enumerate(zip(maps, ("before", "after"))):
+        axes[2].bar(x + (k - 0.5) * 0.4, np.sqrt(np.nanmean(m ** 2, axis=0)), 0.4, label=what)
+    axes[2].axhline(diag.ctx.noise.sigma_mm * np.sqrt(3), color="k", ls="--", lw=1, label="noise (√3 σ)")
+    axes[2].set_xticks(x, ctx.labels, fontsize=7)
+    axes[2].set_ylabel("RMS (mm)")
+    axes[2].legend(fontsize=7)
+    return save(fig, path)
+
+
+def gap_steps(diag, path) -> Path:
+    """The gap after each adopted effect, with the noise floor."""
+    plt = _plt()
+    names = ["rigid model"] + [s.name for s in diag.steps]
+    gaps = [diag.gap_before] + [s.gap_after for s in diag.steps]
+    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(names), 3.4))
+    ax.bar(range(len(names)), gaps, color=["0.6"] + ["C0"] * len(diag.steps))
+    ax.axhline(diag.noise_floor, color="C3", ls="--", label=f"noise floor {diag.noise_floor:.3g} mm")
+    for i, g in enumerate(gaps):
+        ax.text(i, g, f"{g:.3g}", ha="center", va="bottom", fontsize=8)
+    ax.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
+    ax.set_ylabel("gap: RMS 3-D marker error (mm)")
+    ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def evidence(step, path) -> Path:
+    """One effect's evidence, drawn by the kind its evidence dictionary names."""
+    plt = _plt()
+    ev = step.evidence
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    kind = ev.get("kind", "series")
+    x, y, after = np.asarray(ev.get("x")), ev.get("y"), ev.get("y_after")
+    if kind == "scatter":
+        ax.plot(x, np.asarray(y), ".", ms=2, alpha=0.5, label="before")
+        if after is not None:
+            ax.plot(x if np.size(after) == np.size(x) else np.arange(np.size(after)), np.asarray(after), ".",
+                    ms=2, alpha=0.5, label="after")
+    elif kind == "series3":
+        y = np.asarray(y)
+        for d, c in enumerate("xyz"):
+            ax.plot(x, y[:, d], lw=0.8, label=f"{c} before")
+        if after is not None:
+            ax.plot(x, np.linalg.norm(np.asarray(after), axis=1), "k", lw=0.8, label="|after|")
+    else:
+        ax.plot(x, np.asarray(y), lw=0.8, label="before")
+        if after is not None:
+            ax.plot(x, np.asarray(after), lw=0.8, label="after / alternative")
+    for f in ev.get("mark", [])[:200]:
+        ax.axvline(f, color="C3", lw=0.6, alpha=0.6)
+    if "span" in ev:
+        ax.axvspan(ev["span"][0], ev["span"][1], color="C3", alpha=0.15, label="span")
+    ax.set_xlabel(ev.get("x_label", ""))
+    ax.set_ylabel(ev.get("y_label", ""), fontsize=8)
+    where = ", ".join(f"{k}={v}" for k, v in step.where.items() if k not in ("frames",))
+    ax.set_title(f"{step.name} ({where}): gap {step.gap_before:.3g} → {step.gap_after:.3g} mm", fontsize=9)
+    ax.legend(fontsize=7)
+    return save(fig, path)
+
+
+def write_all(diag, directory) -> list:
+    """Every figure of `diag` into `directory` (created); the paths written."""
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [residual_map(diag, out / "residuals.png"), gap_steps(diag, out / "gap_per_step.png")]
+    for k, step in enumerate(diag.steps, 1):
+        if step.evidence:
+            paths.append(evidence(step, out / f"evidence_{k}_{step.name}.png"))
+    return paths

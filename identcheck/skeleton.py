@@ -1,0 +1,62 @@
+"""The model's tree compiled once: segment and joint order (parents before children), each joint's
+parent and child, each segment's marker columns, and the marker columns below every joint.
+
+Everything that walks the tree (the whole-chain fit, the effects, the label screen) reads this one
+structure instead of re-deriving the order from the model file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Skeleton:
+    """The model's tree as index arrays: which markers each segment and each joint moves.
+
+    ``types`` may differ from the model's (``extra_dof`` refits a hinge as a ball joint).
+    """
+
+    segments: tuple          # segment names, parents before children
+    root: str
+    joints: tuple            # joint names, parents before children
+    types: dict              # joint -> "spherical" | "revolute"
+    parent: dict             # joint -> parent segment
+    child: dict              # joint -> child segment
+    labels: tuple            # marker names, trial column order
+    seg_markers: dict        # segment -> marker column indices
+    marker_seg: tuple        # column -> segment name
+    downstream: dict         # joint -> column indices of every marker below the joint
+
+    @classmethod
+    def from_model(cls, model, types: dict | None = None) -> "Skeleton":
+        types = {j: model.joints[j].type for j in model.joint_order} | dict(types or {})
+        labels = tuple(model.markers)
+        col = {m: i for i, m in enumerate(labels)}
+        seg_markers = {s: np.array([col[m] for m in model.segments[s].markers], dtype=int)
+                       for s in model.segments}
+        marker_seg = tuple(s for s in model.segments for _ in model.segments[s].markers)
+        parent = {j: model.joints[j].parent for j in model.joint_order}
+        child = {j: model.joints[j].child for j in model.joint_order}
+        below = {}
+        for j in reversed(model.joint_order):      # children's subtrees are complete first
+            segs = {child[j]} | {s for k in model.joint_order if parent[k] == child[j] for s in below[k]}
+            below[j] = segs
+        downstream = {j: np.sort(np.concatenate([seg_markers[s] for s in below[j]])) for j in model.joint_order}
+        order = [model.root] + [child[j] for j in model.joint_order]
+        return cls(tuple(order), model.root, tuple(model.joint_order), types, parent, child, labels,
+                   seg_markers, marker_seg, downstream)
+
+    @property
+    def n_markers(self) -> int:
+        return len(self.labels)
+
+    def frame_dof(self) -> int:
+        """Unknowns per frame: the root pose plus each joint's angles."""
+        return 6 + sum(3 if self.types[j] == "spherical" else 1 for j in self.joints)
+
+    def gauge(self) -> int:
+        """Parameter directions that change no prediction: each segment frame (6), and each hinge's
+        slide along its axis and angle offset (2)."""
+        return 6 * len(self.segments) + 2 * sum(self.types[j] == "revolute" for j in self.joints)

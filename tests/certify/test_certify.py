@@ -1,0 +1,73 @@
+"""Exact rank over the rationals, and replayable certificates."""
+import json
+
+import sympy as sp
+from hypothesis import given, strategies as st
+
+from identcheck.certify import exact_rank as certify
+from identcheck import cli
+from identcheck.derive import get
+from identcheck.symbols import case
+
+
+@given(st.integers(0, 10**6))
+def test_rank_is_five_on_random_exact_samples(seed):
+    cert = certify.rank("revolute", 2, 1, seed=seed)
+    assert cert.rank == 5 and cert.full_rank and cert.exact and cert.deterministic
+    assert sp.Rational(cert.minor_determinant) != 0
+    assert cert.numeric_rank == 5  # floats agree here, but only guide
+    assert certify.verify(cert.to_dict()).ok
+
+
+@given(st.integers(0, 10**6))
+def test_sample_points_lie_exactly_on_the_output_set(seed):
+    """M·Y = K holds exactly at the certificate's points with the stated parameters."""
+    cert = certify.rank("revolute", 2, 1, seed=seed)
+    cs = case("revolute", 2, 1)
+    dv = get("revolute21")
+    p = {k: sp.Rational(v) for k, v in cert.parameters.items()}
+    ca, sa = certify.half_angle(p["t_alpha"])
+    sub = {sp.Symbol("d", real=True): p["d"], sp.Symbol("r", positive=True): p["r"],
+           sp.Symbol("l", real=True): p["l"], sp.Symbol("rho", positive=True): p["rho"],
+           cs.constant_angles[0].cos: ca, cs.constant_angles[0].sin: sa}
+    Y = [y.xreplace(sub) for y in dv.result("Y")]
+    rows, rhs = certify.m_rows(cs, [[sp.Rational(c) for c in s["xyz"]] for s in cert.samples])
+    for row, k in zip(rows, rhs):
+        assert sum(m * y for m, y in zip(row, Y)) == k
+
+
+def test_fewer_samples_than_unknowns_is_not_full_rank():
+    cert = certify.rank("revolute", 2, 1, n_samples=4, seed=1)
+    assert cert.rank == 4 and not cert.full_rank and not cert.deterministic
+
+
+def test_tampered_certificate_is_rejected():
+    cert = certify.rank("revolute", 2, 1, seed=2).to_dict()
+    for mutate in (lambda c: c.update(rank=4),
+                   lambda c: c["samples"][1]["xyz"].__setitem__(2, "7/3"),
+                   lambda c: c.update(minor_determinant="1")):
+        c = json.loads(json.dumps(cert))
+        mutate(c)
+        assert not certify.verify(c).ok
+
+
+def test_rank_cli_json_has_contract_keys(tmp_path, capsys):
+    path = tmp_path / "cert.json"
+    assert cli.main(["rank", "revolute", "2", "1", "--json", "--seed", "5", "--save", str(path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("joint", "p", "q", "unknowns", "rank", "full_rank", "exact"):
+        assert key in out
+    assert out["rank"] == 5 and out["exact"] is True and out["seed"] == 5 and len(out["samples"]) == 5
+    assert cli.main(["verify", str(path)]) == 0
+    bad = json.loads(path.read_text())
+    bad["rank"] = 3
+    path.write_text(json.dumps(bad))
+    assert cli.main(["verify", str(path)]) == 1
+
+
+def test_rank_cli_bad_input_exits_2(tmp_path, capsys):
+    assert cli.main(["rank", "hinge", "2", "1"]) == 2
+    assert "unknown joint type 'hinge'" in capsys.readouterr().err
+    assert cli.main(["rank", "revolute", "1", "1"]) == 2
+    (tmp_path / "x.json").write_text("{not json")
+    assert cli.main(["verify", str(tmp_path / "x.json")]) == 2

@@ -1,0 +1,183 @@
+"""The identifiability table: contract, certificates, Remark 1, and recovery of random truths."""
+import json
+import random
+import warnings
+
+import mpmath
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from identcheck.certify import counterexamples as C
+from identcheck.certify import jacobian
+from identcheck.certify import table as T
+from identcheck import cli
+from identcheck.errors import DegenerateError
+from identcheck.certify.joint_models import JOINTS
+from identcheck.solve import minimal
+
+KEYS = {"joint", "p", "q", "identifiable", "local", "candidates", "min_samples", "certificate"}
+
+
+@pytest.fixture(scope="module")
+def doc():
+    return T.table()
+
+
+@pytest.fixture(scope="module")
+def rows(doc):
+    return {(r["joint"], r["p"], r["q"]): r for r in doc["cases"]}
+
+
+def test_every_case_once_with_the_contract_keys(doc, rows):
+    assert len(doc["cases"]) == len(rows) == len(JOINTS) * 16
+    for r in doc["cases"]:
+        assert KEYS <= set(r)
+        assert isinstance(r["identifiable"], bool) and isinstance(r["local"], bool)
+        assert r["candidates"] is None or (isinstance(r["candidates"], int) and r["candidates"] >= 1)
+        if r["identifiable"]:
+            assert r["local"] and r["candidates"] == 1 and r["min_samples"] >= 1
+        if not r["local"]:
+            assert r["candidates"] is None and r["min_samples"] is None and not r["identifiable"]
+        assert r["certificate"]["kind"] and r["certificate"]["statement"]
+
+
+def test_paper_cases(rows):
+    assert {k: rows[("revolute", 2, 1)][k] for k in ("identifiable", "local", "candidates", "min_samples")} == \
+        {"identifiable": False, "local": True, "candidates": 4, "min_samples": 5}
+    assert rows[("spherical", 3, 1)]["identifiable"] and rows[("spherical", 3, 1)]["min_samples"] == 4
+    assert rows[("spherical", 2, 2)]["identifiable"] and rows[("spherical", 2, 2)]["min_samples"] == 9
+    for key in (("revolute", 1, 1), ("spherical", 2, 1)):
+        assert not rows[key]["local"] and rows[key]["certificate"]["kind"] == "counterexample"
+    assert rows[("revolute", 2, 2)]["candidates"] == 1          # new: the second child marker decides
+    assert rows[("spherical", 1, 3)]["certificate"]["follows_from"] == "spherical(3,1)"
+
+
+def test_symmetric_in_p_q(rows):
+    for (j, p, q), r in rows.items():
+        s = rows[(j, q, p)]
+        for k in ("identifiable", "local", "candidates", "min_samples", "local_min_samples"):
+            assert r[k] == s[k], (j, p, q, k)
+
+
+def test_monotone_in_markers(rows):
+    for (j, p, q), r in rows.items():
+        for bigger in ((j, p + 1, q), (j, p, q + 1)):
+            if bigger in rows:
+                assert rows[bigger]["local"] >= r["local"], bigger
+                if r["identifiable"]:
+                    assert rows[bigger]["identifiable"], bigger
+                if r["local"] and rows[bigger]["local"] and r["candidates"] and rows[bigger]["candidates"]:
+                    assert rows[bigger]["candidates"] <= r["candidates"]
+
+
+def test_engine_agrees_with_the_certificates(rows):
+    for (j, p, q), r in rows.items():
+        c = jacobian.verdict(j, p, q)
+        assert c.local == r["local"], (j, p, q)
+        if r["local"]:
+            assert r["local_min_samples"] <= r["min_samples"]
+        if j in ("universal", "prismatic"):
+            assert r["verdict_kind"] == "local" and r["certificate"]["kind"] == "local_jacobian"
+            assert r["identifiable_decided"] == (not r["local"])
+
+
+def test_deterministic_and_verifiable(doc):
+    again = T._table.__wrapped__(0, ("revolute", "spherical"))
+    assert json.dumps([r for r in doc["cases"] if r["joint"] in ("revolute", "spherical")], sort_keys=True) == \
+        json.dumps(list(again), sort_keys=True)
+    small = {"format": T.FORMAT, "cases": [r for r in doc["cases"] if (r["joint"], r["p"], r["q"]) in
+                                           {("revolute", 2, 1), ("spherical", 2, 1), ("spherical", 1, 2),
+                                            ("revolute", 3, 1), ("universal", 2, 2)}]}
+    assert T.verify(small) == []
+    at = {(r["joint"], r["p"], r["q"]): i for i, r in enumerate(small["cases"])}
+    bad = json.loads(json.dumps(small))
+    bad["cases"][at[("spherical", 2, 1)]]["certificate"]["counterexample"]["poses"][0]["child"]["t"][0] = "0"
+    assert any("spherical(2,1)" in p for p in T.verify(bad))
+    bad = json.loads(json.dumps(small))
+    bad["cases"][at[("spherical", 1, 2)]]["local"] = True
+    assert any("follows from" in p or "does not match" in p for p in T.verify(bad))
+
+
+def test_cli_table_json_and_text(capsys):
+    assert cli.main(["table", "--json", "--joint", "prismatic"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [(r["p"], r["q"]) for r in out["cases"]] == [(p, q) for p in range(4) for q in range(4)]
+    assert cli.main(["table", "--joint", "revolute"]) == 0
+    text = capsys.readouterr().out
+    assert "revolute   2,1  no            yes    4" in text
+
+
+def _world(data, i, parent=True):
+    return np.array([[float(x) for x in (A if parent else B)[i]] for A, B in data])
+
+
+def _solve(joint, p, q, data):
+    P = [_world(data, i) for i in range(p)]
+    Q = [_world(data, i, parent=False) for i in range(q)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return minimal.solve(joint, P, Q)
+
+
+LOCAL = [("revolute", 2, 1), ("revolute", 1, 2), ("revolute", 2, 2), ("revolute", 3, 1), ("revolute", 1, 3),
+         ("revolute", 3, 3), ("spherical", 3, 1), ("spherical", 2, 2), ("spherical", 2, 3), ("spherical", 3, 3)]
+
+
+@pytest.mark.parametrize("case", LOCAL, ids=lambda c: f"{c[0]}{c[1]}{c[2]}")
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 10**6))
+def test_identifiable_cases_recover_their_truth_from_min_samples(rows, case, seed):
+    r = rows[case]
+    rng = random.Random(seed)
+    g = C.random_geometry(*case, rng)
+    data, _ = C.simulate(g, r["min_samples"], rng)
+    truth = {k: float(v) for k, v in g.marker_distances().items()}
+    try:
+        found = _solve(*case, data)
+    except DegenerateError:          # a random draw close to a degenerate configuration
+        return
+    assert len(found) == r["candidates"]
+    scale = max(truth.values())
+    assert min(max(abs(s[k] - truth[k]) for k in truth) for s in found) < 1e-5 * scale
+
+
+@pytest.mark.parametrize("case", [("revolute", 3, 1), ("revolute", 2, 2), ("spherical", 3, 1), ("spherical", 2, 2)],
+                         ids=lambda c: f"{c[0]}{c[1]}{c[2]}")
+def test_removing_any_marker_from_a_minimal_case_breaks_it(rows, case):
+    """Every one-marker-smaller case is non-identifiable, shown on data: a verified counterexample,
+    or several joints reproducing the same samples."""
+    with mpmath.workdps(C.DPS + C.GUARD):
+        _remove_each_marker(rows, case)
+
+
+def _remove_each_marker(rows, case):
+    j, p, q = case
+    assert rows[case]["identifiable"]
+    rng = random.Random(17)
+    g = C.random_geometry(j, p, q, rng)
+    data, poses = C.simulate(g, 6, rng)
+    for side, k in [("parent", i) for i in range(p)] + [("child", i) for i in range(q)]:
+        keep_p = [i for i in range(p) if not (side == "parent" and i == k)]
+        keep_q = [i for i in range(q) if not (side == "child" and i == k)]
+        smaller = (j, len(keep_p), len(keep_q))
+        assert not rows[smaller]["identifiable"], smaller
+        sub = C.JointGeometry(j, [g.parent_markers[i] for i in keep_p], [g.child_markers[i] for i in keep_q],
+                              g.parent_joint, g.child_joint)
+        sub_data = [([A[i] for i in keep_p], [B[i] for i in keep_q]) for A, B in data]
+        if rows[smaller]["local"]:
+            found = _solve(j, len(keep_p), len(keep_q), sub_data)
+            assert len(found) > 1
+        else:
+            cx = C.construct(sub, sub_data, C.mpf(1) / 64)
+            cx.truth_poses = poses
+            assert cx.check().ok
+
+
+def test_engine_rows_universal_and_prismatic(rows):
+    """The README's summary of the engine-only rows."""
+    for p in range(4):
+        for q in range(4):
+            assert rows[("universal", p, q)]["local"] == (p >= 2 and q >= 2), (p, q)
+            assert rows[("prismatic", p, q)]["local"] == (p >= 1 and q >= 1 and p + q >= 3), (p, q)

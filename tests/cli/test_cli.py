@@ -1,0 +1,101 @@
+"""The CLI end to end: the README's main job, contract exit codes, clear errors."""
+import json
+from pathlib import Path
+
+
+from identcheck import cli
+from identcheck.simulate.rigid import load_truth
+
+ROOT = Path(__file__).resolve().parents[2]
+KNEE = str(ROOT / "examples" / "knee_21.toml")
+
+
+def test_main_job_finds_the_true_knee_among_four_joints(tmp_path, capsys):
+    trial, truth = tmp_path / "knee.c3d", tmp_path / "truth.json"
+    assert cli.main(["simulate", KNEE, "--out", str(trial), "--truth", str(truth)]) == 0
+    capsys.readouterr()
+    assert cli.main(["identify", KNEE, str(trial), "--json"]) == 1  # not unique: exit 1 (negative answer)
+    out = json.loads(capsys.readouterr().out)["joints"]["knee_r"]
+    assert out["candidates"] == 4 and out["parameter_sets"] == 2 and out["unique"] is False
+    true = load_truth(truth).marker_distances("knee_r")
+    sets = [out["marker_distances"]] + [a["marker_distances"] for a in out["alternatives"]]
+    best = min(max(abs(s[m] - true[m]) for m in true) for s in sets)
+    assert best < 0.5  # mm; C3D stores float32
+    worst = max(max(abs(s[m] - true[m]) for m in true) for s in sets)
+    assert worst > 1.0  # the twin joint of erratum E1 really differs
+
+
+def test_identify_on_trc_matches_truth(tmp_path, capsys):
+    trial, truth = tmp_path / "knee.trc", tmp_path / "truth.json"
+    assert cli.main(["simulate", KNEE, "--out", str(trial), "--truth", str(truth), "--seed", "3"]) == 0
+    capsys.readouterr()
+    cli.main(["identify", KNEE, str(trial), "--json"])
+    out = json.loads(capsys.readouterr().out)["joints"]["knee_r"]
+    true = load_truth(truth).marker_distances("knee_r")
+    sets = [out["marker_distances"]] + [a["marker_distances"] for a in out["alternatives"]]
+    assert min(max(abs(s[m] - true[m]) for m in true) for s in sets) < 0.5
+
+
+def test_identify_rejects_cases_it_does_not_cover(tmp_path, capsys):
+    leg = str(ROOT / "examples" / "leg.toml")
+    trial = tmp_path / "leg.trc"
+    assert cli.main(["simulate", leg, "--out", str(trial)]) == 0
+    assert cli.main(["identify", leg, str(trial), "--joint", "knee_r"]) == 2  # revolute (3,2): not an exact case
+    assert "revolute (2,1)" in capsys.readouterr().err
+    assert cli.main(["identify", leg, str(trial), "--joint", "nope"]) == 2
+    assert "unknown joint 'nope'" in capsys.readouterr().err
+
+
+def test_identify_spherical_cases_match_truth(tmp_path, capsys):
+    """Both exact spherical cases of Pham et al. recover the simulated hip, uniquely."""
+    for name, case_ in (("hip_31", "spherical(3,1)"), ("hip_22", "spherical(2,2)")):
+        model = str(ROOT / "examples" / f"{name}.toml")
+        trial, truth = tmp_path / f"{name}.c3d", tmp_path / f"{name}.json"
+        assert cli.main(["simulate", model, "--out", str(trial), "--truth", str(truth), "--seed", "5"]) == 0
+        capsys.readouterr()
+        assert cli.main(["identify", model, str(trial), "--json"]) == 0  # unique: exit 0
+        out = json.loads(capsys.readouterr().out)["joints"]["hip_r"]
+        assert out["case"] == case_ and out["unique"] and out["candidates"] == 1
+        true = load_truth(truth).marker_distances("hip_r")
+        assert max(abs(out["marker_distances"][m] - true[m]) for m in out["marker_distances"]) < 0.05  # float32
+
+
+def test_identify_noisy_trial_is_a_clear_answer_not_a_traceback(tmp_path, capsys):
+    trial = tmp_path / "noisy.c3d"
+    assert cli.main(["simulate", KNEE, "--out", str(trial), "--noise-mm", "2"]) == 0
+    code = cli.main(["identify", KNEE, str(trial)])
+    err = capsys.readouterr().err
+    assert code in (0, 1)
+    if err:
+        assert "identcheck identify" in err and "Traceback" not in err
+
+
+def test_every_contract_verb_is_built(capsys):
+    for verb in ("table", "rank", "identify", "simulate", "fit", "plan", "diagnose"):
+        assert cli.main([verb, "--help"]) == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: identcheck {verb}") and "not available yet" not in out
+
+
+def test_simulate_bad_extension_and_effect(tmp_path, capsys):
+    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.csv")]) == 2
+    assert "x.csv" in capsys.readouterr().err
+    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "wobble"]) == 2
+    assert "invalid choice: 'wobble'" in capsys.readouterr().err
+    assert not (tmp_path / "x.trc").exists()
+    assert cli.main(["simulate", KNEE, "--out", str(tmp_path / "x.trc"), "--effect", "marker_slip"]) == 0
+    assert (tmp_path / "x.trc").exists()
+
+
+def test_flexion_only_hip_is_named_coplanar_with_the_motion_to_add(tmp_path, capsys):
+    model = str(ROOT / "examples" / "hip_31.toml")
+    exact, noisy = tmp_path / "flex.trc", tmp_path / "flex_noisy.trc"
+    assert cli.main(["simulate", model, "--out", str(exact), "--n-axes", "1"]) == 0
+    assert cli.main(["simulate", model, "--out", str(noisy), "--n-axes", "1", "--noise-mm", "0.5"]) == 0
+    capsys.readouterr()
+    assert cli.main(["identify", model, str(exact)]) == 1
+    err = capsys.readouterr().err
+    assert "coplanar" in err and "not identifiable" in err and "Traceback" not in err
+    assert cli.main(["identify", model, str(noisy)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the samples are nearly coplanar" in err and "abduction" in err
