@@ -598,7 +598,7 @@ def simulate(g: JointGeometry, n: int, rng) -> tuple:
 def witness(joint: str, p: int, q: int, seed: int = 0, n_samples: int = 12, family: str = "exact") -> Counterexample:
     """A deterministic counterexample for a case: a random rational truth, ``n_samples`` exact samples,
     the largest δ ∈ {r/8, r/16, …} (r: the first marker's distance) that the construction admits."""
-    rng = random.Random(f"identcheck.certify.counterexamples:{joint}:{p}:{q}:{seed}")
+    rng = random.Random(f"identcheck.counterexamples:{joint}:{p}:{q}:{seed}")
     with mpmath.workdps(DPS + GUARD):
         g = random_geometry(joint, p, q, rng)
         data, poses = simulate(g, n_samples, rng)

@@ -168,7 +168,7 @@ class _Point:
 
     def __init__(self, m: JointModel, seed: int, index: int):
         self.m, self.seed, self.index = m, seed, index
-        rng = random.Random(f"identcheck.certify.jacobian:{seed}:{index}:constants")
+        rng = random.Random(f"identcheck.jacobian:{seed}:{index}:constants")
         self.lengths = {str(s): _draw_length(rng, bool(s.is_positive)) for s in m.constants}
         self.angles = {a.name: _draw_t(rng) for a in m.constant_angles}
         self.samples = []
@@ -197,7 +197,7 @@ class _Point:
             if self.seed is None:
                 raise IndexError(f"the recorded point has {len(self.samples)} samples; sample {i} was asked for")
             j = len(self.samples)
-            rng = random.Random(f"identcheck.certify.jacobian:{self.seed}:{self.index}:sample:{j}")
+            rng = random.Random(f"identcheck.jacobian:{self.seed}:{self.index}:sample:{j}")
             lengths = {str(s): _draw_length(rng, bool(s.is_positive)) for s in self.m.per_sample_lengths}
             angles = {a.name: _draw_t(rng) for a in self.m.variables}
             self.samples.append((lengths, angles))

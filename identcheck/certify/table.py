@@ -27,7 +27,7 @@ from identcheck.certify import jacobian
 from identcheck.certify.joint_models import JOINTS, MARKERS
 
 CERTIFIED = ("revolute", "spherical")
-FORMAT = "identcheck.certify.table/1"
+FORMAT = "identcheck.table/1"
 
 
 def _key(joint: str, p: int, q: int) -> str:

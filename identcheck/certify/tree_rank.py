@@ -194,7 +194,7 @@ class TreeJacobian:
 
     def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0):
         self.spec = spec
-        rng = random.Random(f"identcheck.certify.tree_rank/{seed}/{field_kind}")
+        rng = random.Random(f"identcheck.tree_rank/{seed}/{field_kind}")
         self.F = Field(field_kind, rng)
         self.draw = _Draw(self.F, rng)
         cols = _Columns()
