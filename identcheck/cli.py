@@ -27,7 +27,8 @@ NOT_YET: dict = {}
 
 
 def _print_json(obj) -> None:
-    print(json.dumps(obj, indent=2, sort_keys=True, default=str))
+    from identcheck.report.json_out import dumps
+    print(dumps(obj))
 
 
 def _cmd_derive(a) -> int:
