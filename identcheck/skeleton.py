@@ -30,13 +30,16 @@ class Skeleton:
     downstream: dict         # joint -> column indices of every marker below the joint
 
     @classmethod
-    def from_model(cls, model, types: dict | None = None) -> "Skeleton":
+    def from_model(cls, model, types: dict | None = None, markers=None) -> "Skeleton":
+        """The model's tree; ``types`` overrides joint types, ``markers`` (a set of names) keeps only
+        those markers (a marker the trial never shows carries no information)."""
         types = {j: model.joints[j].type for j in model.joint_order} | dict(types or {})
-        labels = tuple(model.markers)
+        keep = (lambda m: True) if markers is None else (lambda m: m in markers)  # noqa: E731
+        labels = tuple(m for m in model.markers if keep(m))
         col = {m: i for i, m in enumerate(labels)}
-        seg_markers = {s: np.array([col[m] for m in model.segments[s].markers], dtype=int)
+        seg_markers = {s: np.array([col[m] for m in model.segments[s].markers if keep(m)], dtype=int)
                        for s in model.segments}
-        marker_seg = tuple(s for s in model.segments for _ in model.segments[s].markers)
+        marker_seg = tuple(s for s in model.segments for m in model.segments[s].markers if keep(m))
         parent = {j: model.joints[j].parent for j in model.joint_order}
         child = {j: model.joints[j].child for j in model.joint_order}
         below = {}

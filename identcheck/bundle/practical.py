@@ -1,0 +1,104 @@
+"""Practical identifiability: what this motion and this noise determine of each joint.
+
+The structural verdict (``identcheck table`` / ``plan``) says whether noise-free generic data determine a
+joint. A trial is neither noise-free nor generic: a hip that only flexes leaves its centre free along the
+flexion axis, a knee fitted through one marker leaves a 100 mm family of hinges nearly as good. So each
+joint gets a verdict from the covariance of the whole-tree fit:
+
+- ``undetermined``: the information leaves a direction of the joint free, or some marker distance's 95 %
+  interval is wider than ±:data:`TOLERANCE_MM`;
+- ``ambiguous``: another candidate joint explains the trial as well (not rejected by the likelihood ratio);
+- ``determined``: neither.
+
+With it: the weakest direction of the joint centre (or of the hinge's position across its axis) in the
+parent's frame and its standard error, and the motion that would help.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from identcheck.bundle.uncertainty import joint_offsets
+
+TOLERANCE_MM = 10.0
+"""A joint is determined when every marker distance's 95 % interval is within ± this many mm."""
+Z95 = 1.959964
+MIN_SECOND_AXIS_DEG = 15.0   # a ball joint's rotation needs this RMS spread about a second axis
+MIN_HINGE_ROM_DEG = 30.0     # a hinge's range of motion below which more range is the first advice
+
+
+def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0) -> dict:
+    """The ``practical`` JSON object of one joint (see the module docstring).
+
+    Parameters
+    ----------
+    chain : Skeleton
+    fit : bundle.chain.Fit
+    cov : bundle.uncertainty.Covariance
+    joint : str
+    distances : dict
+        marker -> (distance mm, standard error mm) of the joint's adjacent markers.
+    n_alternatives : int
+        Other candidates the likelihood ratio could not reject.
+    """
+    from identcheck.bundle.uncertainty import distance_gradients
+
+    grads = distance_gradients(chain, fit.state, len(cov.information))[joint]
+    free = [m for m, (_, g) in grads.items() if cov.free(g)]
+    worst_marker, (worst_d, worst_se) = max(distances.items(), key=lambda kv: kv[1][1]) if distances else (None, (0, 0))
+    weak = _weakest(chain, fit, cov, joint)
+    motion = _motion(chain, fit, joint, weak)
+    if free:
+        verdict = "undetermined"
+        why = (f"the data leave {joint} free: the distances of {', '.join(free)} can change without changing "
+               "any fitted marker")
+    elif Z95 * worst_se > TOLERANCE_MM:
+        verdict = "undetermined"
+        why = (f"{worst_marker}'s distance is {worst_d:.1f} ± {Z95 * worst_se:.1f} mm (95 %), wider than "
+               f"±{TOLERANCE_MM:g} mm")
+    elif n_alternatives:
+        verdict = "ambiguous"
+        why = f"{n_alternatives} other joint(s) explain the trial as well (likelihood ratio, 95 % level)"
+    else:
+        verdict = "determined"
+        why = f"every marker distance within ±{Z95 * worst_se:.2g} mm (95 %)"
+    return {"verdict": verdict, "reason": why, "tolerance_mm": TOLERANCE_MM,
+            "weakest_direction_parent": [round(float(x), 4) for x in weak[0]], "weakest_se_mm": round(weak[1], 3),
+            "motion_advice": motion if verdict != "determined" else ""}
+
+
+def _weakest(chain, fit, cov, joint: str) -> tuple[np.ndarray, float]:
+    """Unit direction (parent frame) in which the joint's centre (a hinge: its position across the axis)
+    is least determined, and its standard error in mm."""
+    o = joint_offsets(chain)[joint]
+    block = cov.sandwich[o:o + 3, o:o + 3]
+    naive = cov.naive[o:o + 3, o:o + 3]
+    block = naive if np.trace(naive) > np.trace(block) else 0.5 * (block + block.T)   # never below white noise
+    if chain.types[joint] == "revolute":
+        a = fit.state.axis[joint]
+        P = np.eye(3) - np.outer(a, a)
+        block = P @ block @ P
+    w, V = np.linalg.eigh(block)
+    return V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
+
+
+def _motion(chain, fit, joint: str, weak) -> str:
+    """What to record to determine the joint better, from the motion the trial shows."""
+    s = fit.state
+    if chain.types[joint] == "revolute":
+        rom = float(np.rad2deg(np.ptp(s.theta[joint])))
+        if rom < MIN_HINGE_ROM_DEG:
+            return f"flex {joint} through a larger range (this trial: {rom:.0f} deg about the hinge)"
+        return (f"{joint} moved {rom:.0f} deg about its hinge: add frames, or markers farther from the hinge axis, "
+                "on the segments that carry few")
+    rel = s.rel_R[joint]
+    rv = Rotation.from_matrix(rel @ Rotation.from_matrix(rel).mean().as_matrix().T).as_rotvec()
+    spread = np.sqrt(np.linalg.eigvalsh(np.cov(rv.T))) if len(rv) > 2 else np.zeros(3)
+    second = float(np.rad2deg(spread[-2]))
+    d = ", ".join(f"{x:+.2f}" for x in weak[0])
+    if second < MIN_SECOND_AXIS_DEG:
+        return (f"{joint} turned mostly about one axis (second axis {second:.0f} deg RMS): its centre is least "
+                f"determined along ({d}) in {chain.parent[joint]}'s frame; add rotation about the other axes "
+                "(e.g. abduction and circumduction of a hip that only flexed)")
+    return (f"{joint}'s centre is least determined along ({d}) in {chain.parent[joint]}'s frame: a larger range of "
+            "motion, more frames or more markers on the segments that carry few")

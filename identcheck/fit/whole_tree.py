@@ -1,0 +1,213 @@
+"""The answer of ``fit``: one maximum-likelihood fit of the whole skeleton to every marker sample, started
+from every candidate the closed-form estimators leave, with intervals that hold under correlated noise.
+
+Why one fit: the estimators of :mod:`identcheck.estimate` (seed 001, O'Brien/SARA, spheres and circles in
+a posed parent, S22, Pham (2,1)) each see one joint and a share of the data, and each judged its own
+uncertainty its own way. Here they only start the whole-chain least squares of :mod:`identcheck.bundle`
+(root pose and joint angles per frame, markers, centres and axes constant), which uses every sample at
+once, including the segments with one or two markers whose pose comes through the joints.
+
+Every candidate: where a case admits several joints (revolute (2,1): four, ERRATA E1), each one starts a
+fit. The distinct minima are compared by the likelihood ratio: ``Δχ² = ΔRSS / (σ̂² τ)``, τ the variance
+inflation of the trial's correlated residuals (:mod:`identcheck.bundle.uncertainty`); a candidate with
+``Δχ² > χ²₁(0.95) = 3.84`` is rejected, any other stays an alternative with its Δχ² and p-value.
+
+Practical identifiability (:mod:`identcheck.bundle.practical`): from the sandwich covariance, each joint is
+``determined`` (unique, and every marker distance's 95 % interval within ±:data:`~identcheck.bundle.practical.TOLERANCE_MM`),
+``ambiguous`` (other candidates explain the trial as well) or ``undetermined`` (the information leaves
+a direction free, or an interval is wider than the tolerance), with the weakest direction and the motion
+that would help.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import chdtrc
+
+from identcheck.bundle.chain import _fill, fit_chain, initial_state
+from identcheck.bundle.practical import judge
+from identcheck.bundle.uncertainty import covariance, distance_gradients
+from identcheck.errors import DegenerateError, InputError
+from identcheck.geometry.poses import Poses, refine_local
+from identcheck.skeleton import Skeleton
+
+MAX_STARTS = 16          # candidate combinations started (the first ones in order of the closed-form ranking)
+MAX_ITER = 200           # LM iterations per start
+REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
+SAME_MM = 0.5            # two minima whose every marker distance agrees within this (and 2 SE) are one
+Z95 = 1.959964
+
+
+@dataclass(frozen=True)
+class Minimum:
+    """One local minimum of the whole-tree likelihood: its fit, covariance and marker distances."""
+
+    fit: object
+    cov: object
+    distances: dict            # joint -> marker -> (distance mm, standard error mm)
+    start: tuple               # which candidate of each ambiguous joint started it
+
+
+@dataclass
+class TreeFit:
+    """The whole-tree answer: the best minimum, the others with their likelihood-ratio statistics."""
+
+    best: Minimum | None
+    others: list = field(default_factory=list)     # (Minimum, delta_chi2, p_value)
+    problem: str = ""                               # why no whole-tree fit could be made ('' when one was)
+    n_starts: int = 0
+    starts_left_out: int = 0
+
+
+def skeleton_of(model, trial) -> Skeleton:
+    """The model's tree with only the markers the trial shows at least once."""
+    seen = set()
+    data = trial.as_array()
+    col = {m: i for i, m in enumerate(trial.labels)}
+    for m in model.markers:
+        if m in col and np.isfinite(data[:, col[m]]).all(axis=1).any():
+            seen.add(m)
+    return Skeleton.from_model(model, markers=seen)
+
+
+def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
+    """Poses of every segment from its seen markers plus the virtual points (joint centres, hinge points)
+    the closed-form fits give it; raises DegenerateError naming a segment with fewer than 3 points."""
+    out = {}
+    for seg in chain.segments:
+        idx = chain.seg_markers[seg]
+        extra = [v for v in virtual.get(seg, {}).values() if np.isfinite(v).all(axis=1).any()]
+        pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
+        if pts.shape[1] < 3:
+            raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
+                                  "pose it (three are needed to start the whole-tree fit)")
+        try:
+            local, poses = refine_local(pts)
+        except ValueError as exc:
+            raise DegenerateError(f"segment {seg!r}: {exc}") from None
+        if poses.valid.sum() < 3:
+            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points")
+        out[seg] = Poses(R=_fill(poses.valid, poses.R), t=_fill(poses.valid, poses.t), valid=poses.valid,
+                         local=local[:len(idx)], rms=poses.rms)
+    return out
+
+
+def candidates(closed_form: dict) -> dict:
+    """joint -> list of closed-form JointEstimates to start from (one for a unique joint, all for an
+    ambiguous one, including those a far marker ranked lower)."""
+    out = {}
+    for name, (est, _info) in closed_form.items():
+        if est is None:
+            continue
+        out[name] = [est] + list(est.alternatives) + list(getattr(est, "ranked_out", []))
+    return out
+
+
+def fit_tree(model, trial, closed_form: dict, progress=None) -> TreeFit:
+    """Whole-tree maximum likelihood from every combination of closed-form candidates (see module doc)."""
+    chain = skeleton_of(model, trial)
+    data = trial.select(chain.labels).as_array()
+    cands = candidates(closed_form)
+    missing = [j for j in chain.joints if j not in cands]
+    if missing:
+        return TreeFit(None, problem=f"no closed-form start for {', '.join(missing)}")
+    names = list(cands)
+    combos = list(itertools.product(*[range(len(cands[n])) for n in names]))
+    left_out = max(len(combos) - MAX_STARTS, 0)
+    combos = combos[:MAX_STARTS]
+    minima, problems = [], []
+    for k, combo in enumerate(combos):
+        if progress and len(combos) > 1:
+            progress(f"whole-tree fit from candidate start {k + 1} of {len(combos)}")
+        virtual: dict = {}
+        for n, i in zip(names, combo):
+            jt = model.joints[n]
+            for seg in (jt.parent, jt.child):
+                virtual.setdefault(seg, {}).update(cands[n][i].virtual_markers(n))
+        try:
+            frames = _frames(chain, data, virtual)
+            state = initial_state(chain, data, frames=frames)
+        except (DegenerateError, InputError) as exc:
+            problems.append(str(exc))
+            continue
+        fit = fit_chain(chain, data, state, max_iter=MAX_ITER)
+        cov = covariance(fit, data)
+        grads = distance_gradients(chain, fit.state, len(cov.information))
+        dist = {j: {m: (d, cov.se(g)) for m, (d, g) in per.items()} for j, per in grads.items()}
+        minima.append(Minimum(fit, cov, dist, combo))
+    if not minima:
+        return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=len(combos), starts_left_out=left_out)
+    minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
+    best = minima[0]
+    tau = max(1.0, float(np.median([best.cov.inflation(g) for per in distance_gradients(
+        chain, best.fit.state, len(best.cov.information)).values() for _, g in per.values()])))
+    others = []
+    for m in minima[1:]:
+        delta = (m.fit.rss - best.fit.rss) / (best.cov.sigma_mm ** 2 * tau)
+        others.append((m, float(delta), float(chdtrc(1, delta))))
+    return TreeFit(best, others, n_starts=len(combos), starts_left_out=left_out)
+
+
+def _distinct(minima: list) -> list:
+    """Minima with the same marker distances (within SAME_MM and 2 standard errors) kept once, best first."""
+    kept = []
+    for m in minima:
+        if not any(_same(m, k) for k in kept):
+            kept.append(m)
+    return kept
+
+
+def _same(a: Minimum, b: Minimum) -> bool:
+    for j, per in a.distances.items():
+        for mk, (d, se) in per.items():
+            d2, se2 = b.distances[j][mk]
+            if abs(d - d2) > max(SAME_MM, 2 * np.hypot(se, se2)):
+                return False
+    return True
+
+
+def joint_answers(tree: TreeFit, model) -> dict:
+    """Per joint: the contract's fit keys from the whole-tree fit (marker distances, 95 % intervals,
+    uncertainty, alternatives with their likelihood-ratio statistics, practical verdict)."""
+    best = tree.best
+    chain = best.fit.chain
+    out = {}
+    for j in chain.joints:
+        dist = best.distances[j]
+        alts = []
+        for m, delta, p in tree.others:
+            if p < 0.05:
+                continue          # rejected at the 95 % level
+            if all(abs(m.distances[j][k][0] - d) <= max(SAME_MM, 2 * np.hypot(se, m.distances[j][k][1]))
+                   for k, (d, se) in dist.items()):
+                continue          # the same joint; another joint of the tree differs
+            alts.append({"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
+                         "marker_distances_ci95": _ci(m.distances[j]),
+                         "delta_chi2": round(delta, 3), "p_value": round(p, 4),
+                         "rms_residual": round(float(np.sqrt(m.fit.rss / max(m.fit.n_samples, 1))), 4)})
+        rejected = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
+                     "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
+                    for m, delta, p in tree.others if p < 0.05
+                    and not all(abs(m.distances[j][k][0] - d) <= max(SAME_MM, 2 * np.hypot(se, m.distances[j][k][1]))
+                                for k, (d, se) in dist.items())]
+        practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
+        out[j] = {"marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
+                  "marker_distances_ci95": _ci(dist),
+                  "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
+                  "alternatives": alts, "rejected_candidates": rejected, "practical": practical}
+    return out
+
+
+def _ci(dist: dict) -> dict:
+    return {k: [round(d - Z95 * se, 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
+
+
+def noise_report(tree: TreeFit) -> dict:
+    """The top-level ``noise`` key: the residual noise model the intervals rest on."""
+    cov = tree.best.cov
+    return {"sigma_mm": round(cov.sigma_mm, 4), "correlation": {"lag1": round(cov.lag1, 3),
+                                                                 "bartlett_bandwidth_frames": cov.bandwidth},
+            "source": "whole-tree fit residuals; covariance by the sandwich with a Bartlett long-run score "
+                      "covariance (correlated noise and model misfit allowed), never below the white-noise one"}
