@@ -211,3 +211,35 @@ def noise_report(tree: TreeFit) -> dict:
                                                                  "bartlett_bandwidth_frames": cov.bandwidth},
             "source": "whole-tree fit residuals; covariance by the sandwich with a Bartlett long-run score "
                       "covariance (correlated noise and model misfit allowed), never below the white-noise one"}
+
+
+MISFIT_RATIO = 2.0      # residual sd beyond this multiple of the frame-to-frame noise counts as model misfit
+
+
+def misfit_warnings(tree: TreeFit, model, trial) -> list:
+    """Warnings (dicts with ``message`` and ``markers``) when the whole-tree residual is well above the
+    measurement noise estimated without the joint model (frame-to-frame scatter of within-segment distances,
+    :mod:`identcheck.estimate.noise`): the rigid model is not the whole story (skin motion, a swap, an effect
+    of ``identcheck diagnose``). The intervals already include the misfit (sandwich covariance); the warning
+    says that they do and which markers carry it."""
+    from identcheck.estimate.noise import noise_floor
+
+    fit = tree.best.fit
+    chain = fit.chain
+    data = trial.select(chain.labels).as_array()
+    segments = {s: [chain.labels[i] for i in chain.seg_markers[s]] for s in chain.segments}
+    try:
+        floor = noise_floor(data, chain.labels, segments)
+    except InputError:
+        return []
+    sigma = tree.best.cov.sigma_mm
+    if not (floor.sigma_mm > 0 and sigma > MISFIT_RATIO * floor.sigma_mm):
+        return []
+    r = np.linalg.norm(data - fit.pred, axis=2)
+    rms = np.sqrt(np.nanmean(r ** 2, axis=0))
+    worst = [chain.labels[i] for i in np.argsort(-rms)[:3]]
+    return [{"message": f"{trial.source}: the rigid-joint model leaves {sigma:.3g} mm of residual per coordinate, "
+                        f"{sigma / floor.sigma_mm:.1f}x the measurement noise ({floor.sigma_mm:.3g} mm, frame to frame, "
+                        f"within segments); largest on {', '.join(f'{m} ({rms[chain.labels.index(m)]:.3g} mm rms)' for m in worst)}. "
+                        "The intervals include this misfit; `identcheck diagnose` names what the model is missing.",
+             "markers": worst, "kind": "model_misfit"}]
