@@ -28,7 +28,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
 from identcheck import cli  # noqa: E402
-from identcheck.report.figure_io import pyplot, save  # noqa: E402
+from identcheck.report.figure_io import figure, save  # noqa: E402
 from identcheck.fit.workflow import fit_model  # noqa: E402
 from identcheck.estimate.obrien import as_poses  # noqa: E402
 from identcheck.estimate.score_sara import sara, score  # noqa: E402
@@ -169,8 +169,6 @@ def fmt(x, digits: int = 1) -> str:
 
 # ------------------------------------------------------------------ the report
 def main() -> int:
-    plt = pyplot()
-
     trials = {name: Trial.from_file(DATA / name) for name in {t for t, _, _ in RUNS}}
     results = []
     for tname, mname, role in RUNS:
@@ -287,7 +285,8 @@ def main() -> int:
     w("![hip centres](real_fit_hip_centres.png)")
     w("")
 
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig = figure(figsize=(11, 4.8))
+    axs = fig.subplots(1, 2)
     for k, c in hip_sets.items():
         for ax, (i, j) in zip(axs, [(0, 1), (2, 1)]):
             ax.plot(c[::5, i], c[::5, j], ".", ms=2, alpha=0.35)
@@ -352,7 +351,8 @@ def main() -> int:
     xk /= np.linalg.norm(xk, axis=1, keepdims=True)
     zk = np.cross(xk, yk)
     Rk = np.stack([xk, yk, zk], axis=2)
-    fig, axs = plt.subplots(1, 2, figsize=(11, 4.8))
+    fig = figure(figsize=(11, 4.8))
+    axs = fig.subplots(1, 2)
     s = np.linspace(-90, 90, 2)
     for k, (p, d) in axes.items():
         pl = np.nanmedian(to_frame(Rk, mid, foot_of(p, d, mid)), axis=0)
@@ -432,7 +432,8 @@ def main() -> int:
     summary["vicon"] = {k: float(np.nanmean(v)) for k, v in vic.items()}
     w("![distances to Vicon centres](real_fit_vicon_distance.png)")
     w("")
-    fig, axs = plt.subplots(2, 2, figsize=(11, 6.5), sharex=True)
+    fig = figure(figsize=(11, 6.5))
+    axs = fig.subplots(2, 2, sharex=True)
     tt = np.arange(t.n_frames) / t.rate_hz
     for ax, jn in zip(axs.ravel(), ("hip_r", "hip_l", "knee_r", "knee_l")):
         roles = list(dict.fromkeys(role for role, _ in vic))

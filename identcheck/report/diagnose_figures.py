@@ -6,17 +6,17 @@ from pathlib import Path
 
 import numpy as np
 
-from identcheck.report.figure_io import pyplot as _plt, save
+from identcheck.report.figure_io import figure, save
 
 
 def residual_map(diag, path) -> Path:
     """Residual size per marker and frame, before and after the effects, and each marker's RMS."""
-    plt = _plt()
     ctx = diag.ctx
     maps = [np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
             for h in (diag.before, diag.after)]
     top = np.nanpercentile(maps[0], 99.5) or 1.0
-    fig, axes = plt.subplots(3, 1, figsize=(10, 8), gridspec_kw={"height_ratios": [2, 2, 1.4]})
+    fig = figure(figsize=(10, 8))
+    axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [2, 2, 1.4]})
     for ax, m, what in zip(axes[:2], maps, ("rigid-joint model", "with the named effects")):
         im = ax.imshow(m.T, aspect="auto", interpolation="nearest", cmap="magma", vmin=0, vmax=top)
         ax.set_yticks(range(len(ctx.labels)), ctx.labels, fontsize=7)
@@ -35,10 +35,10 @@ def residual_map(diag, path) -> Path:
 
 def gap_steps(diag, path) -> Path:
     """The gap after each adopted effect, with the noise floor."""
-    plt = _plt()
     names = ["rigid model"] + [s.name for s in diag.steps]
     gaps = [diag.gap_before] + [s.gap_after for s in diag.steps]
-    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(names), 3.4))
+    fig = figure(figsize=(1.6 + 1.3 * len(names), 3.4))
+    ax = fig.subplots()
     ax.bar(range(len(names)), gaps, color=["0.6"] + ["C0"] * len(diag.steps))
     ax.axhline(diag.noise_floor, color="C3", ls="--", label=f"noise floor {diag.noise_floor:.3g} mm")
     for i, g in enumerate(gaps):
@@ -51,9 +51,9 @@ def gap_steps(diag, path) -> Path:
 
 def evidence(step, path) -> Path:
     """One effect's evidence, drawn by the kind its evidence dictionary names."""
-    plt = _plt()
     ev = step.evidence
-    fig, ax = plt.subplots(figsize=(7, 3.6))
+    fig = figure(figsize=(7, 3.6))
+    ax = fig.subplots()
     kind = ev.get("kind", "series")
     x, y, after = np.asarray(ev.get("x")), ev.get("y"), ev.get("y_after")
     if kind == "scatter":

@@ -1,7 +1,7 @@
 """Figure of a marker plan: the skeleton tree, joints coloured by verdict, marker counts on segments."""
 from __future__ import annotations
 
-from identcheck.report.figure_io import pyplot, save
+from identcheck.report.figure_io import figure, save
 
 COLOURS = {"identifiable": "#2e7d32", "local": "#f9a825", "not": "#c62828"}
 
@@ -30,12 +30,11 @@ def draw(doc: dict, markers: dict, root: str, path, title: str = "") -> None:
     """Write the plan figure (PNG/SVG by extension) from ``plan`` JSON and segment -> marker names."""
     from matplotlib.lines import Line2D
 
-    plt = pyplot()
-
     joints = doc["joints"]
     pos = _layout(joints, root)
     width = max(6.0, 1.3 * (max(x for x, _ in pos.values()) + 1))
-    fig, ax = plt.subplots(figsize=(width, 1.6 * (1 - min(y for _, y in pos.values())) + 1.5))
+    fig = figure(figsize=(width, 1.6 * (1 - min(y for _, y in pos.values())) + 1.5))
+    ax = fig.subplots()
     for name, j in joints.items():
         (x0, y0), (x1, y1) = pos[j["parent"]], pos[j["child"]]
         verdict = "identifiable" if j["identifiable"] else ("local" if j["local"] else "not")
