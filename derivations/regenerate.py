@@ -12,6 +12,7 @@ import mpmath
 
 from identcheck.certify import exact_rank as certify
 from identcheck import cli
+from identcheck.report import json_out
 from identcheck.solve import identify
 from identcheck.symbols import case, known_cases
 
@@ -48,7 +49,7 @@ def main() -> int:
     (OUT / "witness_E1.md").write_text(witness_e1(), encoding="utf-8")
     for cs in known_cases():
         cert = certify.rank(cs.joint, cs.p, cs.q, seed=0)
-        (OUT / f"rank_{cs.joint}_{cs.p}_{cs.q}.json").write_text(cert.to_json(indent=2), encoding="utf-8")
+        json_out.write(OUT / f"rank_{cs.joint}_{cs.p}_{cs.q}.json", cert, indent=2)
     return code
 
 

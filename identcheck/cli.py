@@ -20,6 +20,7 @@ from pathlib import Path  # noqa: E402
 
 from identcheck.effects.inject import EFFECTS  # noqa: E402
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError  # noqa: E402
+from identcheck.report import json_out  # noqa: E402
 
 log = logging.getLogger("identcheck")
 
@@ -56,7 +57,7 @@ def _cmd_rank(a) -> int:
 
     cert = certify.rank(a.joint, a.p, a.q, n_samples=a.samples, seed=a.seed)
     if a.save:
-        Path(a.save).write_text(cert.to_json(indent=2), encoding="utf-8")
+        json_out.write(a.save, cert, indent=2)
         log.info("certificate saved to %s", a.save)
     if a.json:
         _print_json(cert.to_dict())
@@ -103,14 +104,14 @@ def _cmd_table(a) -> int:
 
     doc = table(seed=a.seed, joints=tuple(a.joint) if a.joint else None)
     if a.save:
-        Path(a.save).write_text(json.dumps(doc, indent=1), encoding="utf-8")
+        json_out.write(a.save, doc, indent=1)
         log.info("table saved to %s", a.save)
     if a.json:
         _print_json(doc)
         return 0
     print(f"{'joint':<10} {'p,q':<4} {'identifiable':<13} {'local':<6} {'candidates':<11} {'min N':<6} "
           f"{'local N':<8} certificate")
-    for r in doc["cases"]:
+    for r in doc.cases:
         c = r["certificate"]
         how = c["kind"] + (f" <- {c['follows_from']} ({c['rule']})" if c["kind"] == "remark1" else "")
         ident = ("yes" if r["identifiable"] else "no") if r["identifiable_decided"] else "undecided"

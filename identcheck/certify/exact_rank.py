@@ -10,7 +10,6 @@ bound and is reported with ``deterministic: false``.
 """
 from __future__ import annotations
 
-import json
 import random
 from dataclasses import asdict, dataclass, field
 
@@ -117,9 +116,14 @@ def exact_rank(rows) -> tuple:
     return rank, list(row_piv), list(col_piv), sp.Rational(int(QQ.numer(det)), int(QQ.denom(det)))
 
 
-@dataclass
+@dataclass(frozen=True)
 class RankCertificate:
-    """Everything needed to replay an exact rank computation (see :func:`verify`)."""
+    """Everything needed to replay an exact rank computation (see :func:`verify`): the result of
+    ``identcheck rank``.
+
+    Rationals are stored as exact text (``"-3/7"``); ``to_dict()`` is the saved certificate and the
+    contract's ``rank`` JSON (``joint``, ``p``, ``q``, ``unknowns``, ``rank``, ``full_rank``, ``exact``).
+    """
 
     joint: str
     p: int
@@ -145,10 +149,8 @@ class RankCertificate:
     expansion: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
+        """The certificate as a JSON document (what ``identcheck rank --json`` prints and ``--save`` writes)."""
         return asdict(self)
-
-    def to_json(self, **kw) -> str:
-        return json.dumps(self.to_dict(), **kw)
 
 
 def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0) -> RankCertificate:

@@ -18,6 +18,8 @@ uniqueness is not decided (``identifiable`` false with ``identifiable_decided`` 
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
 from functools import lru_cache
 
 from identcheck.certify import candidates
@@ -25,6 +27,7 @@ from identcheck.certify import exact_rank as certify
 from identcheck.certify import counterexamples
 from identcheck.certify import jacobian
 from identcheck.certify.joint_models import JOINTS, MARKERS
+from identcheck.io.jsonable import frozen, plain
 
 CERTIFIED = ("revolute", "spherical")
 FORMAT = "identcheck.table/1"
@@ -164,10 +167,49 @@ def _table(seed: int, joints: tuple) -> tuple:
     return tuple(out)
 
 
-def table(seed: int = 0, joints=None) -> dict:
-    """Every case with its verdict and certificate (deterministic for a given ``seed``)."""
+@dataclass(frozen=True)
+class TableResult:
+    """The identifiability table (``identcheck table``): one row per joint type × markers.
+
+    Attributes
+    ----------
+    cases : tuple of Mapping
+        Read-only rows in table order, each with the contract's keys (``joint``, ``p``, ``q``,
+        ``identifiable``, ``local``, ``candidates``, ``min_samples``, ``certificate``) and the engine's.
+    seed : int
+        Seed of the random rational points.
+    format : str
+        The saved table's format name, which ``identcheck verify`` recognises.
+    """
+
+    cases: tuple
+    seed: int = 0
+    format: str = FORMAT
+
+    def row(self, joint: str, p: int, q: int) -> Mapping:
+        """The row of one case; ``KeyError`` if the table does not hold it."""
+        for r in self.cases:
+            if (r["joint"], r["p"], r["q"]) == (joint, p, q):
+                return r
+        raise KeyError(_key(joint, p, q))
+
+    def to_dict(self) -> dict:
+        """The contract's ``table`` JSON, also the saved table that :func:`verify` re-checks."""
+        return {"format": self.format, "seed": self.seed, "cases": plain(self.cases)}
+
+
+def table(seed: int = 0, joints=None) -> TableResult:
+    """Every case with its verdict and certificate (deterministic for a given ``seed``).
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the random rational points.
+    joints : iterable of str, optional
+        Only these joint types (default: all of :data:`identcheck.certify.joint_models.JOINTS`).
+    """
     joints = JOINTS if joints is None else tuple(j for j in JOINTS if j in joints)
-    return {"format": FORMAT, "seed": seed, "cases": [dict(r) for r in _table(int(seed), tuple(joints))]}
+    return TableResult(cases=frozen(list(_table(int(seed), tuple(joints)))), seed=seed)
 
 
 def verify(doc: dict) -> list:

@@ -1,13 +1,23 @@
-"""Values made JSON-plain: numpy arrays and scalars become lists, floats and ints, so that every
-result can be written with the standard ``json`` module and nothing is hidden by ``default=str``."""
+"""Values made JSON-plain, and JSON-like values made read-only.
+
+:func:`plain` turns numpy arrays and scalars into lists, floats and ints (and read-only mappings and
+tuples back into dicts and lists), so that every result can be written with the standard ``json``
+module and nothing is hidden by ``default=str``. :func:`frozen` is its inverse for result objects: a
+nested document of dicts and lists becomes read-only mappings and tuples, so a frozen result cannot be
+changed through the documents it holds either.
+"""
 from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
 
 import numpy as np
 
 
 def plain(value):
-    """`value` with numpy arrays and scalars turned into lists, floats and ints (for JSON)."""
-    if isinstance(value, dict):
+    """`value` with numpy arrays and scalars turned into lists, floats and ints, mappings into dicts and
+    tuples into lists (for JSON)."""
+    if isinstance(value, Mapping):
         return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
@@ -17,4 +27,16 @@ def plain(value):
         return int(value)
     if isinstance(value, np.floating):
         return float(value)
+    return value
+
+
+def frozen(value):
+    """A read-only copy of a JSON-like `value`: dicts become read-only mappings, lists tuples (recursively).
+
+    ``plain(frozen(doc)) == doc`` for a JSON document ``doc``.
+    """
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: frozen(v) for k, v in value.items()})
+    if isinstance(value, (list, tuple)):
+        return tuple(frozen(v) for v in value)
     return value

@@ -53,7 +53,7 @@ def write_table_summary(path, seed: int = 0) -> dict:
     doc = table(seed=seed, joints=tree_rank.TYPES)
     keep = ("joint", "p", "q", "identifiable", "local", "candidates", "min_samples")
     out = {"format": "identcheck.table-summary/1", "seed": seed,
-           "cases": [{k: c[k] for k in keep} for c in doc["cases"]]}
+           "cases": [{k: c[k] for k in keep} for c in doc.cases]}
     with open(path, "w", encoding="utf-8") as fh:
         json.dump(out, fh, indent=1)
         fh.write("\n")

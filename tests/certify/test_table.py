@@ -22,7 +22,7 @@ KEYS = {"joint", "p", "q", "identifiable", "local", "candidates", "min_samples",
 
 @pytest.fixture(scope="module")
 def doc():
-    return T.table()
+    return T.table().to_dict()
 
 
 @pytest.fixture(scope="module")

@@ -33,7 +33,7 @@ def test_table_summary_matches_a_fresh_table():
     """The packaged table copy plan reads is the certified table, recomputed."""
     from identcheck.certify.table import table
 
-    fresh = {(c["joint"], c["p"], c["q"]): c for c in table(joints=tree_rank.TYPES)["cases"]}
+    fresh = {(c["joint"], c["p"], c["q"]): c for c in table(joints=tree_rank.TYPES).cases}
     for key, row in plan.table_summary().items():
         for k in ("identifiable", "local", "candidates", "min_samples"):
             assert row[k] == fresh[key][k], (key, k)
