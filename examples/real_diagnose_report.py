@@ -223,7 +223,7 @@ def main() -> int:
         r.update(trial=tname, model=mname, role=role, modelobj=model, trialobj=trial)
         if r["diag"] is not None:
             d = r["diag"]
-            r["json"] = d.to_json()
+            r["json"] = d.to_dict()
             r["info_finite"] = bool(np.isfinite(information(d.after.fit, d.after.data, d.after.weights)).all())
             r["rom_deg"] = {jn: np.degrees(np.ptp(a, axis=0)).tolist() for jn, a in joint_angles(d.before).items()}
             r["swaps"] = [swap_reference(s.where, model, trials_full, tname) for s in d.steps

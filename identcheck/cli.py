@@ -33,13 +33,10 @@ def _print_json(obj) -> None:
 
 
 def _cmd_derive(a) -> int:
-    from identcheck.report import documents as report
-    from identcheck import derive
-    from identcheck.derive import render
+    from identcheck.derive.result import derive_and_write
 
-    dvs = derive.derive_all()
-    paths = render.write(dvs, a.out)
-    rep = report.derive_report(dvs, a.out, paths)
+    res = derive_and_write(a.out)
+    rep = res.to_dict()
     if a.json:
         _print_json(rep)
     else:
@@ -69,29 +66,12 @@ def _cmd_rank(a) -> int:
 
 
 def _cmd_verify(a) -> int:
-    from identcheck.certify import exact_rank as certify
-    from identcheck.certify import counterexamples
-    from identcheck.certify import jacobian
-    from identcheck.certify import table
+    from identcheck.certify.verify import verify
 
-    try:
-        cert = json.loads(Path(a.certificate).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(["file not found"], source=a.certificate) from None
-    except json.JSONDecodeError as exc:
-        raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=a.certificate) from None
-    if not isinstance(cert, dict):
-        raise InputError(["a certificate is a JSON object"], source=a.certificate)
-    checks = {certify.FORMAT: lambda c: certify.verify(c).problems, jacobian.FORMAT: jacobian.replay,
-              counterexamples.FORMAT: counterexamples.verify_dict, table.FORMAT: table.verify}
-    fmt = cert.get("format")
-    if fmt not in checks:
-        raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(checks))})"],
-                         source=a.certificate)
-    problems = checks[fmt](cert)
-    out = {"ok": not problems, "problems": problems, "certificate": a.certificate, "format": fmt}
+    res = verify(a.certificate)
+    fmt, problems = res.format, res.problems
     if a.json:
-        _print_json(out)
+        _print_json(res)
     else:
         print(f"certificate verified ({fmt}): recomputed from scratch" if not problems else "certificate REJECTED:")
         for p in problems:
@@ -152,17 +132,14 @@ def _without_long_lists(doc: dict, longest: int = 20) -> dict:
 
 
 def _cmd_identify(a) -> int:
-    from identcheck.report import documents as report
-    from identcheck.identify import identify_joint
+    from identcheck.identify import identify
     from identcheck.io.model import Model
     from identcheck.trial import Trial
 
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
-    names = a.joint or [n for n in model.joint_order]
     frames = [int(f) for f in a.frames.split(",")] if a.frames else None
-    results = [identify_joint(model, trial, n, frames=frames, precision=a.precision) for n in names]
-    rep = report.identify_report(results)
+    rep = identify(model, trial, joints=a.joint, frames=frames, precision=a.precision).to_dict()
     if a.json:
         _print_json(rep)
     else:
@@ -243,7 +220,7 @@ def _cmd_diagnose(a) -> int:
     model = Model.from_toml(a.model)
     trial = Trial.from_file(a.trial)
     diag = diagnose(model, trial, progress=lambda msg: print(f"identcheck diagnose: {msg}", file=sys.stderr))
-    rep = diag.to_json()
+    rep = diag.to_dict()
     if a.plots:
         from identcheck.report.diagnose_figures import write_all
         for path in write_all(diag, a.plots):

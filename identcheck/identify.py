@@ -9,28 +9,47 @@ fitting with uncertainty is ``identcheck fit`` (a separate capability).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from identcheck.errors import InputError
+from identcheck.io.jsonable import frozen, plain
 from identcheck.io.model import Model
 from identcheck.solve import revolute21, spherical22, spherical31
 from identcheck.geometry.frames import pair_frame, parent_frame, to_local
 from identcheck.trial import Trial
 
 
-@dataclass
+@dataclass(frozen=True)
 class JointIdentification:
-    """Every joint the trial's samples admit for one model joint."""
+    """Every joint the trial's samples admit for one model joint.
+
+    Attributes
+    ----------
+    joint, type, case : str
+        The model's joint, its type and the exact case used (``"revolute(2,1)"``).
+    markers : Mapping
+        ``{"parent": (names), "child": (names)}``: the markers the case uses.
+    n_samples : int
+        Frames used.
+    frames : tuple of int
+        Their 0-based indices.
+    parent_spread_mm : float
+        Largest peak-to-peak change of a distance between parent markers (a rigidity check), mm.
+    candidates : tuple of Mapping
+        Every joint the samples admit (read-only), each with ``parameter_set``, ``mirror``,
+        ``residual_mm``, ``marker_distances`` (mm) and the case's parameters (``d``, ``r``, ...).
+    """
 
     joint: str
     type: str
     case: str
-    markers: dict
+    markers: MappingProxyType
     n_samples: int
-    frames: list
+    frames: tuple
     parent_spread_mm: float
-    candidates: list  # [{"d","r","alpha","l","rho","mirror","parameter_set","residual_mm","marker_distances"}]
+    candidates: tuple
 
     @property
     def unique(self) -> bool:
@@ -39,6 +58,71 @@ class JointIdentification:
     @property
     def n_parameter_sets(self) -> int:
         return len({c["parameter_set"] for c in self.candidates})
+
+    def to_dict(self) -> dict:
+        """The joint as ``identcheck identify --json`` reports it: the best-fitting candidate's marker
+        distances, the others as ``alternatives``."""
+        best = min(self.candidates, key=lambda c: c["residual_mm"])
+        return {
+            "type": self.type, "case": self.case, "unique": self.unique,
+            "candidates": len(self.candidates), "parameter_sets": self.n_parameter_sets,
+            "marker_distances": plain(best["marker_distances"]),
+            "alternatives": [plain(c) for c in self.candidates if c is not best],
+            "rms_residual": best["residual_mm"], "n_samples": self.n_samples,
+            "parent_marker_spread_mm": self.parent_spread_mm, "markers": plain(self.markers),
+        }
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    """Every joint a trial's samples admit, for each joint asked (``identcheck identify``).
+
+    Attributes
+    ----------
+    joints : tuple of JointIdentification
+        In the order asked.
+    """
+
+    joints: tuple
+
+    @property
+    def unique(self) -> bool:
+        """Every joint asked is determined uniquely."""
+        return all(j.unique for j in self.joints)
+
+    def __getitem__(self, name: str) -> JointIdentification:
+        for j in self.joints:
+            if j.joint == name:
+                return j
+        raise KeyError(name)
+
+    def to_dict(self) -> dict:
+        """``{"joints": {NAME: {...}}}`` as ``identcheck identify --json`` prints it."""
+        return {"joints": {j.joint: j.to_dict() for j in self.joints}}
+
+
+def identify(model: Model, trial: Trial, joints=None, frames=None, precision=None) -> IdentifyResult:
+    """Identify ``joints`` of ``model`` (default: all, in the model's order) from ``trial``.
+
+    Parameters
+    ----------
+    model : Model
+    trial : Trial
+    joints : iterable of str, optional
+        Joint names; default every joint of the model.
+    frames : iterable of int, optional
+        0-based frame indices; default every frame where the joint's markers are all visible.
+    precision : int, optional
+        Decimal digits (mpmath) instead of float64.
+
+    Raises
+    ------
+    InputError
+        See :func:`identify_joint`.
+    """
+    names = list(joints) if joints else list(model.joint_order)
+    frames = None if frames is None else list(frames)
+    return IdentifyResult(tuple(identify_joint(model, trial, n, frames=frames, precision=precision) for n in names))
 
 
 def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precision=None) -> JointIdentification:
@@ -67,9 +151,9 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
     sel = trial.select(names).as_array()[frames]
     cands = solver(sel, parent, list(child), precision)
     return JointIdentification(joint=joint, type=jt.type, case=label,
-                               markers={"parent": list(parent), "child": list(child)},
-                               n_samples=len(frames), frames=list(map(int, frames)),
-                               parent_spread_mm=_parent_spread(sel[:, :len(parent)]), candidates=cands)
+                               markers=frozen({"parent": list(parent), "child": list(child)}),
+                               n_samples=len(frames), frames=tuple(map(int, frames)),
+                               parent_spread_mm=_parent_spread(sel[:, :len(parent)]), candidates=frozen(cands))
 
 
 def _frames(trial: Trial, names, frames, n_min: int, label: str) -> list:

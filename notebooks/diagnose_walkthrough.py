@@ -114,7 +114,7 @@ assert hidden["name"] == EFFECT
 
 # %%
 diag = diagnose(model, sim.trial)
-summary = diag.to_json()
+summary = diag.to_dict()
 short = {k: summary[k] for k in ("noise_sigma_mm", "noise_floor", "gap_before", "gap_after", "effects")}
 print(json.dumps(short, indent=1))
 print(f"noise per coordinate: {diag.ctx.noise.sigma_mm:.3f} mm frame to frame "

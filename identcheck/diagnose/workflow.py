@@ -35,9 +35,10 @@ SD_GROWTH = 5.0
 :data:`MAX_SD_MM`: its parameters would be trading off against the joint's."""
 
 
-@dataclass
+@dataclass(frozen=True)
 class Step:
-    """One adopted effect: what, where, the gap before and after, and the evidence for the figures."""
+    """One adopted effect: what, where, the gap before and after (mm), its score (the criterion's gain),
+    the evidence for the figures, and the other candidates of its round as (name, where, score)."""
 
     name: str
     where: dict
@@ -45,17 +46,29 @@ class Step:
     gap_after: float
     score: float
     evidence: dict = field(default_factory=dict)
-    rejected: list = field(default_factory=list)    # the other candidates of this round: (name, where, score)
+    rejected: tuple = ()
 
 
-@dataclass
+@dataclass(frozen=True)
 class Diagnosis:
-    """Everything ``diagnose`` found: the noise, the rigid fit, the steps, the final model."""
+    """Everything ``diagnose`` found (the result of ``identcheck diagnose``).
+
+    Attributes
+    ----------
+    ctx : Context
+        The model, the trial's data and the noise estimate (``ctx.noise.sigma_mm``, per coordinate).
+    before, after : Hypothesis
+        The rigid-joint fit, and the fit with every adopted effect.
+    steps : tuple of Step
+        The adopted effects, in order (most important first).
+    test_before, test_after : dict
+        Whether the gap is consistent with noise: ``consistent``, ``ratio`` (gap²/floor²), ``limit``, ``dof``.
+    """
 
     ctx: Context
     before: Hypothesis
     after: Hypothesis
-    steps: list
+    steps: tuple
     test_before: dict
     test_after: dict
 
@@ -71,7 +84,12 @@ class Diagnosis:
     def noise_floor(self) -> float:
         return self.after.floor(self.ctx)
 
-    def to_json(self) -> dict:
+    @property
+    def consistent(self) -> bool:
+        """The gap left after the adopted effects is consistent with measurement noise."""
+        return bool(self.test_after["consistent"])
+
+    def to_dict(self) -> dict:
         """The contract's ``diagnose`` JSON, plus the noise estimate and the consistency tests."""
         return {
             "noise_floor": round(self.noise_floor, 4),
@@ -79,7 +97,7 @@ class Diagnosis:
             "noise_sigma_mm": round(self.ctx.noise.sigma_mm, 4),
             "gap_before": round(self.gap_before, 4),
             "gap_after": round(self.gap_after, 4),
-            "consistent_before": self.test_before, "consistent_after": self.test_after,
+            "consistent_before": plain(self.test_before), "consistent_after": plain(self.test_after),
             "effects": [{"name": s.name, "where": plain(s.where), "gap_before": round(s.gap_before, 4),
                          "gap_after": round(s.gap_after, 4), "score": round(s.score, 1)} for s in self.steps],
             "joints": joint_report(self.ctx, self.after),
@@ -175,12 +193,12 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         sc, eff, prop, cand = adopted
         cand = cand.polish()
         steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
-                          [(e.name, p.where, s) for s, e, p, _ in tried if p is not prop][:8]))
+                          tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8]))
         if progress:
             progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
                      f"(floor {cand.floor(ctx):.3g})")
         h = cand
-    return Diagnosis(ctx, base, h, steps, test0, consistency(ctx, h))
+    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h))
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them

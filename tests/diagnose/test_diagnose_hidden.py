@@ -52,7 +52,7 @@ def run_case(name: str, seed: int, tmp: Path) -> dict:
     path = tmp / f"{name}_{seed}.trc"
     sim.trial.to_file(path)                       # the workflow sees the file only
     diag = diagnose(model, Trial.from_file(path))
-    rep = diag.to_json()
+    rep = diag.to_dict()
     return {"name": name, "seed": seed, "noise": noise, "occlusion": occlusion, "rep": rep,
             "found": [e["name"] for e in rep["effects"]],
             "truth_where": sim.settings.get("effect", {}).get("where", {}),

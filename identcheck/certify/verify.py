@@ -1,0 +1,92 @@
+"""Re-check a saved certificate or table from its own data (``identcheck verify``).
+
+The file names its format; each format has its own checker, which trusts none of the saved derived
+numbers: rank certificates are rebuilt from their sample points, counterexamples re-verified at 50
+digits, local certificates replayed, tables re-checked row by row.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from identcheck.certify import counterexamples, jacobian
+from identcheck.certify import exact_rank
+from identcheck.certify import table
+from identcheck.errors import InputError
+
+CHECKS = {exact_rank.FORMAT: lambda c: exact_rank.verify(c).problems, jacobian.FORMAT: jacobian.replay,
+          counterexamples.FORMAT: counterexamples.verify_dict, table.FORMAT: table.verify}
+"""format name -> function(document) -> list of problems (empty: verified)."""
+
+
+@dataclass(frozen=True)
+class VerifyResult:
+    """The verdict on one saved certificate.
+
+    Attributes
+    ----------
+    ok : bool
+        Every check passed.
+    problems : tuple of str
+        One sentence per failed check, naming the row and field.
+    certificate : str
+        Where the certificate came from (its file).
+    format : str
+        The certificate's format name.
+    """
+
+    ok: bool
+    problems: tuple
+    certificate: str
+    format: str
+
+    def to_dict(self) -> dict:
+        """``{"ok", "problems", "certificate", "format"}``, as ``identcheck verify --json`` prints it."""
+        return {"ok": self.ok, "problems": list(self.problems), "certificate": self.certificate,
+                "format": self.format}
+
+
+def read(path) -> dict:
+    """The JSON object saved in ``path``.
+
+    Raises
+    ------
+    InputError
+        The file is missing, is not JSON, or holds no JSON object.
+    """
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(["file not found"], source=str(path)) from None
+    except json.JSONDecodeError as exc:
+        raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=str(path)) from None
+    if not isinstance(doc, dict):
+        raise InputError(["a certificate is a JSON object"], source=str(path))
+    return doc
+
+
+def verify(certificate, source: str | None = None) -> VerifyResult:
+    """Re-check ``certificate`` (a path to a saved certificate or table, or its JSON object).
+
+    Parameters
+    ----------
+    certificate : str, os.PathLike or dict
+    source : str, optional
+        Name reported for a dict (default ``"<dict>"``); a path names itself.
+
+    Raises
+    ------
+    InputError
+        Unreadable file or an unknown format.
+    """
+    if isinstance(certificate, dict):
+        doc, source = certificate, source or "<dict>"
+    else:
+        doc, source = read(certificate), source or str(certificate)
+    fmt = doc.get("format")
+    if fmt not in CHECKS:
+        raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(CHECKS))})"],
+                         source=source)
+    problems = CHECKS[fmt](doc)
+    return VerifyResult(ok=not problems, problems=tuple(problems), certificate=source, format=fmt)
