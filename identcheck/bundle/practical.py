@@ -86,7 +86,7 @@ def _motion(chain, fit, joint: str, weak) -> str:
     """What to record to determine the joint better, from the motion the trial shows."""
     s = fit.state
     if chain.types[joint] == "revolute":
-        rom = float(np.rad2deg(np.ptp(s.theta[joint])))
+        rom = float(np.rad2deg(np.ptp(np.unwrap(s.theta[joint]))))
         if rom < MIN_HINGE_ROM_DEG:
             return f"flex {joint} through a larger range (this trial: {rom:.0f} deg about the hinge)"
         return (f"{joint} moved {rom:.0f} deg about its hinge: add frames, or markers farther from the hinge axis, "

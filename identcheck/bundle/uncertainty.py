@@ -54,10 +54,10 @@ class Covariance:
     undetermined: int
     null: np.ndarray               # (P, k) unit directions the data leave free (gauge and beyond)
 
-    def free(self, grad: np.ndarray, tol: float = 1e-6) -> bool:
+    def free(self, grad: np.ndarray, tol: float = 1e-3) -> bool:
         """Whether a functional with this gradient moves along a direction the data leave free (then its
         standard error, which the pseudo-inverse computes without those directions, means nothing)."""
-        if self.null.size == 0:
+        if self.null.size == 0 or self.undetermined == 0:      # only the gauge is free: distances do not move
             return False
         n = np.linalg.norm(grad)
         return bool(n > 0 and np.max(np.abs(grad @ self.null)) > tol * n)

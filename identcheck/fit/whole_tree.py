@@ -38,6 +38,10 @@ MAX_ITER = 200           # LM iterations per start
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this (and 2 SE) are one
 Z95 = 1.959964
+SIGMA_FLOOR_MM = 0.01
+"""The likelihood ratio's noise is never taken below this: far below any capture system's noise, above
+float32 file precision and the optimiser's own slack, so that two exactly tying joints on noise-free data
+are not told apart by rounding."""
 
 
 @dataclass(frozen=True)
@@ -145,7 +149,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None) -> TreeFit:
         chain, best.fit.state, len(best.cov.information)).values() for _, g in per.values()])))
     others = []
     for m in minima[1:]:
-        delta = (m.fit.rss - best.fit.rss) / (best.cov.sigma_mm ** 2 * tau)
+        delta = (m.fit.rss - best.fit.rss) / (max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau)
         others.append((m, float(delta), float(chdtrc(1, delta))))
     return TreeFit(best, others, n_starts=len(combos), starts_left_out=left_out)
 
@@ -243,3 +247,52 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
                         f"within segments); largest on {', '.join(f'{m} ({rms[chain.labels.index(m)]:.3g} mm rms)' for m in worst)}. "
                         "The intervals include this misfit; `identcheck diagnose` names what the model is missing.",
              "markers": worst, "kind": "model_misfit"}]
+
+
+def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
+    """The contract's ``fit`` JSON with the whole-tree answer in place of the closed-form one: each joint's
+    marker distances, 95 % intervals, uncertainty, alternatives (likelihood ratio), practical verdict and
+    ``unique`` (= determined); the closed-form estimate stays as ``start`` (and in ``notes``). Without a
+    whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined."""
+    joints = {}
+    answers = joint_answers(tree, model) if tree.best is not None else {}
+    residual = None
+    if tree.best is not None:
+        fit = tree.best.fit
+        data = trial.select(fit.chain.labels).as_array()
+        residual = dict(zip(fit.chain.labels, np.linalg.norm(data - fit.pred, axis=2).T))
+    for name, j in rep["joints"].items():
+        j = dict(j)
+        j["start"] = {"estimator": j.get("estimator"), "marker_distances": j.get("marker_distances"),
+                      "uncertainty_mm": j.get("uncertainty_mm")}
+        if name in answers:
+            a = answers[name]
+            j["estimator"] = "whole-tree maximum likelihood"
+            j["marker_distances"] = {m: a["marker_distances"].get(m) for m in j["marker_distances"]} \
+                if j["marker_distances"] else a["marker_distances"]
+            j["marker_distances_ci95"] = a["marker_distances_ci95"]
+            j["uncertainty_mm"] = a["uncertainty_mm"]
+            j["alternatives"] = a["alternatives"]
+            j["rejected_candidates"] = a["rejected_candidates"]
+            j["practical"] = a["practical"]
+            j["unique"] = a["practical"]["verdict"] == "determined"
+            res = [residual[m] for m in a["marker_distances"] if m in residual]
+            j["rms_residual"] = round(float(np.sqrt(np.nanmean(np.square(res)))), 4) if res else None
+            j["excitation"] = {"ok": j["unique"] or a["practical"]["verdict"] == "ambiguous",
+                               "reason": "ok" if a["practical"]["verdict"] == "determined"
+                               else f"{a['practical']['reason']}. {a['practical']['motion_advice']}".strip()}
+        else:
+            why = (tree.problem or "the whole-tree fit could not start") if j.get("identifiable") else \
+                j["excitation"]["reason"]
+            j["unique"] = False
+            j["marker_distances_ci95"] = {}
+            j["uncertainty_mm"] = None
+            j["practical"] = {"verdict": "undetermined", "reason": why, "tolerance_mm": None,
+                              "weakest_direction_parent": None, "weakest_se_mm": None, "motion_advice": ""}
+            j["excitation"] = {"ok": False, "reason": why}
+        joints[name] = j
+    out = dict(rep)
+    out["joints"] = joints
+    out["noise"] = noise_report(tree) if tree.best is not None else {
+        "sigma_mm": None, "correlation": None, "source": "no whole-tree fit: " + (tree.problem or "no start")}
+    return out

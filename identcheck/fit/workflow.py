@@ -212,3 +212,30 @@ def report(model, fitted: dict, points: dict) -> dict:
                      "excitation": {"ok": bool(est.excitation_ok), "reason": est.excitation_reason or "ok"},
                      "estimator": est.estimator, "markers_used": info, "notes": list(est.notes)}
     return {"joints": out}
+
+
+def fit_trial(model, trial, progress=None) -> dict:
+    """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
+    the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
+    (the contract's ``fit`` JSON: joints, ``noise``, ``warnings``).
+
+    Warnings raised by the estimators, the label screen's findings and a model misfit are all in
+    ``warnings`` (dicts with ``message`` and, where there is one, ``markers`` / ``frames``)."""
+    import warnings as _w
+
+    from identcheck.estimate.labels import screen
+    from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
+
+    screened, swaps = screen(model, trial)
+    with _w.catch_warnings(record=True) as caught:
+        _w.simplefilter("always")
+        fitted, points = fit_model(model, screened, progress=progress)
+        tree = fit_tree(model, screened, fitted, progress=progress)
+    rep = merge_report(report(model, fitted, points), tree, model, screened)
+    notes = [{"message": w, "kind": "label_swap"} for w in swaps]
+    notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
+              if issubclass(c.category, UserWarning)]
+    if tree.best is not None:
+        notes += misfit_warnings(tree, model, screened)
+    rep["warnings"] = list({n["message"]: n for n in notes}.values())
+    return rep
