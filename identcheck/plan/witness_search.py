@@ -88,9 +88,9 @@ class Witness:
         label, rel = self.change
         alt = self.quantities_alt[label]
         flipped = label.startswith("axial") and _axis_sign(self.quantities_true, self.quantities_alt) < 0
-        return {"joint": self.joint, "method": self.method, "verified": self.verified,
+        return {"joint": self.joint, "method": self.method, "verified": bool(self.verified),
                 "quantity": label, "true": self.quantities_true[label], "alternative": -alt if flipped else alt,
-                "hinge_direction_flipped": flipped, "held_out_informative": self.held_out_informative,
+                "hinge_direction_flipped": bool(flipped), "held_out_informative": bool(self.held_out_informative),
                 "relative_change": rel, "max_marker_error_mm": self.residual_mm,
                 "held_out_max_marker_error_mm": self.held_out_residual_mm,
                 "frames": self.n_frames, "held_out_frames": self.n_held_out,
@@ -398,7 +398,7 @@ def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) 
         xh, _ = gauss_newton(L, xh, H, held_out, frames_only=True)
         _, held_err = refine(L, xh, H, held_out, frames_only=True, const_mp=xm[:L.n_const])
         Jh = jacobian(L, xh, H, frames_only=True)
-        informative = bool(Jh.shape[0]) and np.linalg.matrix_rank(Jh, tol=1e-9 * max(np.abs(Jh).max(), 1.0)) < Jh.shape[0]
+        informative = bool(Jh.shape[0]) and bool(np.linalg.matrix_rank(Jh, tol=1e-9 * max(np.abs(Jh).max(), 1.0)) < Jh.shape[0])
     const = np.array([float(v) for v in xm[:L.n_const]])
     return Witness(joint, method, _floats(K.joint_quantities(L, truth_x[:L.n_const], joint)),
                    _floats(K.joint_quantities(L, const, joint)), err, held_err, F, H, xm, informative)
