@@ -56,12 +56,12 @@ def main(argv=None):
         rows.append({"plan": path, "markers": n_markers, "joints": len(spec.joints),
                      "verdict_s": t_verdict, "full_s": t_full, "rank_gfp_s": t_gfp, "rank_qq_s": t_qq,
                      "qq_over_gfp": (t_qq / t_gfp) if t_qq else None,
-                     "all_identifiable": full["all_identifiable"], "all_local": full["all_local"],
-                     "suggested_markers": sum(s["add_markers"] for s in full["suggestions"])})
+                     "all_identifiable": full.all_identifiable, "all_local": full.all_local,
+                     "suggested_markers": sum(s["add_markers"] for s in full.suggestions)})
         if a.witness:
             t_w, wdoc = best_of(lambda: plan.plan_model(model, motion=False, robust=False, suggest=False,
                                                         witness=True), k=1)
-            alts = [j["alternative"] for j in wdoc["joints"].values() if "alternative" in j]
+            alts = [j["alternative"] for j in wdoc.joints.values() if "alternative" in j]
             rows[-1].update({"witness_s": t_w, "witness_searched": len(alts),
                              "witness_verified": sum(bool(w["verified"]) for w in alts)})
     head = (f"{'plan':<32} {'mk':>3} {'jt':>3} {'verdict':>9} {'full':>8} {'rank GFp':>9} {'rank QQ':>9} {'QQ/GFp':>7}"

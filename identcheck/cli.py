@@ -203,13 +203,15 @@ def _cmd_plan(a) -> int:
     if a.figure:
         from identcheck.report.plan_figure import draw
 
-        draw(doc, {s: seg.markers for s, seg in model.segments.items()}, model.root, a.figure, title=a.model)
+        draw(doc, a.figure, title=a.model)
         log.info("figure written to %s", a.figure)
     if a.json:
         _print_json(doc)
     else:
-        print(plan.render_table(doc))
-    return 0 if doc["all_identifiable"] else 1
+        from identcheck.report.text import plan_text
+
+        print(plan_text(doc))
+    return 0 if doc.all_identifiable else 1
 
 
 def _cmd_diagnose(a) -> int:

@@ -49,6 +49,7 @@ from identcheck.certify import tree_rank
 from identcheck.plan import witness_search as tree_witness
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.report.plan_figure import draw  # noqa: E402
+from identcheck.report.text import plan_text  # noqa: E402
 
 ROOT = Path(identcheck.__file__).resolve().parents[1]
 FIGS = Path(tempfile.mkdtemp(prefix="plan_walkthrough_"))
@@ -67,14 +68,14 @@ FIGS = Path(tempfile.mkdtemp(prefix="plan_walkthrough_"))
 
 # %%
 body = Model.from_toml(ROOT / "examples" / "body16.toml")
-doc = plan.plan_model(body, robust=False)
-print(plan.render_table(doc))
-assert doc["all_identifiable"]
-knee = doc["joints"]["knee_l"]
+result = plan.plan_model(body, robust=False)
+print(plan_text(result))
+assert result.all_identifiable
+knee = result.joints["knee_l"]
 assert knee["case"] == "revolute(2,1)" and knee["candidates"] == 1 and knee["rejected_by"]["marker"] == "LANKLE"
 
 # %%
-draw(doc, {s: seg.markers for s, seg in body.segments.items()}, body.root, FIGS / "body16.png", title="body16")
+draw(result, FIGS / "body16.png", title="body16")
 display(Image(filename=str(FIGS / "body16.png")))
 
 # %% [markdown]
@@ -92,8 +93,8 @@ display(Image(filename=str(FIGS / "body16.png")))
 
 # %%
 leg = Model.from_toml(ROOT / "examples" / "sparse_leg.toml")
-doc = plan.plan_model(leg, robust=False, motion=False, witness=True)
-w = doc["joints"]["knee_r"]["alternative"]
+result = plan.plan_model(leg, robust=False, motion=False, witness=True)
+w = result.joints["knee_r"]["alternative"]
 print({k: w[k] for k in ("verified", "quantity", "true", "alternative", "max_marker_error_mm",
                          "held_out_max_marker_error_mm", "frames", "held_out_frames")})
 assert w["verified"] and w["max_marker_error_mm"] < 1e-30 and w["held_out_max_marker_error_mm"] < 1e-30

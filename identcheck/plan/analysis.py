@@ -27,6 +27,7 @@ from importlib import resources
 
 from identcheck.certify import tree_rank
 from identcheck.certify import twin as twin_certificate
+from identcheck.plan.result import PlanResult
 
 MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
 
@@ -373,10 +374,28 @@ def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
 
 
 def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
-               fewest: bool = False, witness: bool = False, progress=None) -> dict:
-    """The contract's ``plan`` JSON for a model (plus explanation, motion, robustness and the certificate).
-    ``witness``: also simulate the plan and search every joint it does not identify for a second skeleton
-    verified at 50 digits (:mod:`identcheck.plan.witness`; seconds to a minute)."""
+               fewest: bool = False, witness: bool = False, progress=None) -> PlanResult:
+    """Check a marker plan: every joint's verdict and explanation, the fewest markers to add, and (optional
+    analyses) the motion each joint needs, the markers the plan cannot lose, the fewest markers that keep
+    every joint locally identifiable.
+
+    Parameters
+    ----------
+    model : Model
+    seed : int
+        Seed of the random prime and point of the whole-tree rank.
+    motion, robust, suggest, fewest : bool
+        Run the motion, robustness, suggestion and fewest-markers analyses.
+    witness : bool
+        Also simulate the plan and search every joint it does not identify for a second skeleton verified
+        at 50 digits (:mod:`identcheck.plan.witness`; seconds to a minute).
+    progress : callable, optional
+        Called with a message per stage of the witness search.
+
+    Returns
+    -------
+    PlanResult
+    """
     spec = tree_rank.TreeSpec.from_model(model)
     rows = table_summary()
     plan = analyse(spec, rows, seed=seed)
@@ -407,52 +426,5 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         "prime": r.prime, "frames": r.frames, "constants": r.n_constants, "dim_determined": r.dim_w,
         "degree_bound": r.degree_bound, "failure_probability_bound": r.failure_bound,
         "seed": seed}
-    return doc
+    return PlanResult.from_dict(doc, model.root, {s: seg.markers for s, seg in model.segments.items()})
 
-
-def _witness_text(w: dict) -> str:
-    if w["verified"]:
-        return (f"verified on a simulated trial: a second skeleton reproduces every marker of {w['frames']} frames "
-                f"and of {w['held_out_frames']} held-out frames to {max(w['max_marker_error_mm'], w['held_out_max_marker_error_mm']):.0e} mm "
-                f"({w['precision_digits']} digits) with {w['quantity']} changed by {100 * w['relative_change']:.1f}%")
-    return w["note"]
-
-
-def render_table(doc: dict) -> str:
-    """A readable terminal report of ``plan`` JSON."""
-    head = f"{'joint':<12} {'verdict':<13} {'case':<16} {'cand.':>5} {'samples':>7}  uses / reason"
-    lines = [head, "-" * len(head)]
-    for name, j in doc["joints"].items():
-        verdict = "identifiable" if j["identifiable"] else ("local" if j["local"] else "NOT")
-        cand = "-" if j["candidates"] is None else str(j["candidates"])
-        ms = "-" if j["min_samples"] is None else str(j["min_samples"])
-        uses = ", ".join(j["uses_virtual_markers"]) or ""
-        lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
-        if not j["identifiable"]:
-            lines.append(f"{'':<12} {j['reason']}")
-        elif j.get("rejected_by"):
-            r = j["rejected_by"]
-            lines.append(f"{'':<12} {j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
-                         "(exact certificate)")
-        if "alternative" in j:
-            lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
-                         + _witness_text(j["alternative"]))
-        if j.get("motion_needed"):
-            lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
-    lines.append("")
-    lines.append("all joints identifiable: " + ("yes" if doc["all_identifiable"] else "no")
-                 + ("" if doc["all_identifiable"] else
-                    "; fewest markers to add: " + (", ".join(f"{s['add_markers']} on {s['segment']}"
-                                                             for s in doc["suggestions"]) or "none found")))
-    if doc.get("shared_motion"):
-        lines.append("shared motion: " + doc["shared_motion"])
-    if doc.get("fewest_local"):
-        f = doc["fewest_local"]
-        lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
-                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
-    if "robustness" in doc:
-        weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
-        lines.append("markers the plan cannot lose: " + (", ".join(weak) or "none"))
-    c = doc["certificate"]
-    lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
-    return "\n".join(lines)

@@ -1,7 +1,9 @@
 """Figure of a marker plan: the skeleton tree, joints coloured by verdict, marker counts on segments."""
 from __future__ import annotations
 
-from identcheck.report.figure_io import figure, save
+from pathlib import Path
+
+from identcheck.report.figure_io import figure as new_figure, save
 
 COLOURS = {"identifiable": "#2e7d32", "local": "#f9a825", "not": "#c62828"}
 
@@ -26,14 +28,23 @@ def _layout(joints: dict, root: str) -> dict:
     return pos
 
 
-def draw(doc: dict, markers: dict, root: str, path, title: str = "") -> None:
-    """Write the plan figure (PNG/SVG by extension) from ``plan`` JSON and segment -> marker names."""
+def figure(plan, title: str = ""):
+    """The plan's tree as a :class:`matplotlib.figure.Figure`: segments with their marker counts, joints
+    coloured by verdict (identifiable, locally identifiable, not), balls round and hinges square.
+
+    Parameters
+    ----------
+    plan : PlanResult
+        What :func:`identcheck.plan.analysis.plan_model` returns (its joints, root and markers).
+    title : str
+        Default "marker plan".
+    """
     from matplotlib.lines import Line2D
 
-    joints = doc["joints"]
-    pos = _layout(joints, root)
+    joints, markers = plan.joints, plan.markers
+    pos = _layout(joints, plan.root)
     width = max(6.0, 1.3 * (max(x for x, _ in pos.values()) + 1))
-    fig = figure(figsize=(width, 1.6 * (1 - min(y for _, y in pos.values())) + 1.5))
+    fig = new_figure(figsize=(width, 1.6 * (1 - min(y for _, y in pos.values())) + 1.5))
     ax = fig.subplots()
     for name, j in joints.items():
         (x0, y0), (x1, y1) = pos[j["parent"]], pos[j["child"]]
@@ -58,4 +69,9 @@ def draw(doc: dict, markers: dict, root: str, path, title: str = "") -> None:
     ax.legend(handles=handles, loc="lower left", fontsize=7, frameon=False, ncol=5, bbox_to_anchor=(0, -0.12))
     ax.set_title(title or "marker plan", fontsize=9)
     ax.axis("off")
-    save(fig, path, dpi=130)
+    return fig
+
+
+def draw(plan, path, title: str = "") -> Path:
+    """Write the plan figure (:func:`figure`) to ``path`` (PNG/SVG by extension); returns the path."""
+    return save(figure(plan, title), path, dpi=130)

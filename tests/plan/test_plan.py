@@ -92,7 +92,7 @@ def test_identified_joints_are_recovered_from_a_simulated_trial(tree, seed):
     """Simulate the plan, run the estimators it names (``fit``); every joint the plan calls identifiable
     is recovered, uniquely, with the true marker distances."""
     model = chain_model(*tree)
-    doc = plan.plan_model(model, motion=False, robust=False, suggest=False)
+    doc = plan.plan_model(model, motion=False, robust=False, suggest=False).to_dict()
     if not any(j["identifiable"] for j in doc["joints"].values()):
         return
     sim = simulate(model, n_frames=60, seed=seed, noise_mm=0.0)
@@ -135,7 +135,7 @@ def test_body16_paper_plan():
     knees and elbows are settled by revolute (2,1) on the hip or shoulder centre, which alone admits 4 joints
     (ERRATA E1, E2); the single foot and hand markers, beyond the ankles and wrists, reject the other 3
     (an exact certificate), and the ankles and wrists follow uniquely."""
-    doc = plan.plan_model(Model.from_toml(EXAMPLES / "body16.toml"))
+    doc = plan.plan_model(Model.from_toml(EXAMPLES / "body16.toml")).to_dict()
     j = doc["joints"]
     assert len(j) == 13 and doc["all_local"] and doc["all_identifiable"] and doc["suggestions"] == []
     far = {"knee_l": "LANKLE", "knee_r": "RANKLE", "elbow_l": "LWRIST", "elbow_r": "RWRIST"}
@@ -152,14 +152,14 @@ def test_shared_motion_is_reported():
     """Two pelvis markers, one thigh, one shank marker: the hip (2,1) is not identifiable alone (table),
     but the whole tree pins it together with the knee — the report says so."""
     model = chain_model(["spherical", "revolute"], [2, 1, 1])
-    doc = plan.plan_model(model, motion=False, robust=False)
+    doc = plan.plan_model(model, motion=False, robust=False).to_dict()
     assert doc["joints"]["j1"]["local"] and doc["joints"]["j1"]["jointly_only"]
     assert "shared_motion" in doc
     assert not plan.table_summary()[("spherical", 2, 1)]["local"]
 
 
 def test_motion_needed_names_the_joint_itself():
-    doc = plan.plan_model(Model.from_toml(EXAMPLES / "sparse_leg.toml"), robust=False)
+    doc = plan.plan_model(Model.from_toml(EXAMPLES / "sparse_leg.toml"), robust=False).to_dict()
     assert doc["joints"]["knee_r"]["motion_needed"] == ["knee_r"]
 
 

@@ -1,0 +1,69 @@
+"""What ``identcheck plan`` returns: the verdict for every joint of a marker plan, the explanation, and the
+fewest markers to add."""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from identcheck.io.jsonable import frozen, plain
+
+OPTIONAL = ("suggestions_note", "robustness", "fewest_local", "shared_motion")
+"""Top-level keys present only when the analysis ran (or had something to say)."""
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """A marker plan's verdicts (read-only).
+
+    Attributes
+    ----------
+    all_identifiable, all_local : bool
+        Every joint is identifiable (uniquely) / locally identifiable.
+    joints : Mapping
+        Joint name -> its verdict, with the contract's keys (``identifiable``, ``local``, ``candidates``,
+        ``case``, ``min_samples``, ``uses_virtual_markers``, ``reason``) and the explanation's
+        (``parent``, ``child``, ``settled_by``, ``depends_on``, ``rejected_by``, ...; ``motion_needed``
+        and ``alternative`` when those analyses ran).
+    suggestions : tuple of Mapping
+        The fewest markers to add, ``{"segment", "add_markers"}`` each; empty when none are needed
+        or none were found (``suggestions_note`` then says so).
+    certificate : Mapping
+        How the whole-tree verdict was computed (prime, frames, failure probability bound, seed).
+    suggestions_note, robustness, fewest_local, shared_motion
+        Present (not None) when computed; as in the JSON.
+    root : str
+        The model's root segment (for drawing the tree).
+    markers : Mapping
+        Segment -> its marker names (for drawing the tree).
+    """
+
+    all_identifiable: bool
+    all_local: bool
+    joints: Mapping
+    suggestions: tuple
+    certificate: Mapping
+    root: str
+    markers: Mapping
+    suggestions_note: str | None = None
+    robustness: Mapping | None = None
+    fewest_local: Mapping | None = None
+    shared_motion: str | None = None
+
+    @classmethod
+    def from_dict(cls, doc: dict, root: str, markers: dict) -> "PlanResult":
+        """A PlanResult from the ``plan`` JSON document (a read-only copy) and the model's tree."""
+        return cls(all_identifiable=bool(doc["all_identifiable"]), all_local=bool(doc["all_local"]),
+                   joints=frozen(doc["joints"]), suggestions=frozen(doc["suggestions"]),
+                   certificate=frozen(doc["certificate"]), root=root,
+                   markers=frozen({s: list(ms) for s, ms in markers.items()}),
+                   **{k: frozen(doc[k]) for k in OPTIONAL if k in doc})
+
+    def to_dict(self) -> dict:
+        """The contract's ``plan`` JSON (plus the explanation, motion, robustness and the certificate)."""
+        doc = {"all_identifiable": self.all_identifiable, "all_local": self.all_local,
+               "joints": plain(self.joints), "suggestions": plain(self.suggestions)}
+        for k in OPTIONAL:
+            if getattr(self, k) is not None:
+                doc[k] = plain(getattr(self, k))
+        doc["certificate"] = plain(self.certificate)
+        return doc

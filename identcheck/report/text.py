@@ -1,0 +1,190 @@
+"""Results as text for a terminal: what the ``identcheck`` verbs print without ``--json``.
+
+Each function takes a verb's result (or its JSON document) and returns the lines to print, joined by
+newlines; nothing here computes a number, it only lays out what the result holds. Plain fixed-width
+formatting: no table library is needed for these few columns.
+"""
+from __future__ import annotations
+
+from identcheck.report.json_out import document
+
+
+def derive_text(result) -> str:
+    """``identcheck derive``: each derivation, its checks against the print, and where they were written."""
+    rep = document(result)
+    lines = []
+    for d in rep["derivations"]:
+        lines.append(f"{d['title']}: {'ok' if d['ok'] else 'MISMATCH'}")
+        for c in d["checks"]:
+            flag = "agrees" if c["agrees"] else (f"erratum {c['erratum']}" if c["ok"] else "DISAGREES (unrecorded)")
+            lines.append(f"  {c['name']:<24} {c['where']:<16} {flag}")
+    lines.append(f"written to {rep['out']}")
+    return "\n".join(lines)
+
+
+def rank_text(cert) -> str:
+    """``identcheck rank``: the case, the exact rank against the float cross-check, and the statement."""
+    return "\n".join([f"{cert.joint} ({cert.p},{cert.q}): unknowns {', '.join(cert.unknowns)}",
+                      f"exact rank {cert.rank} of {len(cert.unknowns)} (float cross-check: {cert.numeric_rank})",
+                      cert.statement])
+
+
+def verify_text(result) -> str:
+    """``identcheck verify``: verified, or rejected with every problem."""
+    lines = [f"certificate verified ({result.format}): recomputed from scratch" if not result.problems
+             else "certificate REJECTED:"]
+    lines += ["  - " + p for p in result.problems]
+    return "\n".join(lines)
+
+
+def table_text(result) -> str:
+    """``identcheck table``: one line per case with its verdict and the kind of certificate."""
+    lines = [f"{'joint':<10} {'p,q':<4} {'identifiable':<13} {'local':<6} {'candidates':<11} {'min N':<6} "
+             f"{'local N':<8} certificate"]
+    for r in document(result)["cases"]:
+        c = r["certificate"]
+        how = c["kind"] + (f" <- {c['follows_from']} ({c['rule']})" if c["kind"] == "remark1" else "")
+        ident = ("yes" if r["identifiable"] else "no") if r["identifiable_decided"] else "undecided"
+        lines.append(f"{r['joint']:<10} {r['p']},{r['q']:<2} {ident:<13} {'yes' if r['local'] else 'no':<6} "
+                     f"{'-' if r['candidates'] is None else r['candidates']!s:<11} "
+                     f"{'-' if r['min_samples'] is None else r['min_samples']!s:<6} "
+                     f"{'-' if r['local_min_samples'] is None else r['local_min_samples']!s:<8} {how}")
+    lines.append("identifiable: generic data give one joint; local: finitely many (candidates, mirror images "
+                 "counted); min N: samples for the stated verdict; local N: samples for local identifiability "
+                 "(Jacobian engine).")
+    return "\n".join(lines)
+
+
+def identify_text(result) -> str:
+    """``identcheck identify``: per joint, every candidate's marker distances."""
+    lines = []
+    for name, j in document(result)["joints"].items():
+        hinge = j["type"] == "revolute"
+        lines.append(f"{name}: {j['case']}, {j['n_samples']} samples -> {j['candidates']} joint(s)"
+                     + (f" ({j['parameter_sets']} parameter sets x mirror images)" if hinge else "")
+                     + f"; unique: {j['unique']}; largest sample residual {j['rms_residual']:.3g} mm")
+        rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
+        markers = list(rows[0])
+        what = "distances to the hinge axis (mm): " if hinge else "distances to the centre (mm):     "
+        lines.append("   " + what + "  ".join(f"{m:>8}" for m in markers))
+        for i, row in enumerate(rows):
+            lines.append(f"   joint {i}:" + " " * 26 + "  ".join(f"{row[m]:8.2f}" for m in markers))
+    return "\n".join(lines)
+
+
+def fit_text(result) -> str:
+    """``identcheck fit``: per joint, the verdict, residual and uncertainty, and every candidate's marker
+    distances with their 95 % intervals."""
+    lines = []
+    for name, j in document(result)["joints"].items():
+        head = f"{name}: {j['case']} by {j['estimator'] or '-'}"
+        if not j["identifiable"]:
+            lines.append(f"{head}: NOT IDENTIFIABLE. {j['excitation']['reason']}")
+            continue
+        unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.3g}"
+        rms = "-" if j["rms_residual"] is None else f"{j['rms_residual']:.3g}"
+        lines.append(f"{head}; {j['practical']['verdict']}; unique: {j['unique']}; rms residual {rms} mm; "
+                     f"uncertainty {unc} mm (largest standard error of a marker distance)")
+        what = "distance to the centre" if j["type"] == "spherical" else "distance to the hinge axis"
+        rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
+        lines.append(f"   {what} (mm): " + "  ".join(f"{m:>8}" for m in rows[0]))
+        for i, row in enumerate(rows):
+            lines.append(f"   joint {i}:{' ' * (len(what) - 2)}" + "  ".join(
+                "       -" if row[m] is None else f"{row[m]:8.2f}" for m in rows[0]))
+        for m, (lo, hi) in j.get("marker_distances_ci95", {}).items():
+            lines.append(f"   {m}: 95% interval {lo:.1f} .. {hi:.1f} mm")
+        if j["practical"]["verdict"] != "determined":
+            lines.append(f"   {j['practical']['verdict']}: {j['excitation']['reason']}")
+    return "\n".join(lines)
+
+
+def diagnose_text(diag) -> str:
+    """``identcheck diagnose``: the noise, the gap before, each adopted effect, the gap after and the joints."""
+    rep = diag.to_dict()
+    lines = [f"noise: {rep['noise_sigma_mm']:.3g} mm per coordinate (within-segment distances, frame to frame; "
+             f"whole-trial scatter {diag.ctx.noise.sigma_scatter_mm:.3g} mm)",
+             f"gap of the rigid-joint model: {rep['gap_before']:.3g} mm (noise floor {rep['noise_floor_before']:.3g} mm)"]
+    if not rep["effects"]:
+        lines.append("no effect found: the rigid-joint model plus noise explains the trial"
+                     if rep["consistent_before"]["consistent"]
+                     else "no named effect earns its parameters; the gap stays unexplained")
+    for k, e in enumerate(rep["effects"], 1):
+        where = ", ".join(f"{key}={val}" for key, val in e["where"].items() if key != "frames" or len(val) <= 4)
+        lines.append(f"{k}. {e['name']:<18} {where}: gap {e['gap_before']:.3g} -> {e['gap_after']:.3g} mm")
+    test = rep["consistent_after"]
+    lines.append(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
+                 f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "
+                 f"(gap²/floor² = {test['ratio']:.3g}, limit {test['limit']:.3g})")
+    for name, j in rep["joints"].items():
+        unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.2g}"
+        kind = j["type"] if j["type"] == j["declared_type"] else f"{j['type']} (declared {j['declared_type']})"
+        lines.append(f"   {name}: {kind}; rms residual {j['rms_residual']:.3g} mm; uncertainty {unc} mm; "
+                     + ", ".join(f"{m} {d:.1f}" for m, d in j["marker_distances"].items()))
+    return "\n".join(lines)
+
+
+def without_long_lists(doc: dict, longest: int = 20) -> dict:
+    """`doc` without the keys (at any depth) whose values are lists of more than `longest` items,
+    so that per-frame arrays stay out of a printed summary."""
+    return {k: without_long_lists(v, longest) if isinstance(v, dict) else v for k, v in doc.items()
+            if not (isinstance(v, list) and len(v) > longest)}
+
+
+def simulate_summary(sim, out) -> dict:
+    """``identcheck simulate --json``: the file written, its frames and markers, the truth (no poses) and the
+    injected effect without its per-frame arrays."""
+    doc = {"out": str(out), "n_frames": sim.trial.n_frames, "markers": list(sim.trial.labels),
+           "truth": sim.truth.to_dict(poses=False)}
+    effect = sim.settings.get("effect")
+    if effect:
+        doc["effect"] = without_long_lists(effect)
+    return doc
+
+
+def _witness_text(w: dict) -> str:
+    if w["verified"]:
+        return (f"verified on a simulated trial: a second skeleton reproduces every marker of {w['frames']} frames "
+                f"and of {w['held_out_frames']} held-out frames to {max(w['max_marker_error_mm'], w['held_out_max_marker_error_mm']):.0e} mm "
+                f"({w['precision_digits']} digits) with {w['quantity']} changed by {100 * w['relative_change']:.1f}%")
+    return w["note"]
+
+
+def plan_text(result) -> str:
+    """``identcheck plan``: a table of the joints' verdicts, then the plan's summary lines."""
+    doc = document(result)
+    head = f"{'joint':<12} {'verdict':<13} {'case':<16} {'cand.':>5} {'samples':>7}  uses / reason"
+    lines = [head, "-" * len(head)]
+    for name, j in doc["joints"].items():
+        verdict = "identifiable" if j["identifiable"] else ("local" if j["local"] else "NOT")
+        cand = "-" if j["candidates"] is None else str(j["candidates"])
+        ms = "-" if j["min_samples"] is None else str(j["min_samples"])
+        uses = ", ".join(j["uses_virtual_markers"]) or ""
+        lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
+        if not j["identifiable"]:
+            lines.append(f"{'':<12} {j['reason']}")
+        elif j.get("rejected_by"):
+            r = j["rejected_by"]
+            lines.append(f"{'':<12} {j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
+                         "(exact certificate)")
+        if "alternative" in j:
+            lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
+                         + _witness_text(j["alternative"]))
+        if j.get("motion_needed"):
+            lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
+    lines.append("")
+    lines.append("all joints identifiable: " + ("yes" if doc["all_identifiable"] else "no")
+                 + ("" if doc["all_identifiable"] else
+                    "; fewest markers to add: " + (", ".join(f"{s['add_markers']} on {s['segment']}"
+                                                             for s in doc["suggestions"]) or "none found")))
+    if doc.get("shared_motion"):
+        lines.append("shared motion: " + doc["shared_motion"])
+    if doc.get("fewest_local"):
+        f = doc["fewest_local"]
+        lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
+                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
+    if "robustness" in doc:
+        weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
+        lines.append("markers the plan cannot lose: " + (", ".join(weak) or "none"))
+    c = doc["certificate"]
+    lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
+    return "\n".join(lines)
