@@ -1,29 +1,75 @@
-"""The library's verbs: one function per CLI verb, each taking plain arguments and returning a result.
+"""The library's verbs: one function per CLI verb, each taking a model and a trial (objects or file paths)
+and returning a frozen result with ``to_dict()`` (the verb's JSON).
 
 The command line (:mod:`identcheck.cli`) parses its arguments, calls exactly one of these, renders the
-result and chooses the exit code; nothing a verb computes lives in the CLI.
+result with :mod:`identcheck.report` and chooses the exit code; nothing a verb computes lives in the CLI.
+So ``identcheck.fit(model, trial)`` and ``identcheck fit MODEL TRIAL --json`` give the same numbers.
+
+Each verb runs with one BLAS thread (``threadpoolctl``): the solvers make many small dense solves, and
+several threads per solve only fight each other (a notebook with the default thread count was ~12x
+slower). The limit holds inside the call only; the caller's settings are restored after it.
+
+Heavy modules (SymPy, SciPy) are imported by the verbs that need them, when called.
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from identcheck.effects.inject import SEED_OFFSET, inject_effect
 from identcheck.errors import InputError
 from identcheck.io.model import Model
-from identcheck.simulate.rigid import Simulation, simulate
-from identcheck.trial import FORMATS
+from identcheck.simulate.rigid import Simulation
+from identcheck.simulate.rigid import simulate as simulate_model
+from identcheck.trial import FORMATS, Trial
 
 
-def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None,
-                  effect_seed: int | None = None, **kw) -> Simulation:
-    """Load a model, simulate it, inject `effect` if given, and write the (noisy) trial as
-    TRC or C3D by extension.
+def _one_blas_thread(verb):
+    """Run ``verb`` with BLAS (and OpenMP) limited to one thread, restored afterwards."""
+    @functools.wraps(verb)
+    def run(*args, **kwargs):
+        import scipy.linalg  # noqa: F401  (SciPy's own BLAS is loaded here: limit it too)
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1):
+            return verb(*args, **kwargs)
+    return run
+
+
+def load_model(model) -> Model:
+    """A :class:`~identcheck.io.model.Model` from a TOML file (a Model is returned as it is).
+
+    Raises
+    ------
+    InputError
+        Every problem of the file at once (unknown marker, joint cycle, ...), naming file and line.
+    """
+    return model if isinstance(model, Model) else Model.from_toml(model)
+
+
+def read_trial(trial) -> Trial:
+    """A :class:`~identcheck.trial.Trial` from a C3D or TRC file (a Trial is returned as it is):
+    markers in mm, shape ``(n_frames, n_markers, 3)``, NaN where occluded.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, unknown extension, or bad content, naming the file.
+    """
+    return trial if isinstance(trial, Trial) else Trial.from_file(trial)
+
+
+@_one_blas_thread
+def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_seed: int | None = None,
+             **kw) -> Simulation:
+    """Simulate `model`, inject `effect` if given, and write the (noisy) trial to `out` (TRC or C3D by
+    extension) if given.
 
     Parameters
     ----------
-    model_path : str or os.PathLike
-        TOML model file.
-    out_path : str or os.PathLike
+    model : Model, str or os.PathLike
+        The model, or its TOML file.
+    out : str or os.PathLike, optional
         ``.trc`` or ``.c3d`` (any case).
     seed : int
     effect : str, optional
@@ -43,12 +89,171 @@ def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None
         Bad model, bad arguments, an unknown output extension (checked before simulating),
         or an effect the model cannot carry.
     """
-    out_path = Path(out_path)
-    if out_path.suffix.lower() not in FORMATS:
+    out_path = None if out is None else Path(out)
+    if out_path is not None and out_path.suffix.lower() not in FORMATS:
         raise InputError([f"unknown trial file extension {out_path.suffix or '(none)'!r} (expected "
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
-    sim = simulate(Model.from_toml(model_path), seed=seed, **kw)
+    sim = simulate_model(load_model(model), seed=seed, **kw)
     if effect is not None:
         sim = inject_effect(sim, effect, seed=seed + SEED_OFFSET if effect_seed is None else effect_seed)
-    sim.trial.to_file(out_path)
+    if out_path is not None:
+        sim.trial.to_file(out_path)
     return sim
+
+
+def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None,
+                  effect_seed: int | None = None, **kw) -> Simulation:
+    """:func:`simulate` with the output file required."""
+    return simulate(model_path, out_path, seed=seed, effect=effect, effect_seed=effect_seed, **kw)
+
+
+@_one_blas_thread
+def fit(model, trial, progress=None):
+    """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
+
+    First the trial is screened for swapped marker labels (a span where two markers' labels are
+    exchanged is left out for those two, with a warning), then every joint is fitted as ``identcheck
+    fit`` does; every warning is in the result's ``warnings``.
+
+    Parameters
+    ----------
+    model : Model, str or os.PathLike
+    trial : Trial, str or os.PathLike
+    progress : callable, optional
+        Called with a one-line message per stage.
+
+    Returns
+    -------
+    FitResult
+
+    Raises
+    ------
+    InputError
+        Bad model or trial file, or a model marker missing from the trial.
+    """
+    from identcheck.fit.result import FitResult
+    from identcheck.fit.workflow import fit_trial
+
+    return FitResult.from_dict(fit_trial(load_model(model), read_trial(trial), progress=progress))
+
+
+@_one_blas_thread
+def diagnose(model, trial, progress=None, max_steps: int | None = None):
+    """Where the rigid-joint model and `trial` disagree: the named effects, adopted one at a time while
+    they earn their parameters, with the gap before and after each.
+
+    Parameters
+    ----------
+    model : Model, str or os.PathLike
+    trial : Trial, str or os.PathLike
+    progress : callable, optional
+        Called with a one-line message per stage.
+    max_steps : int, optional
+        Most effects adopted (default :data:`identcheck.diagnose.workflow.MAX_STEPS`).
+
+    Returns
+    -------
+    Diagnosis
+
+    Raises
+    ------
+    InputError
+        Bad files, a model marker missing from or never visible in the trial, or no measurement noise.
+    """
+    from identcheck.diagnose import workflow
+
+    steps = workflow.MAX_STEPS if max_steps is None else max_steps
+    return workflow.diagnose(load_model(model), read_trial(trial), progress=progress, max_steps=steps)
+
+
+@_one_blas_thread
+def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
+         fewest: bool = False, witness: bool = False, progress=None):
+    """Check a marker plan before capture: which joints `model`'s markers identify, how, with how many
+    samples, and the fewest markers to add (see :func:`identcheck.plan.analysis.plan_model`).
+
+    Returns
+    -------
+    PlanResult
+    """
+    from identcheck.plan.analysis import plan_model
+
+    return plan_model(load_model(model), seed=seed, motion=motion, robust=robust, suggest=suggest,
+                      fewest=fewest, witness=witness, progress=progress)
+
+
+@_one_blas_thread
+def identify(model, trial, joints=None, frames=None, precision: int | None = None):
+    """Every joint `trial`'s samples admit, by the exact-case solvers of Pham et al. (revolute (2,1),
+    spherical (3,q), spherical (2,2)), for `joints` of `model` (default: all).
+
+    Parameters
+    ----------
+    frames : iterable of int, optional
+        0-based frames; default every frame where the joint's markers are all visible.
+    precision : int, optional
+        Decimal digits (mpmath) instead of float64.
+
+    Returns
+    -------
+    IdentifyResult
+    """
+    from identcheck.identify import identify as identify_joints
+
+    return identify_joints(load_model(model), read_trial(trial), joints=joints, frames=frames, precision=precision)
+
+
+@_one_blas_thread
+def table(seed: int = 0, joints=None):
+    """The identifiability table: every joint type x markers (p on the parent, q on the child), p, q in 0..3,
+    with a certificate per row.
+
+    Returns
+    -------
+    TableResult
+    """
+    from identcheck.certify.table import table as make_table
+
+    return make_table(seed=seed, joints=joints)
+
+
+@_one_blas_thread
+def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0):
+    """Exact generic rank of the sampled M-matrix of a case over the rationals (``samples`` rows, default
+    the number of unknowns).
+
+    Returns
+    -------
+    RankCertificate
+    """
+    from identcheck.certify.exact_rank import rank as exact_rank
+
+    return exact_rank(joint, p, q, n_samples=samples, seed=seed)
+
+
+@_one_blas_thread
+def verify(certificate):
+    """Re-check a saved certificate or table (a path, or its JSON object) from its own data.
+
+    Returns
+    -------
+    VerifyResult
+        ``ok`` false with the problems when it does not hold.
+    """
+    from identcheck.certify.verify import verify as verify_certificate
+
+    return verify_certificate(certificate)
+
+
+@_one_blas_thread
+def derive(out="derivations/out"):
+    """Regenerate every derivation with SymPy, check each against the printed paper, and write them as
+    Markdown to `out`.
+
+    Returns
+    -------
+    DeriveResult
+    """
+    from identcheck.derive.result import derive_and_write
+
+    return derive_and_write(out)
