@@ -2,8 +2,8 @@
 :mod:`identcheck.report`, exit with the code of CONTRACT.md.
 
 0 success, 1 negative answer (not identifiable / derivation mismatch / certificate rejected / gap not
-explained), 2 bad input (message on stderr naming the file, marker or option). Progress and warnings go
-to stderr, results to stdout.
+explained), 2 bad input (message on stderr naming the file, marker or option), 3 internal error (never
+expected: the message asks for a report). Progress and warnings go to stderr, results to stdout.
 """
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import argparse
 import logging
 import os
 import sys
+import traceback
 import warnings
 
 import identcheck
@@ -251,6 +252,13 @@ def main(argv=None) -> int:
     except DegenerateError as exc:
         print(f"identcheck {a.verb}: degenerate data: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:
+        raise
+    except Exception:                   # a bug: say so, with the traceback to report (exit 3, CONTRACT.md)
+        traceback.print_exc(file=sys.stderr)
+        print(f"identcheck {a.verb}: internal error (a bug in identcheck {identcheck.__version__}); please "
+              "report it with the command line and the traceback above", file=sys.stderr)
+        return 3
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -99,3 +99,27 @@ def test_flexion_only_hip_is_named_coplanar_with_the_motion_to_add(tmp_path, cap
     assert cli.main(["identify", model, str(noisy)]) == 0
     err = capsys.readouterr().err
     assert "warning: the samples are nearly coplanar" in err and "abduction" in err
+
+
+def test_internal_error_is_exit_3_with_a_request_to_report(monkeypatch, capsys):
+    from identcheck import api
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(api, "table", broken)
+    assert cli.main(["table"]) == 3
+    err = capsys.readouterr().err
+    assert "ZeroDivisionError: a bug" in err and "internal error" in err and "report" in err
+
+
+def test_version_and_no_blas_variables_set_on_import():
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", "import os, identcheck.cli; print(os.environ.get('OMP_NUM_THREADS'))"],
+                         env=env, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "None"
+    assert cli.main(["--version"]) == 0
