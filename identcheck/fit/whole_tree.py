@@ -84,6 +84,8 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         idx = chain.seg_markers[seg]
         extra = [v for v in virtual.get(seg, {}).values() if np.isfinite(v).all(axis=1).any()]
         pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
+        if pts.shape[1] == 2:           # two points leave the roll about their line free: any roll will do
+            pts = np.concatenate([pts, _roll_point(pts[:, 0], pts[:, 1])[:, None]], axis=1)
         if pts.shape[1] < 3:
             raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
                                   "pose it (three are needed to start the whole-tree fit)")
@@ -96,6 +98,15 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         out[seg] = Poses(R=_fill(poses.valid, poses.R), t=_fill(poses.valid, poses.t), valid=poses.valid,
                          local=local[:len(idx)], rms=poses.rms)
     return out
+
+
+def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A third point (F, 3) 100 mm from `a`, perpendicular to a→b, turning smoothly with it: it fixes the
+    roll that two points leave free (the data do not see it, so the whole-tree fit treats it as gauge)."""
+    u = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1, keepdims=True), 1e-12)
+    ref = np.where(np.abs(u[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    w = np.cross(u, ref)
+    return a + 100.0 * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
 
 
 def candidates(closed_form: dict) -> dict:
@@ -249,6 +260,11 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
              "markers": worst, "kind": "model_misfit"}]
 
 
+def rep_unique(j: dict) -> bool:
+    """Whether the closed-form start was unique (a structurally multi-candidate case decided, or none)."""
+    return bool(j["start"].get("unique", True)) or not j["start_alternatives"]
+
+
 def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
     """The contract's ``fit`` JSON with the whole-tree answer in place of the closed-form one: each joint's
     marker distances, 95 % intervals, uncertainty, alternatives (likelihood ratio), practical verdict and
@@ -264,7 +280,8 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
     for name, j in rep["joints"].items():
         j = dict(j)
         j["start"] = {"estimator": j.get("estimator"), "marker_distances": j.get("marker_distances"),
-                      "uncertainty_mm": j.get("uncertainty_mm")}
+                      "uncertainty_mm": j.get("uncertainty_mm"), "unique": j.get("unique")}
+        j["start_alternatives"] = j.get("alternatives", [])
         if name in answers:
             a = answers[name]
             j["estimator"] = "whole-tree maximum likelihood"
@@ -275,15 +292,24 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
             j["alternatives"] = a["alternatives"]
             j["rejected_candidates"] = a["rejected_candidates"]
             j["practical"] = a["practical"]
-            j["unique"] = a["practical"]["verdict"] == "determined"
+            if a["practical"]["verdict"] == "determined" and j["start"]["marker_distances"] and not rep_unique(j):
+                # the case itself admits several joints that fit any rigid data equally (revolute (2,1): ERRATA E1)
+                # and nothing beyond it decided: a likelihood difference can only come from the model's misfit
+                j["practical"] = dict(a["practical"], verdict="ambiguous", reason=(
+                    f"{j['case']} admits {1 + len(j['start_alternatives'])} joints that fit rigid data equally well "
+                    "(ERRATA E1/E2) and no other marker decides between them; their likelihood differences here "
+                    "come from how the trial departs from the rigid model, not from the joint"),
+                    motion_advice="add a marker on the one-marker segment, or one beyond it (ERRATA E8)")
+                j["alternatives"] = [dict(r, p_value=None) for r in a["rejected_candidates"]] or j["start_alternatives"]
+            j["unique"] = j["practical"]["verdict"] == "determined"
             res = [residual[m] for m in a["marker_distances"] if m in residual]
             j["rms_residual"] = round(float(np.sqrt(np.nanmean(np.square(res)))), 4) if res else None
             j["excitation"] = {"ok": j["unique"] or a["practical"]["verdict"] == "ambiguous",
                                "reason": "ok" if a["practical"]["verdict"] == "determined"
                                else f"{a['practical']['reason']}. {a['practical']['motion_advice']}".strip()}
         else:
-            why = (tree.problem or "the whole-tree fit could not start") if j.get("identifiable") else \
-                j["excitation"]["reason"]
+            why = j["excitation"]["reason"] if j.get("estimator") is None else \
+                f"closed-form estimate only, no calibrated interval: {tree.problem or 'the whole-tree fit could not start'}"
             j["unique"] = False
             j["marker_distances_ci95"] = {}
             j["uncertainty_mm"] = None

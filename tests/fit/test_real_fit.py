@@ -59,7 +59,8 @@ def test_dense_hip_centre_is_anatomically_plausible(capsys):
     rc, j = fit_json("real_right_hip.toml", HIP, capsys)
     hip = j["hip_r"]
     assert rc == 0 and hip["unique"] and hip["identifiable"] and hip["excitation"]["ok"]
-    assert hip["case"] == "spherical(4,6)" and hip["estimator"].startswith("seed 001")
+    assert hip["case"] == "spherical(4,6)" and hip["start"]["estimator"].startswith("seed 001")
+    assert hip["estimator"] == "whole-tree maximum likelihood" and hip["practical"]["verdict"] == "determined"
     d = hip["marker_distances"]
     assert 40 < d["RGT"] < 150                                   # greater trochanter
     assert 60 < d["RASIS"] < 160                                 # ASIS to hip centre, adult
@@ -70,7 +71,10 @@ def test_dense_hip_centre_is_anatomically_plausible(capsys):
 def test_hip_estimators_agree(capsys, hip_trial):
     rc, j = fit_json("real_right_hip_sparse.toml", HIP, capsys)
     sp = j["hip_r"]
-    assert rc == 0 and sp["case"] == "spherical(3,1)" and sp["unique"] and sp["excitation"]["ok"]
+    # one epicondyle marker on a skin-moving thigh: the whole-tree fit calls the sparse hip undetermined on
+    # this trial (95 % interval of its RLFE distance ~±80 mm), and says why
+    assert sp["case"] == "spherical(3,1)" and sp["practical"]["verdict"] in ("determined", "undetermined")
+    assert rc == (0 if sp["unique"] else 1)
     dense = api("real_right_hip.toml", HIP, "hip_r").centre
     cluster = api("real_right_hip_cluster.toml", HIP, "hip_r").centre
     sparse = api("real_right_hip_sparse.toml", HIP, "hip_r").centre
@@ -87,6 +91,8 @@ def test_hip_estimators_agree(capsys, hip_trial):
     # the sparse fit's distance to the one thigh marker it uses matches the dense fit's within the same scale
     rc, jd = fit_json("real_right_hip.toml", HIP, capsys)
     assert abs(sp["marker_distances"]["RLFE"] - jd["hip_r"]["marker_distances"]["RLFE"]) < HIP_SPARSE_TOL_MM
+    lo, hi = sp["marker_distances_ci95"]["RLFE"]                  # and its interval holds the dense answer
+    assert lo <= jd["hip_r"]["marker_distances"]["RLFE"] <= hi
 
 
 def test_knee_axis_lies_along_the_epicondyles(capsys):
@@ -114,9 +120,10 @@ def test_sparse_knee_estimators_agree_with_the_circle(capsys):
     rc, j = fit_json("real_right_knee_sparse.toml", KNEE, capsys)
     p21 = j["knee_r"]
     assert rc == 1 and p21["case"] == "revolute(2,1)" and not p21["unique"]
-    assert len(p21["alternatives"]) == 3                          # four joints: ERRATA E1/E2
+    # four closed-form joints (ERRATA E1/E2) start the whole-tree fit; on this trial it cannot call one right
+    assert p21["practical"]["verdict"] in ("ambiguous", "undetermined")
     for m in ("RLM", "RTHI1", "RTHI3"):                           # same markers, same distances within 25 mm
-        assert abs(p21["marker_distances"][m] - c31["marker_distances"][m]) < 25
+        assert abs(p21["start"]["marker_distances"][m] - c31["marker_distances"][m]) < 25
     for model in ("real_right_knee_circle1.toml", "real_right_knee_sparse.toml"):
         d = api(model, KNEE, "knee_r").direction
         ang = np.degrees(np.arccos(np.clip(np.nanmedian(np.abs(np.sum(d * ref, axis=1))), 0, 1)))
@@ -162,11 +169,13 @@ def test_the_real_label_swap_is_caught_and_clean_trials_are_not_flagged(capsys):
     capsys.readouterr()
     cli.main(["fit", str(EX / "real_right_hip.toml"), str(HIP), "--json"])
     doc = json.loads(capsys.readouterr().out)
-    assert len(doc["warnings"]) == 1 and "RLFE and RMFE" in doc["warnings"][0]
+    swaps = [w for w in doc["warnings"] if w["kind"] == "label_swap"]
+    assert len(swaps) == 1 and "RLFE and RMFE" in swaps[0]["message"]
     assert doc["joints"]["hip_r"]["rms_residual"] < 8.5           # 9.0 mm with the swapped span in
     walking2 = DATA / "opensim_walking2.c3d"
     runs = [("real_right_knee.toml", KNEE), ("real_right_knee_cluster.toml", KNEE),
             ("real_right_hip.toml", STATIC)] + ([("real_walking2_legs.toml", walking2)] if walking2.exists() else [])
     for model, trial in runs:
         cli.main(["fit", str(EX / model), str(trial), "--json"])
-        assert json.loads(capsys.readouterr().out)["warnings"] == [], (model, trial.name)
+        warns = json.loads(capsys.readouterr().out)["warnings"]
+        assert [w for w in warns if w["kind"] == "label_swap"] == [], (model, trial.name)
