@@ -57,7 +57,8 @@ def test_cli_fit_warns_and_reports_in_json(tmp_path, capsys):
     cli.main(["fit", str(model_path), str(trc), "--json"])
     cap = capsys.readouterr()
     doc = json.loads(cap.out)
-    assert len(doc["warnings"]) == 1 and "look swapped" in cap.err and "swapped.trc" in doc["warnings"][0]
+    swaps = [w for w in doc["warnings"] if w["kind"] == "label_swap"]
+    assert len(swaps) == 1 and "look swapped" in cap.err and "swapped.trc" in swaps[0]["message"]
     assert hashlib.sha256(trc.read_bytes()).hexdigest() == before
 
 
