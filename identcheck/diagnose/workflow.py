@@ -11,9 +11,10 @@ import numpy as np
 
 from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
-from identcheck.estimate.joint import MIN_ROM_DEG
 from identcheck.io.jsonable import plain
 from identcheck.bundle.chain import fit_chain, information, initial_state
+from identcheck.bundle.practical import Z95, judge
+from identcheck.bundle.uncertainty import covariance, distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, joint_angles, score
 from identcheck.estimate.noise import noise_floor
@@ -27,7 +28,6 @@ below 1/SKIP_RATIO of the best score fitted so far is not fitted this round (det
 5x at most in the hidden-effect trials), unless it is another place for the leading effect (a delay's
 linearised detector cannot tell which segment lags when the lag is several frames)."""
 BASE_ITER = 20         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
-RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
 SD_GROWTH = 5.0
@@ -116,13 +116,10 @@ def undetermined(h: Hypothesis) -> int:
     S = information(h.fit, h.data, h.weights)
     if not np.isfinite(S).all():
         return len(S)
-    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
     try:
-        ev = np.linalg.eigvalsh(S / np.outer(d, d))
+        return gauge_free_inverse(S, h.chain.gauge())[1]
     except np.linalg.LinAlgError:
         return len(S)
-    null = int(np.sum(ev < RANK_TOL * ev.max()))
-    return max(null - h.chain.gauge(), 0)
 
 
 # ---------------------------------------------------------------------- the loop
@@ -202,47 +199,16 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them
-def gauge_free_inverse(S: np.ndarray, gauge: int) -> np.ndarray:
-    """Pseudo-inverse of the information, Jacobi-scaled first so that millimetres and radians compare;
-    directions below :data:`RANK_TOL` (the gauge, whose count is ``gauge``) are left out. Directions the
-    data barely determine stay in, with the large variances they deserve."""
-    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
-    w, V = np.linalg.eigh(S / np.outer(d, d))
-    keep = w > RANK_TOL * w.max()
-    inv = (V[:, keep] / w[keep]) @ V[:, keep].T
-    return inv / np.outer(d, d)
-
-
 def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -> dict:
     """Each joint's adjacent markers' distances to its centre (ball) or axis (hinge), mm, with their
-    standard errors: σ² times the pseudo-inverse of the information, carried through the gradient.
+    white-noise standard errors (σ² times the gauge-free inverse of the information, through each
+    distance's gradient): the yardstick the effect selection compares hypotheses by.
     {joint: {marker: (distance, sd)}}."""
     ch, s = h.chain, h.fit.state
     S = information(h.fit, h.data, h.weights) if S is None else S
-    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge())
-    offsets, c = {}, 3 * ch.n_markers
-    for j in ch.joints:
-        offsets[j] = c
-        c += 6 + (5 if ch.types[j] == "revolute" else 0)
-    out = {}
-    for j in ch.joints:
-        out[j] = {}
-        for side, seg in ((0, ch.parent[j]), (1, ch.child[j])):
-            centre = s.c_parent[j] if side == 0 else s.c_child[j]
-            axis = None
-            if ch.types[j] == "revolute":
-                axis = s.axis[j] if side == 0 else s.rest[j].T @ s.axis[j]
-            for col in ch.seg_markers[seg]:
-                v = s.local[col] - centre
-                if axis is not None:
-                    v = v - (v @ axis) * axis
-                d = float(np.linalg.norm(v))
-                u = v / max(d, 1e-12)
-                g = np.zeros(len(S))
-                g[3 * col:3 * col + 3] = u
-                g[offsets[j] + 3 * side: offsets[j] + 3 * side + 3] = -u
-                out[j][ch.labels[col]] = (d, float(np.sqrt(max(g @ cov @ g, 0.0))))
-    return out
+    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge())[0]
+    return {j: {m: (d, float(np.sqrt(max(g @ cov @ g, 0.0)))) for m, (d, g) in per.items()}
+            for j, per in distance_gradients(ch, s, len(S)).items()}
 
 
 def worst_sd(ctx: Context, h: Hypothesis) -> float:
@@ -251,11 +217,13 @@ def worst_sd(ctx: Context, h: Hypothesis) -> float:
 
 
 def joint_report(ctx: Context, h: Hypothesis) -> dict:
-    """Each joint as ``fit`` reports it, from the final model: marker distances to the centre or hinge,
-    their largest standard error, the residual of the joint's markers and the excitation."""
+    """Each joint as ``fit`` reports it, from the final model and with fit's rules (one estimator, one set of
+    rules): marker distances with 95 % intervals from the sandwich covariance (correlated noise and what
+    misfit remains allowed), the largest standard error, the practical verdict (:mod:`identcheck.bundle.practical`),
+    the residual of the joint's markers and the range of motion."""
     ch = h.chain
-    null = undetermined(h)
-    dists = marker_distances(ctx, h)
+    cov = covariance(h.fit, h.data, h.weights)
+    grads = distance_gradients(ch, h.fit.state, len(cov.information))
     angles = joint_angles(h)
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
@@ -263,14 +231,19 @@ def joint_report(ctx: Context, h: Hypothesis) -> dict:
         P, C = ch.parent[j], ch.child[j]
         rev = ch.types[j] == "revolute"
         idx = np.concatenate([ch.seg_markers[P], ch.seg_markers[C]])
-        rom = np.rad2deg(np.ptp(angles[j], axis=0))
-        ok = bool(rom[0] >= MIN_ROM_DEG) if rev else bool(np.sort(rom)[-2] >= MIN_ROM_DEG)
-        reason = "ok" if ok else (f"small range of motion: {', '.join(f'{x:.1f}' for x in rom)} deg "
-                                  f"(< {MIN_ROM_DEG:g} deg about {'the hinge' if rev else 'two axes'})")
-        sd = max(v[1] for v in dists[j].values())
+        rom = np.rad2deg(np.ptp(np.unwrap(angles[j], axis=0), axis=0))
+        dist = {m: (d, cov.se(g)) for m, (d, g) in grads[j].items()}
+        practical = judge(ch, h.fit, cov, j, dist)
+        determined = practical["verdict"] == "determined"
+        reason = "ok" if determined else (f"{practical['reason']}; range of motion {', '.join(f'{x:.1f}' for x in rom)} "
+                                          f"deg{'. ' + practical['motion_advice'] if practical['motion_advice'] else ''}")
+        sd = max(v[1] for v in dist.values())
         out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type,
-                  "unique": null == 0 and sd <= MAX_SD_MM,
-                  "marker_distances": {m: round(v[0], 3) for m, v in dists[j].items()}, "alternatives": [],
+                  "unique": determined,
+                  "marker_distances": {m: round(v[0], 3) for m, v in dist.items()},
+                  "marker_distances_ci95": {m: [round(d - Z95 * se, 3), round(d + Z95 * se, 3)]
+                                            for m, (d, se) in dist.items()},
+                  "alternatives": [], "practical": practical,
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),
-                  "uncertainty_mm": round(sd, 4), "excitation": {"ok": ok, "reason": reason}}
+                  "uncertainty_mm": round(sd, 4), "excitation": {"ok": determined, "reason": reason}}
     return out
