@@ -241,7 +241,7 @@ def joint_report(ctx: Context, h: Hypothesis) -> dict:
         out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type,
                   "unique": determined,
                   "marker_distances": {m: round(v[0], 3) for m, v in dist.items()},
-                  "marker_distances_ci95": {m: [round(d - Z95 * se, 3), round(d + Z95 * se, 3)]
+                  "marker_distances_ci95": {m: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)]
                                             for m, (d, se) in dist.items()},
                   "alternatives": [], "practical": practical,
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),

@@ -110,21 +110,38 @@ def fit(local) -> list:
     seeds = [s for s in revolute21.solve_batch(local).params if np.all(np.isfinite(s))]
     sparsity, lo, hi = _odr_problem(N, scale)
     found = []
-    for s in seeds:
+
+    def refine(s):
         s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
         x0 = np.r_[s, _nearest_beta(s, R, z)]
         sol = least_squares(_odr, x0, args=(R, z), bounds=(lo, hi), jac_sparsity=sparsity, x_scale="jac",
                             max_nfev=MAX_NFEV, ftol=TOL, xtol=TOL, gtol=TOL)
         p = sol.x[:5]
-        rms = float(np.sqrt(np.mean(residuals(p, R, z) ** 2)))
-        found.append((p, rms, _uncertainty(sol, N)))
+        found.append((p, float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(sol, N)))
+
+    for s in seeds:
+        refine(s)
     found.sort(key=lambda t: t[1])
+    if found:                       # the fitted joint's own twins (ERRATA E1): noise can hide them from the seeds
+        for s in twin_seeds(found[0][0], R, z):
+            if all(np.max(np.abs(s - q) / np.r_[scale, scale, 1.0, scale, scale]) > 1e-3 for q, _, _ in found):
+                refine(s)
+        found.sort(key=lambda t: t[1])
     units = np.array([scale, scale, 1.0, scale, scale])
     distinct = []
     for p, rms, unc in found:
         if all(np.max(np.abs(p - q) / units) > 1e-4 for q, _, _ in distinct):
             distinct.append((p, rms, unc))
     return distinct
+
+
+def twin_seeds(params, R, z) -> list:
+    """The closed form's joints for noise-free samples of the joint ``params`` (its meridian points nearest
+    the samples (R, z)): the joint itself and the other real joint that reproduces the same samples
+    exactly (ERRATA E1). On noisy data the closed form of the samples themselves can miss the twin."""
+    b = _nearest_beta(params, R, z)
+    x, y, zz = _meridian(params, b)
+    return [np.array(s, dtype=float) for s in revolute21.solve_batch(np.c_[x, y, zz]).params if np.all(np.isfinite(s))]
 
 
 def bootstrap_uncertainty(params, local, n_boot: int = 8, seed: int = 0) -> float:

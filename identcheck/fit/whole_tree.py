@@ -36,7 +36,8 @@ from identcheck.skeleton import Skeleton
 MAX_STARTS = 16          # candidate combinations started (the first ones in order of the closed-form ranking)
 MAX_ITER = 200           # LM iterations per start
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
-SAME_MM = 0.5            # two minima whose every marker distance agrees within this (and 2 SE) are one
+SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
+                         # reach the same minimum to ~1e-3 mm)
 Z95 = 1.959964
 SIGMA_FLOOR_MM = 0.01
 """The likelihood ratio's noise is never taken below this: far below any capture system's noise, above
@@ -166,7 +167,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None) -> TreeFit:
 
 
 def _distinct(minima: list) -> list:
-    """Minima with the same marker distances (within SAME_MM and 2 standard errors) kept once, best first."""
+    """Minima with the same marker distances (within SAME_MM) kept once, best first."""
     kept = []
     for m in minima:
         if not any(_same(m, k) for k in kept):
@@ -178,7 +179,7 @@ def _same(a: Minimum, b: Minimum) -> bool:
     for j, per in a.distances.items():
         for mk, (d, se) in per.items():
             d2, se2 = b.distances[j][mk]
-            if abs(d - d2) > max(SAME_MM, 2 * np.hypot(se, se2)):
+            if abs(d - d2) > SAME_MM:
                 return False
     return True
 
@@ -195,8 +196,7 @@ def joint_answers(tree: TreeFit, model) -> dict:
         for m, delta, p in tree.others:
             if p < 0.05:
                 continue          # rejected at the 95 % level
-            if all(abs(m.distances[j][k][0] - d) <= max(SAME_MM, 2 * np.hypot(se, m.distances[j][k][1]))
-                   for k, (d, se) in dist.items()):
+            if all(abs(m.distances[j][k][0] - d) <= SAME_MM for k, (d, se) in dist.items()):
                 continue          # the same joint; another joint of the tree differs
             alts.append({"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                          "marker_distances_ci95": _ci(m.distances[j]),
@@ -205,8 +205,7 @@ def joint_answers(tree: TreeFit, model) -> dict:
         rejected = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in tree.others if p < 0.05
-                    and not all(abs(m.distances[j][k][0] - d) <= max(SAME_MM, 2 * np.hypot(se, m.distances[j][k][1]))
-                                for k, (d, se) in dist.items())]
+                    and not all(abs(m.distances[j][k][0] - d) <= SAME_MM for k, (d, se) in dist.items())]
         practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
         out[j] = {"marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
                   "marker_distances_ci95": _ci(dist),
@@ -216,7 +215,7 @@ def joint_answers(tree: TreeFit, model) -> dict:
 
 
 def _ci(dist: dict) -> dict:
-    return {k: [round(d - Z95 * se, 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
+    return {k: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
 
 
 def noise_report(tree: TreeFit) -> dict:
