@@ -27,6 +27,7 @@ import numpy as np
 from scipy.special import chdtrc
 
 from identcheck.bundle.chain import _fill, fit_chain, initial_state
+from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.practical import judge
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -207,7 +208,8 @@ def joint_answers(tree: TreeFit, model) -> dict:
                     for m, delta, p in tree.others if p < 0.05
                     and not all(abs(m.distances[j][k][0] - d) <= SAME_MM for k, (d, se) in dist.items())]
         practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
-        out[j] = {"marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
+        out[j] = {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
+                  "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
                   "marker_distances_ci95": _ci(dist),
                   "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
                   "alternatives": alts, "rejected_candidates": rejected, "practical": practical}
@@ -291,6 +293,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
             j["alternatives"] = a["alternatives"]
             j["rejected_candidates"] = a["rejected_candidates"]
             j["practical"] = a["practical"]
+            j["geometry"] = a["geometry"]
             if a["practical"]["verdict"] == "determined" and j["start"]["marker_distances"] and not rep_unique(j):
                 # the case itself admits several joints that fit any rigid data equally (revolute (2,1): ERRATA E1)
                 # and nothing beyond it decided: a likelihood difference can only come from the model's misfit

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow      # the fast lane (pytest -m 'not slow') leaves these out
+
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCH))
 bench = pytest.importorskip("bench_fit_compare")

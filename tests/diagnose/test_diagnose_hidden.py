@@ -17,6 +17,8 @@ from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.trial import Trial
 
+pytestmark = pytest.mark.slow      # the fast lane (pytest -m 'not slow') leaves these out
+
 MODEL = Path(__file__).parents[2] / "examples" / "diagnose_leg.toml"
 CASES = ("none",) + EFFECTS
 SEEDS = range(5)

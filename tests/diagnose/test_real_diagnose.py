@@ -34,7 +34,7 @@ MODEL = ROOT / "examples" / "real_walk_leg.toml"
 EFFECT_NAMES = {"soft_tissue", "marker_slip", "marker_swap", "joint_translation", "extra_dof", "time_offset",
                 "outliers", "spatial_distortion"}
 
-pytestmark = pytest.mark.skipif(not TRIAL.exists(), reason=f"real data not found: {TRIAL}")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not TRIAL.exists(), reason=f"real data not found: {TRIAL}")]
 
 
 def _sha256(path: Path) -> str:

@@ -27,8 +27,8 @@ EX = ROOT / "examples"
 DATA = Path("/work/shared/data/real")
 HIP, KNEE, STATIC = DATA / "biobuddy_right_hip.c3d", DATA / "biobuddy_right_knee.c3d", DATA / "biobuddy_anat_pose_ECH.c3d"
 
-pytestmark = pytest.mark.skipif(not (HIP.exists() and KNEE.exists() and STATIC.exists()),
-                                reason="real trials not available in /work/shared/data/real")
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not (HIP.exists() and KNEE.exists() and STATIC.exists()),
+                                reason="real trials not available in /work/shared/data/real")]
 
 # Tolerances (mm / deg): soft tissue moves skin markers by ~10 mm relative to bone (rms residuals
 # of 6-10 mm here), and the estimators weigh it differently, so agreement is judged at that scale.

@@ -96,3 +96,38 @@ def test_long_run_variance_of_ar1_scores(phi, seed):
     H = long_run_covariance(g, L) / F
     truth = (1 + phi) / (1 - phi)
     assert np.all(np.abs(np.diag(H) / truth - 1) < 0.35), (np.diag(H), truth, L)
+
+
+def test_joint_geometry_in_technical_frames_matches_the_truth(examples):
+    """The hip centre in the pelvis' and the thigh's technical frames (first three markers) and the knee's
+    axis point in the thigh's frame agree with the simulated truth within 4 standard errors (+0.05 mm)."""
+    from identcheck.fit.workflow import fit_trial
+
+    model = Model.from_toml(examples / "leg.toml")
+    sim = simulate(model, n_frames=400, noise_mm=0.5, seed=11)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rep = fit_trial(model, sim.trial)
+
+    def technical(seg):
+        local = sim.truth.segments[seg].marker_local
+        p = np.array([local[n] for n in model.segments[seg].markers[:3]])
+        x = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
+        z = np.cross(x, p[2] - p[0])
+        z /= np.linalg.norm(z)
+        return p[0], np.stack([x, np.cross(z, x), z])
+
+    hip, knee = sim.truth.joints["hip_r"], sim.truth.joints["knee_r"]
+    for side, seg, c in (("parent", hip.parent, hip.centre_parent), ("child", hip.child, hip.centre_child)):
+        o, T = technical(seg)
+        g = rep["joints"]["hip_r"]["geometry"][side]
+        se = np.sqrt(np.diag(g["centre_covariance"]))
+        assert np.all(np.abs(np.array(g["centre"]) - T @ (c - o)) <= 4 * se + 0.05)
+    o, T = technical(knee.parent)
+    a = T @ knee.axis_parent
+    p = T @ (knee.centre_parent - o)
+    p -= (p @ a) * a
+    g = rep["joints"]["knee_r"]["geometry"]["parent"]
+    assert np.all(np.abs(np.array(g["axis_point"]) - p) <= 4 * np.sqrt(np.diag(g["axis_point_covariance"])) + 0.05)
+    assert abs(np.array(g["axis_direction"]) @ a) > np.cos(np.radians(2))
+    assert rep["joints"]["knee_r"]["geometry"]["child"] is None          # the shank carries two markers
