@@ -39,6 +39,7 @@ def trials(tmp_path_factory):
     return {"sparse_leg": tmp / "sparse_leg.trc", "dleg": tmp / "dleg.trc", "sim": sparse}
 
 
+@pytest.mark.slow
 def test_fit_is_the_cli_fit(trials, capsys):
     rc, doc = cli_json(capsys, "fit", EX / "sparse_leg.toml", trials["sparse_leg"])
     res = ic.fit(EX / "sparse_leg.toml", trials["sparse_leg"])
@@ -93,6 +94,7 @@ def test_identify_table_rank_verify_derive_are_the_cli_verbs(trials, capsys, tmp
     assert same_json(api.derive(out)) == cli_json(capsys, "derive", "--out", out)[1]
 
 
+@pytest.mark.slow
 def test_results_are_frozen_and_plain_json(trials, tmp_path):
     from identcheck import api
 

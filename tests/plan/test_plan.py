@@ -249,6 +249,7 @@ def _nothing_else_can_tell(spec, p, name) -> bool:
     return every == set(st.parent_points) | set(st.child_points)
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(trees, st.integers(0, 10_000))
 def test_non_identified_joints_admit_a_verified_alternative(tree, seed):
@@ -276,6 +277,7 @@ def test_non_identified_joints_admit_a_verified_alternative(tree, seed):
             assert w["relative_change"] >= 1e-3 and w["held_out_frames"] >= 20
 
 
+@pytest.mark.slow
 def test_a_far_marker_decides_the_knee_in_plan_fit_and_search():
     """A leg with three pelvis markers and one on each of thigh, shank and foot: the knee is Pham's revolute
     (2,1) on the hip centre, 4 candidates by the table alone. The foot marker, beyond the ankle, rejects the
