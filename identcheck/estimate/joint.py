@@ -286,13 +286,14 @@ def posed_pair(parent: np.ndarray, child: np.ndarray, kind: str, case: str) -> J
     if kind == "spherical":
         from identcheck.estimate.seed001 import fit_centre
 
-        with warnings.catch_warnings(record=True):
-            warnings.simplefilter("always", IdentifiabilityWarning)
+        with warnings.catch_warnings(record=True) as caught:     # kept as notes: they judge seed 001's own
+            warnings.simplefilter("always", IdentifiabilityWarning)  # covariance, which fit no longer reports
             fit = fit_centre(parent, child)
         centre = fit.parent.to_world(fit.centre_parent[None])[:, 0]
         est = JointEstimate("spherical", "seed 001 two-stage centre with Gauss-Markov covariance", case,
                             centre=centre, rms_residual=float(fit.rms_residual), uncertainty_mm=float(fit.uncertainty_mm),
-                            excitation_ok=bool(fit.excitation_ok), excitation_reason=fit.excitation_reason)
+                            excitation_ok=bool(fit.excitation_ok), excitation_reason=fit.excitation_reason,
+                            notes=[f"seed 001: {w.message}" for w in caught])
         second = float(fit.rotation_spread_deg[1])
         if est.excitation_ok and second < MIN_SECOND_AXIS_DEG:
             # the covariance knows only white marker noise; with rotation about essentially one axis, skin
