@@ -66,7 +66,7 @@ from identcheck.skeleton import Skeleton  # noqa: E402
 from identcheck.bundle.chain import (REL_TOL, State, Terms, _tangents, fit_chain, forward,  # noqa: E402
                                        initial_state)
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
-from identcheck.effects.inject import EFFECTS, inject_effect  # noqa: E402
+from identcheck.effects.registry import NAMES as EFFECTS, inject_effect  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.simulate.rigid import simulate  # noqa: E402
 from identcheck.io.jsonable import plain  # noqa: E402

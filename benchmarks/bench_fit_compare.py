@@ -61,7 +61,7 @@ from identcheck.estimate.obrien import joint_location  # noqa: E402
 from identcheck.geometry.poses import segment_poses  # noqa: E402
 from identcheck.estimate.score_sara import sara, score  # noqa: E402
 from identcheck.estimate.seed001 import fit_centre  # noqa: E402
-from identcheck.simulate.rigid import ROOT_HEIGHT_MM, ROOT_ROM_DEG, ROOT_SWAY_MM, _smooth  # noqa: E402
+from identcheck.simulate.rigid import ROOT_HEIGHT_MM, ROOT_ROM_DEG, ROOT_SWAY_MM, smooth_profile  # noqa: E402
 
 KEY = "fit_compare"
 RESULTS = ROOT / "benchmarks" / "results.json"
@@ -163,8 +163,8 @@ def make_trial(kind: str, n: int, rom_deg: float, noise_mm: float, geo_seed, noi
     geo = make_geometry(kind, rng)
     t = np.arange(n) / RATE_HZ
     # parent in the world: simulate's root motion (rotation ±ROOT_ROM_DEG/2, sway ±ROOT_SWAY_MM/2)
-    Rp = Rotation.from_rotvec(np.deg2rad(ROOT_ROM_DEG) * _smooth(rng, t, 3)).as_matrix() @ geo["R0"]
-    tp = np.array([0.0, 0.0, ROOT_HEIGHT_MM]) + ROOT_SWAY_MM * _smooth(rng, t, 3)
+    Rp = Rotation.from_rotvec(np.deg2rad(ROOT_ROM_DEG) * smooth_profile(rng, t, 3)).as_matrix() @ geo["R0"]
+    tp = np.array([0.0, 0.0, ROOT_HEIGHT_MM]) + ROOT_SWAY_MM * smooth_profile(rng, t, 3)
     rest = Rotation.from_rotvec([geo["rest"][0], geo["rest"][1], 0.0]).as_matrix()
     if kind == "spherical":
         Rrel = Rotation.from_rotvec(star_arc(n, rom_deg, geo["phase"])).as_matrix() @ rest

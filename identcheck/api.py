@@ -16,7 +16,7 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-from identcheck.effects.inject import SEED_OFFSET, inject_effect
+from identcheck.effects.registry import SEED_OFFSET, inject_effect
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import Simulation
@@ -73,9 +73,9 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
         ``.trc`` or ``.c3d`` (any case).
     seed : int
     effect : str, optional
-        An effect name of :data:`identcheck.effects.inject.EFFECTS`, injected before writing.
+        An effect name of :data:`identcheck.effects.registry.NAMES`, injected before writing.
     effect_seed : int, optional
-        Seed of the effect's draw; default ``seed + effects_inject.SEED_OFFSET``.
+        Seed of the effect's draw; default ``seed + identcheck.effects.registry.SEED_OFFSET``.
     **kw
         Passed to :func:`identcheck.simulate.rigid.simulate`.
 

@@ -16,7 +16,7 @@ import warnings
 
 import identcheck
 from identcheck import api
-from identcheck.effects.inject import EFFECTS
+from identcheck.effects.registry import NAMES as EFFECT_NAMES
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
 from identcheck.report import json_out, text
 
@@ -178,8 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="write a synthetic trial (TRC or C3D by extension)")
     s.add_argument("model")
     s.add_argument("--out", required=True)
-    s.add_argument("--effect", default=None, choices=EFFECTS, metavar="NAME",
-                   help=f"inject one named effect ({', '.join(EFFECTS)}); drawn from --seed")
+    s.add_argument("--effect", default=None, choices=EFFECT_NAMES, metavar="NAME",
+                   help=f"inject one named effect ({', '.join(EFFECT_NAMES)}); drawn from --seed")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames", type=int, default=200)
     s.add_argument("--rate", type=float, default=100.0, help="Hz")

@@ -49,7 +49,7 @@ import identcheck  # noqa: E402
 from identcheck.report import diagnose_figures as figures  # noqa: E402
 from identcheck.bundle.hypothesis import centre_world  # noqa: E402
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
-from identcheck.effects.inject import inject_effect, true_centre_world  # noqa: E402
+from identcheck.effects.registry import inject_effect, true_centre_world  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.simulate.rigid import simulate  # noqa: E402
 

@@ -135,12 +135,20 @@ def joint_angles(h: Hypothesis) -> dict:
     return out
 
 
+def rescale(values: np.ndarray, low: float = -1.0) -> np.ndarray:
+    """Each column of `values` mapped linearly from its [min, max] to [low, 1] (a column that does not move
+    maps to `low`): the one angle scaling of the soft-tissue and joint-translation models, used both to
+    inject them and to detect them."""
+    lo, hi = values.min(axis=0), values.max(axis=0)
+    unit = (values - lo) / np.where(hi > lo, hi - lo, 1.0)
+    return low + (1.0 - low) * np.where(hi > lo, unit, 0.0)
+
+
 def angle_basis(angles: np.ndarray, linear: bool = True) -> np.ndarray:
     """Smooth functions of a joint's angles (F, n), each angle scaled to [-1, 1]: the angles themselves
     (unless `linear` is False) and every product of two of them, centred; (F, n + n(n+1)/2) or
     (F, n(n+1)/2). The shape of soft-tissue motion and of a translating joint."""
-    lo, hi = angles.min(axis=0), angles.max(axis=0)
-    a = (2 * angles - (hi + lo)) / np.where(hi > lo, hi - lo, 1.0)
+    a = np.where(np.ptp(angles, axis=0) > 0, rescale(angles, low=-1.0), 0.0)   # an angle that does not move: no term
     i, j = np.triu_indices(a.shape[1])
     quad = a[:, i] * a[:, j]
     quad = quad - quad.mean(axis=0)

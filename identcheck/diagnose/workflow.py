@@ -153,7 +153,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     test0 = consistency(ctx, base)
     h, steps = base, []
     while not consistency(ctx, h)["consistent"] and len(steps) < max_steps:
-        proposals = sorted(((p, eff) for eff in EFFECTS for p in eff.propose(ctx, h)[:eff.max_proposals]),
+        proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
         tried, best, leader = [], 0.0, None
         for prop, eff in proposals:

@@ -11,6 +11,8 @@ import numpy as np
 
 from identcheck.bundle.chain import convert_joint, initial_state
 from identcheck.effects.base import Effect, Proposal
+from identcheck.simulate.rigid import smooth_profile
+from identcheck.effects.injection import Change, cannot, extra_rotation_world, pick, rotations, subtree, subtree_columns, unit
 
 NEXT_TYPE = {"revolute": "spherical"}
 
@@ -31,6 +33,32 @@ def off_axis_deg(h, joint: str) -> np.ndarray:
 class ExtraDof(Effect):
     name = "extra_dof"
     max_proposals = 2
+
+    def inject(self, sim, rng) -> Change:
+        """A hinge also turns about an axis b perpendicular to its own (in the parent frame), by a
+        smooth angle of 12-25 deg peak to peak; the child subtree turns about the joint centre."""
+        model = sim.model
+        hinges = [j for j in model.joint_order if model.joints[j].type == "revolute"]
+        if not hinges:
+            raise cannot(self.name, "it adds a second rotation to a revolute joint, and the model has none")
+        options = [j for j in hinges if subtree_columns(sim, model.joints[j].child)]
+        if not options:
+            raise cannot(self.name, "no revolute joint has a marker on its child segment or below it")
+        joint = pick(rng, options)
+        hinge = sim.truth.joints[joint].axis_parent
+        b = rng.normal(size=3)
+        b = unit(b - (b @ hinge) * hinge)
+        rom = rng.uniform(12.0, 25.0)
+        psi = rom * smooth_profile(rng, sim.clean.times, 1)[:, 0]
+        turn = extra_rotation_world(rotations(sim, model.joints[joint].parent), b, psi)
+        pivot = sim.truth.centre_world(joint)[:, None]
+        clean = sim.clean.as_array()
+        cols = subtree_columns(sim, model.joints[joint].child)
+        clean[:, cols] = pivot + np.einsum("fij,fmj->fmi", turn, clean[:, cols] - pivot)
+        return Change(where={"joint": joint},
+                       params={"extra_rom_deg": rom, "axis_parent": b, "angle_deg": psi,
+                               "moved_segments": subtree(model, model.joints[joint].child)},
+                       clean=clean)
 
     def propose(self, ctx, hyp) -> list:
         ch = hyp.chain

@@ -18,12 +18,36 @@ import numpy as np
 from identcheck.bundle.chain import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import explained
 
 
 class JointTranslation(Effect):
     name = "joint_translation"
     max_proposals = 3
+
+    def inject(self, sim, rng) -> Change:
+        """A joint centre moves in its parent frame along v by A (2a(t) − 1)², a the joint angle scaled
+        to [0, 1]: at rest mid-range, A away at either end of the range; the child segment and everything
+        below it follow. The profile is even on purpose: a translation linear in a hinge's angle,
+        perpendicular to the axis, is to first order a rigid hinge about a shifted axis
+        ((I − Rot θ)Δc ≈ θ Δc × a), so data cannot tell that part from a rigid joint elsewhere."""
+        model = sim.model
+        options = [j for j in model.joint_order if subtree_columns(sim, model.joints[j].child)]
+        if not options:
+            raise cannot(self.name, "no joint has a marker on its child segment or below it")
+        joint = pick(rng, options)
+        a = normalised_angle(sim.truth.joints[joint], low=0.0)
+        direction = unit_vectors(rng, 1)[0]
+        size = rng.uniform(8.0, 15.0)
+        delta = np.outer(size * (2 * a - 1) ** 2, direction)
+        clean = sim.clean.as_array()
+        cols = subtree_columns(sim, model.joints[joint].child)
+        clean[:, cols] += rotate(rotations(sim, model.joints[joint].parent), delta)[:, None]
+        return Change(where={"joint": joint},
+                       params={"amplitude_mm": size, "direction_parent": direction, "translation_parent": delta,
+                               "moved_segments": subtree(model, model.joints[joint].child)},
+                       clean=clean)
 
     def propose(self, ctx, hyp) -> list:
         ch, angles = hyp.chain, joint_angles(hyp)

@@ -11,6 +11,7 @@ import numpy as np
 from identcheck.bundle.chain import Terms
 from identcheck.bundle.hypothesis import segment_residuals
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, marker_column, draw_frame, pick, rotations, unit_vectors
 
 MIN_SIDE = 5     # frames on each side of a step
 
@@ -36,6 +37,21 @@ def best_step(resid: np.ndarray) -> tuple[int, float]:
 class MarkerSlip(Effect):
     name = "marker_slip"
     max_proposals = 2
+
+    def inject(self, sim, rng) -> Change:
+        """One marker jumps on its segment at frame k (in [F/4, 3F/4]) by 6-15 mm and stays."""
+        model, n = sim.model, sim.clean.n_frames
+        if not model.markers:
+            raise cannot(self.name, "the model has no marker")
+        marker = pick(rng, model.markers)
+        seg = model.marker_segment(marker)
+        frame = draw_frame(rng, 0.25 * n, 0.75 * n, n)
+        size = rng.uniform(6.0, 15.0)
+        step = size * unit_vectors(rng, 1)[0]
+        clean = sim.clean.as_array()
+        clean[frame:, marker_column(sim, marker)] += rotations(sim, seg)[frame:] @ step
+        return Change(where={"markers": [marker], "segment": seg, "frame": frame},
+                       params={"step_mm": size, "step_local": step}, clean=clean)
 
     def propose(self, ctx, hyp) -> list:
         seg_res = segment_residuals(hyp)

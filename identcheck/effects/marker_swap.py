@@ -8,16 +8,39 @@ ends count as three parameters).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from identcheck.bundle.chain import initial_state
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, draw_frame
 from identcheck.estimate.labels import detect
 
 
 class MarkerSwap(Effect):
     name = "marker_swap"
     max_proposals = 2
+
+    def inject(self, sim, rng) -> Change:
+        """Two markers at least 40 mm apart (on average) exchange labels for 10-30 % of the frames,
+        inside [5 %, 95 %] of the trial."""
+        x, n = sim.clean.xyz, sim.clean.n_frames
+        apart = np.array([np.linalg.norm(x - x[:, [i]], axis=2).mean(axis=0) for i in range(x.shape[1])])
+        first, second = np.nonzero(np.triu(apart >= 40.0, k=1))
+        if not len(first):
+            raise cannot(self.name, "it needs two markers at least 40 mm apart on average")
+        k = int(rng.integers(len(first)))
+        cols = [int(first[k]), int(second[k])]
+        span = int(rng.integers(max(1, math.ceil(0.1 * n)), max(1, math.floor(0.3 * n)) + 1))
+        start = draw_frame(rng, 0.05 * n, 0.95 * n - span + 1, n - span + 1)
+        rows = slice(start, start + span)
+        trial, gaps = sim.trial.as_array(), np.array(sim.gaps, dtype=bool)
+        trial[rows, cols] = trial[rows][:, cols[::-1]]
+        gaps[rows, cols] = gaps[rows][:, cols[::-1]]
+        labels = sim.trial.labels
+        return Change(where={"markers": [labels[cols[0]], labels[cols[1]]], "frames": [start, start + span - 1]},
+                       params={"mean_distance_mm": float(apart[cols[0], cols[1]])}, trial=trial, gaps=gaps)
 
     def propose(self, ctx, hyp) -> list:
         ch = hyp.chain

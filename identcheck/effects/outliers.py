@@ -12,6 +12,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, unit_vectors
 
 ROUNDS = 8
 MAX_FRACTION = 0.05
@@ -34,6 +35,24 @@ def _where(ctx, mask) -> dict:
 
 class Outliers(Effect):
     name = "outliers"
+
+    def inject(self, sim, rng) -> Change:
+        """A fraction 0.3-1 % (at least 3) of the visible samples get a gross error of 15-60 mm."""
+        visible = np.flatnonzero(~np.asarray(sim.gaps).ravel())
+        if not len(visible):
+            raise cannot(self.name, "the trial has no visible sample")
+        rate = rng.uniform(0.003, 0.01)
+        count = int(min(len(visible), max(3, round(rate * len(visible)))))
+        frames, cols = np.divmod(np.sort(rng.choice(visible, count, replace=False)), sim.trial.n_markers)
+        errors = rng.uniform(15.0, 60.0, count)[:, None] * unit_vectors(rng, count)
+        trial = sim.trial.as_array()
+        trial[frames, cols] += errors
+        labels = sim.trial.labels
+        return Change(where={"markers": sorted({labels[c] for c in cols}),
+                              "frames": sorted({int(f) for f in frames}), "count": count},
+                       params={"fraction": rate, "samples": [[int(f), labels[c]] for f, c in zip(frames, cols)],
+                               "errors_mm": errors, "sizes_mm": np.linalg.norm(errors, axis=1)},
+                       trial=trial)
 
     def propose(self, ctx, hyp) -> list:
         mask = flagged(ctx, hyp)

@@ -12,6 +12,7 @@ import numpy as np
 from identcheck.bundle.chain import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, segment_residuals
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
 
 def explained(resid: np.ndarray, basis: np.ndarray) -> float:
@@ -28,6 +29,30 @@ def explained(resid: np.ndarray, basis: np.ndarray) -> float:
 class SoftTissue(Effect):
     name = "soft_tissue"
     max_proposals = 2
+
+    def inject(self, sim, rng) -> Change:
+        """One child-segment marker wobbles on its segment with the proximal joint angle a(t):
+        d = u1 A1 a + u2 A2 (a^2 - mean a^2), in the segment frame."""
+        model = sim.model
+        options = [s for s in model.segments if s != model.root and model.segments[s].markers]
+        if not options:
+            raise cannot(self.name, "it needs a marker on a segment below a joint, and every marker "
+                                         "of the model is on the root segment")
+        seg = pick(rng, options)
+        marker = pick(rng, model.segments[seg].markers)
+        joint = model.parent_joint(seg).name
+        a = normalised_angle(sim.truth.joints[joint], low=-1.0)
+        u1, u2 = unit_vectors(rng, 2)
+        a1, a2 = rng.uniform(5.0, 10.0), rng.uniform(2.0, 5.0)
+        local = np.outer(a1 * a, u1) + np.outer(a2 * (a ** 2 - np.mean(a ** 2)), u2)
+        clean = sim.clean.as_array()
+        clean[:, marker_column(sim, marker)] += rotate(rotations(sim, seg), local)
+        return Change(where={"markers": [marker], "segment": seg, "joint": joint},
+                       params={"amplitude_mm": diameter(local),
+                               "max_displacement_mm": float(np.linalg.norm(local, axis=1).max()),
+                               "linear_mm": a1, "quadratic_mm": a2, "linear_direction": u1,
+                               "quadratic_direction": u2, "displacement_local": local},
+                       clean=clean)
 
     def propose(self, ctx, hyp) -> list:
         seg_res = segment_residuals(hyp)

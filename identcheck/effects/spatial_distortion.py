@@ -13,6 +13,7 @@ import numpy as np
 
 from identcheck.bundle.chain import Terms
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import MONOMIALS, Change, cannot, monomials
 
 MAX_AMPLITUDE_MM = 25.0
 """A calibrated volume is not distorted by more than this; a larger fitted field is absorbing something
@@ -21,7 +22,6 @@ else (soft tissue on real data does this)."""
 _STRAIN = [np.diag([1.0, -1.0, 0.0]), np.diag([1.0, 1.0, -2.0]) / np.sqrt(3),
            np.array([[0, 1.0, 0], [1, 0, 0], [0, 0, 0]]), np.array([[0, 0, 1.0], [0, 0, 0], [1, 0, 0]]),
            np.array([[0, 0, 0], [0, 0, 1.0], [0, 1, 0]])]
-_PAIRS = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
 
 
 def volume(data: np.ndarray):
@@ -36,8 +36,9 @@ def fields(data: np.ndarray) -> list:
     u = np.nan_to_num((data - c) / h)
     scale = float(np.mean(h))
     out = [scale * np.einsum("ij,fmj->fmi", E, u) for E in _STRAIN]
-    for a, b in _PAIRS:
-        mono = u[..., a] * u[..., b]
+    mono_all = monomials(u)
+    for k in range(len(MONOMIALS)):
+        mono = mono_all[..., k]
         for d in range(3):
             f = np.zeros_like(u)
             f[..., d] = mono
@@ -47,6 +48,24 @@ def fields(data: np.ndarray) -> list:
 
 class SpatialDistortion(Effect):
     name = "spatial_distortion"
+
+    def inject(self, sim, rng) -> Change:
+        """A smooth quadratic warp of the capture volume, x + f(x), with max |f| over the data A
+        (8-15 mm); f is quadratic in the coordinates scaled to the data's bounding box."""
+        x = sim.clean.as_array()
+        if x.shape[1] == 0:
+            raise cannot(self.name, "the model has no marker")
+        centre, half = volume(x)
+        mono = monomials((x - centre) / half)
+        coef = rng.normal(size=(6, 3))
+        size = rng.uniform(8.0, 15.0)
+        peak = np.linalg.norm(mono @ coef, axis=-1).max()
+        if not peak > 0:
+            raise cannot(self.name, "every marker sits at one point")
+        coef *= size / peak
+        return Change(where={}, params={"amplitude_mm": size, "centre": centre, "half_extent": half,
+                                         "coefficients": coef, "monomials": list(MONOMIALS)},
+                       clean=x + mono @ coef)
 
     def propose(self, ctx, hyp) -> list:
         flds = fields(hyp.data)

@@ -14,26 +14,29 @@ from scipy.interpolate import CubicSpline
 
 from identcheck.bundle.chain import Terms
 from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.injection import Change, cannot, marker_column, pick
 
 NEWTON_STEPS = 3
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
 
 
-def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0) -> np.ndarray:
+def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
+            extrapolate: bool = False) -> np.ndarray:
     """Each marker's trajectory (F, m, 3) evaluated at t + τ (or its time derivative), through its
-    visible samples; occluded samples stay NaN, and so do samples whose t + τ falls outside the
-    marker's visible time span (no extrapolation)."""
+    visible samples (a cubic spline); occluded samples stay NaN, and so do samples whose t + τ falls
+    outside the marker's visible time span unless `extrapolate` (the injector delays a whole clean
+    trajectory; the detector undoes a delay on measured data and must not invent samples)."""
     F = data.shape[0]
     t = np.arange(F) / rate_hz
     out = np.full_like(data, np.nan)
     for k in range(data.shape[1]):
         ok = np.all(np.isfinite(data[:, k]), axis=1)
-        if ok.sum() < 4:
+        if ok.sum() < (2 if extrapolate else 4):
             continue
         spline = CubicSpline(t[ok], data[ok, k], axis=0)
         tt = t[ok] + tau_s
-        inside = (tt >= t[ok][0]) & (tt <= t[ok][-1])
+        inside = np.ones(len(tt), dtype=bool) if extrapolate else (tt >= t[ok][0]) & (tt <= t[ok][-1])
         rows = np.flatnonzero(ok)[inside]
         out[rows, k] = spline(tt[inside], derivative)
     return out
@@ -42,6 +45,22 @@ def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0)
 class TimeOffset(Effect):
     name = "time_offset"
     max_proposals = 3
+
+    def inject(self, sim, rng) -> Change:
+        """One segment's markers lag by 20-50 ms: x(t) becomes x(t - tau) (cubic spline)."""
+        model = sim.model
+        options = [s for s in model.segments if model.segments[s].markers]
+        if not options:
+            raise cannot(self.name, "the model has no marker")
+        if sim.clean.n_frames < 2:
+            raise cannot(self.name, "a delay needs at least 2 frames")
+        seg = pick(rng, options)
+        delay_ms = rng.uniform(20.0, 50.0)
+        clean = sim.clean.as_array()
+        cols = [marker_column(sim, m) for m in model.segments[seg].markers]
+        clean[:, cols] = shifted(clean[:, cols], sim.clean.rate_hz, -delay_ms / 1000.0, extrapolate=True)
+        return Change(where={"segment": seg, "delay_ms": delay_ms},
+                       params={"delay_frames": delay_ms / 1000.0 * sim.clean.rate_hz}, clean=clean)
 
     def propose(self, ctx, hyp) -> list:
         ch = hyp.chain

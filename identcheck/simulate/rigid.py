@@ -452,7 +452,7 @@ def _acceptable(drawn: np.ndarray, fixed: np.ndarray, centres, lines) -> bool:
     return True
 
 
-def _smooth(rng: np.random.Generator, t: np.ndarray, k: int) -> np.ndarray:
+def smooth_profile(rng: np.random.Generator, t: np.ndarray, k: int) -> np.ndarray:
     """`k` smooth signals, shape (n_frames, k), each a sum of 3 random sinusoids (``FREQ_HZ``)
     rescaled to peak-to-peak 1, centred on 0 (all zeros for a single frame)."""
     freq = rng.uniform(*FREQ_HZ, size=(k, 3))
@@ -471,8 +471,8 @@ def _motion(model, geo, t, rom_deg, n_axes, root_motion, rng):
     rot = np.empty((n, 3, 3))
     trans = np.empty((n, 3))
     if root_motion:
-        omega0 = np.deg2rad(ROOT_ROM_DEG) * _smooth(rng, t, 3)
-        sway = ROOT_SWAY_MM * _smooth(rng, t, 3)
+        omega0 = np.deg2rad(ROOT_ROM_DEG) * smooth_profile(rng, t, 3)
+        sway = ROOT_SWAY_MM * smooth_profile(rng, t, 3)
     else:
         omega0, sway = np.zeros((n, 3)), np.zeros((n, 3))
     root = model.root
@@ -484,13 +484,13 @@ def _motion(model, geo, t, rom_deg, n_axes, root_motion, rng):
         j = model.joints[jname]
         bp = geo.basis[j.parent]
         if j.type == "revolute":
-            theta = np.deg2rad(rom_deg * _smooth(rng, t, 1)[:, 0] + rng.uniform(-15, 15))
+            theta = np.deg2rad(rom_deg * smooth_profile(rng, t, 1)[:, 0] + rng.uniform(-15, 15))
             omega = theta[:, None] * geo.a_parent[jname]
             angles[jname] = np.rad2deg(theta)
             motion_axes[jname] = geo.a_parent[jname][:, None]
         else:   # flexion (anatomical y), abduction (x), axial rotation (z) of the parent
             axes = bp[:, [1, 0, 2]][:, :n_axes]
-            amount = rom_deg * _smooth(rng, t, n_axes) + rng.uniform(-15, 15, n_axes)
+            amount = rom_deg * smooth_profile(rng, t, n_axes) + rng.uniform(-15, 15, n_axes)
             omega = np.deg2rad(amount) @ axes.T
             angles[jname] = np.rad2deg(omega)
             motion_axes[jname] = axes

@@ -15,7 +15,7 @@ from identcheck.bundle.chain import Terms, convert_joint, fit_chain, initial_sta
 from identcheck.bundle.hypothesis import Hypothesis, centre_world
 from identcheck.estimate.noise import noise_floor
 from identcheck.diagnose.workflow import MAX_SD_MM, SD_GROWTH, start, undetermined, worst_sd
-from identcheck.effects.inject import inject_effect
+from identcheck.effects.registry import inject_effect
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate

@@ -12,7 +12,7 @@ import pytest
 
 from identcheck.bundle.hypothesis import centre_world
 from identcheck.diagnose.workflow import diagnose
-from identcheck.effects.inject import EFFECTS, inject_effect, true_centre_world
+from identcheck.effects.registry import NAMES as EFFECTS, inject_effect, true_centre_world
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.trial import Trial

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 
 from identcheck import cli
-from identcheck.effects.inject import EFFECTS, inject_effect, true_centre_world
+from identcheck.effects.registry import NAMES as EFFECTS, inject_effect, true_centre_world
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate

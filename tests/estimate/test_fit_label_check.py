@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from identcheck import cli
-from identcheck.effects.inject import inject_effect
+from identcheck.effects.registry import inject_effect
 from identcheck.estimate.labels import screen
 from identcheck.io.model import Model
 from identcheck.io.trc import write_trc
