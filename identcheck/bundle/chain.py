@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.errors import InputError
+from identcheck.geometry.kinematics import chain_poses
 from identcheck.skeleton import Skeleton
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
@@ -115,18 +116,14 @@ def _exp(w: np.ndarray) -> np.ndarray:
 def forward(chain: Skeleton, terms: Terms, s: State):
     """Segment rotations/translations and predicted markers (F, M, 3) of state `s`."""
     F = s.root_R.shape[0]
-    R, t, centre = {chain.root: s.root_R}, {chain.root: s.root_t}, {}
     coffs = {}
     for (j, basis), D in zip(terms.centres, s.term_params[len(terms.markers):]):
         coffs[j] = coffs.get(j, 0.0) + basis @ D
-    for j in chain.joints:
-        P, C = chain.parent[j], chain.child[j]
-        rel = s.rel_R[j] if chain.types[j] == "spherical" else _rot(s.axis[j], s.theta[j]) @ s.rest[j]
-        cp = s.c_parent[j] + coffs.get(j, np.zeros(3))
-        cw = np.einsum("fij,fj->fi", R[P], np.broadcast_to(cp, (F, 3))) + t[P]
-        R[C] = R[P] @ rel
-        t[C] = cw - R[C] @ s.c_child[j]
-        centre[j] = cw
+    rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else _rot(s.axis[j], s.theta[j]) @ s.rest[j]
+           for j in chain.joints}
+    cp = {j: s.c_parent[j] + coffs[j] if j in coffs else s.c_parent[j] for j in chain.joints}
+    R, t, centre = chain_poses([(j, chain.parent[j], chain.child[j]) for j in chain.joints], chain.root,
+                               s.root_R, s.root_t, rel, cp, s.c_child)
     local = np.broadcast_to(s.local, (F,) + s.local.shape).copy()
     for (col, basis), B in zip(terms.markers, s.term_params[:len(terms.markers)]):
         local[:, col] += basis @ B

@@ -28,6 +28,7 @@ from typing import Mapping
 import numpy as np
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
+from identcheck.geometry.kinematics import chain_poses
 from identcheck.errors import InputError
 from identcheck.estimate.obrien import HINGE_TOL_DEG, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, Poses
@@ -352,15 +353,11 @@ def rebuild(parent: Mapping[str, str], root: str, joints: Mapping, root_R, root_
         problems.append(f"the root {root!r} has a parent")
     if problems:
         raise InputError(problems)
-    R = {root: np.asarray(root_R, dtype=float)}
-    t = {root: np.asarray(root_t, dtype=float)}
-    for c in order[1:]:
-        p = parent[c]
-        l_c, c_c = (np.asarray(v, dtype=float) for v in joints[c])
-        Rr = np.asarray(rel_R[c], dtype=float)
-        t_rel = l_c - np.einsum("fij,j->fi", Rr, c_c)                 # eq. (9)
-        R[c] = R[p] @ Rr                                              # eq. (4)
-        t[c] = np.einsum("fij,fj->fi", R[p], t_rel) + t[p]
+    R, t, _ = chain_poses([(c, parent[c], c) for c in order[1:]], root,           # eqs. (4), (9)
+                          np.asarray(root_R, dtype=float), np.asarray(root_t, dtype=float),
+                          {c: np.asarray(rel_R[c], dtype=float) for c in order[1:]},
+                          {c: np.asarray(joints[c][0], dtype=float) for c in order[1:]},
+                          {c: np.asarray(joints[c][1], dtype=float) for c in order[1:]})
     markers = {s: np.einsum("fij,kj->fki", R[s], np.asarray(local[s], dtype=float)) + t[s][:, None, :]
                for s in order}
     return R, t, markers

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.certify.tree_rank import TreeSpec, adjacent_points
+from identcheck.geometry.kinematics import chain_poses
 
 DPS = 50
 
@@ -123,17 +124,17 @@ class Layout:
 def segment_poses(layout: Layout, const, frames) -> dict:
     """segment -> (R (F, 3, 3), t (F, 3)) for constants ``const`` and per-frame variables ``frames``."""
     L = layout
-    R = {L.spec.root: quat_matrix(frames[:, L.frame["root_q"]])}
-    t = {L.spec.root: frames[:, L.frame["root_t"]]}
+    rel = {}
     for name, kind, par, chi in L.spec.joints:
         if kind == "spherical":
-            rel = quat_matrix(frames[:, L.frame["q:" + name]])
+            rel[name] = quat_matrix(frames[:, L.frame["q:" + name]])
         else:
             rest = quat_matrix(const[L.const["rest:" + name]])
-            rel = axis_rotation(const[L.const["a:" + name]], frames[:, L.frame["theta:" + name].start]) @ rest
-        c, e = const[L.const["c:" + name]], const[L.const["e:" + name]]
-        R[chi] = R[par] @ rel
-        t[chi] = R[par] @ c + t[par] - R[chi] @ e
+            rel[name] = axis_rotation(const[L.const["a:" + name]], frames[:, L.frame["theta:" + name].start]) @ rest
+    R, t, _ = chain_poses([(name, par, chi) for name, _, par, chi in L.spec.joints], L.spec.root,
+                          quat_matrix(frames[:, L.frame["root_q"]]), frames[:, L.frame["root_t"]], rel,
+                          {name: const[L.const["c:" + name]] for name, *_ in L.spec.joints},
+                          {name: const[L.const["e:" + name]] for name, *_ in L.spec.joints})
     return R, t
 
 

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.errors import InputError
+from identcheck.geometry.kinematics import chain_poses
 from identcheck.io.model import Model
 from identcheck.trial import FORMATS, Trial
 
@@ -478,7 +479,7 @@ def _motion(model, geo, t, rom_deg, n_axes, root_motion, rng):
     root = model.root
     rot[:] = Rotation.from_rotvec(omega0).as_matrix() @ geo.basis[root].T
     trans[:] = np.array([0.0, 0.0, ROOT_HEIGHT_MM]) + sway - rot @ geo.origin[root]
-    rots, transl = {root: rot}, {root: trans}
+    rel = {}
     angles, motion_axes = {}, {}
     for jname in model.joint_order:
         j = model.joints[jname]
@@ -494,11 +495,9 @@ def _motion(model, geo, t, rom_deg, n_axes, root_motion, rng):
             omega = np.deg2rad(amount) @ axes.T
             angles[jname] = np.rad2deg(omega)
             motion_axes[jname] = axes
-        r_rel = Rotation.from_rotvec(omega).as_matrix() @ geo.rest[jname]
-        t_rel = geo.c_parent[jname] - r_rel @ geo.c_child[jname]
-        rp, tp = rots[j.parent], transl[j.parent]
-        rots[j.child] = rp @ r_rel
-        transl[j.child] = np.einsum("fij,fj->fi", rp, t_rel) + tp
+        rel[jname] = Rotation.from_rotvec(omega).as_matrix() @ geo.rest[jname]
+    rots, transl, _ = chain_poses([(jn, model.joints[jn].parent, model.joints[jn].child) for jn in model.joint_order],
+                                  root, rot, trans, rel, geo.c_parent, geo.c_child)
     poses = {}
     for seg in model.segments:
         pose = np.zeros((n, 4, 4))
