@@ -15,11 +15,10 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import sympy as sp
-from sympy.polys.domains import QQ
-from sympy.polys.matrices import DomainMatrix
 
 from identcheck import derive
 from identcheck.errors import InputError
+from identcheck.exact.linalg import maximal_minor
 from identcheck.symbols import Case, case as get_case
 
 FORMAT = "identcheck.rank-certificate/1"
@@ -106,14 +105,10 @@ def m_rows(cs: Case, points) -> tuple:
 
 
 def exact_rank(rows) -> tuple:
-    """Rank over QQ with the pivot rows and columns of a non-zero maximal minor and its value."""
-    dm = DomainMatrix([[QQ(int(v.p), int(v.q)) for v in row] for row in rows], (len(rows), len(rows[0])), QQ)
-    _, col_piv = dm.rref()
-    _, row_piv = dm.transpose().rref()
-    rank = len(col_piv)
-    minor = DomainMatrix([[dm.rep.to_ddm()[i][j] for j in col_piv] for i in row_piv], (rank, rank), QQ)
-    det = minor.det() if rank else QQ(1)
-    return rank, list(row_piv), list(col_piv), sp.Rational(int(QQ.numer(det)), int(QQ.denom(det)))
+    """Rank over QQ with the pivot rows and columns of a non-zero maximal minor and its value
+    (:func:`identcheck.exact.linalg.maximal_minor`; the minor as a SymPy Rational)."""
+    rank, row_piv, col_piv, det = maximal_minor(rows)
+    return rank, row_piv, col_piv, sp.Rational(det.numerator, det.denominator)
 
 
 @dataclass(frozen=True)

@@ -45,10 +45,10 @@ from functools import lru_cache
 
 import sympy as sp
 from sympy.polys.domains import QQ
-from sympy.polys.matrices import DomainMatrix
 
 from identcheck.certify import exact_rank as certify
 from identcheck.certify.joint_models import JOINTS, MARKERS, JointModel, model as get_model
+from identcheck.exact import linalg
 from identcheck.symbols import Angle
 
 FORMAT = "identcheck.local-certificate/1"
@@ -214,44 +214,24 @@ class _Point:
                              **{"t_" + k: str(v) for k, v in an.items()}} for ls, an in self.samples]}
 
 
-# -- exact linear algebra ----------------------------------------------------------------------
-def _dm(rows, ncols) -> DomainMatrix:
-    return DomainMatrix([[QQ(v.numerator, v.denominator) for v in row] for row in rows],
-                        (len(rows), ncols), QQ)
-
-
+# -- exact linear algebra: identcheck.exact.linalg ------------------------------------------------
 def _rowspace(rows, ncols) -> list:
     """An echelon basis (list of Fraction rows) of the span of ``rows``."""
-    if not rows or ncols == 0:
-        return []
-    red, piv = _dm(rows, ncols).rref()
-    dense = red.to_list()
-    return [[Fraction(int(v.numerator), int(v.denominator)) for v in dense[i]] for i in range(len(piv))]
+    return linalg.rref(rows, ncols)[0]
 
 
 def _rank(rows, ncols) -> int:
-    if not rows or ncols == 0:
-        return 0
-    return len(_dm(rows, ncols).rref()[1])
+    return linalg.rank(rows, ncols)
 
 
 def _left_null(rows, ncols) -> list:
     """Basis of {λ : λ·A = 0} for the matrix A given by ``rows`` (len(rows) × ncols)."""
-    n = len(rows)
-    if n == 0:
-        return []
-    if ncols == 0:
-        return [[Fraction(int(i == j)) for j in range(n)] for i in range(n)]
-    ns = _dm(rows, ncols).transpose().nullspace().to_list()
-    return [[Fraction(int(v.numerator), int(v.denominator)) for v in row] for row in ns]
+    return linalg.left_nullspace(rows, ncols)
 
 
 def _null(rows, ncols) -> list:
     """Basis of {x : A x = 0}."""
-    if not rows:
-        return [[Fraction(int(i == j)) for j in range(ncols)] for i in range(ncols)]
-    ns = _dm(rows, ncols).nullspace().to_list()
-    return [[Fraction(int(v.numerator), int(v.denominator)) for v in row] for row in ns]
+    return linalg.nullspace(rows, ncols)
 
 
 def _in_span(basis, vec, ncols, basis_rank=None) -> bool:

@@ -38,57 +38,17 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import cached_property
 
-import flint
-
 from identcheck.errors import InputError
-from identcheck.exact.algebra import add as _add, axis_rotation as _axis_rotation, cross as _cross, dot as _dot, half_angle, mm as _mm, mv as _mv, quaternion_rotation, random_prime as _random_prime, scale as _scale, sub as _sub, transpose as _T
+from identcheck.exact.linalg import PRIME_BITS, Field
+from identcheck.exact.algebra import add as _add, axis_rotation as _axis_rotation, cross as _cross, dot as _dot, half_angle, mm as _mm, mv as _mv, quaternion_rotation, scale as _scale, sub as _sub, transpose as _T
 
 SET_BITS = 40
-PRIME_BITS = 61
 MAX_FRAMES = 60
 TYPES = ("spherical", "revolute")
 VARS_PER_JOINT = {"spherical": 3, "revolute": 1}
 
 
-# -- fields ----------------------------------------------------------------------------------------
-class Field:
-    """Scalars and matrices of QQ (exact) or GF(p) (a random prime, for fast search)."""
-
-    def __init__(self, kind: str, rng: random.Random):
-        self.kind = kind
-        if kind == "QQ":
-            self.p = None
-        elif kind == "GFp":
-            self.p = _random_prime(rng, PRIME_BITS)
-        else:
-            raise ValueError(f"unknown field {kind!r}")
-
-    def __call__(self, x):
-        if self.p is None:
-            if isinstance(x, Fraction):
-                return flint.fmpq(x.numerator, x.denominator)
-            return flint.fmpq(x)
-        if isinstance(x, Fraction):
-            return flint.nmod(x.numerator, self.p) / flint.nmod(x.denominator, self.p)
-        return flint.nmod(x, self.p)
-
-    def matrix(self, rows, ncols: int):
-        if not rows:
-            return None
-        if self.p is None:
-            return flint.fmpq_mat(len(rows), ncols, [v for r in rows for v in r])
-        return flint.nmod_mat(rows, self.p)
-
-    def rref_rows(self, rows, ncols: int) -> list:
-        """Non-zero rows of the reduced row echelon form (a basis of the row space)."""
-        M = self.matrix(rows, ncols)
-        if M is None:
-            return []
-        R, rank = M.rref()
-        flat = R.entries()
-        return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
-
-
+# -- fields: identcheck.exact.linalg.Field (QQ or GF(p)) ------------------------------------------
 class _Draw:
     """Random elements of a field: uniform on GF(p), or on S = {k / 2^20 : |k| < 2^39} ⊂ QQ."""
 
