@@ -26,6 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.errors import InputError
 from identcheck.geometry.kinematics import chain_poses
+from identcheck.geometry.rotations import hinge_matrix, rotvec_matrix
 from identcheck.skeleton import Skeleton
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
@@ -106,11 +107,11 @@ class Fit:
 
 # ---------------------------------------------------------------------- kinematics
 def _rot(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(np.outer(theta, axis)).as_matrix()
+    return hinge_matrix(axis, theta)
 
 
 def _exp(w: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(np.atleast_2d(w)).as_matrix()
+    return rotvec_matrix(w)
 
 
 def forward(chain: Skeleton, terms: Terms, s: State):

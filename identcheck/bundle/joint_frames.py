@@ -13,10 +13,10 @@ over the constants the quantity depends on.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.chain import _tangents
 from identcheck.bundle.uncertainty import joint_offsets
+from identcheck.geometry.rotations import rotvec_matrix
 
 STEP = 1e-4     # mm (or rad) central-difference step
 
@@ -39,7 +39,7 @@ def _constants(state, chain, dc: np.ndarray, joint: str):
     cc = state.c_child[joint] + dc[o + 3:o + 6]
     axis = rest = None
     if chain.types[joint] == "revolute":
-        rest = Rotation.from_rotvec(dc[o + 6:o + 9]).as_matrix() @ state.rest[joint]
+        rest = rotvec_matrix(dc[o + 6:o + 9])[0] @ state.rest[joint]
         b1, b2 = _tangents(state.axis[joint])
         a = state.axis[joint] + dc[o + 9] * b1 + dc[o + 10] * b2
         axis = a / np.linalg.norm(a)

@@ -18,6 +18,7 @@ import sympy as sp
 
 from identcheck import derive
 from identcheck.errors import InputError
+from identcheck.exact.algebra import half_angle as exact_half_angle
 from identcheck.exact.linalg import maximal_minor
 from identcheck.symbols import Case, case as get_case
 
@@ -35,8 +36,7 @@ def _rat(text) -> sp.Rational:
 
 def half_angle(t) -> tuple:
     """Exact (cos, sin) of the angle whose tangent of half is the rational ``t``."""
-    t = sp.Rational(t)
-    return (1 - t**2) / (1 + t**2), 2 * t / (1 + t**2)
+    return exact_half_angle(sp.Rational(t))
 
 
 def _draw(rng: random.Random, lo: int, hi: int, den: int = 16) -> sp.Rational:

@@ -19,6 +19,7 @@ import numpy as np
 
 from identcheck.bundle.hypothesis import rescale
 from identcheck.errors import InputError
+from identcheck.geometry.rotations import rotvec_matrix
 from identcheck.io.jsonable import plain
 
 SOURCE = "inject_effect"
@@ -115,9 +116,7 @@ def normalised_angle(joint, low: float) -> np.ndarray:
 
 def extra_rotation_world(rot_parent: np.ndarray, axis_parent, angle_deg) -> np.ndarray:
     """World rotations R_P Rot(b, psi) R_P^T of ``extra_dof``, shape (F, 3, 3)."""
-    from scipy.spatial.transform import Rotation
-
-    turn = Rotation.from_rotvec(np.deg2rad(np.asarray(angle_deg))[:, None] * np.asarray(axis_parent)).as_matrix()
+    turn = rotvec_matrix(np.deg2rad(np.asarray(angle_deg))[:, None] * np.asarray(axis_parent))
     return rot_parent @ turn @ np.swapaxes(rot_parent, 1, 2)
 
 

@@ -28,41 +28,10 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.certify.tree_rank import TreeSpec, adjacent_points
 from identcheck.geometry.kinematics import chain_poses
+from identcheck.geometry.rotations import (axis_rotation, elementwise as _fn, matrix_quaternion as _quat_from_matrix,
+                                           quaternion_matrix as quat_matrix)
 
 DPS = 50
-
-
-# -- scalar functions for float and mpmath arrays -------------------------------------------------
-def _fn(arr, name):
-    if arr.dtype == object:
-        return np.vectorize(getattr(mpmath, name), otypes=[object])
-    return getattr(np, name)
-
-
-def quat_matrix(q):
-    """Rotation matrices (..., 3, 3) of quaternions (..., 4) = (w, x, y, z), normalised first."""
-    n = _fn(q, "sqrt")((q * q).sum(axis=-1))
-    w, x, y, z = (q[..., i] / n for i in range(4))
-    rows = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
-
-def axis_rotation(a, theta):
-    """Rot(â, θ) for one direction a (3,) and angles θ (F,): (F, 3, 3), by Rodrigues."""
-    a = a / _fn(a, "sqrt")((a * a).sum())
-    c, s = _fn(theta, "cos")(theta), _fn(theta, "sin")(theta)
-    K = np.array([[0 * a[0], -a[2], a[1]], [a[2], 0 * a[0], -a[0]], [-a[1], a[0], 0 * a[0]]], dtype=a.dtype)
-    K2 = K @ K
-    eye = np.eye(3).astype(a.dtype)
-    return eye[None] + s[:, None, None] * K[None] + (1 - c)[:, None, None] * K2[None]
-
-
-def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    xyzw = Rotation.from_matrix(R).as_quat()
-    xyzw = np.where(xyzw[..., 3:] < 0, -xyzw, xyzw)          # w >= 0: nearby rotations, nearby quaternions
-    return np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
 
 
 # -- the parameter layout ---------------------------------------------------------------------------
