@@ -57,7 +57,7 @@ import scipy.linalg
 from scipy.spatial.transform import Rotation
 
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
-from identcheck.geometry.poses import MIN_MARKERS, Poses, refine_local
+from identcheck.geometry.poses import MIN_MARKERS, Poses, refine_local, segment_poses
 
 MIN_FRAMES = 3
 """Fewest frames with valid poses of both segments (two rotations about different axes, plus
@@ -336,7 +336,8 @@ class CentreFit:
         target = np.asarray(local_true, dtype=float)
         if target.shape != self.parent_local.shape:
             raise ValueError(f"local_true must have shape {self.parent_local.shape}, got {target.shape}")
-        R, t = _procrustes(self.parent_local, target)
+        pose = segment_poses(target[None], local=self.parent_local)     # the one Kabsch fit, one frame
+        R, t = pose.R[0], pose.t[0]
         return R @ self.centre_parent + t, R @ self.covariance @ R.T
 
     def validation_index(self, centre_true, local_true=None) -> float:
@@ -834,12 +835,3 @@ def _rotation_spread(R0: np.ndarray, R1: np.ndarray) -> np.ndarray:
     spread = np.zeros(3)
     spread[:len(sv)] = np.rad2deg(sv / np.sqrt(len(dev)))
     return spread
-
-
-def _procrustes(src: np.ndarray, dst: np.ndarray):
-    """Rotation R, translation t minimising Σ |R src_i + t − dst_i|² (Kabsch, reflection guarded)."""
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    U, _, Vt = np.linalg.svd((dst - cd).T @ (src - cs))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ D @ Vt
-    return R, cd - R @ cs
