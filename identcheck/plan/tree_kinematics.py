@@ -90,7 +90,7 @@ class Layout:
 
 
 # -- forward kinematics --------------------------------------------------------------------------------
-def segment_poses(layout: Layout, const, frames) -> dict:
+def tree_poses(layout: Layout, const, frames) -> dict:
     """segment -> (R (F, 3, 3), t (F, 3)) for constants ``const`` and per-frame variables ``frames``."""
     L = layout
     rel = {}
@@ -110,7 +110,7 @@ def segment_poses(layout: Layout, const, frames) -> dict:
 def positions(layout: Layout, x, n_frames: int):
     """Every marker in every frame, (F, M, 3), in ``layout.markers`` order (floats or mpf, as ``x``)."""
     const, frames = layout.split(x, n_frames)
-    R, t = segment_poses(layout, const, frames)
+    R, t = tree_poses(layout, const, frames)
     cols = []
     for s in layout.segments:
         for m in layout.spec.markers[s]:

@@ -281,7 +281,7 @@ def _twin_starts(L: K.Layout, x0: np.ndarray, F: int, joint: str, case_points: d
     if two is None:
         return []
     one = chi if two == par else par
-    Rw, tw = K.segment_poses(L, const, frames)
+    Rw, tw = K.tree_poses(L, const, frames)
     a1, a2 = pts[two]
     cols, _ = pair_frame(a1[None, None], a2[None, None], a1[None, None] + np.eye(3)[None])
     E = cols[0]                                                 # columns: the A1A2 frame's axes, in `two`
