@@ -63,7 +63,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
 from identcheck.skeleton import Skeleton  # noqa: E402
-from identcheck.bundle.chain import (REL_TOL, State, Terms, _tangents, fit_chain, forward,  # noqa: E402
+from identcheck.bundle.chain import (REL_TOL, State, Terms, tangents, fit_chain, forward,  # noqa: E402
                                        initial_state)
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
 from identcheck.effects.registry import NAMES as EFFECTS, inject_effect  # noqa: E402
@@ -279,7 +279,7 @@ class ScipyChain:
         self.chain, self.s0 = chain, start
         self.F, self.k, self.M = start.root_R.shape[0], chain.frame_dof(), chain.n_markers
         self.P = 3 * self.M + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints)
-        self.tangents = {j: _tangents(start.axis[j]) for j in chain.joints if chain.types[j] == "revolute"}
+        self.tangents = {j: tangents(start.axis[j]) for j in chain.joints if chain.types[j] == "revolute"}
         self.seen = np.all(np.isfinite(data), axis=2)                  # (F, M)
         self.mask = np.repeat(self.seen[..., None], 3, axis=2)          # (F, M, 3)
         self.y = np.where(self.mask, data, 0.0)[self.mask]

@@ -41,7 +41,7 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
 
 from results_io import machine_info, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import DegenerateError  # noqa: E402
-from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, _cos_and_l, _is_real,  # noqa: E402
+from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, cos_and_l, is_real,  # noqa: E402
                                          generated, identify, solve_batch)
 
 KEY = "revolute21"
@@ -123,7 +123,7 @@ SCALAR = SimpleNamespace(sqrt=math.sqrt, maximum=max, where=lambda cond, a, b: a
 def loop_one(x: np.ndarray, g: dict, angles: bool, rel_tol: float = 1e-6) -> list:
     """One problem, plainly: generated functions, np.linalg.solve, np.roots, root by root.
 
-    The back-substitution is the solver's own (``_cos_and_l``, ``_is_real``) on Python floats;
+    The back-substitution is the solver's own (``cos_and_l``, ``is_real``) on Python floats;
     the cos²α slack is the fixed ``REAL_TOL`` instead of the solver's conditioning estimate.
     Returns the valid candidates as (d, r, α, l, ρ) tuples in mm / rad.
     """
@@ -136,9 +136,9 @@ def loop_one(x: np.ndarray, g: dict, angles: bool, rel_tol: float = 1e-6) -> lis
         if abs(q.imag) > IMAG_TOL * (1 + abs(q.real)):  # solve_batch's tolerance (near-double roots)
             continue
         r2, S, w, v = map(float, g["back"](np.array([q.real]), Z))
-        ca, l = _cos_and_l(S, w, v, float(Z[0]), SCALAR)
+        ca, l = cos_and_l(S, w, v, float(Z[0]), SCALAR)
         rho2 = float(g["rho2"](np.array([q.real]), Z, np.array([l]))[0])
-        if not (_is_real(r2, S, v, rho2, REAL_TOL, REAL_TOL, SCALAR) and math.isfinite(l)):
+        if not (is_real(r2, S, v, rho2, REAL_TOL, REAL_TOL, SCALAR) and math.isfinite(l)):
             continue
         sa = math.sqrt(min(S, 1.0))
         for sgn in (1.0, -1.0):

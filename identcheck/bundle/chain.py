@@ -138,7 +138,7 @@ def forward(chain: Skeleton, terms: Terms, s: State):
     return R, t, centre, pred
 
 
-def _tangents(a: np.ndarray):
+def tangents(a: np.ndarray):
     b1 = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
     b1 /= np.linalg.norm(b1)
     return b1, np.cross(a, b1)
@@ -182,7 +182,7 @@ def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
                 w = np.einsum("fij,fj->fi", R[P], rot[:, :, a])
                 G[..., c + a][:, idx] = np.cross(w[:, None], dx)
             ax = s.axis[j]
-            for a, b in enumerate(_tangents(ax)):           # axis direction, tangent plane
+            for a, b in enumerate(tangents(ax)):           # axis direction, tangent plane
                 wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * np.cross(ax, b)
                 w = np.einsum("fij,fj->fi", R[P], wp)
                 G[..., c + 3 + a][:, idx] = np.cross(w[:, None], dx)
@@ -226,7 +226,7 @@ def _apply(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: np.nd
         c += 6
         if chain.types[j] == "revolute":
             n.rest[j] = _exp(dc[c:c + 3])[0] @ s.rest[j]
-            b1, b2 = _tangents(s.axis[j])
+            b1, b2 = tangents(s.axis[j])
             a = s.axis[j] + dc[c + 3] * b1 + dc[c + 4] * b2
             n.axis[j] = a / np.linalg.norm(a)
             c += 5
@@ -351,7 +351,7 @@ def _n_const(chain: Skeleton, terms: Terms) -> int:
 
 
 # ---------------------------------------------------------------------- starting point
-def _fill(valid: np.ndarray, arr: np.ndarray) -> np.ndarray:
+def fill_gaps(valid: np.ndarray, arr: np.ndarray) -> np.ndarray:
     """Copy each invalid frame's value from the nearest valid frame (pose continuity)."""
     idx = np.flatnonzero(valid)
     near = idx[np.clip(np.searchsorted(idx, np.arange(len(valid))), 0, len(idx) - 1)]
@@ -378,7 +378,7 @@ def segment_frames(chain: Skeleton, data) -> dict:
         if poses.valid.sum() < 3:
             problems.append(f"segment {seg!r}: fewer than 3 frames show three of its markers")
             continue
-        out[seg] = Poses(R=_fill(poses.valid, poses.R), t=_fill(poses.valid, poses.t),
+        out[seg] = Poses(R=fill_gaps(poses.valid, poses.R), t=fill_gaps(poses.valid, poses.t),
                          valid=poses.valid, local=local, rms=poses.rms)
     if problems:
         raise InputError(problems)
@@ -391,7 +391,7 @@ def _rest_and_theta(rel: np.ndarray, a_p: np.ndarray, a_c: np.ndarray):
     v = ref @ a_c
     fix = Rotation.align_vectors([a_p], [v])[0].as_matrix()
     rest = fix @ ref
-    u = _tangents(a_p)[0]
+    u = tangents(a_p)[0]
     moved = np.einsum("fij,j->fi", rel @ rest.T, u)
     theta = np.arctan2(np.cross(u, moved) @ a_p, moved @ u)
     return rest, theta

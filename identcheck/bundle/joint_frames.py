@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import _tangents
+from identcheck.bundle.chain import tangents
 from identcheck.bundle.uncertainty import joint_offsets
 from identcheck.geometry.rotations import rotvec_matrix
 
@@ -40,7 +40,7 @@ def _constants(state, chain, dc: np.ndarray, joint: str):
     axis = rest = None
     if chain.types[joint] == "revolute":
         rest = rotvec_matrix(dc[o + 6:o + 9])[0] @ state.rest[joint]
-        b1, b2 = _tangents(state.axis[joint])
+        b1, b2 = tangents(state.axis[joint])
         a = state.axis[joint] + dc[o + 9] * b1 + dc[o + 10] * b2
         axis = a / np.linalg.norm(a)
     return local, cp, cc, axis, rest

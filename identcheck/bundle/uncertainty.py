@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identcheck.bundle.chain import _jacobians, _prepare, _tangents, forward
+from identcheck.bundle.chain import _jacobians, _prepare, tangents, forward
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 
@@ -201,7 +201,7 @@ def distance_gradients(chain, state, n_params: int) -> dict:
                     along = float((state.local[col] - centre) @ axis)
                     a, o = state.axis[j], offsets[j] + 6
                     turn = np.eye(3) if side == 0 else state.rest[j].T
-                    for k, b in enumerate(_tangents(a)):
+                    for k, b in enumerate(tangents(a)):
                         grad[o + 3 + k] = -along * float(u @ (turn @ b))
                     if side == 1:               # the rest rotation turns the child's view of the axis
                         for k in range(3):

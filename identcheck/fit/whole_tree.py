@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import chdtrc
 
-from identcheck.bundle.chain import _fill, fit_chain, initial_state
+from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.practical import judge
 from identcheck.bundle.uncertainty import covariance, distance_gradients
@@ -97,7 +97,7 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
             raise DegenerateError(f"segment {seg!r}: {exc}") from None
         if poses.valid.sum() < 3:
             raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points")
-        out[seg] = Poses(R=_fill(poses.valid, poses.R), t=_fill(poses.valid, poses.t), valid=poses.valid,
+        out[seg] = Poses(R=fill_gaps(poses.valid, poses.R), t=fill_gaps(poses.valid, poses.t), valid=poses.valid,
                          local=local[:len(idx)], rms=poses.rms)
     return out
 

@@ -6,7 +6,7 @@ samples admit. The linear system M·Z = K (eq. 10) is solved, the cubic (13) giv
 each root and each sign of cos α (the mirror image) is back-substituted, and each candidate is
 kept only if it reproduces every sample (per-sample θ, β constructed and the sample rebuilt).
 cos α and l come from the derivation's w = cos α·u and v = u², u = l + d cos α, by whichever
-square root is well-conditioned (:func:`_cos_and_l`), so the truth survives cos α → 0.
+square root is well-conditioned (:func:`cos_and_l`), so the truth survives cos α → 0.
 The derivation proves that generic data leave two joint-parameter sets (four joints with
 mirror images); see derivations/ERRATA.md, E1 and E2.
 
@@ -49,7 +49,7 @@ def generated(backend: str = "numpy") -> dict:
     par = CASE.parameter_symbols  # (d, r, l, rho, c_alpha, s_alpha)
     vars_ = [s for a in CASE.variables for s in (a.cos, a.sin)]  # (c_theta, s_theta, c_beta, s_beta)
     back = dv.result("back")
-    rho2 = back["rho2"].subs(back["l"], l_sym)  # ρ² in terms of l itself, see _cos_and_l
+    rho2 = back["rho2"].subs(back["l"], l_sym)  # ρ² in terms of l itself, see cos_and_l
     assert not rho2.has(cos_sign), "rho2 must depend on the sign of cos α only through l"
     h, dist2 = dv.result("axis_distance2")
     f = lambda exprs, groups, name: codegen.numeric(exprs, groups, backend, name)  # noqa: E731
@@ -183,16 +183,16 @@ def _solve_chunk(xyz, angles, rel_tol, out):
     Zs, ratio = _solve_five(MK) if N == N_UNKNOWNS else lstsq_stacked(MK[..., :N_UNKNOWNS], MK[..., N_UNKNOWNS])
     out["Z"][:], out["pivot_ratio"][:] = Zs, ratio
     coeffs = g["cubic"](Zs)
-    q, im = _cubic_roots(coeffs)                                            # (n, 3)
+    q, im = fast_cubic_roots(coeffs)                                       # (n, 3)
     r2, S, w, v = np.moveaxis(g["back"](q[..., None], Zs[:, None, :]), -1, 0)
     d = Zs[:, :1]
     with np.errstate(all="ignore"):
-        ca, l = _cos_and_l(S, w, v, d)                                      # σ = +1; the mirror negates both
+        ca, l = cos_and_l(S, w, v, d)                                      # σ = +1; the mirror negates both
         rho2 = g["rho2"](q[..., None], Zs[:, None, :], l[..., None])[..., 0]
         # a double root (the twin joint meets the true one, e.g. l = 0 and r = rho) splits into a
         # complex pair of size ~sqrt(eps): accept near-real roots and let the reproduction check decide
         ok = (np.abs(im) <= IMAG_TOL * (1 + np.abs(q))) & np.isfinite(l)
-        ok &= _is_real(r2, S, v, rho2, REAL_TOL, _cos2_slack(coeffs, q, Zs, S, v, ratio))
+        ok &= is_real(r2, S, v, rho2, REAL_TOL, _cos2_slack(coeffs, q, Zs, S, v, ratio))
         sa = np.sqrt(np.clip(S, 0, 1))
         r, rho = np.sqrt(np.maximum(r2, 0)), np.sqrt(np.maximum(rho2, 0))
     _slots(out["params"], scale, d, r, np.arctan2(sa, ca), l, rho)
@@ -234,7 +234,7 @@ def _solve_five(MK):
     return Zs, ratio
 
 
-def _cubic_roots(coeffs):
+def fast_cubic_roots(coeffs):
     """The roots of (13), stacked (n, 4) -> (re, im), each (n, 3); three real ones largest first.
 
     Erratum E1 proves all three roots real for exact data (the discriminant is a sum of
@@ -265,7 +265,7 @@ def _cubic_roots(coeffs):
     return re, im
 
 
-def _cos_and_l(S, w, v, d, xp=np):
+def cos_and_l(S, w, v, d, xp=np):
     """cos α and l of the σ = +1 joint (cos α >= 0) of a root; the mirror image negates both.
 
     The derivation gives sin²α = S, w = cos α·u and v = u² with u = l + d cos α. Of the two
@@ -287,7 +287,7 @@ def _cos_and_l(S, w, v, d, xp=np):
     return c, u - d * c
 
 
-def _is_real(r2, S, v, rho2, tol, slack, xp=np):
+def is_real(r2, S, v, rho2, tol, slack, xp=np):
     """Whether a root's constants are those of a real joint.
 
     r² > 0, sin²α > 0, ρ² >= 0 up to ``tol``; cos²α = 1 − S >= 0 up to ``slack`` (rounding
@@ -489,11 +489,11 @@ def _identify_mp(xyz, precision: int, rel_tol=None) -> Identification:
             Qk = mpmath.re(Qk)
             try:
                 r2, S, w, v = g["back"]([Qk], Zs)
-                ca, l = _cos_and_l(S, w, v, Zs[0], _MP)
+                ca, l = cos_and_l(S, w, v, Zs[0], _MP)
                 rho2 = g["rho2"]([Qk], Zs, [l])[0]
             except ZeroDivisionError:
                 continue
-            if not (_is_real(r2, S, v, rho2, eps, eps, _MP) and mpmath.isfinite(l)):
+            if not (is_real(r2, S, v, rho2, eps, eps, _MP) and mpmath.isfinite(l)):
                 continue
             sa = mpmath.sqrt(min(S, 1))
             for sgn in (1, -1):

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.solve import identify, solve_batch
-from identcheck.solve.revolute21 import _cubic_roots, generated
+from identcheck.solve.revolute21 import fast_cubic_roots as cubic_roots, generated
 from strategies import near_perpendicular, revolute21_problem, revolute21_samples, spread_angles
 
 
@@ -79,7 +79,7 @@ def test_cubic_roots_fast_path_agrees_with_numpy():
     one_real = [np.polymul([1, -rng.normal()], [1, 2 * b, b * b + 0.1 + rng.uniform()])  # (t + b)² + c², c > 0
                 for b in rng.normal(size=50)]
     coeffs = np.array(real3 + one_real) * rng.uniform(-3, 3, (100, 1))
-    re, im = _cubic_roots(coeffs)
+    re, im = cubic_roots(coeffs)
     for c, x, y in zip(coeffs, re, im):
         want = np.roots(c)
         got = x + 1j * y
