@@ -56,6 +56,9 @@ class JointEstimate:
     unique: bool = True
     alternatives: list = field(default_factory=list)   # other JointEstimates explaining the data as well
     notes: list = field(default_factory=list)
+    nothing_beyond: bool = False                       # a multi-candidate case with no marker beyond it to decide
+    ranked_out: list = field(default_factory=list)     # candidates a far marker ranked lower (the whole-tree
+                                                       # fit still starts from them and reports their Δχ²)
 
     def distance(self, marker: np.ndarray) -> float:
         """Median over frames of a marker's distance to the centre or the hinge axis."""

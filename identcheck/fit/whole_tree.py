@@ -118,31 +118,53 @@ def candidates(closed_form: dict) -> dict:
     for name, (est, _info) in closed_form.items():
         if est is None:
             continue
-        out[name] = [est] + list(est.alternatives) + list(getattr(est, "ranked_out", []))
+        out[name] = [est] + list(est.alternatives) + list(est.ranked_out)
     return out
 
 
-def fit_tree(model, trial, closed_form: dict, progress=None) -> TreeFit:
+def _starts(chain, closed_form: dict, restart) -> tuple[list, int, str]:
+    """Start assignments (joint -> JointEstimate), how many were left out, and why none could be made.
+    Every combination of the candidates of the ambiguous joints; joints the closed form left without a
+    start because a joint above them was ambiguous are started from each of that joint's candidates in
+    turn (``restart(fixed)`` reruns the closed form with those candidates taken as the joints)."""
+    cands = candidates(closed_form)
+    names = list(cands)
+    combos = [dict(zip(names, (cands[n][i] for n, i in zip(names, idx))))
+              for idx in itertools.product(*[range(len(cands[n])) for n in names])]
+    missing = [j for j in chain.joints if j not in cands]
+    if missing:
+        ambiguous = [n for n in names if len(cands[n]) > 1]
+        if not ambiguous or restart is None:
+            return [], 0, f"no closed-form start for {', '.join(missing)}"
+        combos = []
+        for idx in itertools.product(*[range(len(cands[n])) for n in ambiguous]):
+            if len(combos) >= MAX_STARTS:
+                break
+            fixed = {n: cands[n][i] for n, i in zip(ambiguous, idx)}
+            again = restart(fixed)
+            if all(again.get(j, (None,))[0] is not None for j in chain.joints):
+                combos.append({j: again[j][0] for j in chain.joints})
+        if not combos:
+            return [], 0, f"no closed-form start for {', '.join(missing)}, from any candidate of {', '.join(ambiguous)}"
+    return combos[:MAX_STARTS], max(len(combos) - MAX_STARTS, 0), ""
+
+
+def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> TreeFit:
     """Whole-tree maximum likelihood from every combination of closed-form candidates (see module doc)."""
     chain = skeleton_of(model, trial)
     data = trial.select(chain.labels).as_array()
-    cands = candidates(closed_form)
-    missing = [j for j in chain.joints if j not in cands]
-    if missing:
-        return TreeFit(None, problem=f"no closed-form start for {', '.join(missing)}")
-    names = list(cands)
-    combos = list(itertools.product(*[range(len(cands[n])) for n in names]))
-    left_out = max(len(combos) - MAX_STARTS, 0)
-    combos = combos[:MAX_STARTS]
+    combos, left_out, why = _starts(chain, closed_form, restart)
+    if not combos:
+        return TreeFit(None, problem=why)
     minima, problems = [], []
     for k, combo in enumerate(combos):
         if progress and len(combos) > 1:
             progress(f"whole-tree fit from candidate start {k + 1} of {len(combos)}")
         virtual: dict = {}
-        for n, i in zip(names, combo):
+        for n, est in combo.items():
             jt = model.joints[n]
             for seg in (jt.parent, jt.child):
-                virtual.setdefault(seg, {}).update(cands[n][i].virtual_markers(n))
+                virtual.setdefault(seg, {}).update(est.virtual_markers(n))
         try:
             frames = _frames(chain, data, virtual)
             state = initial_state(chain, data, frames=frames)
@@ -153,7 +175,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None) -> TreeFit:
         cov = covariance(fit, data)
         grads = distance_gradients(chain, fit.state, len(cov.information))
         dist = {j: {m: (d, cov.se(g)) for m, (d, g) in per.items()} for j, per in grads.items()}
-        minima.append(Minimum(fit, cov, dist, combo))
+        minima.append(Minimum(fit, cov, dist, tuple(id(e) for e in combo.values())))
     if not minima:
         return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=len(combos), starts_left_out=left_out)
     minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
@@ -262,8 +284,9 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
 
 
 def rep_unique(j: dict) -> bool:
-    """Whether the closed-form start was unique (a structurally multi-candidate case decided, or none)."""
-    return bool(j["start"].get("unique", True)) or not j["start_alternatives"]
+    """False when the closed-form case admits several joints that fit any rigid data equally and no marker
+    beyond it can decide (revolute (2,1) alone: ERRATA E1); True otherwise."""
+    return not (j.get("twins_undecidable") and j["start_alternatives"])
 
 
 def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
@@ -314,6 +337,8 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
                 f"closed-form estimate only, no calibrated interval: {tree.problem or 'the whole-tree fit could not start'}"
             j["unique"] = False
             j["marker_distances_ci95"] = {}
+            j["rejected_candidates"] = []
+            j["geometry"] = None
             j["uncertainty_mm"] = None
             j["practical"] = {"verdict": "undetermined", "reason": why, "tolerance_mm": None,
                               "weakest_direction_parent": None, "weakest_se_mm": None, "motion_advice": ""}

@@ -10,6 +10,7 @@ row for its case.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -59,8 +60,12 @@ def _markers(model, points: dict, virtual: dict, seg: str) -> dict:
     return {**usable, **known}
 
 
-def fit_model(model, trial, progress=None) -> dict:
-    """Every joint of ``model`` fitted to ``trial``: name → (JointEstimate | None, info dict)."""
+def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
+    """Every joint of ``model`` fitted to ``trial``: name → (JointEstimate | None, info dict).
+
+    ``fixed``: joint → one of its candidate JointEstimates, taken as the joint (its virtual markers passed
+    down) instead of fitting it: the whole-tree fit starts the joints below an ambiguous one from each of
+    its candidates this way."""
     points = {name: trial.select(seg.markers).as_array() for name, seg in model.segments.items()}
     virtual: dict = {}
     done: dict = {}
@@ -75,6 +80,14 @@ def fit_model(model, trial, progress=None) -> dict:
             par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
             p, q = len(par), len(chi)
             case = _case(jt.type, p, q)
+            if fixed and name in fixed:
+                est = dataclasses.replace(fixed[name], unique=True, alternatives=[], ranked_out=[])
+                done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
+                for seg in (jt.parent, jt.child):
+                    virtual.setdefault(seg, {}).update(est.virtual_markers(name))
+                pending.remove(name)
+                progressed = True
+                continue
             chosen = _choose(jt.type, par, chi)
             if chosen is None:
                 continue        # wait: a later joint may add virtual markers
@@ -153,6 +166,7 @@ def _decide_revolute21(model, name, one_side, est, one_points, points):
     b, others = one_points[0], list(one_points[1:])
     far = _far_markers(model, name, one_side, points)
     if not others and not far:
+        est.nothing_beyond = True        # the case's joints fit any rigid data equally: no likelihood can decide
         return est
     cands = [est] + list(est.alternatives)
     scores = []
@@ -174,6 +188,9 @@ def _decide_revolute21(model, name, one_side, est, one_points, points):
                          f"{', '.join(f'{v:.2g}' for v in scores)} mm")
         return est
     chosen = cands[order[0]]
+    chosen.ranked_out = [c for i, c in enumerate(cands) if i != order[0]]
+    for c in chosen.ranked_out:
+        c.alternatives = []
     chosen.unique, chosen.alternatives = True, []
     chosen.notes = [n for n in est.notes if "explain the samples equally well" not in n]
     chosen.notes.append(f"chosen among {len(cands)} revolute (2,1) joints by {', '.join(what)} (fixed in, or on a "
@@ -210,7 +227,8 @@ def report(model, fitted: dict, points: dict) -> dict:
                                       for a in est.alternatives],
                      "rms_residual": _num(est.rms_residual), "uncertainty_mm": _num(est.uncertainty_mm),
                      "excitation": {"ok": bool(est.excitation_ok), "reason": est.excitation_reason or "ok"},
-                     "estimator": est.estimator, "markers_used": info, "notes": list(est.notes)}
+                     "estimator": est.estimator, "markers_used": info, "notes": list(est.notes),
+                     "twins_undecidable": bool(est.nothing_beyond)}
     return {"joints": out}
 
 
@@ -230,7 +248,8 @@ def fit_trial(model, trial, progress=None) -> dict:
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
         fitted, points = fit_model(model, screened, progress=progress)
-        tree = fit_tree(model, screened, fitted, progress=progress)
+        tree = fit_tree(model, screened, fitted, progress=progress,
+                        restart=lambda fixed: fit_model(model, screened, fixed=fixed)[0])
     rep = merge_report(report(model, fitted, points), tree, model, screened)
     notes = [{"message": w, "kind": "label_swap"} for w in swaps]
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught

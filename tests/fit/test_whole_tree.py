@@ -131,3 +131,25 @@ def test_joint_geometry_in_technical_frames_matches_the_truth(examples):
     assert np.all(np.abs(np.array(g["axis_point"]) - p) <= 4 * np.sqrt(np.diag(g["axis_point_covariance"])) + 0.05)
     assert abs(np.array(g["axis_direction"]) @ a) > np.cos(np.radians(2))
     assert rep["joints"]["knee_r"]["geometry"]["child"] is None          # the shank carries two markers
+
+
+@pytest.mark.slow
+def test_a_far_marker_rejects_the_twin_knee_through_the_likelihood(examples, tmp_path):
+    """The minimal leg plus a one-marker foot on a ball ankle (ERRATA E8): with noise the closed form
+    cannot pick the knee, so the ankle is started from every knee candidate; the whole-tree likelihood
+    keeps the true knee and reports the twin's Δχ²."""
+    from identcheck.fit.workflow import fit_trial
+
+    text = (examples / "sparse_leg.toml").read_text() + (
+        '\n[segments.foot_r]\nmarkers = ["RTOE"]\n\n[joints.ankle_r]\ntype = "spherical"\n'
+        'parent = "shank_r"\nchild = "foot_r"\n')
+    (tmp_path / "m.toml").write_text(text)
+    model = Model.from_toml(tmp_path / "m.toml")
+    sim = simulate(model, n_frames=400, seed=4, noise_mm=0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        knee = fit_trial(model, sim.trial)["joints"]["knee_r"]
+    truth = sim.truth.marker_distances("knee_r")
+    assert knee["rejected_candidates"] and all(r["delta_chi2"] > 3.84 for r in knee["rejected_candidates"])
+    for m, (lo, hi) in knee["marker_distances_ci95"].items():
+        assert lo - 1.0 <= truth[m] <= hi + 1.0, (m, lo, hi, truth[m])
