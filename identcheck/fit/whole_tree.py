@@ -283,6 +283,19 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
              "markers": worst, "kind": "model_misfit"}]
 
 
+def _distinct_alternatives(alternatives: list, best: dict) -> list:
+    """The closed form's alternatives with the same marker distances (within SAME_MM: mirror images, the same
+    joint reached twice) kept once, and none equal to the answer itself."""
+    kept = []
+    for alt in alternatives:
+        d = alt["marker_distances"]
+        same = lambda other: all(d.get(m) is None or other.get(m) is None or abs(d[m] - other[m]) <= SAME_MM  # noqa: E731
+                                 for m in d)
+        if not same(best) and not any(same(k["marker_distances"]) for k in kept):
+            kept.append(alt)
+    return kept
+
+
 def rep_unique(j: dict) -> bool:
     """False when the closed-form case admits several joints that fit any rigid data equally and no marker
     beyond it can decide (revolute (2,1) alone: ERRATA E1); True otherwise."""
@@ -321,17 +334,20 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
                 # the case itself admits several joints that fit any rigid data equally (revolute (2,1): ERRATA E1)
                 # and nothing beyond it decided: a likelihood difference can only come from the model's misfit
                 j["practical"] = dict(a["practical"], verdict="ambiguous", reason=(
-                    f"{j['case']} admits {1 + len(j['start_alternatives'])} joints that fit rigid data equally well "
-                    "(ERRATA E1/E2) and no other marker decides between them; their likelihood differences here "
+                    f"{j['case']} admits several joints that fit rigid data equally well (ERRATA E1/E2: four "
+                    "for revolute (2,1), mirror images included) and no other marker decides between them; their "
+                    "likelihood differences here "
                     "come from how the trial departs from the rigid model, not from the joint"),
                     motion_advice="add a marker on the one-marker segment, or one beyond it (ERRATA E8)")
-                j["alternatives"] = [dict(r, p_value=None) for r in a["rejected_candidates"]] or j["start_alternatives"]
+                j["alternatives"] = [dict(r, p_value=None) for r in a["rejected_candidates"]] or \
+                    _distinct_alternatives(j["start_alternatives"], j["marker_distances"])
             j["unique"] = j["practical"]["verdict"] == "determined"
             res = [residual[m] for m in a["marker_distances"] if m in residual]
             j["rms_residual"] = round(float(np.sqrt(np.nanmean(np.square(res)))), 4) if res else None
-            j["excitation"] = {"ok": j["unique"] or a["practical"]["verdict"] == "ambiguous",
-                               "reason": "ok" if a["practical"]["verdict"] == "determined"
-                               else f"{a['practical']['reason']}. {a['practical']['motion_advice']}".strip()}
+            verdict = j["practical"]
+            j["excitation"] = {"ok": verdict["verdict"] != "undetermined",
+                               "reason": "ok" if verdict["verdict"] == "determined"
+                               else f"{verdict['reason']}. {verdict['motion_advice']}".strip()}
         else:
             why = j["excitation"]["reason"] if j.get("estimator") is None else \
                 f"closed-form estimate only, no calibrated interval: {tree.problem or 'the whole-tree fit could not start'}"
