@@ -77,6 +77,7 @@ def test_plan_is_the_cli_plan(capsys):
     assert res.joints["knee_r"]["case"] == "revolute(2,1)"
 
 
+@pytest.mark.slow
 def test_identify_table_rank_verify_derive_are_the_cli_verbs(trials, capsys, tmp_path):
     from identcheck import api
 

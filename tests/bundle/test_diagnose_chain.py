@@ -98,6 +98,7 @@ def test_diagnose_needs_three_markers_on_every_segment(tmp_path):
         start(model, sim.trial)
 
 
+@pytest.mark.slow
 def test_cli_diagnose_json_and_plots(tmp_path, capsys):
     trial = tmp_path / "t.trc"
     assert cli.main(["simulate", str(EXAMPLES / "diagnose_leg.toml"), "--out", str(trial), "--frames", "400",
@@ -128,6 +129,7 @@ def test_cli_diagnose_bad_trial_exits_2_naming_the_file(tmp_path, capsys):
     assert "bad.trc" in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_cli_diagnose_reads_c3d_with_gaps(tmp_path, capsys):
     """The same workflow from a C3D file with occlusion gaps: the hidden swap is found, the gaps are not."""
     trial = tmp_path / "t.c3d"

@@ -117,6 +117,7 @@ def table():
     return {(r["joint"], r["p"], r["q"]): r for r in rows}
 
 
+@pytest.mark.slow
 def test_table_rows_cover_every_case(table):
     assert set(table) == set(CASES)
     for r in table.values():

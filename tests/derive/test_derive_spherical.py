@@ -1,3 +1,4 @@
+import pytest
 """Derivations of Pham IV-A (sphere, (3,1)) and IV-C (eqs. 14-17, (2,2)): proofs hold, errata recorded."""
 import json
 import random
@@ -63,6 +64,7 @@ def test_reduced_unknowns_give_parameters_linearly():
     assert equal(back["rho1_2"].subs(truth), rho1**2) and equal(back["rho2_2"].subs(truth), rho2**2)
 
 
+@pytest.mark.slow
 @given(st.integers(0, 10**6))
 def test_rank_certificates_are_full_and_replay(seed):
     for joint, p, q, n in (("spherical", 3, 1, 4), ("spherical", 2, 2, 9)):

@@ -120,6 +120,7 @@ MONTE_CARLO = settings(max_examples=3, deadline=None, phases=[Phase.explicit, Ph
 """Few examples and no shrinking: each example is a Monte-Carlo run of a hundred fits."""
 
 
+@pytest.mark.slow
 @MONTE_CARLO
 @given(seeds, centres, st.floats(0.3, 1.5))
 def test_covariance_matches_monte_carlo_scatter(seed, cc, noise):
@@ -144,6 +145,7 @@ def test_covariance_matches_monte_carlo_scatter(seed, cc, noise):
     assert 0.6 < ratio.min() and ratio.max() < 1.5
 
 
+@pytest.mark.slow
 def test_bias_correction_removes_the_sigma2_bias():
     """At high noise on a long trial the uncorrected Gauss–Markov centre is off by several of
     its standard errors (bias ∝ σ², not shrinking with frames); the corrected one is not."""

@@ -28,6 +28,7 @@ def _errors(rep, sim, joint):
     return [max(abs(c[k] - v) for k, v in truth.items()) for c in cands]
 
 
+@pytest.mark.slow
 def test_sparse_leg_hip_by_31_then_knee_by_21_through_the_virtual_hip_centre(tmp_path, capsys):
     code, rep, sim, err = _fit(tmp_path, capsys, "sparse_leg.toml", ".c3d", occlusion=0.1)
     hip, knee = rep["joints"]["hip_r"], rep["joints"]["knee_r"]
@@ -92,6 +93,7 @@ def _fit_sparse_leg_with(tmp_path, capsys, segment: str, marker: str, joint: str
     return json.loads(capsys.readouterr().out), sim
 
 
+@pytest.mark.slow
 def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
     """The sparse knee (Pham (2,1), 4 joints) with a one-marker patella on the thigh: nothing beyond the
     shank decides the knee, so it stays ambiguous and its hinge is not handed to the patella joint."""
@@ -101,6 +103,7 @@ def test_ambiguous_joint_is_not_used_as_virtual_markers(tmp_path, capsys):
     assert not pat["identifiable"] and not any("knee_r" in m for m in pat["markers_used"]["parent_markers"])
 
 
+@pytest.mark.slow
 def test_a_foot_marker_decides_the_sparse_knee(tmp_path, capsys):
     """The same knee with a one-marker foot on a ball ankle: the foot marker must stay on a sphere in the
     shank's frame, which only the true knee allows (ERRATA E8); fit keeps it, and the ankle follows."""
@@ -112,6 +115,7 @@ def test_a_foot_marker_decides_the_sparse_knee(tmp_path, capsys):
     assert rep["joints"]["ankle_r"]["identifiable"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_revolute_22_is_unique_in_fit_as_in_the_table(seed):
     """Two markers on each link of a hinge: Pham (2,1) on the first child marker leaves 4 joints, and the
@@ -128,6 +132,7 @@ def test_revolute_22_is_unique_in_fit_as_in_the_table(seed):
         assert d == pytest.approx(sim.truth.marker_distances("j")[m], abs=0.05)
 
 
+@pytest.mark.slow
 def test_pham21_near_the_parent_axis_is_exact_on_noise_free_data():
     """A hinge passing ~4 mm from the line of its two parent points (ρ ≈ 580 mm): the grid's nearest meridian
     point used to sit on another branch of the meridian, and the fit stalled 0.27 mm off with the axis 4° off.

@@ -86,6 +86,7 @@ def _true_distances(sim, model, name):
     return out
 
 
+@pytest.mark.slow
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(trees, st.integers(0, 10_000))
 def test_identified_joints_are_recovered_from_a_simulated_trial(tree, seed):
@@ -224,6 +225,7 @@ def test_broken_body16_gets_the_fewest_marker_fix():
     assert plan.analyse(plan._with_extra(spec, {s["segment"]: s["add_markers"] for s in sugg}), rows).all_identifiable
 
 
+@pytest.mark.slow
 def test_cli_fewest_local_finding(capsys):
     """The finding of issue 7: dropping markers greedily, body16 stays locally identifiable with 13."""
     rc = cli.main(["plan", str(EXAMPLES / "body16.toml"), "--json", "--fast", "--fewest"])
@@ -315,6 +317,7 @@ def test_a_far_marker_decides_the_knee_in_plan_fit_and_search():
     assert K.Layout(no_foot).markers == ["m0_0", "m0_1", "m0_2", "m1_0", "m2_0"]
 
 
+@pytest.mark.slow
 def test_cli_plan_witness(capsys):
     """`plan --witness` on the sparse leg: the knee's second joint is built and verified; the hip needs none."""
     rc = cli.main(["plan", str(EXAMPLES / "sparse_leg.toml"), "--json", "--fast", "--witness"])

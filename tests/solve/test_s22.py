@@ -40,6 +40,7 @@ def test_cost_is_zero_at_the_truth_and_centres_are_exact(kw):
     assert np.abs(j - true_local).max() < 1e-8 and gap.max() < 1e-8
 
 
+@pytest.mark.slow
 @settings(max_examples=12)
 @given(hip_trials())
 def test_s22_recovers_the_truth(kw):
@@ -97,6 +98,7 @@ def circle_pairs(draw):
     return d, r, centre, normal, f(0, 200)
 
 
+@pytest.mark.slow
 @given(circle_pairs())
 def test_closest_points_match_brute_force(pair):
     d, r, centre, normal, radius = pair
