@@ -28,7 +28,7 @@ from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.joint_frames import joint_geometry
-from identcheck.bundle.practical import judge
+from identcheck.bundle.practical import Z95, judge
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import Poses, refine_local
@@ -39,7 +39,6 @@ MAX_ITER = 200           # LM iterations per start
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
                          # reach the same minimum to ~1e-3 mm)
-Z95 = 1.959964
 SIGMA_FLOOR_MM = 0.01
 """The likelihood ratio's noise is never taken below this: far below any capture system's noise, above
 float32 file precision and the optimiser's own slack, so that two exactly tying joints on noise-free data
@@ -198,13 +197,10 @@ def _distinct(minima: list) -> list:
     return kept
 
 
-def _same(a: Minimum, b: Minimum) -> bool:
-    for j, per in a.distances.items():
-        for mk, (d, se) in per.items():
-            d2, se2 = b.distances[j][mk]
-            if abs(d - d2) > SAME_MM:
-                return False
-    return True
+def _same(a: Minimum, b: Minimum, joints=None) -> bool:
+    """Whether two minima give the same marker distances (within SAME_MM) for `joints` (default: all)."""
+    return all(abs(d - b.distances[j][mk][0]) <= SAME_MM
+               for j in (joints or a.distances) for mk, (d, _) in a.distances[j].items())
 
 
 def joint_answers(tree: TreeFit, model) -> dict:
@@ -215,20 +211,15 @@ def joint_answers(tree: TreeFit, model) -> dict:
     out = {}
     for j in chain.joints:
         dist = best.distances[j]
-        alts = []
-        for m, delta, p in tree.others:
-            if p < 0.05:
-                continue          # rejected at the 95 % level
-            if all(abs(m.distances[j][k][0] - d) <= SAME_MM for k, (d, se) in dist.items()):
-                continue          # the same joint; another joint of the tree differs
-            alts.append({"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
-                         "marker_distances_ci95": _ci(m.distances[j]),
-                         "delta_chi2": round(delta, 3), "p_value": round(p, 4),
-                         "rms_residual": round(float(np.sqrt(m.fit.rss / max(m.fit.n_samples, 1))), 4)})
+        differing = [(m, delta, p) for m, delta, p in tree.others if not _same(m, best, [j])]   # this joint differs
+        alts = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
+                 "marker_distances_ci95": _ci(m.distances[j]),
+                 "delta_chi2": round(delta, 3), "p_value": round(p, 4),
+                 "rms_residual": round(float(np.sqrt(m.fit.rss / max(m.fit.n_samples, 1))), 4)}
+                for m, delta, p in differing if delta <= REJECT_CHI2]          # not rejected at the 95 % level
         rejected = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
-                    for m, delta, p in tree.others if p < 0.05
-                    and not all(abs(m.distances[j][k][0] - d) <= SAME_MM for k, (d, se) in dist.items())]
+                    for m, delta, p in differing if delta > REJECT_CHI2]
         practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
         out[j] = {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
                   "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
