@@ -91,7 +91,8 @@ MAX_SWAPS = 5            # swaps looked for, strongest first, each exchanged bac
 
 
 def screen(model, trial) -> tuple:
-    """(trial with each detected swap span set missing for its two markers, list of warnings)."""
+    """(trial with each detected swap span set missing for its two markers, list of warnings: dicts with
+    ``kind`` = "label_swap", ``markers``, ``frames`` (first, last; 0-based) and ``message``)."""
 
     chain = Skeleton.from_model(model)
     present = set(trial.labels)
@@ -123,10 +124,12 @@ def screen(model, trial) -> tuple:
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]              # exchanged back, to look for more
         mi, mj = chain.labels[i], chain.labels[j]
         xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
-        warnings.append(f"{trial.source}: markers {mi} and {mj} look swapped in frames {a}-{b} (there, their distances "
-                        f"to the other markers of their segments fit clearly better exchanged than as labelled in the "
-                        f"rest of the trial); those frames are left out for these two markers. Which labelling is "
-                        f"right, only a reference (static) trial can tell: check the labels.")
+        warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
+                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {a}-{b} (there, their "
+                                    f"distances to the other markers of their segments fit clearly better exchanged than "
+                                    f"as labelled in the rest of the trial); those frames are left out for these two "
+                                    f"markers. Which labelling is right, only a reference (static) trial can tell: check "
+                                    f"the labels."})
     if not warnings:
         return trial, []
     return Trial(xyz, trial.labels, trial.rate_hz, trial.source), warnings

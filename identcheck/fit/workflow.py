@@ -251,7 +251,7 @@ def fit_trial(model, trial, progress=None) -> dict:
         tree = fit_tree(model, screened, fitted, progress=progress,
                         restart=lambda fixed: fit_model(model, screened, fixed=fixed)[0])
     rep = merge_report(report(model, fitted, points), tree, model, screened)
-    notes = [{"message": w, "kind": "label_swap"} for w in swaps]
+    notes = list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
               if issubclass(c.category, UserWarning)]
     if tree.best is not None:

@@ -22,9 +22,10 @@ def test_a_hidden_swap_is_named_and_left_out(seed):
     sim = inject_effect(simulate(model, n_frames=300, noise_mm=0.5, seed=seed), "marker_swap", seed)
     where = sim.settings["effect"]["where"]
     screened, warnings = screen(model, sim.trial)
-    assert len(warnings) == 1 and all(m in warnings[0] for m in where["markers"])
+    assert len(warnings) == 1 and all(m in warnings[0]["message"] for m in where["markers"])
+    assert sorted(warnings[0]["markers"]) == sorted(where["markers"]) and warnings[0]["kind"] == "label_swap"
     a, b = where["frames"]
-    assert f"frames {a}-{b}" in warnings[0] or _overlap(warnings[0], a, b) > 0.9
+    assert f"frames {a}-{b}" in warnings[0]["message"] or _overlap(warnings[0]["frames"], a, b) > 0.9
     cols = [screened.labels.index(m) for m in where["markers"]]
     out = screened.as_array()[:, cols]
     assert np.isnan(out[a:b + 1]).all()                           # the span is out for both markers
@@ -33,10 +34,8 @@ def test_a_hidden_swap_is_named_and_left_out(seed):
     assert np.isfinite(sim.trial.as_array()[a:b + 1][:, cols]).all()   # the caller's trial is not modified
 
 
-def _overlap(text, a, b):
-    import re
-
-    lo, hi = map(int, re.search(r"frames (\d+)-(\d+)", text).groups())
+def _overlap(frames, a, b):
+    lo, hi = frames
     return max(0, min(b, hi) - max(a, lo) + 1) / (b - a + 1)
 
 
