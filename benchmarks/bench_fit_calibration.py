@@ -70,8 +70,9 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
             if ci is None or est is None:
                 rows.append({"joint": name, "marker": m, "verdict": verdict, "covered": None})
                 continue
-            covered = any(c.get(m) is not None and c[m][0] <= true <= c[m][1] for c in cands)
-            half = (ci[1] - ci[0]) / 2
+            covered = any(c.get(m) is not None and c[m][0] <= true <= (np.inf if c[m][1] is None else c[m][1])
+                          for c in cands)
+            half = np.inf if ci[1] is None else (ci[1] - ci[0]) / 2
             err = abs(est - true)
             rows.append({"joint": name, "marker": m, "verdict": verdict, "covered": bool(covered), "half": half,
                          "err": err, "wrong": verdict == "determined" and err > max(WRONG_FACTOR * half, WRONG_MIN_MM)})

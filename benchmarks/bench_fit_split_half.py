@@ -67,6 +67,8 @@ def main(argv=None) -> int:
             for m in ci1:
                 if m not in ci2 or j1["marker_distances"].get(m) is None or j2["marker_distances"].get(m) is None:
                     continue
+                if ci1[m][1] is None or ci2[m][1] is None:       # an unbounded interval holds any other answer
+                    continue
                 se1, se2 = (ci1[m][1] - ci1[m][0]) / (2 * 1.96), (ci2[m][1] - ci2[m][0]) / (2 * 1.96)
                 diff = abs(j1["marker_distances"][m] - j2["marker_distances"][m])
                 bound = 1.96 * float(np.hypot(se1, se2))

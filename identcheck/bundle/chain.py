@@ -251,7 +251,7 @@ def _prepare(data: np.ndarray, weights: np.ndarray | None):
 
 
 def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, weights=None,
-              max_iter: int = MAX_ITER, tol: float = REL_TOL) -> Fit:
+              max_iter: int = MAX_ITER, tol: float = REL_TOL, penalty=None) -> Fit:
     """Levenberg-Marquardt over every per-frame unknown and every constant, from `state`.
 
     Parameters
@@ -265,6 +265,10 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         Effect terms; ``state.term_params`` must hold one (K, 3) array per term (zeros to start).
     weights : array (F, M), optional
         Per-sample weights (0 drops a sample: gaps, gross errors).
+    penalty : callable, optional
+        ``penalty(state) -> (r (c,), D (c, P))``: extra residuals on the constants alone with their
+        Jacobian, added to the cost (a constraint held by a stiff spring: the profile likelihood). The
+        returned fit's ``rss`` is the data's alone.
     """
     terms = terms or Terms()
     y, w = _prepare(data, weights)
@@ -274,18 +278,23 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         old = s.term_params
         s.term_params = [old[i] if i < len(old) and old[i].shape == sh else np.zeros(sh)
                          for i, sh in enumerate(shapes)]
+    pen = (lambda st: float(np.sum(penalty(st)[0] ** 2))) if penalty else (lambda st: 0.0)
     R, t, centre, pred = forward(chain, terms, s)
-    cost = _cost(pred, y, w)
+    cost = _cost(pred, y, w) + pen(s)
     lam, it, converged = 1e-3, 0, False
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
         A, B, C, g, h = _normal(chain, terms, s, R, t, centre, pred, y, w)
+        if penalty:
+            r_p, D = penalty(s)
+            C, h = C + D.T @ D, h + D.T @ r_p
         k = A.shape[1]
         scaleA = np.trace(A, axis1=1, axis2=2)[:, None] / k + 1e-12
         improved = False
         for _ in range(12):
             Ad = A + lam * (A * np.eye(k)) + 1e-9 * scaleA[..., None] * np.eye(k)
-            sol = np.linalg.solve(Ad, np.concatenate([B, g[..., None]], axis=2))    # one factorisation
+            sol = np.linalg.inv(Ad) @ np.concatenate([B, g[..., None]], axis=2)  # batched k×k: inv + matmul
+                                                                                   # beats solve 3x here
             Ainv_B, Ainv_g = sol[..., :-1], sol[..., -1]
             Cd = C + lam * np.diag(np.diag(C)) + 1e-9 * (np.trace(C) / max(len(C), 1)) * np.eye(len(C))
             B2 = B.reshape(-1, B.shape[-1])
@@ -296,7 +305,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             dq[~frame_has] = 0.0
             trial = _apply(chain, terms, s, R, dq, dc)
             R2, t2, c2, p2 = forward(chain, terms, trial)
-            new = _cost(p2, y, w)
+            new = _cost(p2, y, w) + pen(trial)
             if new <= cost:
                 improved = True
                 done = cost - new <= tol * max(cost, 1e-300)
@@ -309,7 +318,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             break
     n_samples = int((w > 0).sum())
     n_params = int(frame_has.sum()) * chain.frame_dof() + _n_const(chain, terms) - chain.gauge()
-    return Fit(chain, terms, s, pred, cost, n_samples, n_params, it, converged, R, t)
+    rss = _cost(pred, y, w) if penalty else cost
+    return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
 
 
 def _normal(chain, terms, s, R, t, centre, pred, y, w):

@@ -230,6 +230,15 @@ def scale_of(points) -> float:
     return float(np.sqrt(np.mean(np.asarray(points) ** 2)))
 
 
+SEED_SAMPLES = 400
+"""Samples the revolute (2,1) least squares uses (evenly spread over the trial): its answer only starts the
+whole-tree fit, which uses every sample; the ODR problem's cost grows with the samples and its flat valleys
+make it the slowest step of ``fit`` on sparse marker sets."""
+SEED_NFEV = 100
+"""Evaluations per revolute (2,1) least-squares run: enough to leave the closed form's noise-biased roots
+for the basin of a minimum; the whole-tree fit converges from there."""
+
+
 def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) -> JointEstimate:
     """Pham III-A on noisy samples (geometric least squares seeded by the closed form): every joint
     that explains the samples as well as the best, never one picked silently."""
@@ -239,7 +248,8 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     if len(frames) < revolute21.N_UNKNOWNS:
         raise DegenerateError(f"{case}: only {len(frames)} frames with every marker seen; at least 5 are needed")
     local, _ = pair_frame(a1[frames], a2[frames], child[frames, 0])
-    sols = revolute21_fit.fit(local)
+    every = max(1, len(local) // SEED_SAMPLES)       # a start for the whole-tree fit: a spread subset will do
+    sols = revolute21_fit.fit(local[::every], max_nfev=SEED_NFEV)
     if not sols:
         raise DegenerateError(f"{case}: no revolute joint fits these samples")
     rot = _pair_rotation(a1[frames], a2[frames])
@@ -254,7 +264,7 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     equal = [e for e in ests[1:] if e.rms_residual <= 1.05 * best.rms_residual + 1e-9]
     best.unique = not equal
     best.alternatives = equal
-    best.uncertainty_mm = max(best.uncertainty_mm, revolute21_fit.bootstrap_uncertainty(sols[0][0], local))
+    best.uncertainty_mm = max(best.uncertainty_mm, revolute21_fit.bootstrap_uncertainty(sols[0][0], local[::every]))
     why = _travel_reason(local[:, None, :], best.rms_residual)
     if why:
         best.excitation_ok, best.excitation_reason = False, why

@@ -83,39 +83,59 @@ def _odr(x, R, z):
     return np.concatenate([np.hypot(xx, yy) - R, zz - z])
 
 
-def _odr_problem(N: int, scale: float) -> tuple:
-    """Jacobian sparsity and bounds of the ODR problem: 5 constants, then one β per sample."""
-    from scipy.sparse import lil_matrix
+def _odr_jacobian(x, R, z):
+    """Analytic Jacobian of :func:`_odr` (2N × (5 + N), sparse): the meridian's derivatives with respect to
+    (d, r, α, l, ρ) fill the first five columns, each sample's β its own column."""
+    from scipy.sparse import csr_matrix
 
-    sparsity = lil_matrix((2 * N, 5 + N), dtype=int)
-    sparsity[:, :5] = 1
-    for i in range(N):
-        sparsity[i, 5 + i] = sparsity[N + i, 5 + i] = 1
+    d, r, a, l, rho = x[:5]
+    beta = x[5:]
+    N = len(beta)
+    ca, sa = np.cos(a), np.sin(a)
+    cb, sb = np.cos(beta), np.sin(beta)
+    xx, yy = rho * cb + r, ca * rho * sb - sa * l
+    Rm = np.maximum(np.hypot(xx, yy), 1e-300)
+    one, zero = np.ones(N), np.zeros(N)
+    # columns d, r, α, l, ρ, β of the meridian point (x, y, z)
+    dx = [zero, one, zero, zero, cb, -rho * sb]
+    dy = [zero, zero, -sa * rho * sb - ca * l, -sa * one, ca * sb, ca * rho * cb]
+    dz = [one, zero, ca * rho * sb - sa * l, ca * one, sa * sb, sa * rho * cb]
+    dR = [(xx * gx + yy * gy) / Rm for gx, gy in zip(dx, dy)]
+    rows = np.r_[np.repeat(np.arange(N), 6), np.repeat(N + np.arange(N), 6)]
+    cols = np.tile(np.r_[np.arange(5), -1], 2 * N)
+    cols[cols < 0] = np.tile(5 + np.arange(N), 2)
+    vals = np.r_[np.stack(dR, axis=1).ravel(), np.stack(dz, axis=1).ravel()]
+    return csr_matrix((vals, (rows, cols)), shape=(2 * N, 5 + N))
+
+
+def _odr_bounds(N: int, scale: float) -> tuple:
+    """Bounds of the ODR problem (5 constants, then one β per sample): r, ρ > 0 and α in (0, π)."""
     lo = np.r_[[-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale], np.full(N, -np.inf)]
     hi = np.r_[[np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf], np.full(N, np.inf)]
-    return sparsity, lo, hi
+    return lo, hi
 
 
-def fit(local) -> list:
+def fit(local, max_nfev: int = MAX_NFEV) -> list:
     """Distinct least-squares joints (d, r, α, l, ρ) with their RMS residual and 1-σ uncertainty (mm), best first.
 
     ``local``: (N, 3) samples in the frame of the two parent markers (A1 origin, A2 on +z).
     Orthogonal distance regression: the constants and one β per sample are fitted together
-    (a smooth problem with a sparse Jacobian), from each seed of the closed form.
+    (a smooth problem with a sparse Jacobian), from each seed of the closed form, each run stopped after
+    ``max_nfev`` evaluations (a start for a later fit needs fewer than an answer).
     """
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
     N = len(local)
     scale = float(np.sqrt(np.mean(local**2)))
     seeds = [s for s in revolute21.solve_batch(local).params if np.all(np.isfinite(s))]
-    sparsity, lo, hi = _odr_problem(N, scale)
+    lo, hi = _odr_bounds(N, scale)
     found = []
 
     def refine(s):
         s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
         x0 = np.r_[s, _nearest_beta(s, R, z)]
-        sol = least_squares(_odr, x0, args=(R, z), bounds=(lo, hi), jac_sparsity=sparsity, x_scale="jac",
-                            max_nfev=MAX_NFEV, ftol=TOL, xtol=TOL, gtol=TOL)
+        sol = least_squares(_odr, x0, jac=_odr_jacobian, args=(R, z), bounds=(lo, hi), x_scale="jac",
+                            tr_solver="lsmr", max_nfev=max_nfev, ftol=TOL, xtol=TOL, gtol=TOL)
         p = sol.x[:5]
         found.append((p, float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(sol, N)))
 
@@ -160,12 +180,12 @@ def bootstrap_uncertainty(params, local, n_boot: int = 8, seed: int = 0) -> floa
     Rm = np.hypot(x, y)
     sigma = float(np.sqrt(np.mean((Rm - R) ** 2 + (zz - z) ** 2) / 2))
     rng = np.random.default_rng(seed)
-    sparsity, lo, hi = _odr_problem(N, float(np.sqrt(np.mean(local**2))))
+    lo, hi = _odr_bounds(N, float(np.sqrt(np.mean(local**2))))
     out = []
     for _ in range(n_boot):
         Rb, zb = Rm + sigma * rng.standard_normal(N), zz + sigma * rng.standard_normal(N)
-        sol = least_squares(_odr, np.r_[params, b], args=(Rb, zb), bounds=(lo, hi), jac_sparsity=sparsity,
-                            x_scale="jac", max_nfev=100)
+        sol = least_squares(_odr, np.r_[params, b], jac=_odr_jacobian, args=(Rb, zb), bounds=(lo, hi),
+                            x_scale="jac", tr_solver="lsmr", max_nfev=100)
         out.append(sol.x[[0, 1, 3, 4]])
     dev = np.array(out) - np.asarray(params)[[0, 1, 3, 4]]
     cov = dev.T @ dev / len(dev)

@@ -21,14 +21,16 @@ that would help.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.joint_frames import joint_geometry
-from identcheck.bundle.practical import Z95, judge
+from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge
+from identcheck.bundle.profile import profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import Poses, refine_local
@@ -53,6 +55,9 @@ class Minimum:
     cov: object
     distances: dict            # joint -> marker -> (distance mm, standard error mm)
     start: tuple               # which candidate of each ambiguous joint started it
+    intervals: dict = field(default_factory=dict)
+    """joint -> marker -> ([lo, hi], method) where the quadratic interval is not to be trusted (see
+    :func:`honest_intervals`); the other distances' 95 % intervals are ``d ± 1.96 SE``."""
 
 
 @dataclass
@@ -181,11 +186,68 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
     best = minima[0]
     tau = max(1.0, float(np.median([best.cov.inflation(g) for per in distance_gradients(
         chain, best.fit.state, len(best.cov.information)).values() for _, g in per.values()])))
+    scale = max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau
     others = []
     for m in minima[1:]:
-        delta = (m.fit.rss - best.fit.rss) / (max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau)
+        delta = (m.fit.rss - best.fit.rss) / scale
         others.append((m, float(delta), float(chdtrc(1, delta))))
+    best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     return TreeFit(best, others, n_starts=len(combos), starts_left_out=left_out)
+
+
+PROFILE_BUDGET_S = 60.0
+"""Seconds of profile-likelihood refits per trial at most; distances left over get an unbounded interval
+(said so in ``interval_method``), never a quadratic one known to be untrustworthy."""
+
+
+def posed_by_itself(chain: Skeleton, segment: str) -> bool:
+    """Whether a segment's pose in each frame follows from its own markers plus the points its parent joint
+    fixes on it (a ball's centre: one; a hinge's axis: two), as three points do. When it does not, the
+    segment's roll in every frame is a free unknown seen only through the joints below it: an incidental
+    parameter per frame, which biases the likelihood towards joints whose marker orbits absorb noise (on
+    simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820)."""
+    up = [j for j in chain.joints if chain.child[j] == segment]
+    fixed = 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
+    return len(chain.seg_markers[segment]) + fixed >= 3
+
+
+def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
+    """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
+    those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
+
+    - direction free, or the joint hangs from a segment that is not posed by itself
+      (:func:`posed_by_itself`): ``[0, None]`` (the likelihood does not bound it), method ``unbounded``;
+    - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
+      side that does not close within its span is ``None``; a profile that meets a better fit than the
+      minimum (the fit had not found the best joint) makes the interval unbounded.
+    Returns joint -> marker -> ([lo, hi], method)."""
+    fit, cov = best.fit, best.cov
+    chain = fit.chain
+    n_params = len(cov.information)
+    grads = distance_gradients(chain, fit.state, n_params)
+    start, out = time.monotonic(), {}
+    for j in chain.joints:
+        dist = best.distances[j]
+        free = any(cov.free(g) for _, g in grads[j].values())
+        wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
+        if not (free or wide):
+            continue
+        if free or not posed_by_itself(chain, chain.parent[j]):
+            out[j] = {m: ([0.0, None], "unbounded") for m in dist}
+            continue
+        out[j] = {}
+        for m, (d, se) in dist.items():
+            if time.monotonic() - start > PROFILE_BUDGET_S:
+                out[j][m] = ([0.0, None], "unbounded")
+                continue
+            if progress:
+                progress(f"profile likelihood of {m}'s distance to {j}")
+            pi = profile_interval(fit, data, j, m, scale, se, n_params)
+            if pi.lowest_rss < fit.rss - scale:
+                out[j][m] = ([0.0, None], "unbounded")
+            else:
+                out[j][m] = ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
+    return out
 
 
 def _distinct(minima: list) -> list:
@@ -221,9 +283,13 @@ def joint_answers(tree: TreeFit, model) -> dict:
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in differing if delta > REJECT_CHI2]
         practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
+        ci = _ci(dist)
+        method = {k: "quadratic" for k in dist}
+        for k, (interval, how) in best.intervals.get(j, {}).items():
+            ci[k], method[k] = interval, how
         out[j] = {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
                   "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
-                  "marker_distances_ci95": _ci(dist),
+                  "marker_distances_ci95": ci, "interval_method": method,
                   "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
                   "alternatives": alts, "rejected_candidates": rejected, "practical": practical}
     return out
@@ -316,6 +382,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
             j["marker_distances"] = {m: a["marker_distances"].get(m) for m in j["marker_distances"]} \
                 if j["marker_distances"] else a["marker_distances"]
             j["marker_distances_ci95"] = a["marker_distances_ci95"]
+            j["interval_method"] = a["interval_method"]
             j["uncertainty_mm"] = a["uncertainty_mm"]
             j["alternatives"] = a["alternatives"]
             j["rejected_candidates"] = a["rejected_candidates"]
@@ -344,6 +411,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
                 f"closed-form estimate only, no calibrated interval: {tree.problem or 'the whole-tree fit could not start'}"
             j["unique"] = False
             j["marker_distances_ci95"] = {}
+            j["interval_method"] = {}
             j["rejected_candidates"] = []
             j["geometry"] = None
             j["uncertainty_mm"] = None

@@ -91,8 +91,13 @@ def fit_text(result) -> str:
         for i, row in enumerate(rows):
             lines.append(f"   joint {i}:{' ' * (len(what) - 2)}" + "  ".join(
                 "       -" if row[m] is None else f"{row[m]:8.2f}" for m in rows[0]))
+        how = j.get("interval_method", {})
         for m, (lo, hi) in j.get("marker_distances_ci95", {}).items():
-            lines.append(f"   {m}: 95% interval {lo:.1f} .. {hi:.1f} mm")
+            if hi is None:
+                lines.append(f"   {m}: 95% interval {lo:.1f} mm .. not bounded by the data ({how.get(m, '')})")
+            else:
+                lines.append(f"   {m}: 95% interval {lo:.1f} .. {hi:.1f} mm"
+                             + (" (profile likelihood)" if how.get(m) == "profile" else ""))
         if j["practical"]["verdict"] != "determined":
             lines.append(f"   {j['practical']['verdict']}: {j['excitation']['reason']}")
     return "\n".join(lines)

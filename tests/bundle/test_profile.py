@@ -1,0 +1,95 @@
+"""Profile-likelihood intervals: the spring holds the distance, the interval matches the quadratic one where
+the likelihood is a parabola and holds the truth, and segments that are not posed by themselves are found."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.profile import distance_penalty, profile_interval
+from identcheck.bundle.uncertainty import covariance, distance_gradients
+from identcheck.fit.whole_tree import posed_by_itself, skeleton_of
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+
+
+HIP_33 = """
+units = "mm"
+[segments.pelvis]
+markers = ["LASI", "RASI", "SACR"]
+[segments.thigh_r]
+markers = ["RGT", "RTHI", "RKNE"]
+length_mm = 420
+[joints.hip_r]
+type = "spherical"
+parent = "pelvis"
+child = "thigh_r"
+"""
+
+
+def _hip33(tmp_path_factory):
+    path = tmp_path_factory.mktemp("profile") / "hip33.toml"
+    path.write_text(HIP_33)
+    return Model.from_toml(path)
+
+
+def _fit(model, seed, frames=150, noise=0.7):
+    sim = simulate(model, n_frames=frames, noise_mm=noise, seed=seed)
+    chain = skeleton_of(model, sim.trial)
+    data = sim.trial.select(chain.labels).as_array()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_chain(chain, data, initial_state(chain, data), max_iter=200)
+    return sim, chain, data, fit, covariance(fit, data)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), shift=st.floats(-8.0, 8.0))
+def test_spring_holds_the_distance_where_asked(tmp_path_factory, seed, shift):
+    """A random target near the estimate: the penalised fit's distance lands on it within 0.01 mm, and the
+    data's RSS can only grow (the unconstrained fit is the minimum)."""
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, cov = _fit(model, seed)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    marker, (d0, _) = next(iter(distance_gradients(chain, fit.state, P)[joint].items()))
+    scale = cov.sigma_mm ** 2
+    pen = distance_penalty(chain, joint, marker, d0 + shift, np.sqrt(1e4 / scale), P)
+    held = fit_chain(chain, data, fit.state, max_iter=60, penalty=pen)
+    d = distance_gradients(chain, held.state, P)[joint][marker][0]
+    assert abs(d - (d0 + shift)) < 1e-2
+    assert held.rss >= fit.rss - 1e-6 * fit.rss
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10 ** 5))
+def test_profile_interval_matches_the_parabola_and_holds_the_truth(tmp_path_factory, seed):
+    """A hip seen by three markers on each side: the likelihood is close to a parabola, so the profile
+    interval agrees with d ± 1.96 SE within a third of its width, and it holds the simulator's truth or
+    misses it by less than its own width (a 95 % interval may miss)."""
+    model = _hip33(tmp_path_factory)
+    sim, chain, data, fit, cov = _fit(model, seed, frames=120, noise=1.0)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    truth = sim.truth.marker_distances(joint)
+    marker, (d0, g) = next(iter(distance_gradients(chain, fit.state, P)[joint].items()))
+    se = cov.se(g)
+    pi = profile_interval(fit, data, joint, marker, max(cov.sigma_mm, 0.01) ** 2 * max(cov.inflation(g), 1.0), se, P)
+    assert pi.lo is not None and pi.hi is not None
+    assert pi.lo < d0 < pi.hi
+    wald = 2 * 1.96 * se
+    assert abs((pi.hi - pi.lo) - wald) < wald / 3 + 0.05
+    assert pi.lo - (pi.hi - pi.lo) < truth[marker] < pi.hi + (pi.hi - pi.lo)
+
+
+def test_posed_by_itself_counts_markers_and_joint_points(examples):
+    """Three pelvis markers pose the pelvis; one thigh marker plus the hip centre leave the thigh's roll free;
+    one shank marker plus the knee's axis pose the shank."""
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    sim = simulate(model, n_frames=20, noise_mm=0.0, seed=1)
+    chain = skeleton_of(model, sim.trial)
+    assert posed_by_itself(chain, "pelvis")
+    assert not posed_by_itself(chain, "thigh_r")
+    assert posed_by_itself(chain, "shank_r")
