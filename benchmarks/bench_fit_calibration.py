@@ -20,6 +20,12 @@ Usage::
 
     python benchmarks/heldout/generator.py --out /tmp/heldout --n 240 --seed 7
     PYTHONPATH=. python benchmarks/bench_fit_calibration.py /tmp/heldout [--limit N] [--figure benchmarks/fit_calibration.png]
+
+or in two shards side by side, then together::
+
+    python benchmarks/bench_fit_calibration.py /tmp/heldout --shard 0/2 --rows /tmp/rows0.json &
+    python benchmarks/bench_fit_calibration.py /tmp/heldout --shard 1/2 --rows /tmp/rows1.json
+    python benchmarks/bench_fit_calibration.py /tmp/heldout --merge /tmp/rows0.json /tmp/rows1.json
 """
 from __future__ import annotations
 
@@ -136,17 +142,32 @@ def main(argv=None) -> int:
     ap.add_argument("--figure", type=Path, default=ROOT / "benchmarks" / "fit_calibration.png")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     ap.add_argument("--key", default="fit_calibration")
+    ap.add_argument("--shard", default=None, metavar="K/N",
+                    help="evaluate only every N-th trial from the K-th (run N shards side by side) and write the "
+                         "per-trial rows to --rows; --merge combines them")
+    ap.add_argument("--rows", type=Path, default=None, help="where a shard writes its per-trial rows (JSON)")
+    ap.add_argument("--merge", type=Path, nargs="+", default=None, help="row files of shards to summarise together")
     a = ap.parse_args(argv)
     index = json.loads((a.trials / "index.json").read_text())
     entries = index["trials"] if isinstance(index, dict) else index
     entries = entries[:a.limit] if a.limit else entries
-    categories, results = {}, []
-    for k, e in enumerate(entries, 1):
-        r = evaluate(a.trials, e)
-        categories[r["stem"]] = e["category"]
-        results.append(r)
-        print(f"[{k}/{len(entries)}] {r['stem']} {e['category']} {r['seconds']:.1f}s"
-              + (f" ERROR {r['error']}" if "error" in r else ""), file=sys.stderr)
+    categories = {(e.get("stem") or e.get("name") or e.get("id")): e["category"] for e in entries}
+    if a.merge:
+        results = [r for f in a.merge for r in json.loads(f.read_text())]
+    else:
+        if a.shard:
+            k0, n = (int(x) for x in a.shard.split("/"))
+            entries = entries[k0::n]
+        results = []
+        for k, e in enumerate(entries, 1):
+            r = evaluate(a.trials, e)
+            results.append(r)
+            print(f"[{k}/{len(entries)}] {r['stem']} {e['category']} {r['seconds']:.1f}s"
+                  + (f" ERROR {r['error']}" if "error" in r else ""), file=sys.stderr)
+            if a.rows:
+                a.rows.write_text(json.dumps(results))
+        if a.shard:
+            return 0
     summary = summarise(results, categories)
     print(f"{'category':<40} {'trials':>6} {'dist':>5} {'cover':>6} {'c.det':>6} {'half':>7} {'rmse':>7} "
           f"{'wrong':>5} {'misfit':>6}  verdicts")

@@ -311,7 +311,57 @@ def verify_dict(d: dict) -> list:
         problems.append(f"the truth misses a sample (or its joint) by {mpmath.nstr(chk.truth, 5)}")
     if not chk.ok and not problems:
         problems.append("the alternative has the same marker distances as the truth")
-    return problems
+    return problems + _displayed(d, cx, chk)
+
+
+DISPLAY_RTOL = mpf("1e-12")
+"""Relative agreement asked of a displayed summary number (saved tables show some in double precision;
+the geometry itself is checked at 50 digits)."""
+DELTA_IS_DISTANCE_CHANGE = ("revolute11", "spherical21", "spherical11")
+"""Constructions whose δ is the change of a marker distance (r' = r − δ, ρ' = ρ + δ)."""
+
+
+def _displayed(d: dict, cx: "Counterexample", chk) -> list:
+    """The summary fields a reader looks at, recomputed from the certificate's geometry and compared with
+    what the file displays: case, sample count, both joints' marker distances, the 50-digit check and δ
+    (where the construction defines δ as a distance change)."""
+    out = []
+    for field, value in (("case", cx.key), ("n_samples", len(cx.data))):
+        if field in d and d[field] != value:
+            out.append(f"{field}: the file says {d[field]!r}, the certificate's data give {value!r}")
+    with mpmath.workdps(DPS + GUARD):
+        scale = max([abs(v) for v in cx.truth.marker_distances().values()] + [mpf(1)])
+        tol = scale * DISPLAY_RTOL
+        for field, geo in (("marker_distances_truth", cx.truth), ("marker_distances_alternative", cx.alternative)):
+            shown = d.get(field)
+            if shown is None:
+                continue
+            real = geo.marker_distances()
+            try:
+                bad = sorted(k for k in set(shown) | set(real)
+                             if k not in shown or k not in real or abs(mpf(shown[k]) - real[k]) > tol)
+            except (TypeError, ValueError):
+                bad = ["(not numbers)"]
+            if bad:
+                out.append(f"{field}: {', '.join(bad)} differ from the distances of the certificate's own joint")
+        shown = d.get("check_50_digits")
+        if isinstance(shown, dict):
+            if shown.get("ok") != chk.ok:
+                out.append(f"check_50_digits.ok: the file says {shown.get('ok')!r}, re-checking gives {chk.ok!r}")
+            try:
+                change = mpf(shown.get("largest_distance_change", "nan"))
+                if abs(change - chk.change) > tol:
+                    out.append(f"check_50_digits.largest_distance_change: the file says {shown['largest_distance_change']}, "
+                               f"re-checking gives {mpmath.nstr(chk.change, 12)}")
+            except (TypeError, ValueError):
+                out.append("check_50_digits.largest_distance_change: not a number")
+        if any(cx.construction.startswith(c) or f": {c}" in cx.construction for c in DELTA_IS_DISTANCE_CHANGE):
+            t, a = cx.truth.marker_distances(), cx.alternative.marker_distances()
+            changes = [abs(a[k] - t[k]) for k in t if k in a]
+            if changes and min(abs(c - abs(cx.delta)) for c in changes) > tol:
+                out.append(f"delta: the file says {mpmath.nstr(cx.delta, 12)}, but no marker distance changes by that "
+                           f"much between the truth and the alternative")
+    return out
 
 
 # -- Remark 1 ------------------------------------------------------------------------------------

@@ -247,5 +247,59 @@ def verify(doc: dict) -> list:
         if kind not in ("exact_rank", "exact_uniqueness", "enumerated_candidates", "counterexample", "remark1",
                         "vacuous", "local_jacobian"):
             found.append(f"unknown certificate kind {kind!r}")
+        else:
+            found += meaning(row)
         problems += [f"{key}: {f}" for f in found]
+    problems += _symmetry(doc.get("cases", []))
     return problems
+
+
+def meaning(row: dict) -> list:
+    """Whether a row's verdict follows from its own certificate (the arithmetic is checked elsewhere):
+    a counterexample family or no marker at all ⇒ neither identifiable nor local; an exact rank or
+    uniqueness proof ⇒ identifiable, local, one candidate; an enumeration of n candidates ⇒ local, with n
+    candidates, identifiable exactly when n = 1; the Jacobian engine ⇒ ``local`` as it certifies, never
+    identifiable (it does not decide global uniqueness); and in every row, identifiable ⇒ local ⇒ a
+    candidate count (1 when identifiable, more when not), not local ⇒ no count. Returns the problems,
+    each naming the field."""
+    cert = row.get("certificate", {})
+    kind = cert.get("kind")
+    ident, local, n = row.get("identifiable"), row.get("local"), row.get("candidates")
+    want = {}
+    if kind in ("counterexample", "vacuous"):
+        want = {"identifiable": False, "local": False, "candidates": None}
+    elif kind in ("exact_rank", "exact_uniqueness"):
+        want = {"identifiable": True, "local": True, "candidates": 1}
+        if kind == "exact_rank" and not cert.get("rank_certificate", {}).get("full_rank", False):
+            return ["certificate: an exact-rank certificate without full rank proves nothing"]
+    elif kind == "enumerated_candidates":
+        count = cert.get("candidates", {}).get("count")
+        want = {"identifiable": count == 1, "local": True, "candidates": count}
+    elif kind == "local_jacobian":
+        lc = cert.get("local_certificate", {}).get("local")
+        want = {"identifiable": False, "local": lc}
+    out = [f"{field}: the row says {row.get(field)!r}, its {kind} certificate gives {value!r}"
+           for field, value in want.items() if row.get(field) != value]
+    if ident and not local:
+        out.append("identifiable: true, but local: false (identifiable implies local)")
+    if ident and n != 1:
+        out.append(f"candidates: {n!r}, but an identifiable joint has exactly one")
+    if local and not ident and n is not None and n < 2:
+        out.append(f"candidates: {n!r}, but a joint that is local and not identifiable has two or more")
+    if local is False and n is not None:
+        out.append(f"candidates: {n!r}, but a joint that is not local has no finite count")
+    return out
+
+
+def _symmetry(rows: list) -> list:
+    """(p, q) and (q, p) rows of a joint type must agree (a joint's relative motion is symmetric: Remark 1)."""
+    by = {(r["joint"], r["p"], r["q"]): r for r in rows if {"joint", "p", "q"} <= set(r)}
+    out = []
+    for (j, p, q), r in sorted(by.items()):
+        other = by.get((j, q, p))
+        if p < q and other is not None:
+            for field in ("identifiable", "local", "candidates"):
+                if r.get(field) != other.get(field):
+                    out.append(f"{_key(j, p, q)} and {_key(j, q, p)}: {field} differs ({r.get(field)!r} vs "
+                               f"{other.get(field)!r}), but swapping the links cannot change it (Remark 1)")
+    return out

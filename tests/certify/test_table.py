@@ -181,3 +181,78 @@ def test_engine_rows_universal_and_prismatic(rows):
         for q in range(4):
             assert rows[("universal", p, q)]["local"] == (p >= 2 and q >= 2), (p, q)
             assert rows[("prismatic", p, q)]["local"] == (p >= 1 and q >= 1 and p + q >= 3), (p, q)
+
+
+FORGEABLE = ("identifiable", "local", "candidates")
+
+
+def _forge(value):
+    """Another value of the same field: a verdict flipped, a count moved."""
+    if isinstance(value, bool):
+        return not value
+    if value is None:
+        return 1
+    return value + 1 if value != 1 else 2
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_forged_verdict_is_rejected_naming_its_row_and_field(doc, data):
+    """Any row's identifiable, local or candidates changed (alone, or together with its mirror row (q, p)
+    so that the symmetry check cannot catch it) makes the table fail verification, with the row named and
+    the field named. The rows of a few cases are re-checked in full (the certificate arithmetic is
+    re-verified elsewhere); the verdict checks need no recomputation."""
+    cases = doc["cases"]
+    i = data.draw(st.integers(0, len(cases) - 1), label="row")
+    field = data.draw(st.sampled_from(FORGEABLE), label="field")
+    mirror = data.draw(st.booleans(), label="mirror too")
+    bad = json.loads(json.dumps(cases))
+    row = bad[i]
+    key = f"{row['joint']}({row['p']},{row['q']})"
+    row[field] = _forge(row[field])
+    rows = [row]
+    if mirror:
+        for r in bad:
+            if (r["joint"], r["p"], r["q"]) == (row["joint"], row["q"], row["p"]) and r is not row:
+                r[field] = row[field]
+                rows.append(r)
+    problems = [p for r in rows for p in T.meaning(r)] + T._symmetry(bad)
+    for r in rows:
+        if r["certificate"]["kind"] == "remark1":       # a Remark 1 row answers to the row it follows from
+            src = next(s for s in bad if f"{s['joint']}({s['p']},{s['q']})" == r["certificate"]["follows_from"])
+            if (src["identifiable"], src["local"], src["candidates"]) != (r["identifiable"], r["local"], r["candidates"]):
+                problems.append(f"{key}: does not match the row it follows from")
+    assert problems, (key, field, row[field])
+    assert any(key in p or field in p for p in problems), problems
+
+
+def test_the_papers_wrong_claim_does_not_verify(doc):
+    """Revolute (2,1) and (1,2) both set identifiable while they carry their four candidates (Pham's claim,
+    ERRATA E1), and revolute (1,1) set identifiable while it carries its own counterexample: rejected, with
+    the rows and the fields named."""
+    bad = {"format": T.FORMAT, "cases": json.loads(json.dumps(
+        [r for r in doc["cases"] if (r["joint"], r["p"], r["q"]) in {("revolute", 2, 1), ("revolute", 1, 2),
+                                                                    ("revolute", 1, 1)}]))}
+    for r in bad["cases"]:
+        r["identifiable"] = True
+    problems = T.verify(bad)
+    assert any(p.startswith("revolute(2,1): identifiable") for p in problems), problems
+    assert any(p.startswith("revolute(1,2)") and "candidates" in p for p in problems), problems
+    assert any(p.startswith("revolute(1,1): identifiable") for p in problems), problems
+
+
+def test_a_counterexamples_displayed_numbers_are_recomputed(doc):
+    """Editing the alternative's displayed distances, δ or the 50-digit summary of a counterexample (its
+    geometry untouched) is rejected, naming the field."""
+    row = next(r for r in doc["cases"] if (r["joint"], r["p"], r["q"]) == ("revolute", 1, 1))
+    good = row["certificate"]["counterexample"]
+    assert C.verify_dict(good) == []
+    for field, edit in (("marker_distances_alternative", lambda d: d.update(A1="40.0")),
+                        ("delta", None), ("check_50_digits", lambda d: d.update(largest_distance_change="1.0"))):
+        bad = json.loads(json.dumps(good))
+        if edit is None:
+            bad[field] = str(mpmath.mpf(bad[field]) * 2)
+        else:
+            edit(bad[field])
+        problems = C.verify_dict(bad)
+        assert any(p.startswith(field.split(".")[0]) or field in p for p in problems), (field, problems)
