@@ -232,6 +232,92 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+# ---------------------------------------------------------------------- checks before any work
+FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",)}
+DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",)}
+NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
+TRIAL_SUFFIXES = (".c3d", ".trc")
+MAX_RANK_SAMPLES = 10_000
+PRECISION_DIGITS = (15, 1000)
+
+
+def preflight(a) -> list:
+    """Everything that can be checked about the arguments before the work starts, so that a bad output
+    path, a missing optional package or a swapped argument costs nothing and loses no result: the
+    problems, each naming the option and the path (empty: go)."""
+    problems = []
+    for opt in FILE_OUTPUTS.get(a.verb, ()):
+        path = getattr(a, opt, None)
+        if path:
+            why = _unwritable_file(path)
+            if why:
+                problems.append(f"--{opt} {path}: {why}")
+    for opt in DIR_OUTPUTS.get(a.verb, ()):
+        path = getattr(a, opt, None)
+        if path:
+            why = _unwritable_dir(path)
+            if why:
+                problems.append(f"--{opt} {path}: {why}")
+    opt = NEEDS_MATPLOTLIB.get(a.verb)
+    if opt and getattr(a, opt, None):
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            problems.append(f"--{opt} draws with matplotlib, which is not installed: pip install 'identcheck[plots]'")
+    model, trial = getattr(a, "model", None), getattr(a, "trial", None)
+    if model and trial and str(model).lower().endswith(TRIAL_SUFFIXES) and str(trial).lower().endswith(".toml"):
+        problems.append(f"the model and the trial are swapped: {a.verb} takes MODEL.toml first, then the trial "
+                        f"(identcheck {a.verb} {trial} {model})")
+    elif model and str(model).lower().endswith(TRIAL_SUFFIXES):
+        problems.append(f"{model} is a trial; {a.verb} takes the model file (TOML) first")
+    if a.verb == "rank" and a.samples is not None and not 1 <= a.samples <= MAX_RANK_SAMPLES:
+        problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the exact rank of a larger "
+                        "matrix would not end in reasonable time)")
+    if a.verb == "identify":
+        lo, hi = PRECISION_DIGITS
+        if a.precision is not None and not lo <= a.precision <= hi:
+            problems.append(f"--precision {a.precision}: decimal digits between {lo} and {hi}")
+        if a.frames:
+            try:
+                bad = [f for f in a.frames.split(",") if int(f) < 0]
+            except ValueError:
+                bad = ["(not integers)"]
+            if bad:
+                problems.append(f"--frames {a.frames}: comma-separated frame indices, 0 or more")
+    if a.verb == "simulate":
+        for opt, ok in (("frames", a.frames >= 2), ("rate", a.rate > 0), ("noise_mm", a.noise_mm >= 0),
+                        ("occlusion", 0 <= a.occlusion < 1), ("rom_deg", 0 <= a.rom_deg <= 360)):
+            if not ok:
+                problems.append(f"--{opt.replace('_', '-')} {getattr(a, opt)}: out of range")
+    return problems
+
+
+def _unwritable_file(path) -> str:
+    """Why a file cannot be written at `path` ('' when it can); nothing is created."""
+    if os.path.isdir(path):
+        return "is a directory; give a file name"
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        return f"its directory {parent} does not exist"
+    if not os.access(parent, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        return "not writable"
+    return ""
+
+
+def _unwritable_dir(path) -> str:
+    """Why a directory cannot be written (created if missing) at `path` ('' when it can)."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        return "is a file; give a directory"
+    if os.path.isdir(path):
+        return "" if os.access(path, os.W_OK) else "not writable"
+    parent = os.path.dirname(os.path.abspath(path))
+    while parent and not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        return f"{parent} is a file, not a directory"
+    return "" if os.access(parent, os.W_OK) else f"cannot create it under {parent} (not writable)"
+
+
 def main(argv=None) -> int:
     """Run the CLI in-process; returns the exit code (tests call this)."""
     parser = build_parser()
@@ -241,6 +327,11 @@ def main(argv=None) -> int:
         return int(exc.code or 0) and 2
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, stream=sys.stderr,
                         format="identcheck: %(message)s")
+    problems = preflight(a)
+    if problems:
+        for msg in problems:
+            print(f"identcheck {a.verb}: {msg}", file=sys.stderr)
+        return 2
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("always", IdentifiabilityWarning)

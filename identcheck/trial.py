@@ -192,6 +192,35 @@ class Trial:
         """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
         return self._xyz[:, self.index(name)].copy()
 
+    def require_visible(self, labels: Sequence[str], where: dict | None = None) -> None:
+        """Raise unless every label is in the trial and visible in at least one frame.
+
+        Parameters
+        ----------
+        labels : sequence of str
+            The model's markers.
+        where : dict, optional
+            label -> the model's segment holding it (named in the message).
+
+        Raises
+        ------
+        InputError
+            Names every marker missing from the trial and every marker never visible, at once: a model marker
+            that is never seen is not silently dropped (its segment and the joints beside it would change
+            case without a word).
+        """
+        where = where or {}
+        problems = []
+        for lab in labels:
+            seg = f" (segment {where[lab]!r})" if lab in where else ""
+            if lab not in self._index:
+                problems.append(f"marker {lab!r}{seg} of the model is not in the trial")
+            elif not np.isfinite(self._xyz[:, self._index[lab]]).all(axis=1).any():
+                problems.append(f"marker {lab!r}{seg} is in the model but never visible in the trial (every sample "
+                                "is empty): fix its labelling, or remove it from the model")
+        if problems:
+            raise InputError(problems, source=self._source)
+
     def select(self, labels: Sequence[str]) -> "Trial":
         """Trial with only `labels`, in that order.
 

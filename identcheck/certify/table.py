@@ -221,7 +221,9 @@ def verify(doc: dict) -> list:
     """
     if doc.get("format") != FORMAT:
         return [f"unknown table format {doc.get('format')!r}; expected {FORMAT}"]
-    problems = []
+    problems = _schema(doc)
+    if problems:
+        return problems
     recompute = {"revolute(2,1)": candidates.revolute21, "revolute(2,2)": candidates.revolute22,
                  "revolute(3,1)": candidates.revolute31}
     for row in doc.get("cases", []):
@@ -252,6 +254,31 @@ def verify(doc: dict) -> list:
         problems += [f"{key}: {f}" for f in found]
     problems += _symmetry(doc.get("cases", []))
     return problems
+
+
+ROW_TYPES = {"joint": (str,), "p": (int,), "q": (int,), "identifiable": (bool,), "local": (bool,),
+             "candidates": (int, type(None)), "certificate": (dict,)}
+
+
+def _schema(doc: dict) -> list:
+    """Each row has the contract's fields with their types (p, q in 0..3), named by row number and field."""
+    cases = doc.get("cases")
+    if not isinstance(cases, list):
+        return ["cases: a table holds a list of rows"]
+    out = []
+    for i, row in enumerate(cases):
+        if not isinstance(row, dict):
+            out.append(f"row {i}: not an object")
+            continue
+        for field, types in ROW_TYPES.items():
+            v = row.get(field, KeyError)
+            if v is KeyError:
+                out.append(f"row {i}: field {field!r} missing")
+            elif not isinstance(v, types) or (isinstance(v, bool) and bool not in types):
+                out.append(f"row {i}: {field} = {v!r} has the wrong type")
+            elif field in ("p", "q") and v not in MARKERS:
+                out.append(f"row {i}: {field} = {v} outside {min(MARKERS)}..{max(MARKERS)}")
+    return out
 
 
 def meaning(row: dict) -> list:

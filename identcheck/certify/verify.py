@@ -59,8 +59,14 @@ def read(path) -> dict:
         doc = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(["file not found"], source=str(path)) from None
+    except IsADirectoryError:
+        raise InputError(["is a directory, not a certificate file"], source=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise InputError([f"not UTF-8 text (byte {exc.start}): a certificate is a JSON file"], source=str(path)) from None
     except json.JSONDecodeError as exc:
         raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=str(path)) from None
+    except RecursionError:
+        raise InputError(["JSON nested too deeply to be a certificate"], source=str(path)) from None
     if not isinstance(doc, dict):
         raise InputError(["a certificate is a JSON object"], source=str(path))
     return doc
@@ -88,5 +94,11 @@ def verify(certificate, source: str | None = None) -> VerifyResult:
     if fmt not in CHECKS:
         raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(CHECKS))})"],
                          source=source)
-    problems = CHECKS[fmt](doc)
+    try:
+        problems = CHECKS[fmt](doc)
+    except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
+        # a field missing or of the wrong type: the file is not a certificate of its stated format; that is a
+        # rejection (exit 1), with what was missing, never a traceback
+        what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
+        problems = [f"malformed {fmt} document ({what})"]
     return VerifyResult(ok=not problems, problems=tuple(problems), certificate=source, format=fmt)

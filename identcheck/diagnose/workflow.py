@@ -125,14 +125,9 @@ def undetermined(h: Hypothesis) -> int:
 # ---------------------------------------------------------------------- the loop
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial`."""
-    missing = [m for m in model.markers if m not in trial.labels]
-    if missing:
-        raise InputError([f"marker {m!r} of the model is not in the trial" for m in missing], source=trial.source)
+    trial.require_visible(model.markers, {m: s for s in model.segments for m in model.segments[s].markers})
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
-    never = [m for m, ok in zip(model.markers, seen.any(axis=0)) if not ok]
-    if never:
-        raise InputError([f"marker {m!r} is never visible" for m in never], source=trial.source)
     noise = noise_floor(data, model.markers, {s: model.segments[s].markers for s in model.segments})
     if noise.sigma_mm <= 0:
         raise InputError(["the distances within every segment are exactly constant: no measurement noise to "

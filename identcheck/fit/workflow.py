@@ -244,6 +244,7 @@ def fit_trial(model, trial, progress=None) -> dict:
     from identcheck.estimate.labels import screen
     from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
 
+    trial.require_visible(model.markers, {m: s for s in model.segments for m in model.segments[s].markers})
     screened, swaps = screen(model, trial)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")

@@ -2,6 +2,8 @@
 import json
 from pathlib import Path
 
+import numpy as np
+
 
 from identcheck import cli
 from identcheck.simulate.rigid import load_truth
@@ -123,3 +125,59 @@ def test_version_and_no_blas_variables_set_on_import():
                          env=env, capture_output=True, text=True, check=True).stdout
     assert out.strip() == "None"
     assert cli.main(["--version"]) == 0
+
+
+def test_a_model_marker_never_visible_is_named_not_dropped(tmp_path, capsys):
+    """A marker of the model whose every sample is empty: fit and diagnose exit 2 naming the marker, its
+    segment and the file (before, fit dropped it and advised adding markers to a segment that has it)."""
+    from identcheck.io.trc import read_trc, write_trc
+
+    leg = str(ROOT / "examples" / "leg.toml")
+    trial = tmp_path / "leg.trc"
+    assert cli.main(["simulate", leg, "--out", str(trial), "--seed", "2"]) == 0
+    capsys.readouterr()
+    md = read_trc(trial)
+    xyz = md.xyz.copy()
+    xyz[:, list(md.labels).index("RTHI")] = np.nan
+    blind = tmp_path / "blind.trc"
+    write_trc(blind, xyz, md.labels, md.rate_hz)
+    before = blind.read_bytes()
+    for verb in ("fit", "diagnose"):
+        assert cli.main([verb, leg, str(blind), "--json"]) == 2
+        err = capsys.readouterr().err
+        assert "'RTHI'" in err and "thigh_r" in err and "never visible" in err and "blind.trc" in err, err
+    assert blind.read_bytes() == before
+
+
+def test_bad_outputs_and_arguments_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """Output paths that are a directory, under a missing directory or a file where a directory belongs,
+    swapped arguments and out-of-range numbers: exit 2 at once, naming the option and the path (before,
+    tracebacks after the work, with the JSON lost). Nothing is created."""
+    import identcheck.api as api_mod
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the work started")
+
+    for verb in ("rank", "table", "simulate", "plan", "derive", "diagnose", "fit", "identify"):
+        monkeypatch.setattr(api_mod, verb, no_work)
+    a_file = tmp_path / "a_file.txt"
+    a_file.write_text("x")
+    model = str(ROOT / "examples" / "leg.toml")
+    cases = [
+        (["rank", "revolute", "2", "1", "--save", str(tmp_path)], "--save", "is a directory"),
+        (["table", "--save", str(tmp_path / "missing" / "t.json")], "--save", "does not exist"),
+        (["simulate", model, "--out", str(tmp_path / "nope" / "x.trc")], "--out", "does not exist"),
+        (["plan", model, "--figure", str(tmp_path)], "--figure", "is a directory"),
+        (["derive", "--out", str(a_file)], "--out", "is a file"),
+        (["diagnose", model, "t.trc", "--plots", str(a_file / "sub")], "--plots", "is a file"),
+        (["fit", "trial.c3d", model], "swapped", "identcheck fit"),
+        (["rank", "revolute", "2", "1", "--samples", "1000000000"], "--samples", "between"),
+        (["identify", model, "t.trc", "--precision", "-3"], "--precision", "between"),
+        (["identify", model, "t.trc", "--frames", "a,b"], "--frames", "indices"),
+        (["simulate", model, "--out", str(tmp_path / "x.trc"), "--rate", "0"], "--rate", "out of range"),
+    ]
+    for argv, option, reason in cases:
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert option in err and reason in err, (argv, err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file.txt"]
