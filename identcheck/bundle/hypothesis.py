@@ -120,13 +120,15 @@ def consistency(ctx: Context, h: Hypothesis) -> dict:
 
 
 # ---------------------------------------------------------------------- joint angles
-def joint_angles(h: Hypothesis) -> dict:
-    """Each joint's angles from the fit: a hinge's angle (F, 1); a ball joint's rotation vector relative
-    to its median pose, in the parent frame (F, 3); radians."""
-    s = h.fit.state
+def joint_angles(h) -> dict:
+    """Each joint's angles from the fit of a :class:`Hypothesis` or a :class:`~identcheck.bundle.chain.Fit`:
+    a hinge's angle (F, 1); a ball joint's rotation vector relative to its median pose, in the parent frame
+    (F, 3); radians."""
+    fit = getattr(h, "fit", h)
+    s, chain = fit.state, fit.chain
     out = {}
-    for j in h.chain.joints:
-        if h.chain.types[j] == "revolute":
+    for j in chain.joints:
+        if chain.types[j] == "revolute":
             out[j] = s.theta[j][:, None]
         else:
             rel = s.rel_R[j]

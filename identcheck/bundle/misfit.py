@@ -1,0 +1,108 @@
+"""Does the rigid-joint model fit, or do markers move on their segments with the joint angles?
+
+Skin moves over bone as the joints turn (soft-tissue artefact), and a rigid fit absorbs much of that motion
+into the joint's geometry: its intervals then describe the noise, not the bias, and a joint can be
+reported to a fraction of a millimetre while several millimetres off. The residual alone cannot tell skin
+motion from serially correlated noise (both are smooth; a low-pass filtered export has lag-1 correlations of
+0.9), and a comparison with the frame-to-frame noise flags every filtered trial. What tells them apart is
+whether the residual *follows the joint angles*.
+
+For every marker, its residual in its segment's frame is regressed on smooth functions of the angles of the
+joints its segment takes part in (:func:`identcheck.bundle.hypothesis.angle_basis`: the angles and their
+products). Under noise alone, AR(1) with coefficient φ, the regression explains on average
+``3 σ_u² K / N_eff`` (K regressors, ``N_eff = N (1 − φ)/(1 + φ)`` effectively independent frames), σ_u and
+φ read from the regression's own remainder. The ratio of the explained mean square to that is about 1 for
+noise of any correlation; skin motion of a millimetre or more makes it hundreds. A marker whose ratio exceeds
+:data:`RATIO` moves with the angles.
+
+What follows for the joints (:func:`model_error_sd`): the bias a rigid fit takes from skin motion grows
+with that motion but is not estimable from one trial, so the explained motion of the joint's markers, times
+:data:`MODEL_ERROR_PER_MM`, is added in quadrature to each marker distance's standard error. That is a rule
+of thumb, not a calibrated model of the bias: the report says so, and names ``identcheck diagnose``, which
+models the motion, as the next step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from identcheck.bundle.hypothesis import angle_basis, joint_angles
+
+RATIO = 10.0
+"""Explained mean square over what correlated noise would explain, beyond which a marker moves with the
+joint angles (noise alone gives about 1: 0.7-2.7 over 24 simulated trials of white and AR(1) noise)."""
+MODEL_ERROR_PER_MM = 1.5
+"""Standard deviation (mm) of the model error added to a joint's marker distances per mm of angle-following
+motion of its markers: the 95 % interval widens by about three times the motion the residual shows."""
+
+
+@dataclass(frozen=True)
+class MarkerMisfit:
+    """How much of one marker's residual follows the joint angles.
+
+    Attributes
+    ----------
+    marker, segment : str
+    explained_mm : float
+        RMS (3-D) of the part of the residual the angle functions explain, mm.
+    ratio : float
+        Its mean square over what serially correlated noise alone would explain (about 1 under the null).
+    lag1 : float
+        Lag-1 autocorrelation of the rest of the residual.
+    """
+
+    marker: str
+    segment: str
+    explained_mm: float
+    ratio: float
+    lag1: float
+
+    @property
+    def moves(self) -> bool:
+        """Whether the marker moves with the joint angles (ratio above :data:`RATIO`)."""
+        return self.ratio > RATIO
+
+
+def angle_dependence(fit, data) -> dict:
+    """marker -> :class:`MarkerMisfit` for every marker of a whole-chain fit (see the module docstring)."""
+    chain = fit.chain
+    angles = joint_angles(fit)
+    resid = np.asarray(data, dtype=float) - fit.pred
+    out = {}
+    for seg in chain.segments:
+        joints = [j for j in chain.joints if seg in (chain.parent[j], chain.child[j])]
+        if not joints:
+            continue
+        basis = np.concatenate([angle_basis(angles[j]) for j in joints], axis=1)
+        for col in chain.seg_markers[seg]:
+            local = np.einsum("fji,fj->fi", fit.seg_R[seg], resid[:, col])
+            ok = np.all(np.isfinite(local), axis=1)
+            K = basis.shape[1]
+            if ok.sum() <= 3 * (K + 2):
+                continue
+            X = np.column_stack([np.ones(ok.sum()), basis[ok]])
+            y = local[ok] - local[ok].mean(axis=0)
+            beta = np.linalg.lstsq(X, y, rcond=None)[0]
+            fitted = X[:, 1:] @ beta[1:]
+            rest = y - X @ beta
+            lag1 = float(np.clip(np.median([_lag1(rest[:, c]) for c in range(3)]), 0.0, 0.99))
+            n_eff = max(len(rest) * (1 - lag1) / (1 + lag1), 1.0)
+            spurious = 3 * float(np.mean(rest ** 2)) * K / n_eff
+            explained = float(np.mean(np.sum(fitted ** 2, axis=1)))
+            out[chain.labels[col]] = MarkerMisfit(chain.labels[col], seg, float(np.sqrt(explained)),
+                                                  explained / max(spurious, 1e-300), lag1)
+    return out
+
+
+def _lag1(x: np.ndarray) -> float:
+    x = x - x.mean()
+    den = float(x @ x)
+    return float(x[1:] @ x[:-1]) / den if den > 0 else 0.0
+
+
+def model_error_sd(chain, joint: str, misfit: dict) -> float:
+    """The model-error standard deviation (mm) for `joint`'s marker distances: MODEL_ERROR_PER_MM times the
+    largest angle-following motion among the markers of its two segments (0 when none moves)."""
+    moved = [m.explained_mm for m in misfit.values() if m.moves and m.segment in (chain.parent[joint], chain.child[joint])]
+    return MODEL_ERROR_PER_MM * max(moved) if moved else 0.0
