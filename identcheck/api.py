@@ -108,7 +108,7 @@ def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None
 
 
 @_one_blas_thread
-def fit(model, trial, progress=None):
+def fit(model, trial, progress=None, frames: str | None = None):
     """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
 
     First the trial is screened for swapped marker labels (a span where two markers' labels are
@@ -121,6 +121,8 @@ def fit(model, trial, progress=None):
     trial : Trial, str or os.PathLike
     progress : callable, optional
         Called with a one-line message per stage.
+    frames : str, optional
+        ``"START:END"`` in the file's own frame numbers, both included (:meth:`Trial.frames`).
 
     Returns
     -------
@@ -134,11 +136,13 @@ def fit(model, trial, progress=None):
     from identcheck.fit.result import FitResult
     from identcheck.fit.workflow import fit_trial
 
-    return FitResult.from_dict(fit_trial(load_model(model), read_trial(trial), progress=progress))
+    data = read_trial(trial)
+    data = data.frames(frames) if frames else data
+    return FitResult.from_dict(fit_trial(load_model(model), data, progress=progress))
 
 
 @_one_blas_thread
-def diagnose(model, trial, progress=None, max_steps: int | None = None):
+def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: str | None = None):
     """Where the rigid-joint model and `trial` disagree: the named effects, adopted one at a time while
     they earn their parameters, with the gap before and after each.
 
@@ -150,6 +154,8 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None):
         Called with a one-line message per stage.
     max_steps : int, optional
         Most effects adopted (default :data:`identcheck.diagnose.workflow.MAX_STEPS`).
+    frames : str, optional
+        ``"START:END"`` in the file's own frame numbers, both included (:meth:`Trial.frames`).
 
     Returns
     -------
@@ -163,7 +169,9 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None):
     from identcheck.diagnose import workflow
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
-    return workflow.diagnose(load_model(model), read_trial(trial), progress=progress, max_steps=steps)
+    data = read_trial(trial)
+    data = data.frames(frames) if frames else data
+    return workflow.diagnose(load_model(model), data, progress=progress, max_steps=steps)
 
 
 @_one_blas_thread

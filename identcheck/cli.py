@@ -99,7 +99,7 @@ def _cmd_identify(a) -> int:
 
 
 def _cmd_fit(a) -> int:
-    res = api.fit(a.model, a.trial, progress=_progress("fit"))
+    res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames)
     for w in res.warnings:
         print(f"identcheck fit: warning: {w['message']}", file=sys.stderr)
     if a.json:
@@ -125,7 +125,7 @@ def _cmd_plan(a) -> int:
 
 
 def _cmd_diagnose(a) -> int:
-    diag = api.diagnose(a.model, a.trial, progress=_progress("diagnose"))
+    diag = api.diagnose(a.model, a.trial, progress=_progress("diagnose"), frames=a.frames)
     if a.plots:
         from identcheck.report.diagnose_figures import write_all
 
@@ -205,6 +205,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--frames", metavar="START:END", default=None,
+                   help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
+                        "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_fit)
 
     s = sub.add_parser("plan", help="check a marker plan before capture: which joints are identifiable, how; "
@@ -227,6 +230,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
     s.add_argument("--plots", metavar="DIR", default=None, help="write the figures into DIR")
+    s.add_argument("--frames", metavar="START:END", default=None,
+                   help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
+                        "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_diagnose)
 
     return p

@@ -49,9 +49,9 @@ class Trial:
     (5, 2, (5, 3))
     """
 
-    __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source")
+    __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source", "_first_frame")
 
-    def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>"):
+    def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>", first_frame: int = 0):
         problems: list[str] = []
         xyz = _float_array(xyz, source, copy=True)  # copy: the trial owns its data
         if xyz.ndim != 3 or xyz.shape[2] != 3:
@@ -84,6 +84,7 @@ class Trial:
         self._index = {lab: i for i, lab in enumerate(labels)}
         self._rate_hz = rate_hz
         self._source = source
+        self._first_frame = int(first_frame)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -119,13 +120,13 @@ class Trial:
     def from_trc(cls, path) -> "Trial":
         """Read an OpenSim TRC file (see :func:`identcheck.io.trc.read_trc`)."""
         data = read_trc(path)
-        return cls(data.xyz, data.labels, data.rate_hz, source=str(path))
+        return cls(data.xyz, data.labels, data.rate_hz, source=str(path), first_frame=data.first_frame)
 
     @classmethod
     def from_c3d(cls, path) -> "Trial":
         """Read the points of a C3D file (see :func:`identcheck.io.c3d.read_c3d`)."""
         data = read_c3d(path)
-        return cls(data.xyz, data.labels, data.rate_hz, source=str(path))
+        return cls(data.xyz, data.labels, data.rate_hz, source=str(path), first_frame=data.first_frame)
 
     @classmethod
     def from_file(cls, path) -> "Trial":
@@ -235,14 +236,47 @@ class Trial:
             raise InputError([f"marker(s) missing from the trial: {', '.join(missing)}"],
                              source=self._source)
         cols = [self._index[lab] for lab in labels]
-        return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source)
+        return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source, self._first_frame)
 
-    def replace(self, xyz=None, labels=None, rate_hz=None, source=None) -> "Trial":
+    def replace(self, xyz=None, labels=None, rate_hz=None, source=None, first_frame=None) -> "Trial":
         """A new trial with some parts replaced (positions in mm); the rest is shared."""
         return Trial(self._xyz if xyz is None else xyz,
                      self._labels if labels is None else labels,
                      self._rate_hz if rate_hz is None else rate_hz,
-                     self._source if source is None else source)
+                     self._source if source is None else source,
+                     self._first_frame if first_frame is None else first_frame)
+
+    @property
+    def first_frame(self) -> int:
+        """The file's own number of row 0 (TRC Frame#, C3D header first frame; 0 for arrays)."""
+        return self._first_frame
+
+    def frame_number(self, row) -> int | np.ndarray:
+        """The file's frame number(s) of row index(es) `row`."""
+        return self._first_frame + np.asarray(row) if np.ndim(row) else self._first_frame + int(row)
+
+    def frames(self, spec: str) -> "Trial":
+        """The frames ``START:END`` of the file's own numbering, both included (either end may be left out).
+
+        Raises
+        ------
+        InputError
+            Not ``START:END`` with integers, or a range holding no frame of the trial (the message gives
+            the trial's own range).
+        """
+        first, last = self._first_frame, self._first_frame + self.n_frames - 1
+        try:
+            a, b = str(spec).split(":")
+            start = int(a) if a.strip() else first
+            end = int(b) if b.strip() else last
+        except ValueError:
+            raise InputError([f"--frames {spec!r}: expected START:END in the file's frame numbers "
+                              f"({first}:{last} here)"], source=self._source) from None
+        if end < start or end < first or start > last:
+            raise InputError([f"--frames {spec}: no frame of the trial in that range (the file's frames are "
+                              f"{first} to {last})"], source=self._source)
+        lo, hi = max(start, first) - first, min(end, last) - first
+        return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, first + lo)
 
     # ------------------------------------------------------------------ writers
     def to_trc(self, path) -> None:

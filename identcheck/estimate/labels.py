@@ -92,7 +92,8 @@ MAX_SWAPS = 5            # swaps looked for, strongest first, each exchanged bac
 
 def screen(model, trial) -> tuple:
     """(trial with each detected swap span set missing for its two markers, list of warnings: dicts with
-    ``kind`` = "label_swap", ``markers``, ``frames`` (first, last; 0-based) and ``message``)."""
+    ``kind`` = "label_swap", ``markers``, ``frames`` (first, last; 0-based rows), ``file_frames`` (the same
+    in the file's own numbering, as the capture software shows them) and ``message``)."""
 
     chain = Skeleton.from_model(model)
     present = set(trial.labels)
@@ -124,12 +125,15 @@ def screen(model, trial) -> tuple:
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]              # exchanged back, to look for more
         mi, mj = chain.labels[i], chain.labels[j]
         xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
+        fa, fb = trial.frame_number(a), trial.frame_number(b)
         warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
-                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {a}-{b} (there, their "
+                         "file_frames": [fa, fb],
+                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of the file "
+                                    f"(rows {a}-{b}; there, their "
                                     f"distances to the other markers of their segments fit clearly better exchanged than "
                                     f"as labelled in the rest of the trial); those frames are left out for these two "
                                     f"markers. Which labelling is right, only a reference (static) trial can tell: check "
                                     f"the labels."})
     if not warnings:
         return trial, []
-    return Trial(xyz, trial.labels, trial.rate_hz, trial.source), warnings
+    return trial.replace(xyz=xyz), warnings

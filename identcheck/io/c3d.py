@@ -123,7 +123,11 @@ def read_c3d(path) -> MarkerData:
     xyz = points[:3].transpose(2, 1, 0) * factor
     if residuals is not None and np.shape(residuals)[1:] == (n_points, n_frames):
         xyz[(np.asarray(residuals)[0] < 0).T] = np.nan
-    return MarkerData(np.ascontiguousarray(xyz), labels, rate_hz)
+    try:
+        first = int(c3d["header"]["points"]["first_frame"])
+    except (KeyError, TypeError, ValueError):
+        first = 0
+    return MarkerData(np.ascontiguousarray(xyz), labels, rate_hz, first)
 
 
 def _rate(params: dict, c3d, problems: list[str]) -> float:

@@ -38,11 +38,15 @@ class MarkerData(NamedTuple):
         Marker positions, shape (n_frames, n_markers, 3), float64, mm, NaN = occluded.
     labels : tuple of str
     rate_hz : float
+    first_frame : int
     """
 
     xyz: np.ndarray
     labels: tuple
     rate_hz: float
+    first_frame: int = 0
+    """The file's own number of its first frame (TRC: the first row's Frame#; C3D: the header's first
+    frame as ezc3d reports it, the numbering of QTM): row i is the file's frame ``first_frame + i``."""
 
 
 def read_bytes(path: Path) -> bytes:
@@ -178,7 +182,24 @@ def read_trc(path) -> MarkerData:
                       f"line {linenos[f]}, marker {labels[m]!r}); treating them as occluded",
                       UserWarning, stacklevel=3)
         xyz[partial] = np.nan
-    return MarkerData(xyz * factor, tuple(labels), rate_hz)
+    return MarkerData(xyz * factor, tuple(labels), rate_hz, _first_frame(rows, linenos, src))
+
+
+def _first_frame(rows: list, linenos: list, src: str) -> int:
+    """The Frame# of the first data row (the file's numbering); frame numbers must rise one by one, else a
+    warning says the row index is used instead."""
+    try:
+        numbers = np.array([int(float(r[0])) for r in rows])
+    except (ValueError, IndexError):
+        warnings.warn(f"{src}: the Frame# column is not numeric (line {linenos[0]}); frames are numbered "
+                      "from 1 by row", UserWarning, stacklevel=4)
+        return 1
+    steps = np.diff(numbers)
+    if len(steps) and np.any(steps != 1):
+        k = int(np.flatnonzero(steps != 1)[0])
+        warnings.warn(f"{src}: Frame# does not rise by one at line {linenos[k + 1]} ({numbers[k]} then "
+                      f"{numbers[k + 1]}); frames are numbered from {numbers[0]} by row", UserWarning, stacklevel=4)
+    return int(numbers[0])
 
 
 def _parse_header(keys_line: str, values_line: str, problems: list[str]):

@@ -1,0 +1,53 @@
+"""Frames as the capture software numbers them: TRC Frame#, C3D first frame, and --frames START:END."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from identcheck.errors import InputError
+from identcheck.io.trc import write_trc
+from identcheck.trial import Trial
+
+
+@settings(max_examples=40, deadline=None)
+@given(first=st.integers(0, 10 ** 5), n=st.integers(1, 300), a=st.integers(-50, 350), b=st.integers(-50, 350))
+def test_frames_keeps_the_files_numbering(first, n, a, b):
+    """A random file numbering and a random START:END: the sub-trial holds exactly the file's frames in
+    [START, END] that exist, and its first frame keeps the file's number; an empty range is an error that
+    gives the file's own range."""
+    xyz = np.arange(n * 3, dtype=float).reshape(n, 1, 3)
+    t = Trial(xyz, ["M"], 100.0, "t", first_frame=first)
+    start, end = first + a, first + b
+    want = [f for f in range(first, first + n) if start <= f <= end]
+    if not want:
+        with pytest.raises(InputError, match=f"{first} to {first + n - 1}"):
+            t.frames(f"{start}:{end}")
+        return
+    sub = t.frames(f"{start}:{end}")
+    assert sub.first_frame == want[0] and sub.n_frames == len(want)
+    assert np.array_equal(sub.as_array()[:, 0, 0], xyz[want[0] - first:want[-1] - first + 1, 0, 0])
+    if end >= first:
+        assert t.frames(f":{end}").first_frame == first
+    if start <= first + n - 1:
+        assert t.frames(f"{start}:").n_frames == sum(f >= start for f in range(first, first + n))
+
+
+def test_trc_frame_column_is_the_files_numbering(tmp_path):
+    """A TRC whose Frame# starts at 101: the trial's row 0 is frame 101, and the numbering survives
+    selecting markers."""
+    path = tmp_path / "t.trc"
+    write_trc(path, np.zeros((5, 2, 3)) + 1.0, ["A", "B"], 100.0)
+    lines = path.read_text().splitlines()
+    head, rows = lines[:6], lines[6:]
+    body = [str(int(r.split("\t")[0]) + 100) + "\t" + r.split("\t", 1)[1] for r in rows if r.strip()]
+    path.write_text("\n".join(head + body) + "\n")
+    t = Trial.from_trc(path)
+    assert t.first_frame == 101 and t.select(["B"]).first_frame == 101
+    assert t.frame_number(4) == 105
+
+
+def test_bad_frames_argument_is_named():
+    t = Trial(np.zeros((10, 1, 3)), ["M"], 100.0, "t", first_frame=1)
+    with pytest.raises(InputError, match="START:END"):
+        t.frames("a-b")
