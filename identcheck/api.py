@@ -108,7 +108,7 @@ def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None
 
 
 @_one_blas_thread
-def fit(model, trial, progress=None, frames: str | None = None):
+def fit(model, trial, progress=None, frames: str | None = None, export_markers=None):
     """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
 
     First the trial is screened for swapped marker labels (a span where two markers' labels are
@@ -123,6 +123,9 @@ def fit(model, trial, progress=None, frames: str | None = None):
         Called with a one-line message per stage.
     frames : str, optional
         ``"START:END"`` in the file's own frame numbers, both included (:meth:`Trial.frames`).
+    export_markers : str or os.PathLike, optional
+        Also write the trial's markers plus each joint's centre / hinge-axis points as virtual markers to
+        this TRC or C3D file (:mod:`identcheck.fit.export`).
 
     Returns
     -------
@@ -138,7 +141,7 @@ def fit(model, trial, progress=None, frames: str | None = None):
 
     data = read_trial(trial)
     data = data.frames(frames) if frames else data
-    return FitResult.from_dict(fit_trial(load_model(model), data, progress=progress))
+    return FitResult.from_dict(fit_trial(load_model(model), data, progress=progress, export=export_markers))
 
 
 @_one_blas_thread

@@ -99,7 +99,7 @@ def _cmd_identify(a) -> int:
 
 
 def _cmd_fit(a) -> int:
-    res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames)
+    res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames, export_markers=a.export_markers)
     for w in res.warnings:
         print(f"identcheck fit: warning: {w['message']}", file=sys.stderr)
     if a.json:
@@ -205,6 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--export-markers", metavar="OUT.trc|OUT.c3d", default=None,
+                   help="also write the markers plus each joint's centre and hinge-axis points as virtual markers")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
                         "it), both included; either end may be left out")
@@ -239,7 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 # ---------------------------------------------------------------------- checks before any work
-FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",)}
+FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
+                "fit": ("export_markers",)}
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
@@ -257,7 +260,7 @@ def preflight(a) -> list:
         if path:
             why = _unwritable_file(path)
             if why:
-                problems.append(f"--{opt} {path}: {why}")
+                problems.append(f"--{opt.replace('_', '-')} {path}: {why}")
     for opt in DIR_OUTPUTS.get(a.verb, ()):
         path = getattr(a, opt, None)
         if path:
@@ -276,6 +279,9 @@ def preflight(a) -> list:
                         f"(identcheck {a.verb} {trial} {model})")
     elif model and str(model).lower().endswith(TRIAL_SUFFIXES):
         problems.append(f"{model} is a trial; {a.verb} takes the model file (TOML) first")
+    out = getattr(a, "export_markers", None)
+    if out and not str(out).lower().endswith(TRIAL_SUFFIXES):
+        problems.append(f"--export-markers {out}: give a .trc or .c3d file name")
     if a.verb == "rank" and a.samples is not None and not 1 <= a.samples <= MAX_RANK_SAMPLES:
         problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the exact rank of a larger "
                         "matrix would not end in reasonable time)")

@@ -281,11 +281,11 @@ class Trial:
     # ------------------------------------------------------------------ writers
     def to_trc(self, path) -> None:
         """Write an OpenSim TRC file in mm."""
-        write_trc(path, self._xyz, self._labels, self._rate_hz)
+        write_trc(path, self._xyz, self._labels, self._rate_hz, first_frame=self._first_frame)
 
     def to_c3d(self, path) -> None:
         """Write a C3D file in mm (32-bit float coordinates)."""
-        write_c3d(path, self._xyz, self._labels, self._rate_hz)
+        write_c3d(path, self._xyz, self._labels, self._rate_hz, first_frame=self._first_frame)
 
     def to_file(self, path) -> None:
         """Write ``.trc`` or ``.c3d`` by extension (any case)."""

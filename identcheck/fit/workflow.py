@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from identcheck.errors import DegenerateError
+from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate import joint as E
 
 log = logging.getLogger("identcheck")
@@ -232,7 +232,7 @@ def report(model, fitted: dict, points: dict) -> dict:
     return {"joints": out}
 
 
-def fit_trial(model, trial, progress=None) -> dict:
+def fit_trial(model, trial, progress=None, export=None) -> dict:
     """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
     (the contract's ``fit`` JSON: joints, ``noise``, ``warnings``).
@@ -244,7 +244,13 @@ def fit_trial(model, trial, progress=None) -> dict:
     from identcheck.estimate.labels import screen
     from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
 
+    from identcheck.fit.export import export_markers, reserved_names
+
     trial.require_visible(model.markers, {m: s for s in model.segments for m in model.segments[s].markers})
+    clash = sorted(reserved_names(model) & (set(trial.labels) | set(model.markers)))
+    if clash:
+        raise InputError([f"marker {m!r} carries the name fit gives a joint's virtual marker; rename it" for m in clash],
+                         source=trial.source)
     screened, swaps = screen(model, trial)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
@@ -258,4 +264,9 @@ def fit_trial(model, trial, progress=None) -> dict:
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
     rep["warnings"] = list({n["message"]: n for n in notes}.values())
+    if export is not None:
+        if tree.best is None:
+            raise InputError([f"--export-markers {export}: no whole-tree fit to export ({tree.problem})"],
+                             source=trial.source)
+        export_markers(export, trial, tree.best.fit)
     return rep

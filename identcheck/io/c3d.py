@@ -163,7 +163,7 @@ def _labels(params: dict, n_points: int, problems: list[str]) -> tuple[str, ...]
     return tuple(labels)
 
 
-def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
+def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 0) -> None:
     """Write marker trajectories as a C3D file (float storage, ``POINT:UNITS = "mm"``).
 
     Parameters
@@ -174,6 +174,8 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
         (negative residual).
     labels : sequence of str
     rate_hz : float
+    first_frame : int
+        The header's first frame, as ezc3d reports it (what :func:`read_c3d` returns).
 
     Raises
     ------
@@ -191,6 +193,7 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
     points = np.ones((4, n_markers, n_frames))
     points[:3] = xyz.transpose(2, 1, 0)
     c3d["data"]["points"] = points
+    c3d["header"]["points"]["first_frame"] = max(int(first_frame), 0)
     # ezc3d appends ".c3d" to any other ending (".C3D" included): write beside, then rename
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.c3d")
     try:

@@ -293,7 +293,7 @@ def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> n
 
 
 # ---------------------------------------------------------------------- writing
-def write_trc(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
+def write_trc(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 1) -> None:
     """Write marker trajectories as an OpenSim TRC file in millimetres.
 
     Parameters
@@ -304,6 +304,9 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
     labels : sequence of str
         Marker names (no tabs or line breaks).
     rate_hz : float
+    first_frame : int
+        Frame# of the first row (TRC frames count from 1: a smaller number is written as 1); Time is
+        ``(Frame# - 1) / rate``.
 
     Raises
     ------
@@ -321,7 +324,7 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
     head = [
         f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
         "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
-        f"{rate}\t{rate}\t{n_frames}\t{n_markers}\tmm\t{rate}\t1\t{n_frames}",
+        f"{rate}\t{rate}\t{n_frames}\t{n_markers}\tmm\t{rate}\t{max(int(first_frame), 1)}\t{n_frames}",
         "Frame#\tTime\t" + "".join(f"{lab}\t\t\t" for lab in labels).rstrip("\t") + "\t\t",
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
         "",
@@ -329,8 +332,9 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float) -> None:
     flat = xyz.reshape(n_frames, 3 * n_markers)
     cells = np.char.mod("%.8f", flat)
     cells[np.isnan(flat)] = ""
-    frames = np.char.mod("%d", np.arange(1, n_frames + 1))
-    times = np.char.mod("%.6f", np.arange(n_frames) / rate_hz)
+    first = max(int(first_frame), 1)
+    frames = np.char.mod("%d", np.arange(first, first + n_frames))
+    times = np.char.mod("%.6f", (np.arange(n_frames) + first - 1) / rate_hz)
     body = ["\t".join((f, t, *row)) for f, t, row in zip(frames, times, cells)]
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write("\n".join(head + body) + "\n")
