@@ -255,18 +255,13 @@ def preflight(a) -> list:
     path, a missing optional package or a swapped argument costs nothing and loses no result: the
     problems, each naming the option and the path (empty: go)."""
     problems = []
-    for opt in FILE_OUTPUTS.get(a.verb, ()):
+    outputs = [(o, _unwritable_file) for o in FILE_OUTPUTS.get(a.verb, ())] + \
+              [(o, _unwritable_dir) for o in DIR_OUTPUTS.get(a.verb, ())]
+    for opt, check in outputs:
         path = getattr(a, opt, None)
-        if path:
-            why = _unwritable_file(path)
-            if why:
-                problems.append(f"--{opt.replace('_', '-')} {path}: {why}")
-    for opt in DIR_OUTPUTS.get(a.verb, ()):
-        path = getattr(a, opt, None)
-        if path:
-            why = _unwritable_dir(path)
-            if why:
-                problems.append(f"--{opt} {path}: {why}")
+        why = check(path) if path else ""
+        if why:
+            problems.append(f"--{opt.replace('_', '-')} {path}: {why}")
     opt = NEEDS_MATPLOTLIB.get(a.verb)
     if opt and getattr(a, opt, None):
         try:
