@@ -195,7 +195,19 @@ class TableResult:
 
     def to_dict(self) -> dict:
         """The contract's ``table`` JSON, also the saved table that :func:`verify` re-checks."""
-        return {"format": self.format, "seed": self.seed, "cases": plain(self.cases)}
+        cases = plain(self.cases)
+        from identcheck import __version__
+
+        return {"format": self.format, "seed": self.seed, "made_by": f"identcheck {__version__}",
+                "sha256": content_hash(cases), "cases": cases}
+
+
+def content_hash(cases) -> str:
+    """SHA-256 of the rows in canonical JSON (sorted keys, no spaces): what a saved table certifies."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(cases, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
 def table(seed: int = 0, joints=None) -> TableResult:
@@ -224,6 +236,9 @@ def verify(doc: dict) -> list:
     problems = _schema(doc)
     if problems:
         return problems
+    if "sha256" in doc and doc["sha256"] != content_hash(doc["cases"]):
+        problems.append("sha256: the rows are not the ones the table was saved with (edited since); every row "
+                        "is re-checked below")
     recompute = {"revolute(2,1)": candidates.revolute21, "revolute(2,2)": candidates.revolute22,
                  "revolute(3,1)": candidates.revolute31}
     for row in doc.get("cases", []):

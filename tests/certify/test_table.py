@@ -256,3 +256,16 @@ def test_a_counterexamples_displayed_numbers_are_recomputed(doc):
             edit(bad[field])
         problems = C.verify_dict(bad)
         assert any(p.startswith(field.split(".")[0]) or field in p for p in problems), (field, problems)
+
+
+def test_a_saved_table_carries_its_maker_and_a_hash_of_its_rows(doc):
+    """The saved table names its maker and the SHA-256 of its rows; editing any field, even prose that no
+    other check reads, is reported under sha256."""
+    assert doc["made_by"].startswith("identcheck ") and len(doc["sha256"]) == 64
+    assert doc["sha256"] == T.content_hash(doc["cases"])
+    bad = json.loads(json.dumps(doc))
+    bad["cases"][0]["certificate"]["statement"] += " (edited)"
+    assert T.content_hash(bad["cases"]) != bad["sha256"]
+    small = {k: v for k, v in bad.items() if k != "cases"} | {"cases": bad["cases"][:1]}
+    small["sha256"] = T.content_hash(doc["cases"][:1])
+    assert any(p.startswith("sha256") for p in T.verify(small))
