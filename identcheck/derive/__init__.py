@@ -9,10 +9,17 @@ DERIVATIONS = {
 }
 
 
-def get(name: str) -> Derivation:
-    """Run (once, cached) and return the named derivation."""
+def get(name: str, disk_cache: bool = True) -> Derivation:
+    """The named derivation: run once per process (each module caches it), and, for the solvers that only
+    need its results, kept on disk between processes (:mod:`identcheck.derive.cache`) so that ``fit`` does
+    not re-derive for seconds at every start. ``identcheck derive`` passes ``disk_cache=False``: it exists to
+    derive again."""
     import importlib
 
+    if disk_cache:
+        from identcheck.derive.cache import cached
+
+        return cached(name, lambda: importlib.import_module(DERIVATIONS[name]).derive())
     return importlib.import_module(DERIVATIONS[name]).derive()
 
 
@@ -30,7 +37,7 @@ def for_case(case) -> Derivation:
 
 def derive_all() -> list:
     """Every derivation, in canonical order."""
-    return [get(n) for n in sorted(DERIVATIONS)]
+    return [get(n, disk_cache=False) for n in sorted(DERIVATIONS)]
 
 
 __all__ = ["Check", "Derivation", "Step", "DERIVATIONS", "get", "for_case", "derive_all"]

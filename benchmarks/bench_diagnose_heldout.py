@@ -1,0 +1,133 @@
+"""``diagnose`` on trials it was not tuned on: which effects does it name, and which does it miss?
+
+The trials come from the independent generator in ``benchmarks/heldout_effects/`` (written from a short spec
+by an author who never read identcheck's code: its own skeleton, motions, noise and effect *shapes*: skin
+that slides along the bone or bulges with two angles, slips that drift, knees that roll back, wobble or
+rotate axially, segment-wide delays, lens-like and shear volume distortions, outlier bursts). For each trial
+``identcheck.diagnose`` runs on the TRC and model, and its named effects are compared with the truth:
+
+- single-effect trials: the true effect named first ("first"), named at all ("any"), or missed;
+- two-effect trials: both named;
+- clean trials: nothing named;
+- a confusion table (true effect -> first named effect, ``none`` when nothing was named), with the
+  magnitude of each miss, so detection limits can be read off.
+
+Usage::
+
+    python benchmarks/heldout_effects/generator.py --out /tmp/hx --n 120 --seed 11
+    PYTHONPATH=. python benchmarks/bench_diagnose_heldout.py /tmp/hx [--shard K/N --rows R.json] [--merge R0 R1]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from collections import Counter, defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import identcheck as ic  # noqa: E402
+from results_io import machine_info, write_json  # noqa: E402
+
+
+def evaluate(trial_dir: Path, entry: dict) -> dict:
+    """Diagnose one trial; the named effects in order, against the truth."""
+    stem = entry["stem"]
+    t0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            diag = ic.diagnose(trial_dir / f"{stem}.toml", trial_dir / f"{stem}.trc").to_dict()
+        except ic.InputError as exc:
+            return {"stem": stem, "error": str(exc), "seconds": time.process_time() - t0}
+    named = [e["name"] for e in diag.get("effects", [])]
+    return {"stem": stem, "named": named, "truth": [e["name"] for e in entry["effects"]],
+            "magnitudes": [round(e.get("magnitude_mm", float("nan")), 2) for e in entry["effects"]],
+            "shapes": [e.get("shape", "") for e in entry["effects"]], "kind": entry["category"]["kind"],
+            "seconds": time.process_time() - t0}
+
+
+def summarise(results: list) -> dict:
+    ok = [r for r in results if "error" not in r]
+    single = [r for r in ok if r["kind"] == "single"]
+    pairs = [r for r in ok if r["kind"] == "pair"]
+    clean = [r for r in ok if r["kind"] == "clean"]
+    confusion = defaultdict(Counter)
+    misses = []
+    for r in single:
+        first = r["named"][0] if r["named"] else "none"
+        confusion[r["truth"][0]][first] += 1
+        if first != r["truth"][0]:
+            misses.append({"stem": r["stem"], "truth": r["truth"][0], "shape": r["shapes"][0],
+                           "magnitude_mm": r["magnitudes"][0], "named": r["named"]})
+    per_effect = {}
+    for name, row in sorted(confusion.items()):
+        n = sum(row.values())
+        per_effect[name] = {"trials": n, "named_first": row.get(name, 0),
+                            "named_any": sum(name in r["named"] for r in single if r["truth"][0] == name)}
+    return {
+        "trials": len(results), "errors": sum("error" in r for r in results),
+        "single": {"trials": len(single), "named_first": sum(bool(r["named"]) and r["named"][0] == r["truth"][0]
+                                                             for r in single),
+                   "named_any": sum(r["truth"][0] in r["named"] for r in single)},
+        "pairs": {"trials": len(pairs), "both_named": sum(all(t in r["named"] for t in r["truth"]) for r in pairs),
+                  "one_named": sum(any(t in r["named"] for t in r["truth"]) for r in pairs)},
+        "clean": {"trials": len(clean), "nothing_named": sum(not r["named"] for r in clean)},
+        "per_effect": per_effect,
+        "confusion": {k: dict(v) for k, v in sorted(confusion.items())},
+        "misses": misses,
+        "median_seconds": sorted(r["seconds"] for r in results)[len(results) // 2] if results else None,
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("trials", type=Path)
+    ap.add_argument("--limit", type=int, default=None)
+    ap.add_argument("--shard", default=None, metavar="K/N")
+    ap.add_argument("--rows", type=Path, default=None)
+    ap.add_argument("--merge", type=Path, nargs="+", default=None)
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
+    a = ap.parse_args(argv)
+    entries = json.loads((a.trials / "index.json").read_text())["trials"]
+    entries = entries[:a.limit] if a.limit else entries
+    if a.merge:
+        results = [r for f in a.merge for r in json.loads(f.read_text())]
+    else:
+        if a.shard:
+            k0, n = (int(x) for x in a.shard.split("/"))
+            entries = entries[k0::n]
+        results = []
+        for k, e in enumerate(entries, 1):
+            r = evaluate(a.trials, e)
+            results.append(r)
+            print(f"[{k}/{len(entries)}] {r['stem']} truth {r.get('truth')} named {r.get('named')} "
+                  f"{r['seconds']:.0f}s" + (f" ERROR {r['error']}" if "error" in r else ""), file=sys.stderr)
+            if a.rows:
+                a.rows.write_text(json.dumps(results))
+        if a.shard:
+            return 0
+    s = summarise(results)
+    print(f"single effects: {s['single']['named_first']}/{s['single']['trials']} named first, "
+          f"{s['single']['named_any']}/{s['single']['trials']} named at all")
+    print(f"pairs: {s['pairs']['both_named']}/{s['pairs']['trials']} both named, "
+          f"{s['pairs']['one_named']}/{s['pairs']['trials']} at least one")
+    print(f"clean: {s['clean']['nothing_named']}/{s['clean']['trials']} with nothing named")
+    print(f"{'effect':<20} {'trials':>6} {'first':>6} {'any':>5}  first named instead")
+    for name, p in s["per_effect"].items():
+        others = {k: v for k, v in s["confusion"][name].items() if k != name}
+        print(f"{name:<20} {p['trials']:>6} {p['named_first']:>6} {p['named_any']:>5}  {others}")
+    for m in s["misses"]:
+        print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm) -> {m['named'] or 'nothing'}")
+    write_json(a.out, "diagnose_heldout", {"summary": s, "trials_dir": str(a.trials), "machine": machine_info()})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
