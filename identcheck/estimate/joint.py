@@ -264,7 +264,6 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     equal = [e for e in ests[1:] if e.rms_residual <= 1.05 * best.rms_residual + 1e-9]
     best.unique = not equal
     best.alternatives = equal
-    best.uncertainty_mm = max(best.uncertainty_mm, revolute21_fit.bootstrap_uncertainty(sols[0][0], local[::every]))
     why = _travel_reason(local[:, None, :], best.rms_residual)
     if why:
         best.excitation_ok, best.excitation_reason = False, why

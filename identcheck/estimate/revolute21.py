@@ -164,34 +164,6 @@ def twin_seeds(params, R, z) -> list:
     return [np.array(s, dtype=float) for s in revolute21.solve_batch(np.c_[x, y, zz]).params if np.all(np.isfinite(s))]
 
 
-def bootstrap_uncertainty(params, local, n_boot: int = 8, seed: int = 0) -> float:
-    """1-σ of the worst-determined length constant (mm) by a parametric bootstrap.
-
-    Samples are rebuilt on the fitted surface (nearest meridian points, the original rolls),
-    perturbed by the fitted residual scatter, and refitted from the fitted constants. Unlike the
-    linearised covariance this sees the flat, curved valleys of this problem (a hinge close to the
-    line of the parent markers), where the linearisation is over-confident by orders of magnitude.
-    """
-    local = np.asarray(local, dtype=float)
-    R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
-    N = len(local)
-    b = _nearest_beta(params, R, z)
-    x, y, zz = _meridian(params, b)
-    Rm = np.hypot(x, y)
-    sigma = float(np.sqrt(np.mean((Rm - R) ** 2 + (zz - z) ** 2) / 2))
-    rng = np.random.default_rng(seed)
-    lo, hi = _odr_bounds(N, float(np.sqrt(np.mean(local**2))))
-    out = []
-    for _ in range(n_boot):
-        Rb, zb = Rm + sigma * rng.standard_normal(N), zz + sigma * rng.standard_normal(N)
-        sol = least_squares(_odr, np.r_[params, b], jac=_odr_jacobian, args=(Rb, zb), bounds=(lo, hi),
-                            x_scale="jac", tr_solver="lsmr", max_nfev=100)
-        out.append(sol.x[[0, 1, 3, 4]])
-    dev = np.array(out) - np.asarray(params)[[0, 1, 3, 4]]
-    cov = dev.T @ dev / len(dev)
-    return float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0)))
-
-
 def _uncertainty(sol, N: int) -> float:
     """1-σ of the worst-determined length constant (d, r, l, ρ), mm, from the linearised covariance.
 
