@@ -179,18 +179,43 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
 @_one_blas_thread
 def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
-         fewest: bool = False, witness: bool = False, progress=None):
+         fewest: bool = False, witness: bool = False, progress=None, noise_mm: float | None = None,
+         practical_motion: str = "functional", frames: int = 1000):
     """Check a marker plan before capture: which joints `model`'s markers identify, how, with how many
     samples, and the fewest markers to add (see :func:`identcheck.plan.analysis.plan_model`).
+
+    With ``noise_mm``, each joint also gets ``practical``: what a capture of ``frames`` frames of
+    ``practical_motion`` (a name of :data:`identcheck.fit.predict.MOTIONS`, or a recorded TRC/C3D trial whose
+    motion to judge) with that noise would determine (:mod:`identcheck.fit.predict`).
 
     Returns
     -------
     PlanResult
     """
     from identcheck.plan.analysis import plan_model
+    from identcheck.plan.result import PlanResult
 
-    return plan_model(load_model(model), seed=seed, motion=motion, robust=robust, suggest=suggest,
-                      fewest=fewest, witness=witness, progress=progress)
+    m = load_model(model)
+    res = plan_model(m, seed=seed, motion=motion, robust=robust, suggest=suggest,
+                     fewest=fewest, witness=witness, progress=progress)
+    if noise_mm is None:
+        return res
+    if progress:
+        progress(f"predicting practical verdicts: {practical_motion}, {noise_mm} mm noise, {frames} frames")
+    if str(practical_motion).lower().endswith((".trc", ".c3d")):
+        from identcheck.fit.workflow import fit_trial
+
+        fitted = fit_trial(m, read_trial(practical_motion), progress=progress)["joints"]
+        practical = {j: dict(v["practical"], predicted=True, motion=str(practical_motion)) for j, v in fitted.items()}
+    else:
+        from identcheck.fit.predict import predict
+
+        practical = predict(m, noise_mm, practical_motion, frames, seed)
+    doc = res.to_dict()
+    for j, p in practical.items():
+        if j in doc["joints"]:
+            doc["joints"][j]["practical"] = p
+    return PlanResult.from_dict(doc, m.root, {s: seg.markers for s, seg in m.segments.items()})
 
 
 @_one_blas_thread

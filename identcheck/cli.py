@@ -111,7 +111,7 @@ def _cmd_fit(a) -> int:
 
 def _cmd_plan(a) -> int:
     res = api.plan(a.model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest, witness=a.witness,
-                   progress=_progress("plan"))
+                   progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion, frames=a.frames)
     if a.figure:
         from identcheck.report.plan_figure import draw
 
@@ -224,6 +224,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--witness", action="store_true",
                    help="simulate the plan and, for every joint it does not identify, search for a second skeleton "
                         "that reproduces every marker, verified at 50 digits (seconds to a minute)")
+    s.add_argument("--noise-mm", type=float, default=None, metavar="SIGMA",
+                   help="also predict what a capture with this marker noise would determine (practical verdicts)")
+    s.add_argument("--motion", default="functional", metavar="NAME|TRIAL",
+                   help="the motion of that capture: functional, flexion or small, or a recorded trial")
+    s.add_argument("--frames", type=int, default=1000, metavar="N", help="frames of that capture")
     s.set_defaults(func=_cmd_plan)
 
     s = sub.add_parser("diagnose", help="where the rigid-joint model and a trial disagree: name the missing "
@@ -291,6 +296,11 @@ def preflight(a) -> list:
                 bad = ["(not integers)"]
             if bad:
                 problems.append(f"--frames {a.frames}: comma-separated frame indices, 0 or more")
+    if a.verb == "plan" and a.noise_mm is not None:
+        if not a.noise_mm > 0:
+            problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")
+        if not 10 <= a.frames <= 20000:
+            problems.append(f"--frames {a.frames}: between 10 and 20000 frames")
     if a.verb == "simulate":
         for opt, ok in (("frames", a.frames >= 2), ("rate", a.rate > 0), ("noise_mm", a.noise_mm >= 0),
                         ("occlusion", 0 <= a.occlusion < 1), ("rom_deg", 0 <= a.rom_deg <= 360)):

@@ -176,6 +176,10 @@ def plan_text(result) -> str:
                          + _witness_text(j["alternative"]))
         if j.get("motion_needed"):
             lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
+        if j.get("practical"):
+            p = j["practical"]
+            lines.append(f"{'':<12} in practice ({p.get('motion', '')}, {p.get('noise_mm', '?')} mm noise): "
+                         f"{p['verdict']}: {p['reason']}")
     lines.append("")
     lines.append("all joints identifiable: " + ("yes" if doc["all_identifiable"] else "no")
                  + ("" if doc["all_identifiable"] else

@@ -1,0 +1,82 @@
+"""Practical verdicts before capture (``identcheck plan MODEL --noise-mm SIGMA --motion NAME``): how well would
+this marker plan determine each joint, with this motion and this noise?
+
+The plan's skeleton is simulated without noise for the named motion; the whole-tree fit of ``fit`` is run on
+it from every closed-form candidate. At the truth the fit's information ``S`` (per unit noise variance,
+per-frame unknowns profiled out) gives each marker distance's predicted standard error ``σ √(gᵀ S⁺ g)``, and
+each other minimum the fit finds (an ERRATA E1 twin, a mirror image) gives the expected likelihood-ratio
+statistic against the truth, its noncentrality ``λ = ΔRSS / σ²``: with real noise it is rejected at the 95 %
+level with probability ``P(χ²₁(λ) > 3.84)``. The verdicts follow ``fit``'s rules: ``undetermined`` when a
+direction is free or a predicted interval is wider than ±10 mm; ``ambiguous`` when another joint would be rejected with probability below 95 %;
+``determined`` otherwise. White noise is assumed: serially correlated noise and skin motion widen real
+intervals beyond these.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from scipy.stats import ncx2
+
+from identcheck.bundle.practical import TOLERANCE_MM, Z95
+from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
+from identcheck.errors import InputError
+from identcheck.fit.whole_tree import REJECT_CHI2, _same, fit_tree, posed_by_itself
+from identcheck.fit.workflow import fit_model
+from identcheck.simulate.rigid import simulate
+
+MOTIONS = {"functional": {"rom_deg": 60.0, "n_axes": None}, "flexion": {"rom_deg": 60.0, "n_axes": 1},
+           "small": {"rom_deg": 15.0, "n_axes": None}}
+"""Named motions: every joint through ±30° about each of its axes (``functional``), about one axis only
+(``flexion``), or through ±7.5° (``small``)."""
+POWER = 0.95
+
+
+def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 1000, seed: int = 0) -> dict:
+    """joint -> predicted ``practical`` dict (see the module docstring) for `model` under `motion`."""
+    if motion not in MOTIONS:
+        raise InputError([f"--motion {motion!r}: one of {', '.join(MOTIONS)}"])
+    if not (noise_mm > 0):
+        raise InputError([f"--noise-mm {noise_mm}: a positive noise level (mm per coordinate)"])
+    sim = simulate(model, n_frames=n_frames, noise_mm=0.0, seed=seed, **MOTIONS[motion])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        closed, _ = fit_model(model, sim.trial)
+        tree = fit_tree(model, sim.trial, closed)
+    if tree.best is None:
+        return {j: {"verdict": "undetermined", "reason": f"no whole-tree fit of the simulated trial: {tree.problem}",
+                    "predicted": True} for j in model.joints}
+    best = tree.best
+    chain = best.fit.chain
+    S = best.cov.information
+    Sinv, _, _ = gauge_free_inverse(S, chain.gauge())
+    grads = distance_gradients(chain, best.fit.state, len(S))
+    out = {}
+    for j in chain.joints:
+        se = {m: noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0))) for m, (_, g) in grads[j].items()}
+        free = [m for m, (_, g) in grads[j].items() if best.cov.free(g)]
+        rivals = []
+        for m, _, _ in tree.others:
+            if not _same(m, best, [j]):
+                lam = max(m.fit.rss - best.fit.rss, 0.0) / noise_mm ** 2
+                rivals.append({"marker_distances": {k: round(v[0], 2) for k, v in m.distances[j].items()},
+                               "expected_delta_chi2": round(lam, 3),
+                               "rejection_probability": round(float(ncx2.sf(REJECT_CHI2, 1, max(lam, 1e-12))), 3)})
+        worst = max(se.items(), key=lambda kv: kv[1]) if se else (None, 0.0)
+        if free:
+            verdict, why = "undetermined", f"the motion leaves {', '.join(free)}'s distances free"
+        elif Z95 * worst[1] > TOLERANCE_MM:
+            verdict, why = "undetermined", f"{worst[0]}'s distance would be ±{Z95 * worst[1]:.1f} mm (95 %)"
+            if not posed_by_itself(chain, chain.parent[j]):
+                why += (f"; {chain.parent[j]} is not posed by its own markers, so its roll in every frame is seen only "
+                        "through this joint and fit will report the distances unbounded")
+        elif any(r["rejection_probability"] < POWER for r in rivals):
+            weak = min(r["rejection_probability"] for r in rivals)
+            verdict, why = "ambiguous", (f"another joint fits as well unless the noise happens to favour the truth: "
+                                         f"rejected with probability {weak:.2f} at the 95 % level")
+        else:
+            verdict, why = "determined", f"every marker distance within ±{Z95 * worst[1]:.2g} mm (95 %)"
+        out[j] = {"verdict": verdict, "reason": why, "predicted": True, "noise_mm": noise_mm, "motion": motion,
+                  "frames": n_frames, "predicted_se_mm": {m: round(v, 4) for m, v in se.items()},
+                  "rivals": rivals}
+    return out
