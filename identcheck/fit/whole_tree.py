@@ -38,6 +38,8 @@ from identcheck.geometry.poses import Poses, refine_local
 from identcheck.skeleton import Skeleton
 
 MAX_STARTS = 16          # candidate combinations started (the first ones in order of the closed-form ranking)
+STARTS_BUDGET_S = 90.0   # no new start after this many seconds (the ones left out are counted and reported)
+MAX_RIVALS = 4           # other minima refitted for the joints above an unbounded one (the best ones)
 MAX_ITER = 200           # LM iterations per start
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
@@ -168,8 +170,13 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
     combos, left_out, why = _starts(chain, closed_form, restart)
     if not combos:
         return TreeFit(None, problem=why)
-    minima, problems = [], []
+    minima, problems, tried = [], [], 0
+    t0 = time.monotonic()
     for k, combo in enumerate(combos):
+        if minima and time.monotonic() - t0 > STARTS_BUDGET_S:
+            left_out += len(combos) - k          # said in the report: fewer candidates were tried
+            break
+        tried += 1
         if progress and len(combos) > 1:
             progress(f"whole-tree fit from candidate start {k + 1} of {len(combos)}")
         virtual: dict = {}
@@ -189,7 +196,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
         dist = {j: {m: (d, cov.se(g)) for m, (d, g) in per.items()} for j, per in grads.items()}
         minima.append(Minimum(fit, cov, dist, tuple(id(e) for e in combo.values())))
     if not minima:
-        return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=len(combos), starts_left_out=left_out)
+        return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out)
     minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
     best = minima[0]
     tau = max(1.0, float(np.median([best.cov.inflation(g) for per in distance_gradients(
@@ -206,7 +213,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
     others = [(_with_model_error(m, model_error), delta, p) for m, delta, p in others]
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     best = _without_incidental_rolls(best, others, data, model_error, scale)
-    return TreeFit(best, others, n_starts=len(combos), starts_left_out=left_out)
+    return TreeFit(best, others, n_starts=tried, starts_left_out=left_out)
 
 
 def joints_below(chain: Skeleton, joint: str) -> list:
@@ -233,7 +240,8 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     if not cut:
         return best
     below = set(cut) | {k for c in cut for k in joints_below(chain, c)}
-    keep = [j for j in chain.joints if j not in below]
+    unbounded = {j for j, per in best.intervals.items() if any(how == "unbounded" for _, how in per.values())}
+    keep = [j for j in chain.joints if j not in below and j not in unbounded]
     if not keep:
         return best
     w = np.ones(data.shape[:2])
@@ -250,7 +258,7 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
 
     upstream = refit(best)
     rivals = []
-    for m, _, _ in others:
+    for m, _, _ in others[:MAX_RIVALS]:
         r = refit(m)
         if any(not _same(r, upstream, [j]) for j in keep):
             delta = max(r.fit.rss - upstream.fit.rss, 0.0) / scale
@@ -285,12 +293,25 @@ def posed_by_itself(chain: Skeleton, segment: str) -> bool:
     return len(chain.seg_markers[segment]) + fixed >= 3
 
 
+def posed_above(chain: Skeleton, joint: str) -> bool:
+    """Whether every segment from the root down to `joint`'s parent is posed by itself
+    (:func:`posed_by_itself`): otherwise a per-frame roll seen only through the joints below reaches `joint`."""
+    seg = chain.parent[joint]
+    while True:
+        if not posed_by_itself(chain, seg):
+            return False
+        up = [j for j in chain.joints if chain.child[j] == seg]
+        if not up:
+            return True
+        seg = chain.parent[up[0]]
+
+
 def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
     """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
     those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
 
-    - direction free, or the joint hangs from a segment that is not posed by itself
-      (:func:`posed_by_itself`) and is wide or misfitted: ``[0, None]`` (the likelihood does not bound it),
+    - direction free, or the joint hangs below a segment that is not posed by itself
+      (:func:`posed_above`) and is wide or misfitted: ``[0, None]`` (the likelihood does not bound it),
       method ``unbounded``;
     - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
       interval stays (a profile of a wrong likelihood would not be better);
@@ -310,7 +331,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
         misfit = j in best.model_error
         if not (free or wide or misfit):
             continue
-        if free or not posed_by_itself(chain, chain.parent[j]):
+        if free or not posed_above(chain, j):
             out[j] = {m: ([0.0, None], "unbounded") for m in dist}
             continue
         if misfit:
@@ -364,6 +385,11 @@ def joint_answers(tree: TreeFit, model) -> dict:
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in differing if delta > REJECT_CHI2]
         practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
+        if any(how == "unbounded" for _, how in best.intervals.get(j, {}).values()):
+            practical = dict(practical, verdict="undetermined", reason=(
+                f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
+                "markers do not pose (a roll in every frame seen only through the joints below), with wide "
+                "intervals or markers moving with the angles"))
         if j in best.model_error:
             practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         ci = _ci(dist)
@@ -402,10 +428,15 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
         return []
     shown = ", ".join(f"{m.marker} ({m.explained_mm:.2g} mm)" for m in moving[:6]) + (" ..." if len(moving) > 6 else "")
     joints = sorted(best.model_error)
-    return [{"message": f"{trial.source}: markers move on their segments with the joint angles, beyond what noise "
-                        f"explains: {shown}. The rigid-joint model does not hold (skin motion, or a joint that is not "
-                        f"rigid); the intervals of {', '.join(joints)} are widened for it by a rule of thumb, not a "
-                        "calibrated bias. `identcheck diagnose` models the motion.",
+    chain = best.fit.chain
+    weak = [s for s in chain.segments if not posed_by_itself(chain, s)]
+    cause = ("skin motion, or a joint that is not rigid" if not weak else
+             f"skin motion, a joint that is not rigid, or the fit's own bias where {', '.join(weak)} "
+             f"{'is' if len(weak) == 1 else 'are'} posed only through the joints")
+    return [{"message": f"{trial.source}: the residuals follow the joint angles beyond what noise explains: {shown}. "
+                        f"The rigid-joint model does not hold ({cause}); the intervals of {', '.join(joints)} are "
+                        "widened for it by a rule of thumb, not a calibrated bias. `identcheck diagnose` models the "
+                        "motion.",
              "markers": [m.marker for m in moving], "joints": joints, "kind": "model_misfit"}]
 
 

@@ -263,6 +263,10 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
               if issubclass(c.category, UserWarning)]
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
+    if tree.starts_left_out:
+        notes.append({"kind": "starts_left_out", "message": (
+            f"{trial.source}: {tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations of candidate "
+            "joints were not tried (a cap on count and time): a joint listed unique could have a rival among them")})
     rep["warnings"] = list({n["message"]: n for n in notes}.values())
     if export is not None:
         if tree.best is None:
