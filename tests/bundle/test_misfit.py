@@ -1,0 +1,61 @@
+"""The misfit test: residuals that follow the joint angles are found; noise of any serial correlation is not
+mistaken for them."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.misfit import RATIO, angle_dependence, model_error_sd
+from identcheck.effects.registry import inject_effect
+from identcheck.fit.whole_tree import skeleton_of
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+
+
+def _ar1(rng, shape, sd, phi):
+    out = np.empty(shape)
+    out[0] = rng.normal(0, sd, shape[1:])
+    e = rng.normal(0, sd * np.sqrt(1 - phi ** 2), shape)
+    for f in range(1, shape[0]):
+        out[f] = phi * out[f - 1] + e[f]
+    return out
+
+
+def _fit(model, trial):
+    chain = skeleton_of(model, trial)
+    data = trial.select(chain.labels).as_array()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return fit_chain(chain, data, initial_state(chain, data), max_iter=100), data
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), phi=st.sampled_from([0.0, 0.5, 0.9]), sd=st.floats(0.3, 1.2))
+def test_noise_of_any_correlation_is_not_misfit(examples, seed, phi, sd):
+    """Rigid leg, white or AR(1) noise: no marker's ratio exceeds the threshold, no model error."""
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    noisy = sim.trial.replace(xyz=sim.trial.as_array() + _ar1(rng, sim.trial.as_array().shape, sd, phi))
+    fit, data = _fit(model, noisy)
+    mis = angle_dependence(fit, data)
+    assert max(m.ratio for m in mis.values()) < RATIO, {k: round(m.ratio, 1) for k, m in mis.items()}
+    assert all(model_error_sd(fit.chain, j, mis) == 0 for j in fit.chain.joints)
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10 ** 5))
+def test_skin_motion_is_found_on_its_marker(examples, seed):
+    """A marker that wobbles with its joint's angle (the simulator's soft tissue, 5-10 mm): its ratio is far
+    above the threshold, and its joint gets a model error."""
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    sim = inject_effect(simulate(model, n_frames=600, noise_mm=0.5, seed=seed), "soft_tissue", seed=seed)
+    where = sim.settings["effect"]["where"]
+    marker = where["markers"][0]
+    fit, data = _fit(model, sim.trial)
+    mis = angle_dependence(fit, data)
+    assert mis[marker].moves, {k: round(m.ratio, 1) for k, m in mis.items()}
+    assert model_error_sd(fit.chain, where["joint"], mis) > 0
