@@ -84,8 +84,8 @@ def angle_dependence(fit, data) -> dict:
             X = np.column_stack([np.ones(ok.sum()), basis[ok]])
             y = local[ok] - local[ok].mean(axis=0)
             beta = np.linalg.lstsq(X, y, rcond=None)[0]
-            fitted = X[:, 1:] @ beta[1:]
-            rest = y - X @ beta
+            fitted = X @ beta                # y is centred, so is its fit: the intercept must not be left out
+            rest = y - fitted
             lag1 = float(np.clip(np.median([_lag1(rest[:, c]) for c in range(3)]), 0.0, 0.99))
             n_eff = max(len(rest) * (1 - lag1) / (1 + lag1), 1.0)
             spurious = 3 * float(np.mean(rest ** 2)) * K / n_eff
