@@ -86,6 +86,11 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     return {"stem": stem, "rows": rows, "seconds": seconds, "misfit_flagged": misfit}
 
 
+def _finite(x) -> float | None:
+    """A JSON-safe number: None for an unbounded (infinite) one."""
+    return round(float(x), 3) if np.isfinite(x) else None
+
+
 def summarise(results: list, categories: dict) -> dict:
     groups = defaultdict(list)
     for r in results:
@@ -106,7 +111,7 @@ def summarise(results: list, categories: dict) -> dict:
             "trials": len(rs), "errors": sum("error" in r for r in rs), "distances": len(scored),
             "coverage": round(float(np.mean([x["covered"] for x in scored])), 4) if scored else None,
             "coverage_determined": round(float(np.mean([x["covered"] for x in det])), 4) if det else None,
-            "median_half_width_mm": round(float(np.median([x["half"] for x in scored])), 3) if scored else None,
+            "median_half_width_mm": _finite(np.median([x["half"] for x in scored])) if scored else None,
             "rms_error_mm": round(float(np.sqrt(np.mean([x["err"] ** 2 for x in scored]))), 3) if scored else None,
             "verdicts": dict(verdicts),
             "confidently_wrong_joints": len({(r["stem"], x["joint"]) for r in rs for x in r.get("rows", []) if x.get("wrong")}),
@@ -173,7 +178,7 @@ def main(argv=None) -> int:
           f"{'wrong':>5} {'misfit':>6}  verdicts")
     for key, s in summary.items():
         print(f"{key:<40} {s['trials']:>6} {s['distances']:>5} {s['coverage'] or 0:>6.3f} "
-              f"{s['coverage_determined'] or 0:>6.3f} {s['median_half_width_mm'] or 0:>7.2f} {s['rms_error_mm'] or 0:>7.2f} "
+              f"{s['coverage_determined'] or 0:>6.3f} {s['median_half_width_mm'] if s['median_half_width_mm'] is not None else float('inf'):>7.2f} {s['rms_error_mm'] or 0:>7.2f} "
               f"{s['confidently_wrong_joints']:>5} {s['misfit_flagged']:>6.2f}  {s['verdicts']}")
     figure(summary, a.figure)
     write_json(a.out, a.key, {"summary": summary, "trials_dir": str(a.trials), "n_trials": len(results),

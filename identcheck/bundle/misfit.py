@@ -15,11 +15,16 @@ products). Under noise alone, AR(1) with coefficient φ, the regression explains
 noise of any correlation; skin motion of a millimetre or more makes it hundreds. A marker whose ratio exceeds
 :data:`RATIO` moves with the angles.
 
-What follows for the joints (:func:`model_error_sd`): the bias a rigid fit takes from skin motion grows
-with that motion but is not estimable from one trial, so the explained motion of the joint's markers, times
-:data:`MODEL_ERROR_PER_MM`, is added in quadrature to each marker distance's standard error. That is a rule
-of thumb, not a calibrated model of the bias: the report says so, and names ``identcheck diagnose``, which
-models the motion, as the next step.
+What follows for the joints (:func:`model_error_sd`): the bias a rigid fit takes from skin motion is not
+estimable from one trial, but its size is: a marker that moves by ``e`` with the joint's angle is, to first
+order, indistinguishable from a joint centre displaced by ``e / θ`` (θ the joint's RMS excursion in
+radians: ``(R(θ) − I) Δc ≈ θ × Δc``), so a joint moved through ±15° takes four times the bias of one moved
+through ±60° from the same skin motion. The model-error standard deviation is the larger of
+``e / max(θ, θ_min)`` and :data:`MODEL_ERROR_PER_MM` · e, with e the largest angle-following motion among
+the joint's markers; it is added in quadrature to each marker distance's standard error. That is an order of
+magnitude, not a calibrated model of the bias: the report says so, and names ``identcheck diagnose``, which
+models the motion, as the next step. A joint beside a segment with fewer than three markers takes the
+largest motion seen anywhere in the trial: such a segment cannot show its own.
 """
 from __future__ import annotations
 
@@ -33,8 +38,9 @@ RATIO = 10.0
 """Explained mean square over what correlated noise would explain, beyond which a marker moves with the
 joint angles (noise alone gives about 1: 0.7-2.7 over 24 simulated trials of white and AR(1) noise)."""
 MODEL_ERROR_PER_MM = 1.5
-"""Standard deviation (mm) of the model error added to a joint's marker distances per mm of angle-following
-motion of its markers: the 95 % interval widens by about three times the motion the residual shows."""
+"""Smallest model-error standard deviation (mm) per mm of angle-following motion of a joint's markers."""
+MIN_EXCURSION_RAD = 0.05
+"""A joint's RMS excursion is taken as at least this (3°) in ``e / θ``."""
 
 
 @dataclass(frozen=True)
@@ -101,8 +107,27 @@ def _lag1(x: np.ndarray) -> float:
     return float(x[1:] @ x[:-1]) / den if den > 0 else 0.0
 
 
-def model_error_sd(chain, joint: str, misfit: dict) -> float:
-    """The model-error standard deviation (mm) for `joint`'s marker distances: MODEL_ERROR_PER_MM times the
-    largest angle-following motion among the markers of its two segments (0 when none moves)."""
-    moved = [m.explained_mm for m in misfit.values() if m.moves and m.segment in (chain.parent[joint], chain.child[joint])]
-    return MODEL_ERROR_PER_MM * max(moved) if moved else 0.0
+def excursion_rad(fit, joint: str) -> float:
+    """RMS angular excursion of a joint about its mean pose over the trial, radians."""
+    a = joint_angles(fit)[joint]
+    dev = a - a.mean(axis=0)
+    return float(np.sqrt(np.mean(np.sum(dev ** 2, axis=1))))
+
+
+def model_error_sd(fit, joint: str, misfit: dict) -> float:
+    """The model-error standard deviation (mm) for `joint`'s marker distances (see the module docstring):
+    the larger of e / θ and MODEL_ERROR_PER_MM · e, e the largest angle-following motion among the markers of
+    its two segments (0 when none moves)."""
+    chain = fit.chain
+    sides = (chain.parent[joint], chain.child[joint])
+    moved = [m.explained_mm for m in misfit.values() if m.moves and m.segment in sides]
+    anywhere = [m.explained_mm for m in misfit.values() if m.moves]
+    if any(len(chain.seg_markers[s]) < 3 for s in sides) and anywhere:
+        # a segment with fewer than three markers cannot show its own skin motion (no distance within it
+        # changes, and the joint absorbs what would show in the residual): skin motion seen anywhere in the
+        # trial may be there unseen, as large
+        moved = moved + [max(anywhere)]
+    if not moved:
+        return 0.0
+    e = max(moved)
+    return max(MODEL_ERROR_PER_MM * e, e / max(excursion_rad(fit, joint), MIN_EXCURSION_RAD))

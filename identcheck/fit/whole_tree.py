@@ -207,7 +207,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
         delta = (m.fit.rss - best.fit.rss) / scale
         others.append((m, float(delta), float(chdtrc(1, delta))))
     misfit = angle_dependence(best.fit, data)
-    model_error = {j: model_error_sd(chain, j, misfit) for j in chain.joints}
+    model_error = {j: model_error_sd(best.fit, j, misfit) for j in chain.joints}
     model_error = {j: sd for j, sd in model_error.items() if sd > 0}
     best = _with_model_error(replace(best, misfit=misfit), model_error)
     others = [(_with_model_error(m, model_error), delta, p) for m, delta, p in others]
@@ -247,25 +247,33 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     w = np.ones(data.shape[:2])
     for c in cut:
         w[:, chain.downstream[c]] = 0.0
-    def refit(m: Minimum) -> Minimum:
+    seen = np.where(w[..., None] > 0, data, np.nan)         # the markers below the cut are not data here
+
+    def refit(m: Minimum, errors: dict) -> Minimum:
         fit = fit_chain(chain, data, m.fit.state, weights=w, max_iter=MAX_ITER)
         cov = covariance(fit, data, weights=w)
         grads = distance_gradients(chain, fit.state, len(cov.information))
         dist = dict(m.distances)
         for j in keep:
-            dist[j] = {k: (d, float(np.hypot(cov.se(g), model_error.get(j, 0.0)))) for k, (d, g) in grads[j].items()}
+            dist[j] = {k: (d, float(np.hypot(cov.se(g), errors.get(j, 0.0)))) for k, (d, g) in grads[j].items()}
         return replace(m, fit=fit, distances=dist)
 
-    upstream = refit(best)
+    first = fit_chain(chain, data, best.fit.state, weights=w, max_iter=MAX_ITER)
+    misfit = angle_dependence(first, seen)                  # judged on the fit the joints above come from
+    errors = dict(model_error)
+    errors.update({j: model_error_sd(first, j, misfit) for j in keep})
+    errors = {j: sd for j, sd in errors.items() if sd > 0}
+    upstream = refit(replace(best, fit=first), errors)
     rivals = []
     for m, _, _ in others[:MAX_RIVALS]:
-        r = refit(m)
+        r = refit(m, errors)
         if any(not _same(r, upstream, [j]) for j in keep):
             delta = max(r.fit.rss - upstream.fit.rss, 0.0) / scale
             rivals.append((r, float(delta), float(chdtrc(1, delta))))
     dist = {j: (upstream.distances[j] if j in keep else best.distances[j]) for j in chain.joints}
     intervals = {j: v for j, v in best.intervals.items() if j not in keep}
-    return replace(best, distances=dist, intervals=intervals, rivals={j: rivals for j in keep})
+    return replace(best, distances=dist, intervals=intervals, rivals={j: rivals for j in keep},
+                   model_error=errors, misfit={**best.misfit, **{k: v for k, v in misfit.items()}})
 
 
 def _with_model_error(m: Minimum, model_error: dict) -> Minimum:

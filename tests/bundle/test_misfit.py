@@ -43,7 +43,7 @@ def test_noise_of_any_correlation_is_not_misfit(examples, seed, phi, sd):
     fit, data = _fit(model, noisy)
     mis = angle_dependence(fit, data)
     assert max(m.ratio for m in mis.values()) < RATIO, {k: round(m.ratio, 1) for k, m in mis.items()}
-    assert all(model_error_sd(fit.chain, j, mis) == 0 for j in fit.chain.joints)
+    assert all(model_error_sd(fit, j, mis) == 0 for j in fit.chain.joints)
 
 
 @settings(max_examples=4, deadline=None)
@@ -58,4 +58,4 @@ def test_skin_motion_is_found_on_its_marker(examples, seed):
     fit, data = _fit(model, sim.trial)
     mis = angle_dependence(fit, data)
     assert mis[marker].moves, {k: round(m.ratio, 1) for k, m in mis.items()}
-    assert model_error_sd(fit.chain, where["joint"], mis) > 0
+    assert model_error_sd(fit, where["joint"], mis) > 0
