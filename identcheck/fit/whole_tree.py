@@ -400,6 +400,10 @@ def joint_answers(tree: TreeFit, model) -> dict:
                 "intervals or markers moving with the angles"))
         if j in best.model_error:
             practical["model_error_sd_mm"] = round(best.model_error[j], 3)
+            if practical["verdict"] != "determined":
+                practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
+                                        "for markers that move with the joint angles (see warnings; `identcheck "
+                                        "diagnose` models that motion)")
         ci = _ci(dist)
         method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
         for k, (interval, how) in best.intervals.get(j, {}).items():
