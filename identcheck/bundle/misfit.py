@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identcheck.bundle.hypothesis import angle_basis, joint_angles
+from identcheck.bundle.uncertainty import lag1
 
 RATIO = 10.0
 """Explained mean square over what correlated noise would explain, beyond which a marker moves with the
@@ -92,19 +93,13 @@ def angle_dependence(fit, data) -> dict:
             beta = np.linalg.lstsq(X, y, rcond=None)[0]
             fitted = X @ beta                # y is centred, so is its fit: the intercept must not be left out
             rest = y - fitted
-            lag1 = float(np.clip(np.median([_lag1(rest[:, c]) for c in range(3)]), 0.0, 0.99))
-            n_eff = max(len(rest) * (1 - lag1) / (1 + lag1), 1.0)
+            rho = float(np.clip(np.median([lag1(rest[:, c]) for c in range(3)]), 0.0, 0.99))
+            n_eff = max(len(rest) * (1 - rho) / (1 + rho), 1.0)
             spurious = 3 * float(np.mean(rest ** 2)) * K / n_eff
             explained = float(np.mean(np.sum(fitted ** 2, axis=1)))
             out[chain.labels[col]] = MarkerMisfit(chain.labels[col], seg, float(np.sqrt(explained)),
-                                                  explained / max(spurious, 1e-300), lag1)
+                                                  explained / max(spurious, 1e-300), rho)
     return out
-
-
-def _lag1(x: np.ndarray) -> float:
-    x = x - x.mean()
-    den = float(x @ x)
-    return float(x[1:] @ x[:-1]) / den if den > 0 else 0.0
 
 
 def excursion_rad(fit, joint: str) -> float:

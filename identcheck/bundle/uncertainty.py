@@ -117,7 +117,7 @@ def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.nd
     return g, 0.5 * (S + S.T), r
 
 
-def _lag1(x: np.ndarray) -> float:
+def lag1(x: np.ndarray) -> float:
     """Lag-1 autocorrelation of a series (F,) (0 when it does not vary)."""
     x = x - x.mean()
     den = float(x @ x)
@@ -132,7 +132,7 @@ def bartlett_bandwidth(scores: np.ndarray) -> int:
     use = var > 1e-12 * max(var.max(), 1e-300)
     if not use.any() or F < 4:
         return 0
-    rho = np.clip([_lag1(scores[:, p]) for p in np.flatnonzero(use)], -0.97, 0.97)
+    rho = np.clip([lag1(scores[:, p]) for p in np.flatnonzero(use)], -0.97, 0.97)
     v = var[use]
     num = np.sum(v ** 2 * 4 * rho ** 2 / ((1 - rho) ** 6 * (1 + rho) ** 2))
     den = np.sum(v ** 2 / (1 - rho) ** 4)
@@ -156,7 +156,7 @@ def covariance(fit, data, weights=None) -> Covariance:
     nu = max(3 * fit.n_samples - fit.n_params, 1)
     sigma = float(np.sqrt(fit.rss / nu))
     seen = np.any(r != 0, axis=2)
-    lags = [_lag1(r[seen[:, m], m, c]) for m in range(r.shape[1]) for c in range(3) if seen[:, m].sum() > 10]
+    lags = [lag1(r[seen[:, m], m, c]) for m in range(r.shape[1]) for c in range(3) if seen[:, m].sum() > 10]
     L = bartlett_bandwidth(g)
     H = long_run_covariance(g, L)
     # H estimates Σ g gᵀ; at a least-squares optimum each frame's own score uses a residual that has
