@@ -33,7 +33,7 @@ if str(ROOT) not in sys.path:
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
-from results_io import machine_info, write_json  # noqa: E402
+from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
 
 
 def evaluate(trial_dir: Path, entry: dict) -> dict:
@@ -90,29 +90,16 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("trials", type=Path)
     ap.add_argument("--limit", type=int, default=None)
-    ap.add_argument("--shard", default=None, metavar="K/N")
-    ap.add_argument("--rows", type=Path, default=None)
-    ap.add_argument("--merge", type=Path, nargs="+", default=None)
+    add_shard_arguments(ap)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     a = ap.parse_args(argv)
     entries = json.loads((a.trials / "index.json").read_text())["trials"]
     entries = entries[:a.limit] if a.limit else entries
-    if a.merge:
-        results = [r for f in a.merge for r in json.loads(f.read_text())]
-    else:
-        if a.shard:
-            k0, n = (int(x) for x in a.shard.split("/"))
-            entries = entries[k0::n]
-        results = []
-        for k, e in enumerate(entries, 1):
-            r = evaluate(a.trials, e)
-            results.append(r)
-            print(f"[{k}/{len(entries)}] {r['stem']} truth {r.get('truth')} named {r.get('named')} "
-                  f"{r['seconds']:.0f}s" + (f" ERROR {r['error']}" if "error" in r else ""), file=sys.stderr)
-            if a.rows:
-                a.rows.write_text(json.dumps(results))
-        if a.shard:
-            return 0
+    results = run_trials(entries, lambda e: evaluate(a.trials, e), a, lambda k, n, e, r: (
+        f"[{k}/{n}] {r['stem']} truth {r.get('truth')} named {r.get('named')} {r['seconds']:.0f}s"
+        + (f" ERROR {r['error']}" if "error" in r else "")))
+    if results is None:
+        return 0
     s = summarise(results)
     print(f"single effects: {s['single']['named_first']}/{s['single']['trials']} named first, "
           f"{s['single']['named_any']}/{s['single']['trials']} named at all")

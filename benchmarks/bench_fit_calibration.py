@@ -45,7 +45,7 @@ if str(ROOT) not in sys.path:
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
-from results_io import machine_info, write_json  # noqa: E402
+from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
 
 WRONG_FACTOR = 3.0
 WRONG_MIN_MM = 2.0
@@ -147,32 +147,16 @@ def main(argv=None) -> int:
     ap.add_argument("--figure", type=Path, default=ROOT / "benchmarks" / "fit_calibration.png")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     ap.add_argument("--key", default="fit_calibration")
-    ap.add_argument("--shard", default=None, metavar="K/N",
-                    help="evaluate only every N-th trial from the K-th (run N shards side by side) and write the "
-                         "per-trial rows to --rows; --merge combines them")
-    ap.add_argument("--rows", type=Path, default=None, help="where a shard writes its per-trial rows (JSON)")
-    ap.add_argument("--merge", type=Path, nargs="+", default=None, help="row files of shards to summarise together")
+    add_shard_arguments(ap)
     a = ap.parse_args(argv)
     index = json.loads((a.trials / "index.json").read_text())
     entries = index["trials"] if isinstance(index, dict) else index
     entries = entries[:a.limit] if a.limit else entries
     categories = {(e.get("stem") or e.get("name") or e.get("id")): e["category"] for e in entries}
-    if a.merge:
-        results = [r for f in a.merge for r in json.loads(f.read_text())]
-    else:
-        if a.shard:
-            k0, n = (int(x) for x in a.shard.split("/"))
-            entries = entries[k0::n]
-        results = []
-        for k, e in enumerate(entries, 1):
-            r = evaluate(a.trials, e)
-            results.append(r)
-            print(f"[{k}/{len(entries)}] {r['stem']} {e['category']} {r['seconds']:.1f}s"
-                  + (f" ERROR {r['error']}" if "error" in r else ""), file=sys.stderr)
-            if a.rows:
-                a.rows.write_text(json.dumps(results))
-        if a.shard:
-            return 0
+    results = run_trials(entries, lambda e: evaluate(a.trials, e), a, lambda k, n, e, r: (
+        f"[{k}/{n}] {r['stem']} {e['category']} {r['seconds']:.1f}s" + (f" ERROR {r['error']}" if "error" in r else "")))
+    if results is None:
+        return 0
     summary = summarise(results, categories)
     print(f"{'category':<40} {'trials':>6} {'dist':>5} {'cover':>6} {'c.det':>6} {'half':>7} {'rmse':>7} "
           f"{'wrong':>5} {'misfit':>6}  verdicts")

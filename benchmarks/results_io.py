@@ -40,3 +40,32 @@ def machine_info(**extra) -> dict:
     return {"nproc": os.cpu_count(), "numpy": numpy.__version__, "scipy": scipy.__version__,
             "sympy": sympy.__version__, "python": platform.python_version(), "platform": platform.platform(),
             "processor": platform.processor() or platform.machine(), "loadavg": list(os.getloadavg()), **extra}
+
+
+def add_shard_arguments(ap) -> None:
+    """``--shard K/N``, ``--rows FILE`` and ``--merge FILES...``: run a long per-trial benchmark as N processes
+    side by side, then summarise their rows together (:func:`run_trials`)."""
+    ap.add_argument("--shard", default=None, metavar="K/N",
+                    help="evaluate only every N-th trial from the K-th and write the per-trial rows to --rows")
+    ap.add_argument("--rows", type=Path, default=None, help="where the per-trial rows are written (JSON)")
+    ap.add_argument("--merge", type=Path, nargs="+", default=None, help="row files of shards to summarise together")
+
+
+def run_trials(entries: list, evaluate, args, describe) -> list | None:
+    """Per-trial rows: read from ``args.merge``, or computed by ``evaluate(entry)`` for this shard's entries,
+    each announced on stderr by ``describe(k, n, entry, row)`` and saved to ``args.rows`` as it comes. Returns
+    None for a shard (its rows are in ``args.rows``; the merge run summarises)."""
+    import sys
+
+    if args.merge:
+        return [r for f in args.merge for r in json.loads(f.read_text())]
+    if args.shard:
+        k0, n = (int(x) for x in args.shard.split("/"))
+        entries = entries[k0::n]
+    rows = []
+    for k, e in enumerate(entries, 1):
+        rows.append(evaluate(e))
+        print(describe(k, len(entries), e, rows[-1]), file=sys.stderr)
+        if args.rows:
+            args.rows.write_text(json.dumps(rows))
+    return None if args.shard else rows

@@ -107,6 +107,12 @@ def simulate_file(model_path, out_path, seed: int = 0, effect: str | None = None
     return simulate(model_path, out_path, seed=seed, effect=effect, effect_seed=effect_seed, **kw)
 
 
+def _frames(trial, frames: str | None):
+    """The trial (read if a path), cut to ``frames`` (``START:END`` in the file's numbering) when given."""
+    data = read_trial(trial)
+    return data.frames(frames) if frames else data
+
+
 @_one_blas_thread
 def fit(model, trial, progress=None, frames: str | None = None, export_markers=None):
     """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
@@ -139,9 +145,8 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     from identcheck.fit.result import FitResult
     from identcheck.fit.workflow import fit_trial
 
-    data = read_trial(trial)
-    data = data.frames(frames) if frames else data
-    return FitResult.from_dict(fit_trial(load_model(model), data, progress=progress, export=export_markers))
+    return FitResult.from_dict(fit_trial(load_model(model), _frames(trial, frames), progress=progress,
+                                         export=export_markers))
 
 
 @_one_blas_thread
@@ -172,9 +177,7 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
     from identcheck.diagnose import workflow
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
-    data = read_trial(trial)
-    data = data.frames(frames) if frames else data
-    return workflow.diagnose(load_model(model), data, progress=progress, max_steps=steps)
+    return workflow.diagnose(load_model(model), _frames(trial, frames), progress=progress, max_steps=steps)
 
 
 @_one_blas_thread

@@ -12,8 +12,9 @@ DERIVATIONS = {
 def get(name: str, disk_cache: bool = True) -> Derivation:
     """The named derivation: run once per process (each module caches it), and, for the solvers that only
     need its results, kept on disk between processes (:mod:`identcheck.derive.cache`) so that ``fit`` does
-    not re-derive for seconds at every start. ``identcheck derive`` passes ``disk_cache=False``: it exists to
-    derive again."""
+    not re-derive for seconds at every start. ``identcheck derive`` and the certificates pass
+    ``disk_cache=False``: the one exists to derive again, and the others print the derived expressions, whose
+    printed form a pickle round trip can change (``(2*d**2 + r**2)/2`` came back as ``d**2 + r**2/2``)."""
     import importlib
 
     if disk_cache:
@@ -27,10 +28,10 @@ CASE_DERIVATION = {"revolute(2,1)": "revolute21", "spherical(3,1)": "spherical31
                    "spherical(2,2)": "spherical22"}
 
 
-def for_case(case) -> Derivation:
-    """The derivation that yields the linear form M·Y = K of a case."""
+def for_case(case, disk_cache: bool = True) -> Derivation:
+    """The derivation that yields the linear form M·Y = K of a case (see :func:`get` for ``disk_cache``)."""
     try:
-        return get(CASE_DERIVATION[case.key])
+        return get(CASE_DERIVATION[case.key], disk_cache=disk_cache)
     except KeyError:
         raise RuntimeError(f"no derivation of the linear form for {case.key} yet") from None
 

@@ -125,7 +125,7 @@ def undetermined(h: Hypothesis) -> int:
 # ---------------------------------------------------------------------- the loop
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial`."""
-    trial.require_visible(model.markers, {m: s for s in model.segments for m in model.segments[s].markers})
+    trial.require_visible(model.markers, {m: model.marker_segment(m) for m in model.markers})
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
     noise = noise_floor(data, model.markers, {s: model.segments[s].markers for s in model.segments})

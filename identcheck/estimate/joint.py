@@ -71,10 +71,16 @@ class JointEstimate:
         return float(np.median(d)) if len(d) else float("nan")
 
     def virtual_markers(self, name: str) -> dict:
-        """World trajectories that sit still on both links: the centre, or two points of the hinge."""
+        """World trajectories that sit still on both links: the centre, or two points of the hinge (names from
+        :func:`virtual_names`)."""
         if self.kind == "spherical":
-            return {f"{name}.centre": self.centre}
-        return {f"{name}.axis0": self.point, f"{name}.axis1": self.point + AXIS_HANDLE_MM * self.direction}
+            return dict(zip(virtual_names(name, "spherical"), [self.centre]))
+        return dict(zip(virtual_names(name, "revolute"), [self.point, self.point + AXIS_HANDLE_MM * self.direction]))
+
+
+def virtual_names(joint: str, kind: str) -> tuple:
+    """The names of a joint's virtual markers: ``JOINT.centre`` (ball), ``JOINT.axis0``, ``JOINT.axis1`` (hinge)."""
+    return (f"{joint}.centre",) if kind == "spherical" else (f"{joint}.axis0", f"{joint}.axis1")
 
 
 def _full(F: int, frames: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -11,15 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import forward
-from identcheck.estimate.joint import AXIS_HANDLE_MM
+from identcheck.estimate.joint import AXIS_HANDLE_MM, virtual_names
 from identcheck.trial import Trial
 
-VIRTUAL_SUFFIXES = ("centre", "axis0", "axis1")
-
-
 def reserved_names(model) -> set:
-    """The virtual-marker names of the model's joints (no measured marker may carry one)."""
-    return {f"{j}.{s}" for j in model.joints for s in VIRTUAL_SUFFIXES}
+    """The virtual-marker names of the model's joints, of either type (no measured marker may carry one)."""
+    return {n for j in model.joints for kind in ("spherical", "revolute") for n in virtual_names(j, kind)}
 
 
 def joint_trajectories(fit) -> dict:
@@ -29,11 +26,11 @@ def joint_trajectories(fit) -> dict:
     out = {}
     for j in chain.joints:
         if chain.types[j] == "spherical":
-            out[f"{j}.centre"] = centre[j]
+            points = [centre[j]]
         else:
             axis = np.einsum("fij,j->fi", R[chain.parent[j]], fit.state.axis[j])
-            out[f"{j}.axis0"] = centre[j]
-            out[f"{j}.axis1"] = centre[j] + AXIS_HANDLE_MM * axis
+            points = [centre[j], centre[j] + AXIS_HANDLE_MM * axis]
+        out.update(zip(virtual_names(j, chain.types[j]), points))
     return out
 
 

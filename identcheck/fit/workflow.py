@@ -246,7 +246,7 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
 
     from identcheck.fit.export import export_markers, reserved_names
 
-    trial.require_visible(model.markers, {m: s for s in model.segments for m in model.segments[s].markers})
+    trial.require_visible(model.markers, {m: model.marker_segment(m) for m in model.markers})
     clash = sorted(reserved_names(model) & (set(trial.labels) | set(model.markers)))
     if clash:
         raise InputError([f"marker {m!r} carries the name fit gives a joint's virtual marker; rename it" for m in clash],
