@@ -24,6 +24,8 @@ import json
 import sys
 import time
 import warnings
+
+import numpy as np
 from collections import Counter, defaultdict
 from pathlib import Path
 
@@ -31,9 +33,38 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "heldout_effects"))    # its generator: the truth's simulate
 
 import identcheck as ic  # noqa: E402
 from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
+
+
+def visible_chi2(trial_dir: Path, entry: dict) -> float | None:
+    """What of the trial's effects a rigid-joint model cannot absorb, in units of the noise: the noise-free trial
+    (the generator's own ``simulate(spec, noise=False)``) fitted by the rigid whole-chain model, its residual
+    prewhitened with the trial's true noise correlation, over the true noise variance. An effect whose visible
+    χ² is a few tens or less is below what any method could name from this trial: the misses are read against it."""
+    import generator as heldout
+    from identcheck.bundle.chain import fit_chain, initial_state
+    from identcheck.bundle.hypothesis import whitened_rss
+    from identcheck.skeleton import Skeleton
+
+    truth = json.loads((trial_dir / f"{entry['stem']}.truth.json").read_text())
+    spec = truth["spec"]
+    X = heldout.simulate(spec, noise=False)
+    X = X[0] if isinstance(X, tuple) else X
+    noise = truth["params"]["noise"]
+    model = ic.load_model(trial_dir / f"{entry['stem']}.toml")
+    names = [m for _, m in heldout.marker_order(heldout.geometry_from_json(spec["geometry"]))]
+    data = X[:, [names.index(m) for m in model.markers]]
+    chain = Skeleton.from_model(model)
+    try:
+        fit = fit_chain(chain, data, initial_state(chain, data), max_iter=40)
+    except Exception:                     # noqa: BLE001 - a trial the rigid model cannot even start on
+        return None
+    phi = float(noise.get("phi") or 0.0)
+    w = np.all(np.isfinite(data), axis=2).astype(float)
+    return float(whitened_rss(data - fit.pred, w, phi) / noise["sigma_mm"] ** 2)
 
 
 def evaluate(trial_dir: Path, entry: dict) -> dict:
@@ -47,7 +78,9 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
         except ic.InputError as exc:
             return {"stem": stem, "error": str(exc), "seconds": time.process_time() - t0}
     named = [e["name"] for e in diag.get("effects", [])]
-    return {"stem": stem, "named": named, "truth": [e["name"] for e in entry["effects"]],
+    visible = visible_chi2(trial_dir, entry) if entry["effects"] else None
+    return {"stem": stem, "named": named, "visible_chi2": None if visible is None else round(visible, 1),
+            "noise": entry["category"]["noise"], "motion": entry["category"]["motion"], "truth": [e["name"] for e in entry["effects"]],
             "magnitudes": [round(e.get("magnitude_mm", float("nan")), 2) for e in entry["effects"]],
             "shapes": [e.get("shape", "") for e in entry["effects"]], "kind": entry["category"]["kind"],
             "seconds": time.process_time() - t0}
@@ -65,7 +98,8 @@ def summarise(results: list) -> dict:
         confusion[r["truth"][0]][first] += 1
         if first != r["truth"][0]:
             misses.append({"stem": r["stem"], "truth": r["truth"][0], "shape": r["shapes"][0],
-                           "magnitude_mm": r["magnitudes"][0], "named": r["named"]})
+                           "magnitude_mm": r["magnitudes"][0], "named": r["named"],
+                           "visible_chi2": r.get("visible_chi2"), "noise": r.get("noise")})
     per_effect = {}
     for name, row in sorted(confusion.items()):
         n = sum(row.values())
@@ -111,7 +145,8 @@ def main(argv=None) -> int:
         others = {k: v for k, v in s["confusion"][name].items() if k != name}
         print(f"{name:<20} {p['trials']:>6} {p['named_first']:>6} {p['named_any']:>5}  {others}")
     for m in s["misses"]:
-        print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm) -> {m['named'] or 'nothing'}")
+        print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm, visible χ² "
+              f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
     write_json(a.out, "diagnose_heldout", {"summary": s, "trials_dir": str(a.trials), "machine": machine_info()})
     return 0
 

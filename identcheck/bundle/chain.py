@@ -10,7 +10,8 @@ the Schur complement (bundle adjustment), so a 1500-frame trial costs a few smal
 
 Effects add to this model through :class:`Terms`: marker offsets on their segment and joint-centre
 offsets in the parent, each a fixed basis of per-frame functions times fitted 3-vectors (soft tissue,
-a slipped marker, a translating joint). Effects of the recording (swapped labels, a delay, a distorted
+a slipped marker, a translating joint), and a hinge's second rotation about a fixed axis perpendicular
+to it, its angle a fixed basis times fitted coefficients (a knee's varus/valgus or axial play). Effects of the recording (swapped labels, a delay, a distorted
 volume, gross errors) change the data or the weights instead.
 
 Rotation updates are applied on the left in the world frame, so the Jacobian of every marker with
@@ -41,24 +42,35 @@ class Terms:
 
     ``markers``: list of (column, basis (F, K)): the marker's position on its segment moves by
     ``basis @ B`` (B (K, 3), segment frame). ``centres``: list of (joint, basis (F, K)): the joint's
-    centre in the parent moves by ``basis @ D``. ``world``: list of (columns (m,), field (F, m, 3)):
+    centre in the parent moves by ``basis @ D``. ``rotations``: list of (hinge, basis (F, K), β₀): the
+    hinge's relative rotation becomes ``Rot(a, θ) Exp(ψ u) rest`` with ψ = ``basis @ p[:K]`` (p (K + 1, 1))
+    and u the unit vector at angle β = β₀ + p[K] in the plane perpendicular to the hinge axis a
+    (:func:`tangents`): a second rotation about a fitted axis that turns with the child. ``world``: list of (columns (m,), field (F, m, 3)):
     those markers' predictions move by a scalar times the field (a delay's velocity, a distortion's
-    basis field), in the world.
+    basis field), in the world. Parameters are kept in that order: markers, centres, rotations, world.
     """
 
     markers: list = field(default_factory=list)
     centres: list = field(default_factory=list)
     world: list = field(default_factory=list)
+    rotations: list = field(default_factory=list)
 
     def size(self) -> int:
-        return 3 * sum(b.shape[1] for _, b in self.markers + self.centres) + len(self.world)
+        return 3 * sum(b.shape[1] for _, b in self.markers + self.centres) \
+            + sum(b.shape[1] + 1 for _, b, _ in self.rotations) + len(self.world)
 
     def shapes(self) -> list:
         """Shape of each term's parameters, in ``State.term_params`` order."""
-        return [(b.shape[1], 3) for _, b in self.markers + self.centres] + [(1,)] * len(self.world)
+        return [(b.shape[1], 3) for _, b in self.markers + self.centres] \
+            + [(b.shape[1] + 1, 1) for _, b, _ in self.rotations] + [(1,)] * len(self.world)
+
+    def ordered(self) -> list:
+        """Every term in ``State.term_params`` order."""
+        return self.markers + self.centres + self.rotations + self.world
 
     def __add__(self, other: "Terms") -> "Terms":
-        return Terms(self.markers + other.markers, self.centres + other.centres, self.world + other.world)
+        return Terms(self.markers + other.markers, self.centres + other.centres, self.world + other.world,
+                     self.rotations + other.rotations)
 
 
 @dataclass
@@ -114,14 +126,31 @@ def _exp(w: np.ndarray) -> np.ndarray:
     return rotvec_matrix(w)
 
 
+def second_axis(axis: np.ndarray, beta: float) -> np.ndarray:
+    """The unit vector at angle β in the plane perpendicular to `axis` (from :func:`tangents`)."""
+    b1, b2 = tangents(axis)
+    return np.cos(beta) * b1 + np.sin(beta) * b2
+
+
+def _hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
+    """Each revolute joint's ``Rot(a, θ) Exp(ψ u)`` (F, 3, 3), the second rotations of ``terms.rotations``
+    included: the relative rotation is this times the rest rotation."""
+    n0 = len(terms.markers) + len(terms.centres)
+    extra = {}
+    for (j, basis, beta), p in zip(terms.rotations, s.term_params[n0:n0 + len(terms.rotations)]):
+        extra[j] = extra.get(j, 0.0) + (basis @ p[:-1])[:, 0, None] * second_axis(s.axis[j], beta + p[-1, 0])
+    return {j: _rot(s.axis[j], s.theta[j]) @ _exp(extra[j]) if j in extra else _rot(s.axis[j], s.theta[j])
+            for j in chain.joints if chain.types[j] == "revolute"}
+
+
 def forward(chain: Skeleton, terms: Terms, s: State):
     """Segment rotations/translations and predicted markers (F, M, 3) of state `s`."""
     F = s.root_R.shape[0]
     coffs = {}
     for (j, basis), D in zip(terms.centres, s.term_params[len(terms.markers):]):
         coffs[j] = coffs.get(j, 0.0) + basis @ D
-    rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else _rot(s.axis[j], s.theta[j]) @ s.rest[j]
-           for j in chain.joints}
+    turns = _hinge_turns(chain, terms, s)
+    rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else turns[j] @ s.rest[j] for j in chain.joints}
     cp = {j: s.c_parent[j] + coffs[j] if j in coffs else s.c_parent[j] for j in chain.joints}
     R, t, centre = chain_poses([(j, chain.parent[j], chain.child[j]) for j in chain.joints], chain.root,
                                s.root_R, s.root_t, rel, cp, s.c_child)
@@ -132,7 +161,7 @@ def forward(chain: Skeleton, terms: Terms, s: State):
     for seg in chain.segments:
         idx = chain.seg_markers[seg]
         pred[:, idx] = np.einsum("fij,fkj->fki", R[seg], local[:, idx]) + t[seg][:, None]
-    n0 = len(terms.markers) + len(terms.centres)
+    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
     for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
         pred[:, cols] += p[0] * fld
     return R, t, centre, pred
@@ -144,12 +173,46 @@ def tangents(a: np.ndarray):
     return b1, np.cross(a, b1)
 
 
+def _turn_rate(chain: Skeleton, terms: Terms, s: State, joint: str, move, h: float = 1e-6):
+    """The rotation vector (parent frame, (F, 3)) of ``d(turn)/dε · turnᵀ`` of the joint's
+    :func:`_hinge_turns` when ``move(state, ε)`` changes the state (central differences): where a second
+    rotation's axis moves with the hinge axis or its own angle β, no closed form is worth its length."""
+    def turn(eps):
+        st = s.copy()
+        move(st, eps)
+        return _hinge_turns(chain, terms, st)[joint]
+    dT = (turn(h) - turn(-h)) / (2 * h)
+    W = dT @ np.swapaxes(turn(0.0), 1, 2)
+    return 0.5 * np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], axis=1)
+
+
+def _tilt_axis(joint: str, direction: np.ndarray):
+    """``move`` for :func:`_turn_rate`: the hinge axis tilted by ε towards `direction`, as :func:`_apply` does."""
+    def move(st, eps):
+        a = st.axis[joint] + eps * direction
+        st.axis[joint] = a / np.linalg.norm(a)
+    return move
+
+
+def _turn_beta(index: int):
+    """``move`` for :func:`_turn_rate`: term parameter `index`'s β (its last row) moved by ε."""
+    def move(st, eps):
+        st.term_params[index] = st.term_params[index].copy()
+        st.term_params[index][-1, 0] += eps
+    return move
+
+
 def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
     """Per-frame Jacobian (F, M, 3, k) and constants' Jacobian (F, M, 3, P) of the predictions."""
     F, M = pred.shape[:2]
     k = chain.frame_dof()
     J = np.zeros((F, M, 3, k))
     eye = np.eye(3)
+    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    if terms.world:                                   # lever arms are the rigid bodies' points, not the fields'
+        pred = pred.copy()
+        for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
+            pred[:, cols] -= p[0] * fld
     d = pred - s.root_t[:, None]
     for a in range(3):
         J[..., a] = np.cross(eye[a], d)
@@ -157,6 +220,7 @@ def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
     col = 6
     n_const = 3 * M + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints) + terms.size()
     G = np.zeros((F, M, 3, n_const))
+    turns = _hinge_turns(chain, terms, s) if terms.rotations else {}
     for seg in chain.segments:
         for i in chain.seg_markers[seg]:
             G[:, i, :, 3 * i:3 * i + 3] = R[seg]
@@ -177,13 +241,17 @@ def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
         c += 6
         if chain.types[j] == "revolute":
             th = s.theta[j]
-            rot = _rot(s.axis[j], th)
-            for a in range(3):                              # rest rotation, pre-multiplied by Rot(a, θ)
+            rot = turns.get(j, None)
+            rot = _rot(s.axis[j], th) if rot is None else rot
+            for a in range(3):                              # rest rotation, pre-multiplied by Rot(a, θ) Exp(ψu)
                 w = np.einsum("fij,fj->fi", R[P], rot[:, :, a])
                 G[..., c + a][:, idx] = np.cross(w[:, None], dx)
             ax = s.axis[j]
             for a, b in enumerate(tangents(ax)):           # axis direction, tangent plane
-                wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * np.cross(ax, b)
+                if any(r[0] == j for r in terms.rotations):
+                    wp = _turn_rate(chain, terms, s, j, _tilt_axis(j, b))  # the second axis moves with it
+                else:
+                    wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * np.cross(ax, b)
                 w = np.einsum("fij,fj->fi", R[P], wp)
                 G[..., c + 3 + a][:, idx] = np.cross(w[:, None], dx)
             c += 5
@@ -197,6 +265,19 @@ def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
         for kk in range(basis.shape[1]):
             G[:, idx, :, c:c + 3] = (R[chain.parent[j]] * basis[:, kk, None, None])[:, None]
             c += 3
+    n_mc = len(terms.markers) + len(terms.centres)
+    for r, (j, basis, beta) in enumerate(terms.rotations):  # d/dψ: about R_P Rot(a, θ) u, through the centre
+        idx = chain.downstream[j]
+        dx = pred[:, idx] - centre[j][:, None]
+        u = second_axis(s.axis[j], beta + s.term_params[n_mc + r][-1, 0])
+        w = np.einsum("fij,fjk,k->fi", R[chain.parent[j]], _rot(s.axis[j], s.theta[j]), u)
+        turn = np.cross(w[:, None], dx)
+        for kk in range(basis.shape[1]):
+            G[..., c][:, idx] = turn * basis[:, kk, None, None]
+            c += 1
+        w = np.einsum("fij,fj->fi", R[chain.parent[j]], _turn_rate(chain, terms, s, j, _turn_beta(n_mc + r)))
+        G[..., c][:, idx] = np.cross(w[:, None], dx)
+        c += 1
     for (cols, fld) in terms.world:
         G[..., c][:, cols] = fld
         c += 1
@@ -310,7 +391,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 improved = True
                 done = cost - new <= tol * max(cost, 1e-300)
                 s, R, t, centre, pred, cost = trial, R2, t2, c2, p2, new
-                lam = max(lam / 3, 1e-12)
+                lam = max(lam / 10, 1e-12)
                 break
             lam *= 4
         if not improved or done:

@@ -39,6 +39,11 @@ class Context:
     def n_obs(self) -> int:
         return 3 * self.n_samples
 
+    def rss(self, h: "Hypothesis") -> float:
+        """What a hypothesis leaves unexplained, as the noise model sees it: its residual sum of squares
+        prewhitened with the noise's lag-1 coefficient (:func:`whitened_rss`; the plain RSS for white noise)."""
+        return h.rss if self.noise.lag1 <= 0 else whitened_rss(h.residuals(), h.weights, self.noise.lag1)
+
     def bic_gain(self, explained_mm2: float, n_params: int) -> float:
         """Bayesian information criterion gain with the noise known: the squared residual a change
         explains over σ², less ln(3N) per parameter it costs; > 0 means it earns its parameters."""
@@ -97,24 +102,41 @@ class Hypothesis:
 
 def carry_params(old: Terms, params: list, new: Terms) -> list:
     """Parameters for `new` terms: those it shares with `old` (the same term objects) keep their values."""
-    by_id = {id(t): p for t, p in zip(old.markers + old.centres + old.world, params)}
+    by_id = {id(t): p for t, p in zip(old.ordered(), params)}
     return [np.array(by_id[id(t)]) if id(t) in by_id else np.zeros(shape)
-            for t, shape in zip(new.markers + new.centres + new.world, new.shapes())]
+            for t, shape in zip(new.ordered(), new.shapes())]
+
+
+def whitened_rss(resid: np.ndarray, weights: np.ndarray, phi: float) -> float:
+    """Σ over every marker coordinate's series of ``(e_t − φ e_{t−1})² / (1 − φ²)`` (a run's first sample:
+    ``e_t²``), e the residual (F, M, 3) times √weight, a gap or a set-aside sample ending the run.
+
+    Minus twice the AR(1) log-likelihood up to constants, in the units of an RSS (its expectation under
+    noise alone is σ² per sample, as for white noise), so that BIC with correlated noise is the plain
+    formula with this in place of the RSS. Smooth residual is worth (1 − φ)/(1 + φ) of its plain sum of
+    squares, so slow correlated noise no longer passes for soft tissue or a translating joint, while a
+    spike or a step is worth as much as before or more."""
+    w = np.asarray(weights, dtype=float)
+    e = np.where((w > 0)[..., None], resid * np.sqrt(np.maximum(w, 0.0))[..., None], np.nan)
+    prev = np.concatenate([np.full_like(e[:1], np.nan), e[:-1]])
+    innov = np.where(np.isfinite(prev), e - phi * prev, np.sqrt(1 - phi ** 2) * e)
+    return float(np.nansum(innov ** 2) / (1 - phi ** 2))
 
 
 def score(ctx: Context, new: Hypothesis, old: Hypothesis) -> float:
-    """:meth:`Context.bic_gain` of going from ``old`` to ``new``: ΔRSS/σ² − ΔP·ln(3N)."""
-    return ctx.bic_gain(old.rss - new.rss, new.n_params() - old.n_params())
+    """:meth:`Context.bic_gain` of going from ``old`` to ``new``: ΔRSS/σ² − ΔP·ln(3N), the RSS prewhitened
+    for correlated noise (:meth:`Context.rss`)."""
+    return ctx.bic_gain(ctx.rss(old) - ctx.rss(new), new.n_params() - old.n_params())
 
 
 def consistency(ctx: Context, h: Hypothesis) -> dict:
-    """The stated test that the residual is noise: RSS/σ² is χ²(ν), ν = 3N − P, so gap²/floor² ≈ 1 with
+    """The stated test that the residual is noise: RSS/σ² (prewhitened, :meth:`Context.rss`) is χ²(ν), ν = 3N − P, so gap²/floor² ≈ 1 with
     spread √(2/ν); σ itself is estimated with relative standard error s, which moves the ratio by 2s.
     Consistent when ratio ≤ 1 + 3√(2/ν) + 4s + :data:`CONSISTENCY_MARGIN` (about 3 and 2 standard
     errors). A trial that fails it only by chance still adopts nothing unless an effect earns its
     parameters (:func:`score`)."""
     nu = max(ctx.n_obs - h.n_params(), 1)
-    ratio = h.rss / (nu * ctx.noise.sigma_mm ** 2) if ctx.noise.sigma_mm > 0 else np.inf
+    ratio = ctx.rss(h) / (nu * ctx.noise.sigma_mm ** 2) if ctx.noise.sigma_mm > 0 else np.inf
     limit = 1 + 3 * np.sqrt(2 / nu) + 4 * ctx.noise.rel_se + CONSISTENCY_MARGIN
     return {"ratio": float(ratio), "limit": float(limit), "dof": int(nu), "consistent": bool(ratio <= limit)}
 
@@ -146,15 +168,37 @@ def rescale(values: np.ndarray, low: float = -1.0) -> np.ndarray:
     return low + (1.0 - low) * np.where(hi > lo, unit, 0.0)
 
 
-def angle_basis(angles: np.ndarray, linear: bool = True) -> np.ndarray:
+def angle_basis(angles: np.ndarray, linear: bool = True, cubic: bool = False) -> np.ndarray:
     """Smooth functions of a joint's angles (F, n), each angle scaled to [-1, 1]: the angles themselves
-    (unless `linear` is False) and every product of two of them, centred; (F, n + n(n+1)/2) or
-    (F, n(n+1)/2). The shape of soft-tissue motion and of a translating joint."""
+    (unless `linear` is False), every product of two of them and, with `cubic`, each angle's cube, centred;
+    (F, n + n(n+1)/2 [+ n]) or (F, n(n+1)/2 [+ n]). The shape of soft-tissue motion and of a translating
+    joint."""
     a = np.where(np.ptp(angles, axis=0) > 0, rescale(angles, low=-1.0), 0.0)   # an angle that does not move: no term
     i, j = np.triu_indices(a.shape[1])
-    quad = a[:, i] * a[:, j]
-    quad = quad - quad.mean(axis=0)
-    return np.concatenate([a, quad], axis=1) if linear else quad
+    parts = [a] if linear else []
+    parts.append(a[:, i] * a[:, j])
+    if cubic:
+        parts.append(a ** 3)
+    out = np.concatenate(parts, axis=1)
+    return out - out.mean(axis=0) * (np.arange(out.shape[1]) >= (a.shape[1] if linear else 0))
+
+
+TIME_KNOT_S = 0.2
+"""Knot spacing of the smooth functions of time (cubic B-splines: motion up to about 2 Hz)."""
+
+
+def time_basis(n_frames: int, rate_hz: float, spacing_s: float = TIME_KNOT_S) -> np.ndarray:
+    """Smooth functions of time (F, K): cubic B-splines with knots every `spacing_s`, centred, one dropped so
+    that no combination is constant (a constant is a change of the constants, not a motion). The shape of
+    a joint's extra rotation when nothing says what drives it."""
+    from scipy.interpolate import BSpline
+
+    n_knots = max(int(np.ceil(n_frames / max(spacing_s * rate_hz, 1.0))), 1)
+    inner = np.linspace(0.0, n_frames - 1.0, n_knots + 1)
+    knots = np.concatenate([[inner[0]] * 3, inner, [inner[-1]] * 3])
+    B = BSpline.design_matrix(np.arange(n_frames, dtype=float), knots, 3).toarray()
+    B = B[:, 1:] - B[:, 1:].mean(axis=0)
+    return B
 
 
 def segment_residuals(h: Hypothesis) -> np.ndarray:

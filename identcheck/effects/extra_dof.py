@@ -1,16 +1,30 @@
 """``extra_dof``: a joint declared a hinge also turns about another axis.
 
-Detector: a hinge whose downstream markers carry residual the hinge cannot absorb (ranked by that
-residual). Augmentation: the joint re-declared as the next type up, a ball joint, keeping its fitted
-motion as the starting point (two more angles per frame; the selection makes them earn it, and the
-joint must stay identifiable as a ball).
+Two hypotheses, both for a hinge (a ball joint has nothing to add):
+
+- **a second rotation** about one axis perpendicular to the hinge that turns with the child (a knee's
+  varus/valgus or axial play), its angle any smooth function of time
+  (:func:`~identcheck.bundle.hypothesis.time_basis`). Detector: in every frame, the small rotation about
+  the joint's centre that best explains the residual of the markers below the joint, seen in the hinge's
+  own frame with its component about the hinge removed; the principal direction of those rotations is
+  the axis, and their smooth part the angle. What tells this from soft tissue is what moves: a rotation
+  moves every child marker rigidly about the joint, skin moves markers one by one on their segment.
+  Augmentation: :class:`~identcheck.bundle.chain.Terms` ``rotations``, the angle's coefficients fitted
+  with everything else (the axis direction counts as one more parameter).
+- **a ball joint**: the joint re-declared as the next type up, keeping its fitted motion as the starting
+  point (two more angles per frame: it earns them only when the extra rotation is too rough for a smooth
+  profile).
+
+The selection makes either earn its parameters, and the joint must stay identifiable.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import convert_joint, initial_state
+from identcheck.bundle.chain import Terms, convert_joint, forward, initial_state, second_axis, tangents
+from identcheck.bundle.hypothesis import time_basis
 from identcheck.effects.base import Effect, Proposal
+from identcheck.geometry.rotations import hinge_matrix
 from identcheck.simulate.rigid import smooth_profile
 from identcheck.effects.injection import Change, cannot, extra_rotation_world, pick, rotations, subtree, subtree_columns, unit
 
@@ -28,6 +42,107 @@ def off_axis_deg(h, joint: str) -> np.ndarray:
     a = np.einsum("fij,j->fi", P.R, fit.axis_parent)
     b = np.einsum("fij,j->fi", C.R, fit.axis_child)
     return np.rad2deg(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
+
+
+def pivot_at_markers(chain, state, joint: str):
+    """The same rigid state with the hinge's point (``c_parent``, ``c_child``) moved along its axis to the point
+    nearest the mean of both segments' markers (seen from the parent): for a rigid hinge where on its axis
+    the point sits is a free choice, but a second rotation turns about it, and a knee's play is about the knee,
+    not about wherever the hinge fit left its point (hundreds of millimetres away along the axis)."""
+    s = state.copy()
+    P, C = chain.parent[joint], chain.child[joint]
+    a = s.axis[joint]
+    rel = hinge_matrix(a, s.theta[joint]) @ s.rest[joint]
+    pts = [s.local[chain.seg_markers[P]]] if len(chain.seg_markers[P]) else []
+    if len(chain.seg_markers[C]):
+        child = np.einsum("fij,mj->fmi", rel, s.local[chain.seg_markers[C]] - s.c_child[joint])
+        pts.append((child.mean(axis=0) + s.c_parent[joint]))
+    if not pts:
+        return s
+    along = float((np.concatenate(pts).mean(axis=0) - s.c_parent[joint]) @ a)
+    s.c_parent[joint] = s.c_parent[joint] + along * a
+    s.c_child[joint] = s.c_child[joint] + along * (s.rest[joint].T @ a)
+    return s
+
+
+def frame_rotations(hyp, joint: str) -> tuple[np.ndarray, np.ndarray]:
+    """In every frame, the small rotation (rad, world) about the joint's centre that best explains the
+    residual of the markers below it, ω = L⁻¹ Σ d × r with L = Σ (|d|² I − d dᵀ), d each marker's offset
+    from the centre and r its residual; and L itself (how strongly each rotation moves the markers).
+    (F, 3) and (F, 3, 3); ω is zero where fewer than two such markers are seen."""
+    ch = hyp.chain
+    idx = ch.downstream[joint]
+    _, _, centre, _ = forward(ch, hyp.terms, pivot_at_markers(ch, hyp.fit.state, joint))
+    seen = (hyp.weights[:, idx] > 0) & np.all(np.isfinite(hyp.data[:, idx]), axis=2)
+    r = np.where(seen[..., None], np.nan_to_num(hyp.residuals()[:, idx]), 0.0)
+    d = np.where(seen[..., None], hyp.fit.pred[:, idx] - centre[joint][:, None], 0.0)
+    L = np.einsum("fm,ij->fij", np.sum(d * d, axis=2), np.eye(3)) - np.einsum("fmi,fmj->fij", d, d)
+    b = np.sum(np.cross(d, r), axis=1)
+    ok = seen.sum(axis=1) >= 2
+    out = np.zeros_like(b)
+    out[ok] = np.linalg.solve(L[ok] + 1e-9 * np.eye(3), b[ok][..., None])[..., 0]
+    L[~ok] = 0.0
+    return out, L
+
+
+def fitted_betas(hyp, joint: str) -> list:
+    """The angles β of the second rotations already fitted for `joint`."""
+    n0 = len(hyp.terms.markers) + len(hyp.terms.centres)
+    return [b + float(p[-1, 0]) for (j, _, b), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint]
+
+
+def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ()) -> list:
+    """The second-rotation hypothesis for a hinge (see the module docstring), as a proposal whose strength is
+    the BIC gain of the smooth part of the per-frame rotations about the best axis in the plane perpendicular
+    to the hinge (searched every 2°, each direction weighted by how far it moves the markers; across the axis
+    already `taken` when there is one)."""
+    ch = hyp.chain
+    s = pivot_at_markers(ch, hyp.fit.state, joint)
+    omega, L = frame_rotations(hyp, joint)
+    frame = np.einsum("fij,fjk->fik", hyp.fit.seg_R[ch.parent[joint]], hinge_matrix(s.axis[joint], s.theta[joint]))
+    E = np.stack(tangents(s.axis[joint]), axis=1)                   # (3, 2): the plane, in the turning frame
+    W = np.einsum("fji,jk->fik", frame, E)                          # (F, 3, 2): the plane's axes in the world
+    plane = np.einsum("fji,fj->fi", W, omega)                       # (F, 2)
+    lever = np.einsum("fji,fjk,fkl->fil", W, L, W)                   # (F, 2, 2)
+    moved = np.any(omega != 0, axis=1)
+    basis = time_basis(len(plane), ctx.rate_hz)
+    if moved.sum() <= basis.shape[1] + 10:
+        return []
+    coef = np.linalg.lstsq(basis[moved], plane[moved] - plane[moved].mean(axis=0), rcond=None)[0]
+    smooth = basis @ coef                                           # (F, 2)
+    # a joint that already turns about one axis can take only the axis across it
+    betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, 2.0))
+    e = np.stack([np.cos(betas), np.sin(betas)], axis=1)            # (B, 2)
+    explained = np.einsum("fb,fij,bi,bj->b", (smooth @ e.T) ** 2, lever, e, e)
+    k = int(np.argmax(explained))
+    beta = float(betas[k])
+    gain = ctx.bic_gain(float(explained[k]) * phi_discount(ctx), basis.shape[1] + 1)
+    where = {"joint": joint, "declared": ch.types[joint], "needs": "a second rotation"}
+    where.update(axis_description(ch, s, joint, beta))
+    return [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta})] if gain > 0 else []
+
+
+def axis_description(chain, state, joint: str, beta: float) -> dict:
+    """Where the second rotation's axis points: its angle to the child's long axis (the pivot to the child's
+    markers' mean, across the hinge), and the name that angle suggests."""
+    s = pivot_at_markers(chain, state, joint)
+    a = s.axis[joint]
+    child = chain.seg_markers[chain.child[joint]]
+    if not len(child):
+        return {}
+    long_axis = s.rest[joint] @ (s.local[child].mean(axis=0) - s.c_child[joint])
+    long_axis = long_axis - (long_axis @ a) * a
+    tilt = float(np.degrees(np.arccos(min(abs(second_axis(a, beta) @ long_axis)
+                                          / max(np.linalg.norm(long_axis), 1e-12), 1.0))))
+    return {"about": "the child's long axis (axial rotation)" if tilt < 30 else
+            "an axis across the child's long axis (varus/valgus)" if tilt > 60 else "an oblique axis",
+            "angle_to_long_axis_deg": round(tilt, 1)}
+
+
+def phi_discount(ctx) -> float:
+    """What smooth residual is worth under serially correlated noise of lag-1 coefficient φ: (1 − φ)/(1 + φ)."""
+    phi = getattr(ctx.noise, "lag1", 0.0)
+    return (1 - phi) / (1 + phi)
 
 
 class ExtraDof(Effect):
@@ -64,16 +179,30 @@ class ExtraDof(Effect):
         ch = hyp.chain
         res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), 0.0)
         out = []
+        turned = [j for j, _, _ in hyp.terms.rotations]
         for j in ch.joints:
             if ch.types[j] not in NEXT_TYPE:
                 continue
-            rss = float(np.sum(res[:, ch.downstream[j]] ** 2)) / ctx.noise.sigma_mm ** 2
-            out.append(Proposal(self.name, {"joint": j, "declared": ch.types[j], "needs": NEXT_TYPE[ch.types[j]]},
-                                rss, {"joint": j}))
+            if turned.count(j) < 2:          # a second axis of play: the hinge is then a ball with smooth play
+                out.extend(second_rotation_proposals(ctx, hyp, j, self.name, fitted_betas(hyp, j)))
+            if j not in turned:
+                # at most all the residual below the joint, less two angles per frame
+                rss = float(np.sum(res[:, ch.downstream[j]] ** 2)) / ctx.noise.sigma_mm ** 2
+                bound = rss - 2 * int(np.any(hyp.weights[:, ch.downstream[j]] > 0, axis=1).sum()) * np.log(ctx.n_obs)
+                out.append(Proposal(self.name, {"joint": j, "declared": ch.types[j], "needs": NEXT_TYPE[ch.types[j]]},
+                                    bound, {"joint": j}))
         return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
         j = proposal.payload["joint"]
+        if "basis" in proposal.payload:
+            term = (j, proposal.payload["basis"], proposal.payload["beta"])
+            new = hyp.refit(terms=hyp.terms + Terms(rotations=[term]), state=pivot_at_markers(hyp.chain, hyp.fit.state, j),
+                            extra_params=1, effect=proposal, max_iter=12)
+            p = next(q for t, q in zip(new.terms.ordered(), new.fit.state.term_params) if t is term)
+            proposal.where["range_deg"] = round(float(np.rad2deg(np.ptp(term[1] @ p[:-1, 0]))), 1)
+            proposal.where.update(axis_description(new.chain, new.fit.state, j, term[2] + float(p[-1, 0])))
+            return new
         chain, _ = convert_joint(hyp.chain, hyp.fit.state, j, NEXT_TYPE[hyp.chain.types[j]])
         # a fresh start: the hinge fit bent every constant to absorb the missing rotation
         state = initial_state(chain, hyp.data)

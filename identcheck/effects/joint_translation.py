@@ -4,10 +4,12 @@ Detector: the residuals of every marker below the joint, seen from the parent se
 smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
 ``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree.
 
-The basis has the angles' products only, no linear terms: a translation linear in a hinge's angle,
+The basis has the angles' products and cubes, no linear terms: a translation linear in a hinge's angle,
 perpendicular to the axis, is to first order a rigid hinge about a shifted axis (and for a ball joint
 the skew part of a linear translation is a shifted centre), so linear terms would trade off against
-the joint's own parameters (their standard errors grow to several mm) rather than add information.
+the joint's own parameters (their standard errors grow to several mm) rather than add information. A
+knee rolling back (A sin θ, odd) is therefore seen through its cubic part, sin θ − θ, and its even
+companions; the report says which part is modelled (``where["modelled"]``).
 """
 from __future__ import annotations
 
@@ -20,6 +22,10 @@ from identcheck.bundle.hypothesis import angle_basis, joint_angles
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import explained
+
+
+MODELLED = ("the centre's motion quadratic and cubic in the joint angles; a part linear in them cannot be told "
+            "from a shifted centre or axis and stays in the joint's fitted position")
 
 
 class JointTranslation(Effect):
@@ -56,12 +62,12 @@ class JointTranslation(Effect):
         for j in ch.joints:
             idx = ch.downstream[j]
             seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
-            basis = angle_basis(angles[j], linear=False)
+            basis = angle_basis(angles[j], linear=False, cubic=True)
             with warnings.catch_warnings():          # frames where every such marker is hidden
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(seen_from_parent, axis=1)
             gain = ctx.bic_gain(len(idx) * explained(mean, basis), 3 * basis.shape[1])
-            out.append(Proposal(self.name, {"joint": j}, float(gain), {"joint": j, "basis": basis}))
+            out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain), {"joint": j, "basis": basis}))
         return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):

@@ -3,9 +3,13 @@
 A rigid body moved through a distorted volume appears to stretch; the part of a smooth field that a
 rigid motion cannot absorb is its strain. The field is modelled as ``f(u) = E u + Σ q_k m_k(u)``
 over normalised coordinates ``u`` of the volume the markers occupy: E symmetric and traceless (a
-rotation or uniform scale would be absorbed by the segments; 5 parameters) and 6 quadratic
-monomials times 3-vectors (18). Detector: the residuals regressed on these fields. Augmentation: the
-fields added to every prediction, their 23 coefficients fitted with everything else.
+rotation or uniform scale would be absorbed by the segments; 5 parameters), the 6 quadratic monomials
+times 3-vectors (18) and, as a second hypothesis, also the 10 cubic ones (30 more). Degree 3 holds
+the lens-like fields: a radial distortion ``|u − c|² (u − c)`` about any centre c is a cubic polynomial
+in u. Detector: the residuals regressed on these fields. Augmentation: the fields added to every
+prediction, their 23 or 53 coefficients fitted with everything else; the criterion decides whether the
+cubic part earns its parameters. A smooth field moves every marker by where it is, a slip one marker
+from one instant on: the two compete on that difference through the same criterion.
 """
 from __future__ import annotations
 
@@ -30,14 +34,22 @@ def volume(data: np.ndarray):
     return (lo + hi) / 2, np.maximum((hi - lo) / 2, 1.0)
 
 
-def fields(data: np.ndarray) -> list:
-    """The 23 distortion fields at the measured positions, each (F, M, 3) mm per unit coefficient."""
+def cubic_monomials(u: np.ndarray) -> np.ndarray:
+    """The 10 cubic monomials (x³, y³, z³, x²y, x²z, y²x, y²z, z²x, z²y, xyz) of points (..., 3), (..., 10)."""
+    x, y, z = u[..., 0], u[..., 1], u[..., 2]
+    return np.stack([x ** 3, y ** 3, z ** 3, x * x * y, x * x * z, y * y * x, y * y * z, z * z * x, z * z * y,
+                     x * y * z], axis=-1)
+
+
+def fields(data: np.ndarray, degree: int = 2) -> list:
+    """The distortion fields at the measured positions, each (F, M, 3) mm per unit coefficient: 23 up to
+    degree 2, 53 up to degree 3."""
     c, h = volume(data)
     u = np.nan_to_num((data - c) / h)
     scale = float(np.mean(h))
     out = [scale * np.einsum("ij,fmj->fmi", E, u) for E in _STRAIN]
-    mono_all = monomials(u)
-    for k in range(len(MONOMIALS)):
+    mono_all = monomials(u) if degree < 3 else np.concatenate([monomials(u), cubic_monomials(u)], axis=-1)
+    for k in range(mono_all.shape[-1]):
         mono = mono_all[..., k]
         for d in range(3):
             f = np.zeros_like(u)
@@ -67,14 +79,22 @@ class SpatialDistortion(Effect):
                                          "coefficients": coef, "monomials": list(MONOMIALS)},
                        clean=x + mono @ coef)
 
+    max_proposals = 2
+
     def propose(self, ctx, hyp) -> list:
-        flds = fields(hyp.data)
+        if any(getattr(e, "effect", "") == self.name for e in hyp.effects):
+            return []                        # the volume has its field already
         w = hyp.weights > 0
         res = np.where(w[..., None], np.nan_to_num(hyp.residuals()), 0.0).reshape(-1)
-        X = np.stack([np.where(w[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
-        coef = np.linalg.lstsq(X, res, rcond=None)[0]
-        gain = ctx.bic_gain(float(np.sum((X @ coef) ** 2)), len(flds))
-        return [Proposal(self.name, {}, gain, {"fields": flds})] if gain > 0 else []
+        out = []
+        for degree in (2, 3):
+            flds = fields(hyp.data, degree)
+            X = np.stack([np.where(w[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
+            coef = np.linalg.lstsq(X, res, rcond=None)[0]
+            gain = ctx.bic_gain(float(np.sum((X @ coef) ** 2)), len(flds))
+            if gain > 0:
+                out.append(Proposal(self.name, {"degree": degree}, gain, {"fields": flds}))
+        return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
         cols = np.arange(hyp.chain.n_markers)

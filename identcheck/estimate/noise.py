@@ -7,10 +7,15 @@ their own scatter. They are slow, noise is not: so each pair's scatter is taken 
 the second differences ``d(t+1) − 2d(t) + d(t−1)`` (variance ``6σ_d²`` for white noise, while a
 movement at 2 Hz and 100 Hz keeps 1.6 % of its amplitude), robustly (median absolute deviation, so
 the few frames at a slip, a swap's ends or a gross error do not count), and the median over pairs is
-kept, so that one misbehaving marker cannot raise the estimate through the pairs it belongs to. The
-seed 001 whole-trial scatter is reported alongside (``sigma_scatter_mm``): much larger than
-``sigma_mm`` means the segments deform slowly, or the recording was low-pass filtered (which hides
-noise from the frame-to-frame estimate and makes the floor optimistic). A least-squares fit with P free parameters to 3N coordinates leaves, in
+kept, so that one misbehaving marker cannot raise the estimate through the pairs it belongs to.
+
+Exported trajectories are often low-pass filtered or smoothed, which makes the noise serially correlated
+and hides most of it from frame-to-frame differences. The noise is therefore modelled as AR(1) with
+coefficient φ: the lag-1 correlation of a distance's first differences is ``−(1 − φ)/2`` (−½ for white
+noise), which gives φ per pair (median over pairs); the second differences then have variance
+``σ_d² (1 − φ)(6 − 2φ)``, which gives the marginal σ. For white noise this is the estimate above. The seed
+001 whole-trial scatter is reported alongside (``sigma_scatter_mm``): much larger than ``sigma_mm`` means the
+segments deform slowly. A least-squares fit with P free parameters to 3N coordinates leaves, in
 expectation, ``σ²(3N − P)``; the floor in the contract's gap measure (RMS 3-D distance over the N
 marker samples) is therefore ``σ·sqrt((3N − P)/N)``.
 """
@@ -24,16 +29,47 @@ from identcheck.errors import InputError
 from identcheck.estimate.seed001 import MAD_TO_SD, marker_noise
 
 MIN_SAMPLES_PER_PAIR = 10
+MAX_PHI = 0.98
+"""Largest lag-1 coefficient estimated: beyond it, noise and slow motion cannot be told apart."""
+WINSOR = 5.0
+"""First differences beyond this many robust standard deviations (a slip, a swap's ends, a gross error)
+are clipped before their correlation is taken."""
 
 
 def frame_to_frame_sd(d: np.ndarray) -> tuple[float, int]:
-    """Robust standard deviation of the noise on a distance series d (F,), from its second differences
-    over consecutive visible frames; and how many were used."""
+    """Robust standard deviation of a distance series d (F,)'s second differences over consecutive visible
+    frames, divided by √6 (the noise's own standard deviation if it is white); and how many were used."""
     dd = d[2:] - 2 * d[1:-1] + d[:-2]
     dd = dd[np.isfinite(dd)]
     if len(dd) < MIN_SAMPLES_PER_PAIR:
         return float("nan"), len(dd)
     return float(MAD_TO_SD * np.median(np.abs(dd - np.median(dd))) / np.sqrt(6.0)), len(dd)
+
+
+def ar1_coefficient(d: np.ndarray) -> float:
+    """φ of AR(1) noise on a distance series d (F,), from the lag-1 correlation ρ of its first differences
+    (ρ = −(1 − φ)/2), the differences winsorised at :data:`WINSOR` robust standard deviations; in
+    [0, :data:`MAX_PHI`], NaN when too few consecutive frames are visible."""
+    dx = np.diff(d)
+    ok = np.isfinite(dx[1:]) & np.isfinite(dx[:-1])
+    if ok.sum() < MIN_SAMPLES_PER_PAIR:
+        return float("nan")
+    fin = dx[np.isfinite(dx)]
+    med = np.median(fin)
+    half = WINSOR * MAD_TO_SD * np.median(np.abs(fin - med))
+    if not half > 0:
+        return float("nan")
+    dx = np.clip(dx - med, -half, half)
+    a, b = dx[1:][ok], dx[:-1][ok]
+    den = np.sqrt(float(a @ a) * float(b @ b))
+    rho = float(a @ b) / den if den > 0 else -0.5
+    return float(np.clip(1 + 2 * rho, 0.0, MAX_PHI))
+
+
+def second_difference_factor(phi: float) -> float:
+    """Variance of an AR(1) series' second differences over its marginal variance, over 6 (1 for white
+    noise): what turns :func:`frame_to_frame_sd` into the marginal standard deviation."""
+    return (1 - phi) * (6 - 2 * phi) / 6.0
 
 
 @dataclass(frozen=True)
@@ -43,14 +79,17 @@ class NoiseFloor:
     Attributes
     ----------
     sigma_mm : float
-        Noise standard deviation of one coordinate, mm (median over pairs, frame to frame).
+        Noise standard deviation of one coordinate, mm (median over pairs, frame to frame, corrected for
+        the serial correlation ``lag1``).
     sigma_scatter_mm : float
         The same from the whole-trial scatter of the distances (seed 001, section 8), mm.
     pair_sigma_mm : dict
         "A-B" → that pair's own robust estimate, mm.
     rel_se : float
-        Relative standard error of ``sigma_mm`` (from the spread of the pairs' estimates).
+        Relative standard error of ``sigma_mm`` (from the spread of the pairs' estimates, φ's included).
     n_pairs, n_samples : int
+    lag1 : float
+        φ, the AR(1) coefficient of the noise from frame to frame (0: white).
     """
 
     sigma_mm: float
@@ -59,6 +98,7 @@ class NoiseFloor:
     rel_se: float
     n_pairs: int
     n_samples: int
+    lag1: float = 0.0
 
     def floor(self, n_samples: int, n_params: int) -> float:
         """Expected RMS 3-D gap of a least-squares fit with `n_params` free parameters to
@@ -83,26 +123,36 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
         No pair of markers on one segment is seen together in enough frames.
     """
     col = {m: i for i, m in enumerate(labels)}
-    pair_sd, scatter, counts = {}, [], []
+    pair_sd, scatter, counts, phis = {}, [], [], []
     for seg, markers in segments.items():
         idx = [col[m] for m in markers if m in col]
         for a in range(len(idx)):
             for b in range(a + 1, len(idx)):
                 pts = data[:, [idx[a], idx[b]]]
-                sd, n = frame_to_frame_sd(np.linalg.norm(pts[:, 0] - pts[:, 1], axis=1))
+                dist = np.linalg.norm(pts[:, 0] - pts[:, 1], axis=1)
+                sd, n = frame_to_frame_sd(dist)
                 if not np.isfinite(sd):
                     continue
                 pair_sd[f"{labels[idx[a]]}-{labels[idx[b]]}"] = sd / np.sqrt(2.0)
+                phis.append(ar1_coefficient(dist))
                 scatter.append(pts)
                 counts.append(n)
     if not pair_sd:
         raise InputError(["no two markers of one segment are seen together in "
                           f"{MIN_SAMPLES_PER_PAIR} or more frames: the noise floor cannot be estimated"])
+    phis = np.array([p for p in phis if np.isfinite(p)])
+    phi = float(np.median(phis)) if len(phis) else 0.0
+    scale = 1 / np.sqrt(second_difference_factor(phi))
+    pair_sd = {k: v * scale for k, v in pair_sd.items()}
     vals = np.array(list(pair_sd.values()))
     sigma = float(np.median(vals))
     n = len(vals)
     # standard error of a median of n estimates, each with MAD's own sampling error
     mad_se = 1.167 / np.sqrt(max(np.median(counts), 1))
     spread = 1.2533 * 1.4826 * np.median(np.abs(vals - sigma)) / max(sigma, 1e-300) / np.sqrt(n) if n > 1 else 0.0
+    # and φ's: d ln σ / dφ = ½ (1/(1 − φ) + 2/(6 − 2φ)), φ's standard error that of a median of the pairs'
+    phi_se = 1.2533 * 1.4826 * np.median(np.abs(phis - phi)) / np.sqrt(len(phis)) if len(phis) > 1 else 0.0
+    phi_part = 0.5 * (1 / (1 - phi) + 2 / (6 - 2 * phi)) * phi_se if phi > 0 else 0.0
     whole = marker_noise(*scatter).noise_mm
-    return NoiseFloor(sigma, whole, pair_sd, float(max(mad_se / np.sqrt(n), spread)), n, int(np.sum(counts)))
+    rel_se = float(np.hypot(max(mad_se / np.sqrt(n), spread), phi_part))
+    return NoiseFloor(sigma, whole, pair_sd, rel_se, n, int(np.sum(counts)), phi)

@@ -1,0 +1,45 @@
+"""The whole-chain fit's analytic derivatives are the derivatives of its forward kinematics: every effect
+term (marker offsets, centre offsets, a hinge's second rotation, world fields) checked against central
+finite differences at random states."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.chain import Terms, _apply, _jacobians, forward, initial_state
+from identcheck.bundle.hypothesis import angle_basis, time_basis
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+from identcheck.skeleton import Skeleton
+
+MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, 3.2), size=st.floats(0.0, 0.3))
+def test_constants_jacobian_matches_finite_differences(seed, beta, size):
+    sim = simulate(MODEL, n_frames=40, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.trial.as_array()
+    s = initial_state(chain, data)
+    rng = np.random.default_rng(seed)
+    hinge = next(j for j in chain.joints if chain.types[j] == "revolute")
+    ball = next(j for j in chain.joints if chain.types[j] == "spherical")
+    tb = time_basis(40, 100.0, 0.1)
+    terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1))))], centres=[(ball, tb[:, :3])],
+                  rotations=[(hinge, tb, beta)], world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
+    s.term_params = [rng.normal(size=sh) * (size if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
+    R, t, centre, pred = forward(chain, terms, s)
+    J, G = _jacobians(chain, terms, s, R, t, centre, pred)
+    P = G.shape[-1]
+    for p in range(P):
+        dc = np.zeros(P)
+        h = 1e-6
+        dc[p] = h
+        up = forward(chain, terms, _apply(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
+        dc[p] = -h
+        down = forward(chain, terms, _apply(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
+        numeric = (up - down) / (2 * h)
+        assert np.allclose(G[..., p], numeric, atol=1e-4 * (1 + np.abs(numeric).max())), p

@@ -1,0 +1,89 @@
+"""``extra_dof`` as a hinge's second rotation: a knee that also turns about an axis across its hinge with a
+smooth profile (varus/valgus or axial play) is found by the detector, and the fit recovers the axis and the
+profile; ``time_offset`` finds one marker's own lag; the interpolation that undoes a delay is charged for the
+noise it smooths away."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.chain import Terms, fit_chain, forward, initial_state
+from identcheck.bundle.hypothesis import Hypothesis, score, time_basis
+from identcheck.diagnose.workflow import diagnose, start
+from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers
+from identcheck.effects.time_offset import interpolation_loss, shifted
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+from identcheck.skeleton import Skeleton
+from identcheck.trial import Trial
+
+MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
+
+
+def played_knee(seed: int, beta: float, peak_deg: float, n_frames: int = 600, noise: float = 0.3):
+    """A simulated leg whose hinge also turns by a smooth ψ(t) about the axis at angle β across it (through
+    the point of the hinge nearest the markers); the trial and the true (β, ψ)."""
+    sim = simulate(MODEL, n_frames=n_frames, seed=seed)
+    data = sim.clean.as_array()
+    chain = Skeleton.from_model(MODEL)
+    rigid = fit_chain(chain, data, initial_state(chain, data), max_iter=60)
+    state = pivot_at_markers(chain, rigid.state, "knee")
+    basis = time_basis(n_frames, sim.clean.rate_hz)
+    coef = np.random.default_rng(seed).normal(size=(basis.shape[1], 1))
+    psi = basis @ coef
+    coef *= np.deg2rad(peak_deg) / np.abs(psi).max()
+    terms = Terms(rotations=[("knee", basis, beta)])
+    state.term_params = [np.vstack([coef, [[0.0]]])]
+    pred = forward(chain, terms, state)[3]
+    noisy = pred + np.random.default_rng(seed + 7).normal(scale=noise, size=pred.shape)
+    return Trial(noisy, chain.labels, sim.clean.rate_hz), np.rad2deg(np.ptp(basis @ coef))
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, np.pi), peak=st.floats(4.0, 12.0))
+def test_a_second_rotation_is_proposed_and_its_fit_recovers_the_axis_and_range(seed, beta, peak):
+    trial, true_range = played_knee(seed, beta, peak)
+    ctx, h = start(MODEL, trial)
+    h = h.polish(60)
+    eff = ExtraDof()
+    props = [p for p in eff.propose(ctx, h) if "basis" in p.payload]
+    assert props and props[0].strength > 0
+    cand = eff.apply(ctx, h, props[0]).polish(60)
+    assert score(ctx, cand, h) > 100
+    fitted_beta = props[0].payload["beta"] + float(cand.fit.state.term_params[-1][-1, 0])
+    assert abs(np.sin(fitted_beta - beta)) < np.sin(np.deg2rad(10))          # the same axis (either sense)
+    assert props[0].where["range_deg"] == pytest.approx(true_range, rel=0.3)
+    assert cand.gap(ctx) < 1.2 * ctx.noise.floor(ctx.n_samples, cand.n_params())
+
+
+@pytest.mark.slow
+def test_diagnose_names_a_knee_with_play_extra_dof():
+    trial, _ = played_knee(5, 1.0, 8.0)
+    diag = diagnose(MODEL, trial)
+    assert diag.steps and diag.steps[0].name == "extra_dof"
+    assert diag.steps[0].where["needs"] == "a second rotation"
+
+
+def test_interpolation_loss_is_zero_at_whole_frames_and_largest_half_way():
+    assert interpolation_loss(0.0) == pytest.approx(0.0, abs=1e-9)
+    assert interpolation_loss(2.0) == pytest.approx(0.0, abs=1e-9)
+    half = interpolation_loss(0.5)
+    assert half > interpolation_loss(0.25) > 0.01
+    assert interpolation_loss(0.25) == pytest.approx(interpolation_loss(0.75), rel=0.1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_one_marker_lagging_on_its_own_is_named_a_time_offset_of_that_marker(seed):
+    sim = simulate(MODEL, n_frames=800, seed=seed)
+    clean = sim.clean.as_array()
+    col = 5
+    clean[:, [col]] = shifted(clean[:, [col]], sim.clean.rate_hz, -0.03, extrapolate=True)
+    noisy = clean + np.random.default_rng(seed).normal(scale=0.4, size=clean.shape)
+    diag = diagnose(MODEL, Trial(noisy, sim.clean.labels, sim.clean.rate_hz))
+    assert diag.steps and diag.steps[0].name == "time_offset"
+    assert diag.steps[0].where.get("markers") == [sim.clean.labels[col]]
+    assert diag.steps[0].where["delay_ms"] == pytest.approx(30.0, abs=3.0)
