@@ -14,7 +14,7 @@ from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.chain import fit_chain, information, initial_state
-from identcheck.bundle.practical import Z95, judge
+from identcheck.bundle.practical import Z95, judge, single_axis
 from identcheck.bundle.uncertainty import covariance, distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, joint_angles, score
@@ -249,13 +249,16 @@ def joint_report(ctx: Context, h: Hypothesis) -> dict:
         dist = {m: (d, cov.se(g)) for m, (d, g) in grads[j].items()}
         practical = judge(ch, h.fit, cov, j, dist)
         determined = practical["verdict"] == "determined"
+        # as fit reports them: a direction the data leave free bounds nothing
+        unbounded = any(cov.free(g) for _, g in grads[j].values()) or single_axis(ch, h.fit, cov.sigma_mm, j)[0]
         reason = "ok" if determined else (f"{practical['reason']}; range of motion {', '.join(f'{x:.1f}' for x in rom)} "
                                           f"deg{'. ' + practical['motion_advice'] if practical['motion_advice'] else ''}")
         sd = max(v[1] for v in dist.values())
         out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type,
                   "unique": determined,
                   "marker_distances": {m: round(v[0], 3) for m, v in dist.items()},
-                  "marker_distances_ci95": {m: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)]
+                  "marker_distances_ci95": {m: [0.0, None] if unbounded else [round(max(d - Z95 * se, 0.0), 3),
+                                                                             round(d + Z95 * se, 3)]
                                             for m, (d, se) in dist.items()},
                   "alternatives": [], "practical": practical,
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),

@@ -30,7 +30,7 @@ from scipy.special import chdtrc
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.joint_frames import joint_geometry
-from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge
+from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge, single_axis
 from identcheck.bundle.profile import profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -318,7 +318,8 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
     """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
     those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
 
-    - direction free, or the joint hangs below a segment that is not posed by itself
+    - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`),
+      or the joint hangs below a segment that is not posed by itself
       (:func:`posed_above`) and is wide or misfitted: ``[0, None]`` (the likelihood does not bound it),
       method ``unbounded``;
     - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
@@ -334,7 +335,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
     start, out = time.monotonic(), {}
     for j in chain.joints:
         dist = best.distances[j]
-        free = any(cov.free(g) for _, g in grads[j].values())
+        free = any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
         wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
         misfit = j in best.model_error
         if not (free or wide or misfit):

@@ -1,0 +1,35 @@
+"""A ball joint that turned about one axis only leaves its centre free along that axis, however small the
+quadratic standard error the noise's own curvature gives: ``single_axis`` says so (random subjects, noise
+levels and trial lengths), and neither ``fit`` nor ``diagnose`` then bounds the joint's marker distances."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from hypothesis import given, settings, strategies as st
+
+import identcheck as ic
+from identcheck.bundle.practical import single_axis
+from identcheck.diagnose.workflow import diagnose, start
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+
+MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10_000), n_axes=st.sampled_from([1, 2, 3]), noise=st.floats(0.2, 2.0),
+       frames=st.integers(200, 900))
+def test_single_axis_tells_a_one_axis_hip_from_a_two_or_three_axis_one(seed, n_axes, noise, frames):
+    sim = simulate(MODEL, n_frames=frames, seed=seed, n_axes=n_axes, noise_mm=noise)
+    ctx, h = start(MODEL, sim.trial)
+    one, second_deg, noise_deg = single_axis(h.chain, h.fit, ctx.noise.sigma_mm, "hip")
+    assert one == (n_axes == 1), (second_deg, noise_deg)
+    assert not single_axis(h.chain, h.fit, ctx.noise.sigma_mm, "knee")[0]      # a hinge needs one axis
+
+
+def test_a_one_axis_hip_is_undetermined_and_unbounded_in_fit_and_diagnose():
+    sim = simulate(MODEL, n_frames=600, seed=1, n_axes=1, noise_mm=0.5)
+    for result in (ic.fit(MODEL, sim.trial).to_dict(), diagnose(MODEL, sim.trial).to_dict()):
+        hip = result["joints"]["hip"]
+        assert hip["practical"]["verdict"] == "undetermined" and not hip["unique"]
+        assert all(hi is None for _, hi in hip["marker_distances_ci95"].values())
