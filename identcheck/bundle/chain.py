@@ -40,8 +40,8 @@ REL_TOL = 1e-8        # stop when the cost falls by less than this fraction
 class Terms:
     """Linear effect terms: a per-frame basis times fitted 3-vectors.
 
-    ``markers``: list of (column, basis (F, K)): the marker's position on its segment moves by
-    ``basis @ B`` (B (K, 3), segment frame). ``centres``: list of (joint, basis (F, K)): the joint's
+    ``markers``: list of (column or columns of one segment, basis (F, K)): the marker's (or each of the
+    markers') position on its segment moves by ``basis @ B`` (B (K, 3), segment frame, shared). ``centres``: list of (joint, basis (F, K)): the joint's
     centre in the parent moves by ``basis @ D``. ``rotations``: list of (hinge, basis (F, K), β₀): the
     hinge's relative rotation becomes ``Rot(a, θ) Exp(ψ u) rest`` with ψ = ``basis @ p[:K]`` (p (K + 1, 1))
     and u the unit vector at angle β = β₀ + p[K] in the plane perpendicular to the hinge axis a
@@ -156,7 +156,7 @@ def forward(chain: Skeleton, terms: Terms, s: State):
                                s.root_R, s.root_t, rel, cp, s.c_child)
     local = np.broadcast_to(s.local, (F,) + s.local.shape).copy()
     for (col, basis), B in zip(terms.markers, s.term_params[:len(terms.markers)]):
-        local[:, col] += basis @ B
+        local[:, np.atleast_1d(col)] += (basis @ B)[:, None]
     pred = np.empty((F, chain.n_markers, 3))
     for seg in chain.segments:
         idx = chain.seg_markers[seg]
@@ -256,9 +256,10 @@ def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
                 G[..., c + 3 + a][:, idx] = np.cross(w[:, None], dx)
             c += 5
     for (i, basis) in terms.markers:
-        seg = chain.marker_seg[i]
+        cols = np.atleast_1d(i)
+        seg = chain.marker_seg[int(cols[0])]
         for kk in range(basis.shape[1]):
-            G[:, i, :, c:c + 3] = R[seg] * basis[:, kk, None, None]
+            G[:, cols, :, c:c + 3] = (R[seg] * basis[:, kk, None, None])[:, None]
             c += 3
     for (j, basis) in terms.centres:
         idx = chain.downstream[j]

@@ -36,6 +36,10 @@ DECISIVE_GAIN = 50.0
 """A gap the consistency test passes may still hide an effect the criterion finds decisively (a slip under
 strongly correlated noise: the test's allowance for the uncertain noise level is wide); an effect whose gain
 exceeds this is adopted even then (the gain is 2 ln of a Bayes factor: 50 is far beyond 'very strong')."""
+EQUIVALENT_GAIN = 10.0
+EQUIVALENT_FRACTION = 0.02
+"""Two effects whose scores differ by less than the larger of these (criterion units, fraction of the score)
+explain the trial equally well: the report names both (``indistinguishable_from``)."""
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
 SD_GROWTH = 5.0
@@ -55,6 +59,13 @@ class Step:
     score: float
     evidence: dict = field(default_factory=dict)
     rejected: tuple = ()
+
+    def equivalents(self) -> list:
+        """Other effects of its round that explain the trial as well, within :data:`EQUIVALENT_GAIN` of its score
+        (a skin cluster moving on the root segment with the hip's angles is the hip centre moving in the root,
+        to the last marker): the data cannot tell them from this one. [(name, where)]."""
+        return [(n, w) for n, w, sc in self.rejected
+                if n != self.name and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
 
 
 @dataclass(frozen=True)
@@ -107,7 +118,9 @@ class Diagnosis:
             "gap_after": round(self.gap_after, 4),
             "consistent_before": plain(self.test_before), "consistent_after": plain(self.test_after),
             "effects": [{"name": s.name, "where": plain(s.where), "gap_before": round(s.gap_before, 4),
-                         "gap_after": round(s.gap_after, 4), "score": round(s.score, 1)} for s in self.steps],
+                         "gap_after": round(s.gap_after, 4), "score": round(s.score, 1),
+                         "indistinguishable_from": [{"name": n, "where": plain(w)} for n, w in s.equivalents()]}
+                        for s in self.steps],
             "joints": joint_report(self.ctx, self.after),
         }
 
@@ -171,7 +184,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
-            if prop.strength * SKIP_RATIO < best and eff is not leader:   # other places of the leader: always
+            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.always_fit:   # other places of the leader: always
                 log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
                 continue
             if progress:

@@ -21,6 +21,10 @@ class Effect:
 
     name = ""
     max_proposals = 1       # how many of the detector's best proposals are fitted each round
+    always_fit = False
+    """Fit this effect's proposals even when its detector's strength is far below the best score of the round:
+    for detectors whose strength is not an estimate of the fitted score (a label swap's is read from distances
+    within segments and fell 20x short of its score on a gait trial)."""
 
     def propose(self, ctx, hyp) -> list:
         """Proposals, strongest first, from the residuals of hypothesis `hyp` (empty: no sign of it)."""

@@ -42,6 +42,8 @@ class MarkerSwap(Effect):
         return Change(where={"markers": [labels[cols[0]], labels[cols[1]]], "frames": [start, start + span - 1]},
                        params={"mean_distance_mm": float(apart[cols[0], cols[1]])}, trial=trial, gaps=gaps)
 
+    always_fit = True
+
     def propose(self, ctx, hyp) -> list:
         ch = hyp.chain
         return [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],

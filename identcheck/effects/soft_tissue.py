@@ -4,6 +4,11 @@ Detector: each marker's residual in its own segment's frame, regressed on smooth
 angles of each joint its segment takes part in; the variance explained, net of the parameters it
 costs, ranks the (marker, joint) pairs. Augmentation: the marker's position on its segment becomes
 ``local + basis(angles) @ B`` with B (2n × 3) fitted with everything else.
+
+Skin also carries a whole marker cluster at once (a cluster on a plate, or the soft tissue under it): the
+mean of a segment's markers' residuals regressed the same way proposes the cluster moving together, one
+shared B for all its markers. A cluster moving on its segment is not a translating joint: it moves that
+segment's markers only, while a joint that translates carries every segment below it.
 """
 from __future__ import annotations
 
@@ -28,7 +33,7 @@ def explained(resid: np.ndarray, basis: np.ndarray) -> float:
 
 class SoftTissue(Effect):
     name = "soft_tissue"
-    max_proposals = 2
+    max_proposals = 3
 
     def inject(self, sim, rng) -> Change:
         """One child-segment marker wobbles on its segment with the proximal joint angle a(t):
@@ -62,6 +67,19 @@ class SoftTissue(Effect):
         for j in ch.joints:
             basis = angle_basis(angles[j])
             for seg in (ch.parent[j], ch.child[j]):
+                cols = np.asarray(ch.seg_markers[seg])
+                if len(cols) >= 2:
+                    # the root's own pose takes up its cluster's common motion whole, which then shows on the
+                    # markers below the joint instead (in the root's frame, with the sign turned)
+                    seen = ch.downstream[j] if seg == ch.root else cols
+                    with np.errstate(all="ignore"):
+                        mean = np.nanmean(seg_res[:, seen] if seg != ch.root else np.einsum(
+                            "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
+                    gain = ctx.bic_gain(len(seen) * explained(mean, basis), 3 * basis.shape[1])
+                    if gain > 0:
+                        out.append(Proposal(self.name, {"markers": [ch.labels[c] for c in cols], "segment": seg,
+                                                        "joint": j, "together": True},
+                                            gain, {"col": cols, "basis": basis, "joint": j}))
                 for col in ch.seg_markers[seg]:
                     gain = ctx.bic_gain(explained(seg_res[:, col], basis), 3 * basis.shape[1])
                     if gain > 0:
@@ -74,10 +92,14 @@ class SoftTissue(Effect):
         return hyp.refit(terms=hyp.terms + Terms(markers=[term]), effect=proposal)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
-        col, j = proposal.payload["col"], proposal.payload["joint"]
+        col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]
         ang = np.rad2deg(joint_angles(before)[j])
+
+        def moved(h):  # noqa: E306 - the marker's (the cluster's mean) residual on its segment
+            with np.errstate(all="ignore"):
+                return np.linalg.norm(np.nanmean(segment_residuals(h)[:, col], axis=1), axis=1)
+        who = proposal.where["markers"][0] if len(col) == 1 else "the cluster's mean"
         return {"x": ang[:, 0], "x_label": f"{j} angle (deg)",
-                "y": np.linalg.norm(segment_residuals(before)[:, col], axis=1),
-                "y_after": np.linalg.norm(segment_residuals(after)[:, col], axis=1),
-                "y_label": f"{proposal.where['markers'][0]} residual on {proposal.where['segment']} (mm)",
+                "y": moved(before), "y_after": moved(after),
+                "y_label": f"{who} residual on {proposal.where['segment']} (mm)",
                 "kind": "scatter"}

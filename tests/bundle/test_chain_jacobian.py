@@ -28,7 +28,9 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size):
     hinge = next(j for j in chain.joints if chain.types[j] == "revolute")
     ball = next(j for j in chain.joints if chain.types[j] == "spherical")
     tb = time_basis(40, 100.0, 0.1)
-    terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1))))], centres=[(ball, tb[:, :3])],
+    seg0 = chain.seg_markers[chain.marker_seg[0]]
+    terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1)))), (np.array(seg0), tb[:, :2])],
+                  centres=[(ball, tb[:, :3])],
                   rotations=[(hinge, tb, beta)], world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
     s.term_params = [rng.normal(size=sh) * (size if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
     R, t, centre, pred = forward(chain, terms, s)
