@@ -11,6 +11,7 @@ The public API, one function per verb of the ``identcheck`` command (each return
     ic.plan(model).all_identifiable            # PlanResult
     ic.diagnose(model, "leg.trc").steps        # Diagnosis
     ic.table(), ic.rank("revolute", 2, 1), ic.verify("cert.json")
+    ic.batch("fit", ["trials/"], "results/", model=model)   # DataFrame, one row per trial x joint (Dask)
 
 Names are imported on first use (PEP 562), so ``import identcheck`` stays light: no SymPy, no SciPy.
 """
@@ -19,7 +20,7 @@ from __future__ import annotations
 import functools
 import importlib
 
-_API = ("load_model", "read_trial", "simulate", "fit", "diagnose", "plan", "table", "rank", "verify")
+_API = ("load_model", "read_trial", "simulate", "fit", "diagnose", "plan", "table", "rank", "verify", "batch")
 """The verbs of :mod:`identcheck.api` offered here (``derive`` and ``identify`` stay in the api: their names are
 the subpackages ``identcheck.derive`` and ``identcheck.identify``, which ``from identcheck import derive``
 must keep giving)."""
@@ -43,10 +44,10 @@ _LAZY = {
 
 __all__ = ["__version__", *_LAZY]
 
-# The verbs fit, plan, diagnose and simulate share their names with subpackages (whose __init__ only holds a
-# docstring). Importing a subpackage binds its name here, the first time only: so they are imported now, and
+# The verbs fit, plan, diagnose, simulate and batch share their names with subpackages (whose __init__ only holds
+# a docstring). Importing a subpackage binds its name here, the first time only: so they are imported now, and
 # their names unbound, for __getattr__ to give the verb; later imports of their modules leave the name alone.
-_SUBPACKAGES = ("fit", "plan", "diagnose", "simulate")
+_SUBPACKAGES = ("fit", "plan", "diagnose", "simulate", "batch")
 for _sub in _SUBPACKAGES:
     importlib.import_module(f"identcheck.{_sub}")
     del globals()[_sub]

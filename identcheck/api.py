@@ -296,3 +296,64 @@ def derive(out="derivations/out"):
     from identcheck.derive.result import derive_and_write
 
     return derive_and_write(out)
+
+
+def batch(verb: str, inputs, out, model=None, frames=None, noise_mm=None, motion=None, seed: int = 0,
+          fast: bool = False, workers: int | None = None, scheduler: str | None = None, dashboard: str = ":8787",
+          progress: bool = False):
+    """Run ``fit``, ``diagnose`` or ``plan`` over many trials (or models x noise levels x motions) on a Dask
+    cluster: one JSON per job in `out` (what ``identcheck VERB ... --json`` prints for it), and the summary
+    table ``summary.csv`` / ``summary.parquet`` with one row per job x joint (``identcheck batch``).
+
+    Resumable: a job whose JSON in `out` was made from the same input bytes, settings and identcheck version is
+    skipped. A job that fails is an error row with its message; the other jobs go on. Needs the ``batch`` extra
+    (``pip install 'identcheck[batch]'``). See docs/batch.md.
+
+    Parameters
+    ----------
+    verb : {"fit", "diagnose", "plan"}
+    inputs : str, os.PathLike or sequence of them
+        ``fit`` / ``diagnose``: trial files, globs, folders (every ``.trc`` / ``.c3d`` below them), manifest CSVs
+        (``trial,model[,frames]``, paths relative to the manifest), and one ``MODEL.toml`` for the trials not in
+        a manifest. ``plan``: model files, globs, folders.
+    out : str or os.PathLike
+        The output folder (created); nothing is written outside it, and the inputs are only read.
+    model : str or os.PathLike, optional
+        The model of the trials outside manifests, instead of a ``.toml`` among `inputs`.
+    frames : str or int, optional
+        ``fit`` / ``diagnose``: ``"START:END"`` in the files' own frame numbers (a manifest row's own range comes
+        first). ``plan``: the frames of the predicted capture (default 1000).
+    noise_mm, motion : optional
+        ``plan`` sweeps: noise levels (``[0.5, 1, 2]`` or ``"0.5,1,2"``) and motions (``"functional,flexion"``,
+        or recorded trials); each model is planned at every noise level x motion.
+    seed : int
+        ``plan``'s seed.
+    fast : bool
+        ``plan``: skip the robustness and motion analyses (``plan --fast``).
+    workers : int, optional
+        Worker processes of the local cluster (default: one per CPU, at most one per job to run).
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:8786``) to run on instead of a local cluster; its
+        workers must see the input files at the same paths.
+    dashboard : str
+        Address of the local cluster's dashboard (``":0"``: any free port).
+    progress : bool
+        Print the dashboard address and a progress bar (counts, rate, ETA) on stderr.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The summary (columns: :data:`identcheck.batch.summary.COLUMNS`), as written to ``out/summary.*``.
+
+    Raises
+    ------
+    InputError
+        Bad inputs (every problem at once; nothing is written), or an unreachable scheduler.
+    ImportError
+        The ``batch`` extra is not installed.
+    """
+    from identcheck.batch.runner import run
+
+    return run(verb, inputs, out, verbs={"fit": fit, "diagnose": diagnose, "plan": plan}, model=model,
+               frames=frames, noise_mm=noise_mm, motion=motion, seed=seed, fast=fast, workers=workers,
+               scheduler=scheduler, dashboard=dashboard, progress=progress)

@@ -138,6 +138,25 @@ def _cmd_diagnose(a) -> int:
     return 0 if diag.consistent else 1
 
 
+def _cmd_batch(a) -> int:
+    from identcheck.batch import summary
+
+    try:
+        df = api.batch(a.batch_verb, a.inputs, a.out, model=a.model, frames=a.frames, noise_mm=a.noise_mm,
+                       motion=a.motion, seed=a.seed, fast=a.fast, workers=a.workers, scheduler=a.scheduler,
+                       dashboard=a.dashboard, progress=True)
+    except KeyboardInterrupt:
+        print(f"identcheck batch: interrupted; every job finished so far is saved in {a.out}: the same command "
+              "completes the rest", file=sys.stderr)
+        return 130
+    doc = summary.counts(df, a.out)
+    if a.json:
+        _print_json(doc)
+    else:
+        print(text.batch_text(doc))
+    return summary.exit_code(df)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``identcheck`` argument parser: one subcommand per verb of CONTRACT.md."""
     p = argparse.ArgumentParser(prog="identcheck", description=(
@@ -242,13 +261,45 @@ def build_parser() -> argparse.ArgumentParser:
                         "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_diagnose)
 
+    s = sub.add_parser("batch", help="run fit, diagnose or plan over many trials on a Dask cluster (local by "
+                                     "default): one JSON per job, a summary table; resumable",
+                       description="Run fit, diagnose or plan over many trials on a Dask cluster: one JSON per job "
+                                   "(the verb's own --json output) and DIR/summary.csv + .parquet, one row per job x "
+                                   "joint. A job already done with the same inputs, settings and version is skipped; "
+                                   "a failed job is an error row. Exit 0: no job failed, 1: some did, 2: all did "
+                                   "(or bad arguments). See docs/batch.md.")
+    s.add_argument("batch_verb", choices=("fit", "diagnose", "plan"), metavar="VERB", help="fit, diagnose or plan")
+    s.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="fit/diagnose: MODEL.toml then trials (files, quoted globs, folders), or manifest CSVs "
+                        "(trial,model[,frames], paths relative to the CSV); plan: model files, globs, folders")
+    s.add_argument("--out", required=True, metavar="DIR", help="one JSON per job and the summary go here (only here)")
+    s.add_argument("--model", metavar="FILE", default=None, help="the model of the trials (instead of a first .toml)")
+    s.add_argument("--frames", metavar="START:END|N", default=None,
+                   help="fit/diagnose: only these frames of every trial (a manifest row's own range comes first); "
+                        "plan: frames of the predicted capture (default 1000)")
+    s.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes of the local cluster (default: one per CPU, at most one per job)")
+    s.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="run on an existing Dask cluster (tcp://host:8786) instead of a local one; its workers must "
+                        "see the inputs at the same paths")
+    s.add_argument("--dashboard", metavar="ADDRESS", default=":8787",
+                   help="address of the local cluster's dashboard (default :8787; :0 for any free port)")
+    s.add_argument("--noise-mm", metavar="SIGMA[,SIGMA...]", default=None,
+                   help="plan: sweep these noise levels (practical verdicts)")
+    s.add_argument("--motion", metavar="NAME|TRIAL[,...]", default=None,
+                   help="plan: with --noise-mm, sweep these motions (functional, flexion, small, or recorded trials)")
+    s.add_argument("--seed", type=int, default=0, help="plan: seed of the random prime and point")
+    s.add_argument("--fast", action="store_true", help="plan: skip the per-marker robustness and motion analyses")
+    s.add_argument("--json", action="store_true", help="print the counts and the failed jobs as JSON")
+    s.set_defaults(func=_cmd_batch)
+
     return p
 
 
 # ---------------------------------------------------------------------- checks before any work
 FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
                 "fit": ("export_markers",)}
-DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",)}
+DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
 MAX_RANK_SAMPLES = 10_000
@@ -301,6 +352,16 @@ def preflight(a) -> list:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")
         if not 10 <= a.frames <= 20000:
             problems.append(f"--frames {a.frames}: between 10 and 20000 frames")
+    if a.verb == "batch":
+        from identcheck.batch import extra
+
+        if extra.problem():
+            problems.append(extra.problem())
+        if a.workers is not None and a.workers < 1:
+            problems.append(f"--workers {a.workers}: 1 or more")
+        if a.workers is not None and a.scheduler:
+            problems.append("--workers sizes the local cluster; with --scheduler the cluster's own workers run the "
+                            "jobs: give one of them")
     if a.verb == "simulate":
         for opt, ok in (("frames", a.frames >= 2), ("rate", a.rate > 0), ("noise_mm", a.noise_mm >= 0),
                         ("occlusion", 0 <= a.occlusion < 1), ("rom_deg", 0 <= a.rom_deg <= 360)):

@@ -28,6 +28,21 @@ def _format(path: Path) -> str:
     return ext
 
 
+def frame_range(spec: str) -> tuple[int | None, int | None]:
+    """``START:END`` (the file's own frame numbers, both included) as ``(start, end)``, None for an end left out.
+
+    The one parser of ``--frames START:END`` (:meth:`Trial.frames`, and the batch manifest's ``frames`` column,
+    checked before any file is read).
+
+    Raises
+    ------
+    ValueError
+        Not two integers (either may be empty) around one colon.
+    """
+    a, b = str(spec).split(":")
+    return (int(a) if a.strip() else None), (int(b) if b.strip() else None)
+
+
 def _float_array(xyz, source: str, copy: bool = False) -> np.ndarray:
     try:
         return np.array(xyz, dtype=np.float64) if copy else np.asarray(xyz, dtype=np.float64)
@@ -266,12 +281,12 @@ class Trial:
         """
         first, last = self._first_frame, self._first_frame + self.n_frames - 1
         try:
-            a, b = str(spec).split(":")
-            start = int(a) if a.strip() else first
-            end = int(b) if b.strip() else last
+            start, end = frame_range(spec)
         except ValueError:
             raise InputError([f"--frames {spec!r}: expected START:END in the file's frame numbers "
                               f"({first}:{last} here)"], source=self._source) from None
+        start = first if start is None else start
+        end = last if end is None else end
         if end < start or end < first or start > last:
             raise InputError([f"--frames {spec}: no frame of the trial in that range (the file's frames are "
                               f"{first} to {last})"], source=self._source)

@@ -197,3 +197,15 @@ def plan_text(result) -> str:
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
     return "\n".join(lines)
+
+
+def batch_text(doc: dict) -> str:
+    """``identcheck batch``: the jobs by status, where the summary is, and each failed job with its message."""
+    jobs = f"{doc['jobs']} job" + ("" if doc["jobs"] == 1 else "s")
+    lines = [f"{jobs}: {doc['done']} done, {doc['skipped']} skipped (done earlier), {doc['failed']} failed"
+             + (f"; {doc['negative']} answered no (column ok)" if doc.get("negative") else "")]
+    if doc.get("summary"):
+        lines.append(f"summary: {', '.join(doc['summary'])}")
+    for e in doc["errors"]:
+        lines.append(f"FAILED {e['job']}: {e['error']}")
+    return "\n".join(lines)
