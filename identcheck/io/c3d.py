@@ -48,6 +48,40 @@ def _header_frames(raw: bytes) -> int | None:
     return last - first + 1
 
 
+def _header_layout(raw: bytes) -> dict | None:
+    """What the raw header says about the data: the point scale (negative: floats), analog samples per frame
+    and the data start block; None for a DEC (VAX float) file, whose header scale this does not decode."""
+    param_start = (raw[0] - 1) * 512
+    proc = raw[param_start + 3] if len(raw) > param_start + 3 else 84
+    if proc == 85:
+        return None
+    order = ">" if proc == 86 else "<"
+    scale = struct.unpack(order + "f", raw[12:16])[0]
+    analog = struct.unpack(order + "H", raw[4:6])[0]
+    start = struct.unpack(order + "H", raw[16:18])[0]
+    return {"scale": scale, "analog": analog, "start": start}
+
+
+def _frames_in_file(raw: bytes, layout: dict, n_points: int, data_start: int) -> int | None:
+    """How many whole frames the file's bytes hold from its data start (points and analog samples, 2-byte
+    integers or 4-byte floats as the header's scale sign says)."""
+    word = 4 if layout["scale"] < 0 else 2
+    per_frame = (4 * n_points + layout["analog"]) * word
+    start = (data_start - 1) * 512
+    if per_frame <= 0 or start <= 0 or start > len(raw):
+        return None
+    return (len(raw) - start) // per_frame
+
+
+def _ends_whole(raw: bytes, layout: dict, n_points: int, start, n_frames: int) -> bool:
+    """Whether the file ends where a writer would end it after `n_frames` frames: at the first 512-byte block
+    boundary after the last frame (a file cut in transfer ends anywhere)."""
+    word = 4 if layout["scale"] < 0 else 2
+    first = ((int(start[0]) if start is not None and len(start) else layout["start"]) - 1) * 512
+    end = first + n_frames * (4 * n_points + layout["analog"]) * word
+    return len(raw) % 512 == 0 and -(-end // 512) * 512 == len(raw)
+
+
 def _value(params: dict, group: str, name: str):
     try:
         return params[group][name]["value"]
@@ -106,9 +140,35 @@ def read_c3d(path) -> MarkerData:
     if n_frames == 0:
         problems.append("no frames")
     announced = _header_frames(raw)
-    if announced is not None and n_frames < announced:
-        problems.append(f"truncated file: the header announces {announced} frames but only "
-                        f"{n_frames} are present")
+    layout = _header_layout(raw)
+    scale, start = _value(params, "POINT", "SCALE"), _value(params, "POINT", "DATA_START")
+    in_file = None
+    if layout is not None and scale is not None and len(scale) and np.isfinite(layout["scale"]) \
+            and layout["scale"] != 0 and float(scale[0]) != 0 and (float(scale[0]) < 0) != (layout["scale"] < 0):
+        problems.append(f"POINT:SCALE is {float(scale[0]):g} ({'floating-point' if float(scale[0]) < 0 else 'integer'} "
+                        f"data) but the header's scale is {layout['scale']:g} "
+                        f"({'floating-point' if layout['scale'] < 0 else 'integer'} data): the two disagree on how "
+                        "the coordinates are stored, so any number read would be wrong")
+    elif layout is not None and n_points:
+        in_file = _frames_in_file(raw, layout, n_points, int(start[0]) if start is not None and len(start)
+                                  else layout["start"])
+    frames_param = _value(params, "POINT", "FRAMES")
+    frames_param = int(frames_param[0]) if frames_param is not None and len(frames_param) else None
+    if announced is not None and n_frames > announced:
+        problems.append(f"POINT:FRAMES says {frames_param} frames but the header's frame range says {announced}: "
+                        f"the {n_frames - announced} frames past the header's last would be read from padding")
+    elif in_file is not None and n_frames > in_file:
+        problems.append(f"POINT:FRAMES says {n_frames} frames but the file holds only {in_file} after its data "
+                        f"start: the last {n_frames - in_file} would be invented")
+    elif announced is not None and n_frames < announced:
+        if layout is not None and n_frames == frames_param and _ends_whole(raw, layout, n_points, start, n_frames):
+            warnings.warn(f"{src}: the header's frame range announces {announced} frames; POINT:FRAMES and the "
+                          f"file size agree on {n_frames}, which are read", UserWarning, stacklevel=3)
+        else:
+            problems.append(f"truncated file: the header announces {announced} frames but only "
+                            f"{n_frames} are present")
+    elif frames_param is not None and n_frames < frames_param and announced is None:
+        problems.append(f"truncated file: POINT:FRAMES announces {frames_param} frames but only {n_frames} are present")
     rate_hz = _rate(params, c3d, problems)
     units = _value(params, "POINT", "UNITS")
     if not units or not str(units[0]).strip():
