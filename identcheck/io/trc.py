@@ -84,6 +84,14 @@ def _capped(items: list[str], what: str) -> list[str]:
     return items[:_MAX_LISTED] + [f"... and {len(items) - _MAX_LISTED} more {what}"]
 
 
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
 def _cells(line: str) -> list[str]:
     """Tab-separated cells, stripped, without trailing empty cells."""
     cells = [c.strip() for c in line.split("\t")]
@@ -138,6 +146,10 @@ def read_trc(path) -> MarkerData:
                           "lines (PathFileType, keys, values, marker names, X/Y/Z) before the data"],
                          source=src)
     problems: list[str] = []
+    xyz_line = [c for c in _cells(lines[4]) if c]
+    if xyz_line and all(_is_number(c) for c in xyz_line):
+        problems.append("line 5 holds numbers where the coordinate names (X1, Y1, Z1, ...) belong: the X/Y/Z "
+                        "line is missing, so every row would be read one line off")
     rate_hz, factor, n_frames_hdr, n_markers_hdr = _parse_header(lines[1], lines[2], problems)
     labels = _parse_names(lines[3], problems)
     if n_markers_hdr is not None and labels and n_markers_hdr != len(labels):
@@ -160,6 +172,11 @@ def read_trc(path) -> MarkerData:
         rows.append(cells)
         linenos.append(i + 1)
     problems += _capped(bad_width, "rows with the wrong number of columns")
+    if rows and linenos[-1] == len(lines) and not text.endswith(("\n", "\r")):
+        warnings.warn(f"{src}: the file ends inside line {linenos[-1]} without a line end, so its last number may "
+                      "be cut short; that row is left out", UserWarning, stacklevel=3)
+        rows, linenos = rows[:-1], linenos[:-1]
+        n_frames_hdr = None if n_frames_hdr is None else min(n_frames_hdr, len(rows))
     if not rows and not bad_width:
         problems.append("no data rows after the header (data start on line 6)")
     if n_frames_hdr is not None and rows and not bad_width:
