@@ -67,6 +67,30 @@ def visible_chi2(trial_dir: Path, entry: dict) -> float | None:
     return float(whitened_rss(data - fit.pred, w, phi) / noise["sigma_mm"] ** 2)
 
 
+def where_right(name: str, truth: dict, named: dict) -> bool:
+    """Whether `diagnose` put the effect where the generator did: the same markers for a slip or a swap, a
+    segment (or marker) the truth names for soft tissue, the same joint for a translation or an extra degree
+    of freedom, the same segment (and marker, when one lags alone) for a delay, overlapping markers for
+    outliers; a distortion acts everywhere."""
+    tm = set(truth.get("markers") or ([truth["marker"]] if truth.get("marker") else []))
+    nm = set(named.get("markers") or [])
+    segs = truth.get("segments") or truth.get("segment")
+    segs = set(segs if isinstance(segs, list) else [segs]) - {None}
+    if name in ("marker_slip", "marker_swap"):
+        return nm == tm
+    if name == "soft_tissue":
+        return named.get("segment") in segs and (not nm or bool(nm & tm) or named.get("together", False))
+    if name in ("joint_translation", "extra_dof"):
+        return named.get("joint") == truth.get("joint")
+    if name == "time_offset":
+        if len(tm) == 1 and nm:
+            return nm == tm
+        return named.get("segment") in segs
+    if name == "outliers":
+        return bool(nm & tm)
+    return True
+
+
 def evaluate(trial_dir: Path, entry: dict) -> dict:
     """Diagnose one trial; the named effects in order, against the truth."""
     stem = entry["stem"]
@@ -78,8 +102,14 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
         except ic.InputError as exc:
             return {"stem": stem, "error": str(exc), "seconds": time.process_time() - t0}
     named = [e["name"] for e in diag.get("effects", [])]
+    wheres = {e["name"]: e["where"] for e in reversed(diag.get("effects", []))}     # each name's first place
+    right = [where_right(t["name"], t.get("where", {}), wheres[t["name"]]) if t["name"] in wheres else None
+             for t in entry["effects"]]
+    indistinct = [[o["name"] for o in e.get("indistinguishable_from", [])] for e in diag.get("effects", [])]
     visible = visible_chi2(trial_dir, entry) if entry["effects"] else None
     return {"stem": stem, "named": named, "visible_chi2": None if visible is None else round(visible, 1),
+            "where_right": right, "indistinguishable": indistinct,
+            "gap_ratio": round(diag["gap_after"] / diag["noise_floor"], 3) if diag.get("noise_floor") else None,
             "noise": entry["category"]["noise"], "motion": entry["category"]["motion"], "truth": [e["name"] for e in entry["effects"]],
             "magnitudes": [round(e.get("magnitude_mm", float("nan")), 2) for e in entry["effects"]],
             "shapes": [e.get("shape", "") for e in entry["effects"]], "kind": entry["category"]["kind"],
@@ -105,7 +135,16 @@ def summarise(results: list) -> dict:
         n = sum(row.values())
         per_effect[name] = {"trials": n, "named_first": row.get(name, 0),
                             "named_any": sum(name in r["named"] for r in single if r["truth"][0] == name)}
+    firsts = [r for r in single if r["named"] and r["named"][0] == r["truth"][0] and r.get("where_right")]
+    gaps = [r["gap_ratio"] for r in single + pairs if r.get("gap_ratio") is not None and r["named"]]
     return {
+        "where_right": {"trials": len(firsts), "right": sum(bool(r["where_right"][0]) for r in firsts)},
+        "gap_after_over_floor": {"trials": len(gaps), "within_1_5": sum(g <= 1.5 for g in gaps),
+                                 "median": float(np.median(gaps)) if gaps else None,
+                                 "max": float(np.max(gaps)) if gaps else None},
+        "named_first_or_indistinguishable": sum(
+            bool(r["named"]) and (r["named"][0] == r["truth"][0] or r["truth"][0] in (r.get("indistinguishable") or [[]])[0])
+            for r in single),
         "detection_limits": detection_limits(single),
         "trials": len(results), "errors": sum("error" in r for r in results),
         "single": {"trials": len(single), "named_first": sum(bool(r["named"]) and r["named"][0] == r["truth"][0]
@@ -189,6 +228,11 @@ def main(argv=None) -> int:
     print(f"pairs: {s['pairs']['both_named']}/{s['pairs']['trials']} both named, "
           f"{s['pairs']['one_named']}/{s['pairs']['trials']} at least one")
     print(f"clean: {s['clean']['nothing_named']}/{s['clean']['trials']} with nothing named")
+    print(f"single effects named first or tied with the first (indistinguishable): "
+          f"{s['named_first_or_indistinguishable']}/{s['single']['trials']}")
+    print(f"where right: {s['where_right']['right']}/{s['where_right']['trials']} of the effects named first")
+    g = s["gap_after_over_floor"]
+    print(f"gap after / noise floor: median {g['median']}, max {g['max']}, within 1.5x in {g['within_1_5']}/{g['trials']}")
     print(f"{'effect':<20} {'trials':>6} {'first':>6} {'any':>5}  first named instead")
     for name, p in s["per_effect"].items():
         others = {k: v for k, v in s["confusion"][name].items() if k != name}
