@@ -6,11 +6,14 @@ Two hypotheses, both for a hinge (a ball joint has nothing to add):
   varus/valgus or axial play), its angle any smooth function of time
   (:func:`~identcheck.bundle.hypothesis.time_basis`). Detector: in every frame, the small rotation about
   the joint's centre that best explains the residual of the markers below the joint, seen in the hinge's
-  own frame with its component about the hinge removed; the principal direction of those rotations is
-  the axis, and their smooth part the angle. What tells this from soft tissue is what moves: a rotation
+  own frame with its component about the hinge removed; their smooth part (in time) about each direction
+  across the hinge, weighted by how far that direction moves the markers, picks the axis (a 2° search,
+  then the axis is fitted). What tells this from soft tissue is what moves: a rotation
   moves every child marker rigidly about the joint, skin moves markers one by one on their segment.
-  Augmentation: :class:`~identcheck.bundle.chain.Terms` ``rotations``, the angle's coefficients fitted
-  with everything else (the axis direction counts as one more parameter).
+  Augmentation: :class:`~identcheck.bundle.chain.Terms` ``rotations``, the angle's coefficients and the
+  axis direction fitted with everything else, about the hinge's point nearest the markers
+  (:func:`pivot_at_markers`). ``where`` gives the axis's angle to the child's long axis and the range.
+  A second proposal for the same joint takes the axis across the first (two smooth axes of play).
 - **a ball joint**: the joint re-declared as the next type up, keeping its fitted motion as the starting
   point (two more angles per frame: it earns them only when the extra rotation is too rough for a smooth
   profile).
