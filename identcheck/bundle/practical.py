@@ -97,8 +97,13 @@ def single_axis(chain, fit, sigma_mm: float, joint: str) -> tuple[bool, float, f
     in deg, RMS noise of its fitted rotation in deg). Its centre is then not determined along that axis, however
     small the quadratic standard error: the fitted rotations' wobble about the other axes is noise, and a fit
     that moves the centre to follow it is fitting the noise (a floating-point guide on measured data, with the
-    threshold :data:`SECOND_AXIS_NOISE_RATIO`). False for a hinge."""
+    threshold :data:`SECOND_AXIS_NOISE_RATIO`). False for a hinge, and beside a segment with fewer than three
+    markers (its rotation is not measured by its own markers: the test cannot tell)."""
     if chain.types[joint] != "spherical":
+        return False, float("nan"), float("nan")
+    if any(len(chain.seg_markers[s]) < 3 for s in (chain.parent[joint], chain.child[joint])):
+        # a segment posed through its joints, not by its own markers: its fitted rotation's wobble is not a
+        # measurement of the motion, so this test cannot tell (the rules for such segments decide instead)
         return False, float("nan"), float("nan")
     rel = fit.state.rel_R[joint]
     rv = Rotation.from_matrix(rel @ Rotation.from_matrix(rel).mean().as_matrix().T).as_rotvec()
