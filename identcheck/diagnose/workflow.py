@@ -27,7 +27,8 @@ SKIP_RATIO = 10.0
 """Proposals are fitted strongest first; one whose detector strength (its own estimate of the score) is
 below 1/SKIP_RATIO of the best score fitted so far is not fitted this round (detectors underestimate by
 5x at most in the hidden-effect trials), unless it is another place for the leading effect (a delay's
-linearised detector cannot tell which segment lags when the lag is several frames)."""
+linearised detector cannot tell which segment lags when the lag is several frames) or an effect marked
+``always_fit`` (a swap's strength is read from distances, not from the residual)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
@@ -179,12 +180,12 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
         proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
-        tried, best, leader = [], 0.0, None
-        drift = creep(ctx, h)
+        tried, best, leader, drift = [], 0.0, None, None
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
-            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.always_fit:   # other places of the leader: always
+            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.always_fit:
+                # (other places of the leader, and effects whose strength is no estimate of their score: always)
                 log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
                 continue
             if progress:
@@ -194,6 +195,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             except (np.linalg.LinAlgError, ValueError) as exc:
                 log.debug("%s %s failed: %s", eff.name, prop.where, exc)
                 continue
+            drift = creep(ctx, h) if drift is None else drift
             sc = score(ctx, cand, h) - drift
             tried.append((sc, eff, prop, cand))
             if not eff.implausible(prop) and sc > best:
