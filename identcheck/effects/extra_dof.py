@@ -68,14 +68,16 @@ def pivot_at_markers(chain, state, joint: str):
     return s
 
 
-def frame_rotations(hyp, joint: str) -> tuple[np.ndarray, np.ndarray]:
+def frame_rotations(hyp, joint: str, pivoted=None) -> tuple[np.ndarray, np.ndarray]:
     """In every frame, the small rotation (rad, world) about the joint's centre that best explains the
     residual of the markers below it, ω = L⁻¹ Σ d × r with L = Σ (|d|² I − d dᵀ), d each marker's offset
     from the centre and r its residual; and L itself (how strongly each rotation moves the markers).
-    (F, 3) and (F, 3, 3); ω is zero where fewer than two such markers are seen."""
+    (F, 3) and (F, 3, 3); ω is zero where fewer than two such markers are seen. `pivoted`: the state from
+    :func:`pivot_at_markers`, when the caller has it already."""
     ch = hyp.chain
     idx = ch.downstream[joint]
-    _, _, centre, _ = forward(ch, hyp.terms, pivot_at_markers(ch, hyp.fit.state, joint))
+    pivoted = pivot_at_markers(ch, hyp.fit.state, joint) if pivoted is None else pivoted
+    _, _, centre, _ = forward(ch, hyp.terms, pivoted)
     seen = (hyp.weights[:, idx] > 0) & np.all(np.isfinite(hyp.data[:, idx]), axis=2)
     r = np.where(seen[..., None], np.nan_to_num(hyp.residuals()[:, idx]), 0.0)
     d = np.where(seen[..., None], hyp.fit.pred[:, idx] - centre[joint][:, None], 0.0)
@@ -101,7 +103,7 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     already `taken` when there is one)."""
     ch = hyp.chain
     s = pivot_at_markers(ch, hyp.fit.state, joint)
-    omega, L = frame_rotations(hyp, joint)
+    omega, L = frame_rotations(hyp, joint, s)
     frame = np.einsum("fij,fjk->fik", hyp.fit.seg_R[ch.parent[joint]], hinge_matrix(s.axis[joint], s.theta[joint]))
     E = np.stack(tangents(s.axis[joint]), axis=1)                   # (3, 2): the plane, in the turning frame
     W = np.einsum("fji,jk->fik", frame, E)                          # (F, 3, 2): the plane's axes in the world

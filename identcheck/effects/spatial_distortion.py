@@ -87,8 +87,9 @@ class SpatialDistortion(Effect):
         w = hyp.weights > 0
         res = np.where(w[..., None], np.nan_to_num(hyp.residuals()), 0.0).reshape(-1)
         out = []
+        cubic = fields(hyp.data, 3)              # its first 23 fields are those of degree 2
         for degree in (2, 3):
-            flds = fields(hyp.data, degree)
+            flds = cubic[:23] if degree == 2 else cubic
             X = np.stack([np.where(w[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
             coef = np.linalg.lstsq(X, res, rcond=None)[0]
             gain = ctx.bic_gain(float(np.sum((X @ coef) ** 2)), len(flds))

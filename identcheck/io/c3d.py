@@ -62,11 +62,15 @@ def _header_layout(raw: bytes) -> dict | None:
     return {"scale": scale, "analog": analog, "start": start}
 
 
+def _frame_bytes(layout: dict, n_points: int) -> int:
+    """Bytes of one frame: points and analog samples, 2-byte integers or 4-byte floats as the header's scale
+    sign says."""
+    return (4 * n_points + layout["analog"]) * (4 if layout["scale"] < 0 else 2)
+
+
 def _frames_in_file(raw: bytes, layout: dict, n_points: int, data_start: int) -> int | None:
-    """How many whole frames the file's bytes hold from its data start (points and analog samples, 2-byte
-    integers or 4-byte floats as the header's scale sign says)."""
-    word = 4 if layout["scale"] < 0 else 2
-    per_frame = (4 * n_points + layout["analog"]) * word
+    """How many whole frames the file's bytes hold from its data start."""
+    per_frame = _frame_bytes(layout, n_points)
     start = (data_start - 1) * 512
     if per_frame <= 0 or start <= 0 or start > len(raw):
         return None
@@ -76,9 +80,8 @@ def _frames_in_file(raw: bytes, layout: dict, n_points: int, data_start: int) ->
 def _ends_whole(raw: bytes, layout: dict, n_points: int, start, n_frames: int) -> bool:
     """Whether the file ends where a writer would end it after `n_frames` frames: at the first 512-byte block
     boundary after the last frame (a file cut in transfer ends anywhere)."""
-    word = 4 if layout["scale"] < 0 else 2
     first = ((int(start[0]) if start is not None and len(start) else layout["start"]) - 1) * 512
-    end = first + n_frames * (4 * n_points + layout["analog"]) * word
+    end = first + n_frames * _frame_bytes(layout, n_points)
     return len(raw) % 512 == 0 and -(-end // 512) * 512 == len(raw)
 
 
