@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.uncertainty import bartlett_bandwidth, long_run_covariance
+from identcheck.bundle.uncertainty import bartlett_bandwidth, long_run_covariance, prewhitened_long_run
 from identcheck.fit.whole_tree import fit_tree, joint_answers
 from identcheck.fit.workflow import fit_model
 from identcheck.io.model import Model
@@ -89,7 +89,7 @@ def test_minimal_leg_knee_is_never_a_confident_wrong_answer(examples):
 @given(phi=st.floats(0.0, 0.9), seed=st.integers(0, 10 ** 6))
 def test_long_run_variance_of_ar1_scores(phi, seed):
     """Random AR(1) score series: the Bartlett long-run variance with the plug-in bandwidth recovers the
-    true long-run variance σ²(1+φ)/(1−φ) per frame within 35 %."""
+    true long-run variance σ²(1+φ)/(1−φ) per frame within 35 %, and prewhitened within 25 %."""
     rng = np.random.default_rng(seed)
     F = 4000
     g = _ar1(rng, (F, 2), 1.0, phi)
@@ -97,6 +97,25 @@ def test_long_run_variance_of_ar1_scores(phi, seed):
     H = long_run_covariance(g, L) / F
     truth = (1 + phi) / (1 - phi)
     assert np.all(np.abs(np.diag(H) / truth - 1) < 0.35), (np.diag(H), truth, L)
+    Hp, _, rho = prewhitened_long_run(g)
+    assert np.all(np.abs(np.diag(Hp) / F / truth - 1) < 0.25), (np.diag(Hp) / F, truth, rho)
+
+
+@settings(max_examples=10, deadline=None)
+@given(phi=st.floats(0.7, 0.9), seed=st.integers(0, 10 ** 6))
+def test_prewhitening_removes_the_kernel_bias_under_strong_correlation(phi, seed):
+    """Averaged over eight independent 1500-frame AR(1) series, the plain Bartlett estimate falls short of
+    the long-run variance (its kernel bias) while the prewhitened one is unbiased within 6 %."""
+    rng = np.random.default_rng(seed)
+    F, P = 1500, 40
+    truth = (1 + phi) / (1 - phi)
+    plain, white = [], []
+    for _ in range(8):
+        g = _ar1(rng, (F, P), 1.0, phi)
+        plain.append(np.diag(long_run_covariance(g, bartlett_bandwidth(g))).mean() / F / truth)
+        white.append(np.diag(prewhitened_long_run(g)[0]).mean() / F / truth)
+    assert abs(np.mean(white) - 1) < 0.06, white
+    assert np.mean(plain) < np.mean(white), (plain, white)
 
 
 def test_joint_geometry_in_technical_frames_matches_the_truth(examples):
