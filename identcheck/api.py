@@ -16,7 +16,6 @@ from __future__ import annotations
 import functools
 from pathlib import Path
 
-from identcheck.effects.registry import SEED_OFFSET, inject_effect
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import Simulation
@@ -95,6 +94,7 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
     sim = simulate_model(load_model(model), seed=seed, **kw)
     if effect is not None:
+        from identcheck.effects.registry import SEED_OFFSET, inject_effect   # the effects load only when used
         sim = inject_effect(sim, effect, seed=seed + SEED_OFFSET if effect_seed is None else effect_seed)
     if out_path is not None:
         sim.trial.to_file(out_path)

@@ -9,7 +9,7 @@ fails it (a frame with two gross errors loses the second in the next round).
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, unit_vectors
@@ -22,7 +22,7 @@ MAX_FRACTION = 0.05
 def flagged(ctx, hyp) -> np.ndarray:
     """Samples (F, M) whose residual fails the trial-wide noise bound."""
     r2 = np.where(hyp.weights > 0, np.sum(np.nan_to_num(hyp.residuals()) ** 2, axis=2), 0.0)
-    limit = ctx.noise.sigma_mm ** 2 * chi2.isf(0.01 / ctx.n_samples, 3)
+    limit = ctx.noise.sigma_mm ** 2 * chdtri(3, 0.01 / ctx.n_samples)
     worst = r2 >= r2.max(axis=1, keepdims=True)
     return (r2 > limit) & worst
 

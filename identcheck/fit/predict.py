@@ -16,7 +16,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.stats import ncx2
+from scipy.special import chndtr
 
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
@@ -61,7 +61,7 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
                 lam = max(m.fit.rss - best.fit.rss, 0.0) / noise_mm ** 2
                 rivals.append({"marker_distances": {k: round(v[0], 2) for k, v in m.distances[j].items()},
                                "expected_delta_chi2": round(lam, 3),
-                               "rejection_probability": round(float(ncx2.sf(REJECT_CHI2, 1, max(lam, 1e-12))), 3)})
+                               "rejection_probability": round(1.0 - float(chndtr(REJECT_CHI2, 1, max(lam, 1e-12))), 3)})
         worst = max(se.items(), key=lambda kv: kv[1]) if se else (None, 0.0)
         if free:
             verdict, why = "undetermined", f"the motion leaves {', '.join(free)}'s distances free"

@@ -182,6 +182,24 @@ assert callable(ic.plan) and analysis.__name__ == "identcheck.plan.analysis" and
     subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)
 
 
+def test_cli_and_fit_leave_heavy_modules_unloaded():
+    """Importing the command line loads neither SymPy nor scipy.stats; a whole fit (closed-form starts,
+    whole-tree fit, intervals) loads no scipy.stats and no matplotlib (SymPy still comes in with the
+    generated closed-form solvers' module)."""
+    script = """
+import sys, warnings
+import identcheck.cli
+assert not {"sympy", "scipy.stats", "matplotlib"} & set(sys.modules)
+import identcheck as ic
+warnings.simplefilter("ignore")
+sim = ic.simulate("examples/leg.toml", n_frames=200, noise_mm=0.5, seed=1)
+ic.fit("examples/leg.toml", sim.trial)
+heavy = {"scipy.stats", "matplotlib"} & set(sys.modules)
+assert not heavy, heavy
+"""
+    subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)
+
+
 def test_errors_are_the_public_ones(tmp_path):
     with pytest.raises(ic.InputError, match="missing.toml"):
         ic.load_model(tmp_path / "missing.toml")
