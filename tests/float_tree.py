@@ -78,9 +78,21 @@ class FloatTree:
             return np.array(vals)
         return f
 
+    def centre_distance(self, a, b):
+        """Squared distance between the centres of two ball joints with the same parent segment."""
+        def f(x):
+            _, c, _, _ = self.unpack(x)
+            w = c[a] - c[b]
+            return np.array([w @ w])
+        return f
+
     def locally_identifiable(self, joint, tol=1e-5):
+        return self.determined(self.distances(joint), tol)
+
+    def determined(self, fn, tol=1e-5):
+        """Is every component of ``fn`` (a function of the parameter vector) locally determined by the markers?"""
         J = self.jacobian(self.positions, self.x0)
-        G = self.jacobian(self.distances(joint), self.x0)
+        G = self.jacobian(fn, self.x0)
         if G.size == 0:
             return False
         U, s, Vt = np.linalg.svd(J, full_matrices=False)

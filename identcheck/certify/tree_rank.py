@@ -21,6 +21,16 @@ is W = Σ_i {λ C_i : λ V_i = 0}, read off the reduced row echelon form of [V_i
 pivot lies in the constant columns). W only grows with N; frames are added until a new generic
 frame changes neither dim W nor any verdict (the stopping rule of :mod:`identcheck.certify.jacobian`).
 
+What a joint is judged by. Its own parameters — its centre (and axis) in each of its two segments —
+relative to what the data determine in that segment: its distances to the segment's markers, or, on
+a segment without markers, to the centres of the segment's other ball joints. Such a segment has no
+frame of its own: its determined content is the configuration of the centres placed relative to
+each other (:func:`anchored_centres`). A joint is locally identifiable iff the null space of J,
+beyond the gauge, moves none of those distances (each ∇f in W). A neighbour's centre that the data
+do not place on the segment (a neck whose head carries no marker) is not judged against: that
+distance is the neighbour's undetermined quantity, and it is reported with it
+(:attr:`JointRank.set_aside`), not charged to the shoulders and hips (:func:`judged_points`).
+
 Exactness. Every rank is exact, in one of two fields (python-flint matrices): ``"GFp"``, the
 integers modulo a prime p drawn uniformly among the 61-bit primes, with the point uniform on
 GF(p)^n (the default: fast), or ``"QQ"``, exact rationals, the point's coordinates uniform on a set
@@ -317,10 +327,11 @@ def adjacent_points(spec: TreeSpec, joint: str) -> tuple:
 
 
 class _Quantity:
-    """A gauge-invariant quantity of one joint and its gradient on the constants (column -> value)."""
+    """A gauge-invariant quantity of one joint and its gradient on the constants (column -> value), with the
+    point it measures the joint against (``None`` for an axial offset, which involves two)."""
 
-    def __init__(self, label: str, grad: dict):
-        self.label, self.grad = label, grad
+    def __init__(self, label: str, grad: dict, point: Point | None = None):
+        self.label, self.grad, self.point = label, grad, point
 
 
 def _point_local(tj: "TreeJacobian", pt: Point, seg: str):
@@ -336,12 +347,13 @@ def _point_local(tj: "TreeJacobian", pt: Point, seg: str):
     return [F(0), F(0), F(0)], {}  # seg's own parent joint: its centre is seg's origin
 
 
-def quantities(tj: "TreeJacobian", joint: str) -> list:
+def quantities(tj: "TreeJacobian", joint: str, points: tuple | None = None) -> list:
     """Squared distances of the adjacent points to the centre (spherical) or to the hinge, and the
-    hinge's axial offsets between the adjacent points (revolute)."""
+    hinge's axial offsets between the adjacent points (revolute). ``points``: (parent-side, child-side)
+    points to measure against instead of all of :func:`adjacent_points`."""
     spec, k, F = tj.spec, tj.k, tj.F
     name, kind, par, chi = next(j for j in spec.joints if j[0] == joint)
-    parent_pts, child_pts = adjacent_points(spec, joint)
+    parent_pts, child_pts = points if points is not None else adjacent_points(spec, joint)
     ci = tj.cols.centre[name]
     out, axial = [], []
     for side, pts in ((par, parent_pts), (chi, child_pts)):
@@ -359,7 +371,7 @@ def quantities(tj: "TreeJacobian", joint: str) -> list:
                 if side == par:
                     for a in range(3):
                         put(ci + a, -2 * w[a])
-                out.append(_Quantity(f"|{pt.name} - centre|^2", grad))
+                out.append(_Quantity(f"|{pt.name} - centre|^2", grad, pt))
                 continue
             a_, u_, v_ = k.a[name]
             h = _dot(w, a_)
@@ -372,7 +384,7 @@ def quantities(tj: "TreeJacobian", joint: str) -> list:
             ti = tj.cols.tangent[name]
             put(ti, -2 * h * _dot(w, u_))
             put(ti + 1, -2 * h * _dot(w, v_))
-            out.append(_Quantity(f"dist({pt.name}, hinge)^2", grad))
+            out.append(_Quantity(f"dist({pt.name}, hinge)^2", grad, pt))
             hg: dict = {}
             for col, a in dy.items():
                 hg[col] = hg.get(col, F(0)) + a_[a]
@@ -390,6 +402,52 @@ def quantities(tj: "TreeJacobian", joint: str) -> list:
     return out
 
 
+# -- what a joint is judged against on a segment without markers ----------------------------------------
+def _centre_joints(spec: TreeSpec, seg: str) -> list:
+    """Names of the spherical joints attached to ``seg`` (its parent joint and its child joints)."""
+    attached = list(spec.children[seg]) + ([spec.parent_joint[seg]] if seg in spec.parent_joint else [])
+    return [j[0] for j in attached if j[1] == "spherical"]
+
+
+def anchored_centres(spec: TreeSpec, asked: dict, undetermined: dict) -> dict:
+    """segment without markers -> the ball-joint centres on it that the data place relative to another
+    of them: a centre is anchored when some distance from it to another centre of the segment is
+    determined (in W).
+
+    A segment without markers has no frame of its own; its determined content is the configuration of
+    its anchored centres. A centre whose distances to all the others stay undetermined (a neck whose
+    head carries no marker) is not part of it, and its distances are that joint's undetermined
+    quantities, not its neighbours'. ``asked``: joint -> its :class:`_Quantity` list over all
+    :func:`adjacent_points`; ``undetermined``: joint -> the labels of those not in W."""
+    out = {}
+    for seg, ms in spec.markers.items():
+        if ms:
+            continue
+        out[seg] = {a for a in _centre_joints(spec, seg)
+                    if any(q.point is not None and q.point.segment == seg and q.point.kind == "centre"
+                           and q.label not in undetermined[a] for q in asked[a])}
+    return out
+
+
+def judged_points(spec: TreeSpec, joint: str, anchored: dict) -> tuple:
+    """((parent-side, child-side) points ``joint`` is judged against, [points set aside]).
+
+    On a segment with markers: its markers. On one without: the anchored centres of its other ball
+    joints (:func:`anchored_centres`); all of them when none is anchored (then nothing on the segment
+    is determined, and the joint is judged against everything there, as its neighbours are). A point
+    set aside is another joint's centre that the data leave undetermined on the segment: it belongs to
+    that joint's verdict, not to this one's."""
+    sides, aside = [], []
+    for pts in adjacent_points(spec, joint):
+        seg_anchored = anchored.get(pts[0].segment, set()) if pts else set()
+        keep = [p for p in pts if p.kind == "marker" or p.name in seg_anchored]
+        if not keep:
+            keep = list(pts)
+        aside += [p for p in pts if p not in keep]
+        sides.append(tuple(keep))
+    return tuple(sides), aside
+
+
 # -- the analysis ------------------------------------------------------------------------------------
 @dataclass
 class JointRank:
@@ -399,6 +457,10 @@ class JointRank:
     min_frames: int | None            # fewest generic frames after which it is locally identifiable
     quantities: list                  # labels of the gauge-invariant quantities asked about
     undetermined: list                # labels not in W (empty when local)
+    points: tuple = ((), ())          # (parent-side, child-side) Points the quantities measure against
+    set_aside: list = field(default_factory=list)   # [{"joint", "segment", "quantity"}]: its quantities
+    #     measured against another joint's centre that the data leave undetermined on a segment without
+    #     markers (``quantity``, this joint's label) — they belong to that joint (``joint``), not to this one
 
 
 @dataclass
@@ -467,35 +529,64 @@ def failure_bound(spec: TreeSpec, frames: int, n_claims: int, prime: int | None,
     return min(1.0, n_claims * per)
 
 
+def _not_in_w(tj: "TreeJacobian", asked: dict) -> dict:
+    """joint -> labels of its quantities whose gradients are not in W (one matrix product for all)."""
+    labels = [(n, q.label) for n, ql in asked.items() for q in ql]
+    G = tj.gradient_rows([q.grad for ql in asked.values() for q in ql])
+    out = {n: [] for n in asked}
+    for (n, label), ok in zip(labels, tj.in_span(G)):
+        if not ok:
+            out[n].append(label)
+    return out
+
+
+def _judge(tj: "TreeJacobian", asked: dict) -> tuple:
+    """(joint -> (points, set aside), joint -> its judged quantities, joint -> judged labels not in W) at
+    the current W: every quantity over :func:`adjacent_points` is decided first, which fixes the anchored
+    centres; joints whose points then change are asked again, against :func:`judged_points`."""
+    spec = tj.spec
+    undetermined = _not_in_w(tj, asked)
+    anchored = anchored_centres(spec, asked, undetermined)
+    points = {n: judged_points(spec, n, anchored) for n in asked}
+    redo = {n: quantities(tj, n, pts) for n, (pts, aside) in points.items() if aside}
+    again = _not_in_w(tj, redo)
+    judged = {n: redo.get(n, asked[n]) for n in asked}
+    return points, judged, {n: again.get(n, undetermined[n]) for n in asked}
+
+
 def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
             warm_frames: int = 0) -> TreeRank:
     """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
 
+    A joint is locally identifiable when every quantity it is judged by is in W: its distances to the
+    markers of its segments, and on a segment without markers to the anchored centres of the segment's
+    other ball joints (:func:`judged_points`). An undetermined neighbour (a neck whose head carries no
+    marker) is then the neighbour's undetermined quantity, reported in ``set_aside``, not this joint's.
+
     ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
     plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count)."""
     tj = TreeJacobian(spec, field_kind, seed)
-    qs = {j[0]: quantities(tj, j[0]) for j in spec.joints}
-    labels = [(n, q.label) for n, ql in qs.items() for q in ql]
-    G = tj.gradient_rows([q.grad for ql in qs.values() for q in ql])
+    asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     first = {}
     prev = None
     while tj.frames < max_frames:
         dim = tj.add_frame(max(1, warm_frames - tj.frames))
-        verdict = {n: [] for n in qs}
-        for (n, label), ok in zip(labels, tj.in_span(G)):
-            if not ok:
-                verdict[n].append(label)
-        for name, qlist in qs.items():
+        points, judged, verdict = _judge(tj, asked)
+        for name, qlist in judged.items():
             if qlist and not verdict[name] and name not in first:
                 first[name] = tj.frames
-        state = (dim, {n: len(m) for n, m in verdict.items()})
+        state = (dim, {n: (len(points[n][1]), len(m)) for n, m in verdict.items()})
         if state == prev:
             break
         prev = state
-    joints = {n: JointRank(local=bool(qs[n]) and not verdict[n], min_frames=first.get(n),
-                           quantities=[q.label for q in qs[n]], undetermined=verdict[n]) for n in qs}
+    joints = {n: JointRank(local=bool(judged[n]) and not verdict[n], min_frames=first.get(n),
+                           quantities=[q.label for q in judged[n]], undetermined=verdict[n],
+                           points=points[n][0],
+                           set_aside=[{"joint": q.point.name, "segment": q.point.segment, "quantity": q.label}
+                                      for q in asked[n] if q.point in points[n][1]])
+              for n in asked}
     D = degree_bound(spec, tj.frames)
-    n_claims = sum(len(q) for q in qs.values()) + 1
+    n_claims = sum(len(q) for q in asked.values()) + sum(len(q) for n, q in judged.items() if points[n][1]) + 1
     fail = failure_bound(spec, tj.frames, n_claims, tj.F.p, tj.n_vars * tj.frames + tj.cols.n)
     return TreeRank(joints=joints, frames=tj.frames, dim_w=len(tj.W), n_constants=tj.cols.n, field=field_kind,
                     prime=tj.F.p, degree_bound=D, failure_bound=fail)

@@ -16,6 +16,18 @@ Two layers (issue 7):
 A joint is ``identifiable`` only when the explanation settles it with one candidate through
 uniquely identified joints; ``local`` is the whole tree's verdict. The explanation never claims
 more than the whole tree (checked on every plan: :class:`PlanInconsistency` otherwise).
+
+A segment without markers (a trunk, a head) is judged by what the data determine on it: a joint there
+is measured against the centres of its neighbours that the whole tree places relative to each other,
+so a neck whose head carries no marker is the neck's undetermined quantity, not the shoulders' and
+hips' (:func:`identcheck.certify.tree_rank.judged_points`; JSON ``undetermined`` and, per joint,
+``undetermined_neighbours``).
+
+The fewest markers to add (:func:`fewest_markers`) are minimal for the whole-tree rank: after them every
+joint is locally identifiable and none is left several candidates by its case (:attr:`Plan.passes`), and
+every plan with fewer added markers, on any segment, was checked to fail. Joints locally identifiable only
+together pass with their candidates uncounted; the fewest markers for the propagation to prove every
+joint unique are reported beside them (``suggestions_unique``) when they differ.
 """
 from __future__ import annotations
 
@@ -30,6 +42,7 @@ from identcheck.certify import twin as twin_certificate
 from identcheck.plan.result import PlanResult
 
 MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
+MAX_RANK_CHECKS = 400      # whole-tree ranks the fewest-marker search may ask about plans below the propagation's fix
 
 
 class PlanInconsistency(RuntimeError):
@@ -182,8 +195,54 @@ class Plan:
     def all_local(self) -> bool:
         return all(j["local"] for j in self.joints.values())
 
+    @property
+    def passes(self) -> bool:
+        """The target of the fewest-marker suggestions: every joint locally identifiable (whole-tree rank) and
+        none settled by a case that leaves it several candidates. A joint locally identifiable only through
+        the whole tree passes: its candidates are not counted, and no marker is known to be needed."""
+        return all(j["local"] and j["candidates"] in (None, 1) for j in self.joints.values())
+
+
+def _set_aside_text(jr) -> str:
+    """What a joint was not judged against: undetermined centres of its neighbours on a segment without
+    markers, which belong to those joints' verdicts."""
+    if not jr.set_aside:
+        return ""
+    by_seg: dict = {}
+    for a in jr.set_aside:
+        by_seg.setdefault(a["segment"], []).append(a["joint"])
+    judged = {p.segment: [p.name for p in pts] for pts in jr.points for p in pts}
+    parts = [f"on {seg} (no markers) it is judged against the centres the data determine there "
+             f"({', '.join(judged.get(seg, [])) or 'none'}); where the centre of {', '.join(js)} lies on {seg} "
+             f"is not determined, and that belongs to the verdict of {', '.join(js)}, not to this one's"
+             for seg, js in by_seg.items()]
+    return "; " + "; ".join(parts)
+
+
+def _bare_below(spec, chi: str) -> bool:
+    """No marker on ``chi`` or on any segment below it."""
+    return not any(spec.markers[s] for s in _subtree(spec, chi))
+
+
+def _subtree(spec, seg: str) -> list:
+    """``seg`` and every segment below it."""
+    out, todo = [], [seg]
+    while todo:
+        s = todo.pop()
+        out.append(s)
+        todo += [j[3] for j in spec.children[s]]
+    return out
+
 
 def _reason(spec, name, kind, par, chi, jr, st) -> str:
+    """The joint's ``reason``: how it was settled (or why not), then any undetermined neighbours it was not
+    judged against."""
+    return _explain(spec, name, kind, par, chi, jr, st) + _set_aside_text(jr)
+
+
+def _explain(spec, name, kind, par, chi, jr, st) -> str:
+    """Why the joint has its verdict: the propagation's case, the whole tree's shared motion, or what the
+    whole tree leaves undetermined."""
     np_, nc = len(spec.markers[par]), len(spec.markers[chi])
     if st is not None:
         via = f" with virtual markers {', '.join(st.virtual)}" if st.virtual else ""
@@ -215,9 +274,12 @@ def _reason(spec, name, kind, par, chi, jr, st) -> str:
         return (f"nothing measures it: {chi if not spec.markers[chi] else par} carries no markers and no other ball "
                 "joint to measure the joint against")
     missing = ", ".join(jr.undetermined[:4]) + (" ..." if len(jr.undetermined) > 4 else "")
+    what = "centre" if kind == "spherical" else "hinge"
+    bare = (f"; nothing on {chi} or below it carries a marker, so nothing measures where {name}'s {what} is"
+            if _bare_below(spec, chi) else "")
     return (f"not identifiable: {kind}({min(np_, 3)},{min(nc, 3)}) with the markers of {par} | {chi} (and any "
             f"virtual markers) is not locally identifiable (see `identcheck table`), and the whole tree leaves "
-            f"{missing} undetermined; add markers (see suggestions)")
+            f"{missing} undetermined{bare}; add markers (see suggestions)")
 
 
 def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0,
@@ -252,6 +314,8 @@ def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str 
                             if st and st.rejected_by else None),
             "reason": _reason(spec, name, kind, par, chi, jr, st),
         }
+        if jr.set_aside:
+            plan.joints[name]["undetermined_neighbours"] = [dict(a) for a in jr.set_aside]
     return plan
 
 
@@ -281,9 +345,100 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) 
     return out
 
 
+@dataclass
+class Fix:
+    """The fewest markers to add (:func:`fewest_markers`), and how far their minimality was checked."""
+
+    extra: dict | None          # segment -> markers to add: {} none needed, None none found within the limit
+    unique_extra: dict | None   # the fewest for which the propagation settles every joint uniquely (None: none)
+    fewer_checked: int          # plans with fewer added markers (the plan itself included) the whole-tree rank
+    #                             rejected
+    fewer_bare: int             # plans with fewer added markers skipped: a subtree stays bare (cannot pass)
+    complete: bool              # every plan with fewer added markers was ruled out (False: the budget ran out)
+    failure_bound: float = 0.0  # probability that any of those rejections is wrong (sum of their plans' bounds)
+
+    @property
+    def markers(self) -> int | None:
+        return None if self.extra is None else sum(self.extra.values())
+
+    def check(self) -> dict:
+        """The ``suggestions_check`` JSON: what was searched and what minimality rests on."""
+        return {"target": "every joint locally identifiable (whole-tree rank) and none settled with several "
+                          "candidates", "markers": self.markers, "minimal": self.complete,
+                "fewer_plans_checked": self.fewer_checked, "fewer_plans_bare": self.fewer_bare,
+                "failure_probability_bound": self.failure_bound,
+                "method": "every plan with fewer added markers, on any segment (those without markers too), "
+                          "rejected by the whole-tree rank, or skipped when a joint's subtree stays without markers"}
+
+
+def as_suggestions(extra: dict | None) -> list:
+    """``{segment: count}`` as the contract's ``[{"segment", "add_markers"}]`` (empty for None)."""
+    return [{"segment": s, "add_markers": c} for s, c in (extra or {}).items()]
+
+
 def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED) -> list | None:
-    """Fewest extra markers (segment -> count) after which every joint is identifiable, or None when no
-    addition of up to ``max_markers`` markers suffices.
+    """Fewest extra markers (``[{"segment", "add_markers"}]``) after which the plan :attr:`~Plan.passes`,
+    ``[]`` when it already does, None when no addition of up to ``max_markers`` markers does
+    (:func:`fewest_markers`)."""
+    fix = fewest_markers(spec, rows, seed, max_markers)
+    return None if fix.extra is None else as_suggestions(fix.extra)
+
+
+def fewest_markers(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED,
+                   budget: int = MAX_RANK_CHECKS, base: Plan | None = None) -> Fix:
+    """The fewest extra markers after which the plan :attr:`~Plan.passes`, minimal for the whole-tree rank.
+
+    The propagation's fix (:func:`unique_suggestions`) passes, so it bounds the count from above. Every
+    plan with fewer added markers — multisets of all segments, those without markers included — is then
+    asked, fewest first, and the first that passes is the answer; if none does, the propagation's fix
+    is. So no plan with one marker fewer passes: each was rejected by the whole-tree rank, or skipped
+    because it leaves some joint's whole subtree without a marker (nothing then varies that joint's
+    centre or axis, so the rank cannot determine them: such a plan provably fails). ``budget`` caps the
+    whole-tree ranks; when it runs out, the propagation's fix is returned with ``complete`` False."""
+    base = base or analyse(spec, rows, seed=seed)
+    unique = {} if base.all_identifiable else unique_suggestions(spec, rows, seed, max_markers)
+    if base.passes:
+        return Fix({}, unique, 0, 0, True, 0.0)
+    upper = max_markers if unique is None else sum(unique.values()) - 1
+    needs = _bare_subtrees(spec)
+    checked, bare, fail = 1, 0, base.rank.failure_bound       # the plan itself (0 added) fails
+    for k in range(1, upper + 1):
+        level_checked = level_bare = 0
+        for combo in itertools.combinations_with_replacement(list(spec.markers), k):
+            if not all(need & set(combo) for need in needs):
+                level_bare += 1
+                continue
+            if checked + level_checked >= budget:
+                return Fix(unique, unique, checked + level_checked, bare + level_bare, False, fail)
+            extra = _count_segments(combo)
+            cand = analyse(_with_extra(spec, extra), rows, seed=seed, warm_frames=base.rank.frames - 1)
+            if cand.passes:
+                return Fix(extra, unique, checked, bare, True, fail)
+            level_checked += 1
+            fail += cand.rank.failure_bound
+        checked, bare = checked + level_checked, bare + level_bare
+    return Fix(unique, unique, checked, bare, True, fail)
+
+
+def _bare_subtrees(spec: tree_rank.TreeSpec) -> list:
+    """For each joint whose child and everything below it carry no marker, the set of those segments: a
+    plan that passes has an added marker in each (else the joint's constants move no marker)."""
+    return [set(_subtree(spec, chi)) for _, _, _, chi in spec.joints if _bare_below(spec, chi)]
+
+
+def _count_segments(combo) -> dict:
+    """A multiset of segments as {segment: count}, in first-seen order."""
+    extra: dict = {}
+    for s in combo:
+        extra[s] = extra.get(s, 0) + 1
+    return extra
+
+
+def unique_suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0,
+                       max_markers: int = MAX_SUGGESTED) -> dict | None:
+    """Fewest extra markers (segment -> count) after which the propagation settles every joint with one
+    candidate and the whole-tree rank confirms it (every joint identifiable), or None when no addition of
+    up to ``max_markers`` markers suffices.
 
     A marker on segment X can change a joint not yet uniquely settled only if the joint touches X (X's
     points) or a neighbour of X (a far marker beyond its one-point segment); a uniquely settled joint's
@@ -295,7 +450,7 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
     base = propagate(spec, rows)
     open_joints = [j for j in spec.joints if not (j[0] in base and base[j[0]].candidates == 1)]
     if not open_joints:
-        return []
+        return {}
     extra: dict = {}
     for comp in _components(spec, open_joints):
         found = _fewest(spec, rows, comp, max_markers - sum(extra.values()))
@@ -303,9 +458,8 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
             return None
         extra.update(found)
     if analyse(_with_extra(spec, extra), rows, seed=seed).all_identifiable:
-        return [{"segment": s, "add_markers": c} for s, c in extra.items()]
-    found = _fewest(spec, rows, open_joints, max_markers, seed=seed)
-    return None if found is None else [{"segment": s, "add_markers": c} for s, c in found.items()]
+        return extra
+    return _fewest(spec, rows, open_joints, max_markers, seed=seed)
 
 
 def _influencing(spec, joints: list) -> set:
@@ -333,9 +487,7 @@ def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None)
     segs = [s for s in spec.markers if s in near]
     for k in range(1, max_markers + 1):
         for combo in itertools.combinations_with_replacement(segs, k):
-            extra: dict = {}
-            for s in combo:
-                extra[s] = extra.get(s, 0) + 1
+            extra = _count_segments(combo)
             cand = _with_extra(spec, extra)
             settled = propagate(cand, rows)
             if not all(n in settled and settled[n].candidates == 1 for n in names):
@@ -373,6 +525,22 @@ def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
             "method": "greedy removal while every joint stays locally identifiable (whole-tree rank)"}
 
 
+def _suggestion_keys(fix: Fix) -> dict:
+    """The JSON keys of a fix: ``suggestions`` (the fewest markers for the whole-tree rank), how that was
+    checked, and the fewest for a proof of uniqueness by propagation when those differ."""
+    keys = {"suggestions": as_suggestions(fix.extra), "suggestions_check": fix.check()}
+    if fix.extra is None:
+        keys["suggestions_note"] = (f"no addition of up to {MAX_SUGGESTED} markers makes every joint locally "
+                                    "identifiable" if fix.complete else
+                                    f"none found: the search stopped after {fix.fewer_checked} whole-tree ranks")
+    if fix.unique_extra != fix.extra:
+        keys["suggestions_unique"] = as_suggestions(fix.unique_extra)
+        if fix.unique_extra is None:
+            keys["suggestions_unique_note"] = (f"no addition of up to {MAX_SUGGESTED} markers lets the propagation "
+                                               "settle every joint uniquely")
+    return keys
+
+
 def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
                fewest: bool = False, witness: bool = False, progress=None) -> PlanResult:
     """Check a marker plan: every joint's verdict and explanation, the fewest markers to add, and (optional
@@ -408,14 +576,16 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     if motion:
         for n, needs in motion_needed(spec, plan, seed).items():
             doc["joints"][n]["motion_needed"] = needs
-    sugg = [] if plan.all_identifiable else (suggestions(spec, rows, seed) if suggest else None)
-    doc["suggestions"] = sugg if sugg is not None else []
-    if sugg is None and suggest:
-        doc["suggestions_note"] = f"no addition of up to {MAX_SUGGESTED} markers makes every joint identifiable"
+    doc["suggestions"] = []
+    if suggest and not plan.all_identifiable:
+        doc.update(_suggestion_keys(fewest_markers(spec, rows, seed, base=plan)))
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed)
     if fewest:
         doc["fewest_local"] = fewest_local(spec, rows, seed)
+    undetermined = {n: list(plan.rank.joints[n].undetermined) for n, j in plan.joints.items() if not j["local"]}
+    if undetermined:
+        doc["undetermined"] = undetermined
     jointly = [n for n, j in plan.joints.items() if j["jointly_only"]]
     if jointly:
         doc["shared_motion"] = (f"{', '.join(jointly)}: locally identifiable only together (the whole tree's rank), "

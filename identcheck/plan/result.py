@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 from identcheck.io.jsonable import frozen, plain
 
-OPTIONAL = ("suggestions_note", "robustness", "fewest_local", "shared_motion")
+OPTIONAL = ("suggestions_note", "suggestions_check", "suggestions_unique", "suggestions_unique_note", "undetermined",
+            "robustness", "fewest_local", "shared_motion")
 """Top-level keys present only when the analysis ran (or had something to say)."""
 
 
@@ -25,12 +26,20 @@ class PlanResult:
         (``parent``, ``child``, ``settled_by``, ``depends_on``, ``rejected_by``, ...; ``motion_needed``
         and ``alternative`` when those analyses ran).
     suggestions : tuple of Mapping
-        The fewest markers to add, ``{"segment", "add_markers"}`` each; empty when none are needed
-        or none were found (``suggestions_note`` then says so).
+        The fewest markers to add, ``{"segment", "add_markers"}`` each, after which every joint is locally
+        identifiable (whole-tree rank) and none is settled with several candidates; empty when none are
+        needed or none were found (``suggestions_note`` then says so). ``suggestions_check`` says how
+        their minimality was checked (every plan with one marker fewer fails).
     certificate : Mapping
         How the whole-tree verdict was computed (prime, frames, failure probability bound, seed).
-    suggestions_note, robustness, fewest_local, shared_motion
+    suggestions_note, suggestions_check, robustness, fewest_local, shared_motion
         Present (not None) when computed; as in the JSON.
+    suggestions_unique, suggestions_unique_note
+        The fewest markers after which the propagation settles every joint uniquely, when they differ from
+        ``suggestions`` (jointly identifiable joints' candidates are not counted).
+    undetermined : Mapping
+        Joint -> the quantities of that joint the whole tree leaves undetermined, for every joint that is
+        not locally identifiable.
     root : str
         The model's root segment (for drawing the tree).
     markers : Mapping
@@ -45,6 +54,10 @@ class PlanResult:
     root: str
     markers: Mapping
     suggestions_note: str | None = None
+    suggestions_check: Mapping | None = None
+    suggestions_unique: tuple | None = None
+    suggestions_unique_note: str | None = None
+    undetermined: Mapping | None = None
     robustness: Mapping | None = None
     fewest_local: Mapping | None = None
     shared_motion: str | None = None

@@ -37,9 +37,14 @@ DPS = 50
 # -- the parameter layout ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Layout:
-    """Where each constant and per-frame variable sits in the flat vector ``[constants | frame 0 | frame 1 ...]``."""
+    """Where each constant and per-frame variable sits in the flat vector ``[constants | frame 0 | frame 1 ...]``.
+
+    ``judged``: ((joint, (parent-side points, child-side points)), ...), the points the whole-tree verdict
+    judged each joint against (:attr:`identcheck.certify.tree_rank.JointRank.points`); a joint not listed is
+    measured against all its :func:`~identcheck.certify.tree_rank.adjacent_points`."""
 
     spec: TreeSpec
+    judged: tuple = ()
 
     @cached_property
     def markers(self) -> list:
@@ -127,8 +132,9 @@ def to_mp(x: np.ndarray) -> np.ndarray:
 
 # -- the gauge-invariant quantities of one joint ---------------------------------------------------------
 def joint_quantities(layout: Layout, const, joint: str) -> dict:
-    """label -> value of the quantities :mod:`identcheck.certify.tree_rank` asks about for ``joint``: each adjacent
-    point's squared distance to the centre (ball) or hinge, and the hinge's axial offsets between them."""
+    """label -> value of the quantities :mod:`identcheck.certify.tree_rank` judges ``joint`` by: each adjacent
+    point's squared distance to the centre (ball) or hinge, and the hinge's axial offsets between them (the
+    points of ``layout.judged`` when it names the joint)."""
     L = layout
     name, kind, par, chi = next(j for j in L.spec.joints if j[0] == joint)
     c, e = const[L.const["c:" + name]], const[L.const["e:" + name]]
@@ -138,7 +144,8 @@ def joint_quantities(layout: Layout, const, joint: str) -> dict:
         rest = quat_matrix(const[L.const["rest:" + name]])
         axes = {par: a, chi: rest.T @ a}           # the hinge direction in each segment's frame
     out, axial = {}, []
-    for side, pts in zip((par, chi), adjacent_points(L.spec, joint)):
+    points = dict(L.judged).get(joint) or adjacent_points(L.spec, joint)
+    for side, pts in zip((par, chi), points):
         origin = c if side == par else e
         for pt in pts:
             y = _point(L, const, pt, side)

@@ -37,6 +37,7 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
     F = max(MIN_FRAMES, 2 * plan.rank.frames)
     truth, held = simulated_truth(model, spec, F, seed)
     case_points = {n: (st.parent_points, st.child_points) for n, st in plan.settled.items()}
+    judged = tuple((n, jr.points) for n, jr in plan.rank.joints.items())
     out = {}
     if not any(spec.markers.values()):
         return {n: {"joint": n, "method": None, "verified": False, "found": None,
@@ -53,7 +54,7 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
             continue
         search = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
                              held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]),
-                             case_points=case_points)
+                             case_points=case_points, judged=judged)
         w = search.witness
         if w is not None and w.verified:
             out[name] = w.to_dict()

@@ -330,18 +330,20 @@ def _reexpress(Rw, tw, R2, t2, seg, v):
 def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, method: str,
               undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
               change: float = 0.05, via: tuple = (),
-              case_points: dict | None = None) -> "Search":
+              case_points: dict | None = None, judged: tuple = ()) -> "Search":
     """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
     the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
     truth's markers evaluated at 50 digits (the truth's float parameters taken as exact), so truth and
     alternative are held to the same data. The truth's vector over ``n_held_out`` further frames,
     ``held_out_truth``, gives frames the alternative's constants must also reproduce. ``via``: for an
     ``"isolated"`` search, further joints whose other candidates may carry this one's (a joint that uses
-    their virtual markers inherits them); ``case_points``: the points the propagation settled each with.
+    their virtual markers inherits them); ``case_points``: the points the propagation settled each with;
+    ``judged``: the points the whole-tree verdict judged each joint against (:class:`~identcheck.plan.
+    tree_kinematics.Layout`), so an alternative counts as different only by the joint's own quantities.
 
     Returns a :class:`Search`: the first verified witness, else the best unverified attempt (``verified``
     False), else none — which is not a proof that nothing exists."""
-    L = K.Layout(spec)
+    L = K.Layout(spec, judged)
     F = n_frames
     data = trial(L, truth_x, F)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None

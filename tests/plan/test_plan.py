@@ -117,6 +117,8 @@ def test_identified_joints_are_recovered_from_a_simulated_trial(tree, seed):
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(trees)
 def test_suggestions_fix_the_plan_and_are_fewest(tree):
+    """The suggestion makes every joint locally identifiable with none left several candidates (the whole-tree
+    rank's target), nothing with one marker fewer does; the propagation's fix makes every joint identifiable."""
     model = chain_model(*tree)
     spec = tree_rank.TreeSpec.from_model(model)
     rows = plan.table_summary()
@@ -125,10 +127,14 @@ def test_suggestions_fix_the_plan_and_are_fewest(tree):
         return
     assert sugg is not None
     extra = {s["segment"]: s["add_markers"] for s in sugg}
-    assert plan.analyse(plan._with_extra(spec, extra), rows).all_identifiable
+    assert plan.analyse(plan._with_extra(spec, extra), rows).passes
     k = sum(extra.values())
     if k > 1:                                       # nothing with one marker fewer works
         assert plan.suggestions(spec, rows, max_markers=k - 1) is None
+    unique = plan.unique_suggestions(spec, rows, max_markers=4)
+    if unique is not None:
+        assert plan.analyse(plan._with_extra(spec, unique), rows).all_identifiable
+        assert sum(unique.values()) >= k
 
 
 def test_body16_paper_plan():
