@@ -206,7 +206,7 @@ def best_of(fn, repeat=3):
 
 
 def run(args) -> dict:
-    g = generated("numpy")  # generation (SymPy -> NumPy) once, before any timing
+    g = generated("numpy")  # the generated functions, loaded once before any timing
     prob = draw_problems(args.problems, args.seed)
     xyz, truth = prob["xyz"], prob["truth"]
     n = len(xyz)

@@ -15,19 +15,27 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from identcheck.errors import InputError
 from identcheck.io.model import Model
-from identcheck.simulate.rigid import Simulation
-from identcheck.simulate.rigid import simulate as simulate_model
 from identcheck.trial import FORMATS, Trial
 
+if TYPE_CHECKING:  # pragma: no cover
+    from identcheck.simulate.rigid import Simulation
 
-def _one_blas_thread(verb):
-    """Run ``verb`` with BLAS (and OpenMP) limited to one thread, restored afterwards."""
+
+def _one_blas_thread(verb, with_scipy: bool = True):
+    """Run ``verb`` with BLAS (and OpenMP) limited to one thread, restored afterwards.
+
+    threadpoolctl limits the libraries loaded when the call starts, so SciPy (whose wheels bring their own
+    BLAS) is imported first. ``with_scipy=False`` is for a verb that runs on NumPy alone (``identify``): it
+    spares that import, a third of such a verb's time.
+    """
     @functools.wraps(verb)
     def run(*args, **kwargs):
-        import scipy.linalg  # noqa: F401  (SciPy's own BLAS is loaded here: limit it too)
+        if with_scipy:
+            import scipy.linalg  # noqa: F401  (SciPy's own BLAS is loaded here: limit it too)
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1):
@@ -92,6 +100,8 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
     if out_path is not None and out_path.suffix.lower() not in FORMATS:
         raise InputError([f"unknown trial file extension {out_path.suffix or '(none)'!r} (expected "
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
+    from identcheck.simulate.rigid import simulate as simulate_model
+
     sim = simulate_model(load_model(model), seed=seed, **kw)
     if effect is not None:
         from identcheck.effects.registry import SEED_OFFSET, inject_effect   # the effects load only when used
@@ -221,7 +231,7 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
     return PlanResult.from_dict(doc, m.root, {s: seg.markers for s, seg in m.segments.items()})
 
 
-@_one_blas_thread
+@functools.partial(_one_blas_thread, with_scipy=False)  # the exact-case solvers need NumPy only
 def identify(model, trial, joints=None, frames=None, precision: int | None = None):
     """Every joint `trial`'s samples admit, by the exact-case solvers of Pham et al. (revolute (2,1),
     spherical (3,q), spherical (2,2)), for `joints` of `model` (default: all).
@@ -285,17 +295,28 @@ def verify(certificate):
 
 
 @_one_blas_thread
-def derive(out="derivations/out"):
-    """Regenerate every derivation with SymPy, check each against the printed paper, and write them as
-    Markdown to `out`.
+def derive(out="derivations/out", regenerate: bool = False):
+    """Regenerate every derivation with SymPy, check each against the printed paper, write them as
+    Markdown to `out`, and compare the solvers' generated modules (:mod:`identcheck.solve.generated`) with
+    a fresh print of the derivations.
+
+    Parameters
+    ----------
+    regenerate : bool
+        Rewrite the generated modules that differ from the fresh print (else a difference makes the
+        result not ``ok``).
 
     Returns
     -------
     DeriveResult
     """
-    from identcheck.derive.result import derive_and_write
+    import dataclasses
 
-    return derive_and_write(out)
+    from identcheck.derive.result import derive_and_write
+    from identcheck.solve.generated.writer import sync
+
+    res = derive_and_write(out)
+    return dataclasses.replace(res, generated=sync(write=regenerate))
 
 
 def batch(verb: str, inputs, out, model=None, frames=None, noise_mm=None, motion=None, seed: int = 0,

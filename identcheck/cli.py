@@ -16,11 +16,32 @@ import warnings
 
 import identcheck
 from identcheck import api
-from identcheck.effects.registry import NAMES as EFFECT_NAMES
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
 from identcheck.report import json_out, text
 
 log = logging.getLogger("identcheck")
+
+
+class _EffectNames:
+    """The effect names of :data:`identcheck.effects.registry.NAMES`, read when argparse checks or prints them:
+    the registry imports every effect module (and SciPy with them), which the other verbs do not need."""
+
+    def _names(self) -> tuple:
+        from identcheck.effects.registry import NAMES
+
+        return NAMES
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __len__(self) -> int:
+        return len(self._names())
+
+
+EFFECT_NAMES = _EffectNames()
 
 
 def _progress(verb: str):
@@ -33,7 +54,7 @@ def _print_json(result) -> None:
 
 
 def _cmd_derive(a) -> int:
-    res = api.derive(a.out)
+    res = api.derive(a.out, regenerate=a.regenerate)
     if a.json:
         _print_json(res)
     else:
@@ -168,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("derive", help="regenerate and check every derivation against the paper")
     s.add_argument("--out", default="derivations/out", help="directory for the rendered Markdown")
+    s.add_argument("--regenerate", action="store_true",
+                   help="rewrite the solvers' generated code (identcheck/solve/generated/) from these derivations")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_derive)
 
@@ -198,7 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("--out", required=True)
     s.add_argument("--effect", default=None, choices=EFFECT_NAMES, metavar="NAME",
-                   help=f"inject one named effect ({', '.join(EFFECT_NAMES)}); drawn from --seed")
+                   help="inject one named effect (%(choices)s); drawn from --seed")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames", type=int, default=200)
     s.add_argument("--rate", type=float, default=100.0, help="Hz")

@@ -42,3 +42,8 @@ class DerivationError(RuntimeError):
 
 class IdentifiabilityWarning(UserWarning):
     """Usable but near-degenerate data: the answer is sensitive to noise."""
+
+
+class StaleCodeWarning(RuntimeWarning):
+    """A committed generated module no longer matches its derivation's sources: the functions were derived
+    again at run time (SymPy, seconds). ``identcheck derive --regenerate`` rewrites the module."""

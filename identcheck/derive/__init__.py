@@ -10,11 +10,12 @@ DERIVATIONS = {
 
 
 def get(name: str, disk_cache: bool = True) -> Derivation:
-    """The named derivation: run once per process (each module caches it), and, for the solvers that only
-    need its results, kept on disk between processes (:mod:`identcheck.derive.cache`) so that ``fit`` does
-    not re-derive for seconds at every start. ``identcheck derive`` and the certificates pass
-    ``disk_cache=False``: the one exists to derive again, and the others print the derived expressions, whose
-    printed form a pickle round trip can change (``(2*d**2 + r**2)/2`` came back as ``d**2 + r**2/2``)."""
+    """The named derivation: run once per process (each module caches it), and, for callers that only need
+    its results, kept on disk between processes (:mod:`identcheck.derive.cache`). The solvers need neither:
+    they run committed generated code (:mod:`identcheck.solve.generated`) and derive, from the disk cache,
+    only when that code is stale. ``identcheck derive``, the code generator and the certificates pass
+    ``disk_cache=False``: they derive again or print the derived expressions, whose printed form a pickle
+    round trip can change (``(2*d**2 + r**2)/2`` came back as ``d**2 + r**2/2``)."""
     import importlib
 
     if disk_cache:

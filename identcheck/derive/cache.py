@@ -1,10 +1,12 @@
 """Derivations kept on disk between processes.
 
-Deriving Pham's revolute (2,1) system takes SymPy seconds; every ``fit`` of a knee needs its results. The
-results are pickled under the user's cache directory (``$IDENTCHECK_CACHE``, else
-``$XDG_CACHE_HOME/identcheck``, else ``~/.cache/identcheck``), keyed by a hash of every source file of
-:mod:`identcheck.derive`, of :mod:`identcheck.symbols` and of the SymPy and Python versions, so that any change
-to a derivation derives again. A cache that cannot be read or written is skipped (the derivation runs as
+Deriving Pham's revolute (2,1) system takes SymPy seconds. The solvers run committed generated code
+(:mod:`identcheck.solve.generated`) and need a derivation's results only when that code is stale (a
+derivation was edited and not yet printed again): then they come from here. The results are pickled under
+the user's cache directory (``$IDENTCHECK_CACHE``, else ``$XDG_CACHE_HOME/identcheck``, else
+``~/.cache/identcheck``), keyed by a hash of every source file of :mod:`identcheck.derive`, of
+:mod:`identcheck.symbols` and of the SymPy and Python versions, so that any change to a derivation derives
+again. A cache that cannot be read or written is skipped (the derivation runs as
 before); a file that fails to load is derived again and replaced. ``identcheck derive`` never uses it.
 """
 from __future__ import annotations

@@ -16,20 +16,24 @@ class DeriveResult:
         The directory the rendered Markdown went to.
     files : tuple of str
         The files written there.
+    generated : tuple
+        The solvers' generated modules compared with a fresh print of these derivations, one status per
+        module (:class:`identcheck.solve.generated.writer.ModuleStatus`: ``ok`` when it holds the print).
     """
 
     derivations: tuple
     out: str
     files: tuple
+    generated: tuple = ()
 
     @property
     def ok(self) -> bool:
-        """Every check agrees with the print or is a recorded erratum."""
-        return all(dv.ok for dv in self.derivations)
+        """Every check agrees with the print or is a recorded erratum, and every generated module is current."""
+        return all(dv.ok for dv in self.derivations) and all(g.ok for g in self.generated)
 
     def to_dict(self) -> dict:
-        """``{"ok", "out", "files", "derivations": [{name, title, source, ok, checks}]}``, as
-        ``identcheck derive --json`` prints it."""
+        """``{"ok", "out", "files", "derivations": [{name, title, source, ok, checks}], "generated": [{case,
+        path, up_to_date, written, ok}]}``, as ``identcheck derive --json`` prints it."""
         return {
             "ok": self.ok,
             "out": self.out,
@@ -40,6 +44,7 @@ class DeriveResult:
                             "ok": c.ok, "note": c.note or (c.derived if isinstance(c.derived, str) else "")}
                            for c in dv.checks],
             } for dv in self.derivations],
+            "generated": [g.to_dict() for g in self.generated],
         }
 
 

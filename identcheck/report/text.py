@@ -10,7 +10,8 @@ from identcheck.report.json_out import document
 
 
 def derive_text(result) -> str:
-    """``identcheck derive``: each derivation, its checks against the print, and where they were written."""
+    """``identcheck derive``: each derivation, its checks against the print, the generated solver modules
+    against a fresh print, and where the derivations were written."""
     rep = document(result)
     lines = []
     for d in rep["derivations"]:
@@ -18,6 +19,10 @@ def derive_text(result) -> str:
         for c in d["checks"]:
             flag = "agrees" if c["agrees"] else (f"erratum {c['erratum']}" if c["ok"] else "DISAGREES (unrecorded)")
             lines.append(f"  {c['name']:<24} {c['where']:<16} {flag}")
+    for g in rep.get("generated", []):
+        state = ("rewritten" if g["written"] else "up to date" if g["up_to_date"]
+                 else "STALE: run identcheck derive --regenerate")
+        lines.append(f"generated code {g['path']}: {state}")
     lines.append(f"written to {rep['out']}")
     return "\n".join(lines)
 
@@ -181,10 +186,7 @@ def plan_text(result) -> str:
             lines.append(f"{'':<12} in practice ({p.get('motion', '')}, {p.get('noise_mm', '?')} mm noise): "
                          f"{p['verdict']}: {p['reason']}")
     lines.append("")
-    lines.append("all joints identifiable: " + ("yes" if doc["all_identifiable"] else "no")
-                 + ("" if doc["all_identifiable"] else
-                    "; fewest markers to add: " + (", ".join(f"{s['add_markers']} on {s['segment']}"
-                                                             for s in doc["suggestions"]) or "none found")))
+    lines += _plan_summary(doc)
     if doc.get("shared_motion"):
         lines.append("shared motion: " + doc["shared_motion"])
     if doc.get("fewest_local"):
@@ -197,6 +199,39 @@ def plan_text(result) -> str:
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
     return "\n".join(lines)
+
+
+def _markers_text(sugg) -> str:
+    return ", ".join(f"{s['add_markers']} on {s['segment']}" for s in sugg)
+
+
+def _plan_summary(doc: dict) -> list:
+    """The plan's verdict lines: all identifiable or not; what stays undetermined and whose it is; the fewest
+    markers for the whole-tree rank (and how minimality was checked); those for uniqueness by propagation."""
+    if doc["all_identifiable"]:
+        return ["all joints identifiable: yes"]
+    check = doc.get("suggestions_check") or {}
+    uncounted = [n for n, j in doc["joints"].items() if j["local"] and j["candidates"] is None]
+    if doc["all_local"] and not doc["suggestions"] and check.get("markers") == 0:
+        lines = [f"all joints identifiable: not shown; every joint is locally identifiable (whole-tree rank), but "
+                 f"{len(uncounted)} only together ({', '.join(uncounted)}), and their candidates are not counted; "
+                 "no marker is needed for the rank"]
+    else:
+        lines = ["all joints identifiable: no; fewest markers to add: " + (_markers_text(doc["suggestions"])
+                                                                           or "none found")]
+        if check.get("markers") and check["minimal"]:
+            lines[-1] += (f" (after them every joint is locally identifiable; every plan with fewer fails: "
+                          f"{check['fewer_plans_checked']} rejected by the whole-tree rank, "
+                          f"{check['fewer_plans_bare']} leave a subtree without markers)")
+        elif check.get("markers"):
+            lines[-1] += (f" (minimality not checked: the search stopped after {check['fewer_plans_checked']} "
+                          "whole-tree ranks)")
+    for name, labels in (doc.get("undetermined") or {}).items():
+        lines.append(f"undetermined: {name}: " + (", ".join(labels) or "nothing measures it"))
+    if doc.get("suggestions_unique"):
+        lines.append("fewest markers for every joint to be settled uniquely by propagation: "
+                     + _markers_text(doc["suggestions_unique"]))
+    return lines
 
 
 def batch_text(doc: dict) -> str:

@@ -10,24 +10,22 @@ square root is well-conditioned (:func:`cos_and_l`), so the truth survives cos �
 The derivation proves that generic data leave two joint-parameter sets (four joints with
 mirror images); see derivations/ERRATA.md, E1 and E2.
 
-Every formula comes from :mod:`identcheck.derive.revolute` through :mod:`identcheck.codegen`.
+Every formula comes from :mod:`identcheck.derive.revolute` through :mod:`identcheck.codegen`, printed once
+into :mod:`identcheck.solve.generated` (:func:`identcheck.solve.formulas.revolute21` names them).
 """
 from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from functools import lru_cache
 from types import SimpleNamespace
 
 import mpmath
 import numpy as np
 
-from identcheck import codegen, derive
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
-from identcheck.symbols import Q, Z, case, cos_sign, l as l_sym
+from identcheck.solve import generated as generated_code
 from identcheck.solve.linalg import cubic_roots, lstsq_stacked, solve_stacked
 
-CASE = case("revolute", 2, 1)
 PARAMS = ("d", "r", "alpha", "l", "rho")
 N_UNKNOWNS = 5
 SLOTS = 6  # 3 roots of (13) × 2 signs of cos α
@@ -40,29 +38,12 @@ ROUNDING_RESIDUAL = 1e-9  # float64 reproduction residuals below this × scale a
 _MP = SimpleNamespace(sqrt=mpmath.sqrt, maximum=max, where=lambda cond, a, b: a if cond else b)
 
 
-@lru_cache(maxsize=None)
 def generated(backend: str = "numpy") -> dict:
-    """The numeric functions of this case, generated from the derivation (cached)."""
-    dv = derive.for_case(CASE)
-    sample = CASE.sample
-    inv = dv.result("invariants")
-    par = CASE.parameter_symbols  # (d, r, l, rho, c_alpha, s_alpha)
-    vars_ = [s for a in CASE.variables for s in (a.cos, a.sin)]  # (c_theta, s_theta, c_beta, s_beta)
-    back = dv.result("back")
-    rho2 = back["rho2"].subs(back["l"], l_sym)  # ρ² in terms of l itself, see cos_and_l
-    assert not rho2.has(cos_sign), "rho2 must depend on the sign of cos α only through l"
-    h, dist2 = dv.result("axis_distance2")
-    f = lambda exprs, groups, name: codegen.numeric(exprs, groups, backend, name)  # noqa: E731
-    return {
-        "m_row": f([e.subs(inv) for e in dv.result("M")] + [dv.result("K").subs(inv)], [sample], "m_row"),
-        "cubic": f(dv.result("cubic").all_coeffs(), [Z], "cubic"),
-        "back": f([back[k] for k in ("r2", "sin2_alpha", "w", "v")], [(Q,), Z], "back"),
-        "rho2": f([rho2], [(Q,), Z, (l_sym,)], "rho2"),
-        "theta": f(dv.result("theta_cs"), [sample, par], "theta"),
-        "local": f(list(dv.result("local")), [sample, par, vars_[:2]], "local"),
-        "forward": f(list(dv.result("forward")), [par, vars_], "forward"),
-        "dist2": f([dist2], [(h,), par], "dist2"),
-    }
+    """The numeric functions of this case (:mod:`identcheck.solve.generated`; the same dict every call)."""
+    return generated_code.functions("revolute21", backend)
+
+
+__getattr__ = generated_code.lazy_case(__name__, "revolute21")  # ``CASE``: the symbolic case, loads SymPy
 
 
 @dataclass
@@ -205,13 +186,9 @@ def _solve_chunk(xyz, angles, rel_tol, out):
         out["residual"][where] = res * scale[where[0]]
 
 
-@lru_cache(maxsize=None)
 def _constant_column() -> int:
     """Index of the column of M that is the same number for every sample (M4 = 1, unknown Y4)."""
-    const = [i for i, m in enumerate(derive.for_case(CASE).result("M")) if m.is_number and m != 0]
-    if len(const) != 1:
-        raise AssertionError(f"expected one constant column in M, found {const}")
-    return const[0]
+    return generated_code.facts("revolute21")["constant_column"]
 
 
 def _solve_five(MK):
@@ -383,10 +360,11 @@ def _degeneracy(xyz: np.ndarray) -> None:
         raise DegenerateError(f"samples {bad} are not finite (NaN or inf): drop occluded frames first")
     if scale == 0:
         raise DegenerateError("all samples are at the origin (B coincides with A1)")
-    for i in range(N):
-        for j in range(i + 1, N):
-            if np.linalg.norm(xyz[i] - xyz[j]) <= 1e-9 * scale:
-                raise DegenerateError(f"samples {i} and {j} coincide: they give the same equation (det M = 0)")
+    for i in range(N - 1):  # each sample against the later ones at once: the first coinciding pair is named
+        close = np.flatnonzero(np.linalg.norm(xyz[i + 1:] - xyz[i], axis=1) <= 1e-9 * scale)
+        if close.size:
+            raise DegenerateError(f"samples {i} and {i + 1 + close[0]} coincide: they give the same equation "
+                                  "(det M = 0)")
     on_axis = np.hypot(xyz[:, 0], xyz[:, 1]) <= 1e-9 * scale
     if on_axis.any():
         raise DegenerateError(f"samples {np.flatnonzero(on_axis).tolist()} lie on the A1A2 line: "

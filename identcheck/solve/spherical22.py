@@ -7,45 +7,35 @@ the printed (17); errata E4, E5) from which d, r², ρ1², ρ2² follow linearly
 exactly one joint. Each sample's centre J = (r cos θ, r sin θ, d) is constructed and the joint
 is kept only if |J − B1| = ρ1 and |J − B2| = ρ2 in every sample.
 
-Every formula comes from the derivation through :mod:`identcheck.codegen`.
+Every formula comes from the derivation through :mod:`identcheck.codegen`, printed once into
+:mod:`identcheck.solve.generated` (:func:`identcheck.solve.formulas.spherical22` names them).
 """
 from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from functools import lru_cache
 
 import mpmath
 import numpy as np
 
-from identcheck import codegen, derive
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
-from identcheck.symbols import case, d, r, rho1, rho2
+from identcheck.solve import generated as generated_code
 from identcheck.solve.sampling import check_samples, column_scaled_lstsq, mp_solve
 
-CASE = case("spherical", 2, 2)
 PARAMS = ("d", "r", "rho1", "rho2")
 
 
-@lru_cache(maxsize=None)
 def generated(backend: str = "numpy") -> dict:
-    """The numeric functions of this case, generated from the derivation (cached)."""
-    dv = derive.for_case(CASE)
-    back = dv.result("back")
-    f = lambda exprs, groups, name: codegen.numeric(exprs, groups, backend, name)  # noqa: E731
-    par = (d, r, rho1, rho2)
-    return {
-        "m_row": f(list(dv.result("M")) + [dv.result("K")], [CASE.sample], "m_row"),
-        "back": f([back[k] for k in ("d", "r2", "rho1_2", "rho2_2")], [back["Z"]], "back"),
-        "theta": f(list(dv.result("theta_cs")), [CASE.sample, par], "theta"),
-        "forward": f(list(dv.result("forward")), [par + (CASE.constant_angles[0].cos, CASE.constant_angles[0].sin),
-                                                  [s for a in CASE.variables for s in (a.cos, a.sin)]], "forward"),
-    }
+    """The numeric functions of this case (:mod:`identcheck.solve.generated`; the same dict every call)."""
+    return generated_code.functions("spherical22", backend)
 
 
 def n_unknowns() -> int:
     """Unknowns of the full-rank linear system: the minimum number of samples."""
-    return len(derive.for_case(CASE).result("Y"))
+    return generated_code.facts("spherical22")["n_unknowns"]
+
+
+__getattr__ = generated_code.lazy_case(__name__, "spherical22")  # ``CASE``: the symbolic case, loads SymPy
 
 
 @dataclass

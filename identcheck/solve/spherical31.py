@@ -10,33 +10,23 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from functools import lru_cache
 
 import mpmath
 import numpy as np
 
-from identcheck import codegen, derive
 from identcheck.errors import DegenerateError, IdentifiabilityWarning
-from identcheck.symbols import case
+from identcheck.solve import generated as generated_code
 from identcheck.solve.sampling import check_samples, column_scaled_lstsq, mp_solve
 
-CASE = case("spherical", 3, 1)
 N_UNKNOWNS = 4
 
 
-@lru_cache(maxsize=None)
 def generated(backend: str = "numpy") -> dict:
-    """The numeric functions of this case, generated from the derivation (cached)."""
-    dv = derive.for_case(CASE)
-    back = dv.result("back")
-    inv = dv.result("invariants")
-    f = lambda exprs, groups, name: codegen.numeric(exprs, groups, backend, name)  # noqa: E731
-    return {
-        "m_row": f([e.subs(inv) for e in dv.result("M")] + [dv.result("K").subs(inv)], [CASE.sample], "m_row"),
-        "back": f([back[k] for k in ("x_J", "y_J", "z_J", "rho2")], [back["Z"]], "back"),
-        "forward": f(list(dv.result("forward")), [CASE.constants, [s for a in CASE.variables for s in (a.cos, a.sin)]],
-                     "forward"),
-    }
+    """The numeric functions of this case (:mod:`identcheck.solve.generated`; the same dict every call)."""
+    return generated_code.functions("spherical31", backend)
+
+
+__getattr__ = generated_code.lazy_case(__name__, "spherical31")  # ``CASE``: the symbolic case, loads SymPy
 
 
 @dataclass

@@ -183,18 +183,25 @@ assert callable(ic.plan) and analysis.__name__ == "identcheck.plan.analysis" and
 
 
 def test_cli_and_fit_leave_heavy_modules_unloaded():
-    """Importing the command line loads neither SymPy nor scipy.stats; a whole fit (closed-form starts,
-    whole-tree fit, intervals) loads no scipy.stats and no matplotlib (SymPy still comes in with the
-    generated closed-form solvers' module)."""
+    """Importing the command line loads neither SymPy nor scipy.stats; a whole fit (closed-form starts, among
+    them the revolute (2,1) and spherical solvers of the sparse leg, whole-tree fit, intervals) and
+    ``identify`` (float64 and mpmath) load no SymPy, no scipy.stats and no matplotlib: the solvers' functions
+    are committed generated code (identcheck.solve.generated)."""
     script = """
 import sys, warnings
 import identcheck.cli
 assert not {"sympy", "scipy.stats", "matplotlib"} & set(sys.modules)
 import identcheck as ic
+from identcheck import api
 warnings.simplefilter("ignore")
-sim = ic.simulate("examples/leg.toml", n_frames=200, noise_mm=0.5, seed=1)
-ic.fit("examples/leg.toml", sim.trial)
-heavy = {"scipy.stats", "matplotlib"} & set(sys.modules)
+for model in ("examples/leg.toml", "examples/sparse_leg.toml"):
+    sim = ic.simulate(model, n_frames=200, noise_mm=0.5, seed=1)
+    ic.fit(model, sim.trial)
+for model in ("examples/knee_21.toml", "examples/hip_22.toml", "examples/hip_31.toml"):
+    sim = ic.simulate(model, n_frames=40, seed=1)
+    assert api.identify(model, sim.trial).joints
+api.identify("examples/knee_21.toml", ic.simulate("examples/knee_21.toml", n_frames=12, seed=1).trial, precision=30)
+heavy = {"sympy", "scipy.stats", "matplotlib"} & set(sys.modules)
 assert not heavy, heavy
 """
     subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)

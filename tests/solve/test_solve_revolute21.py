@@ -104,7 +104,7 @@ def test_coincident_samples_are_degenerate(problem, i, j):
         j = (i + 1) % 5
     xyz = xyz.copy()
     xyz[j] = xyz[i]
-    with pytest.raises(DegenerateError, match="coincide"):
+    with pytest.raises(DegenerateError, match=f"samples {min(i, j)} and {max(i, j)} coincide"):
         identify(xyz)
 
 
