@@ -314,14 +314,24 @@ def posed_above(chain: Skeleton, joint: str) -> bool:
         seg = chain.parent[up[0]]
 
 
+def skin_unseen(chain: Skeleton, joint: str) -> bool:
+    """Whether a segment beside `joint` has fewer than three markers: no distance within it shows its markers'
+    skin motion, which the joint then absorbs whole (a thigh marker that slides by e with the hip angle is a hip
+    centre moved by about e / θ). When skin motion is seen elsewhere in the trial, nothing bounds it here: on
+    simulated minimal legs (3 pelvis, 1 thigh, 1 shank marker) with 2-10 mm of skin motion, hips whose intervals
+    took the motion seen on the pelvis as their model error were 4-23 half-widths off."""
+    return any(len(chain.seg_markers[s]) < 3 for s in (chain.parent[joint], chain.child[joint]))
+
+
 def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
     """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
     those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
 
     - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`),
       or the joint hangs below a segment that is not posed by itself
-      (:func:`posed_above`) and is wide or misfitted: ``[0, None]`` (the likelihood does not bound it),
-      method ``unbounded``;
+      (:func:`posed_above`) and is wide or misfitted, or it is misfitted beside a segment that cannot show its
+      own skin motion (:func:`skin_unseen`): ``[0, None]`` (the likelihood does not bound it), method
+      ``unbounded``;
     - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
       interval stays (a profile of a wrong likelihood would not be better);
     - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
@@ -340,7 +350,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
         misfit = j in best.model_error
         if not (free or wide or misfit):
             continue
-        if free or not posed_above(chain, j):
+        if free or not posed_above(chain, j) or (misfit and skin_unseen(chain, j)):
             out[j] = {m: ([0.0, None], "unbounded") for m in dist}
             continue
         if misfit:
@@ -398,7 +408,8 @@ def joint_answers(tree: TreeFit, model) -> dict:
             practical = dict(practical, verdict="undetermined", reason=(
                 f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
                 "markers do not pose (a roll in every frame seen only through the joints below), with wide "
-                "intervals or markers moving with the angles"))
+                "intervals or markers moving with the angles, or markers move with the angles in this trial and "
+                "a segment beside it has too few markers (under three) to show its own skin motion"))
         if j in best.model_error:
             practical["model_error_sd_mm"] = round(best.model_error[j], 3)
             if practical["verdict"] != "determined":

@@ -173,3 +173,46 @@ def test_a_far_marker_rejects_the_twin_knee_through_the_likelihood(examples, tmp
     assert knee["rejected_candidates"] and all(r["delta_chi2"] > 3.84 for r in knee["rejected_candidates"])
     for m, (lo, hi) in knee["marker_distances_ci95"].items():
         assert lo - 1.0 <= truth[m] <= hi + 1.0, (m, lo, hi, truth[m])
+
+
+MIXED_LEG = """units = "mm"
+[segments.pelvis]
+markers = ["LASI", "RASI", "SACR"]
+[segments.thigh_r]
+markers = ["RTHI"]
+length_mm = 420
+[segments.shank_r]
+markers = ["RTIB", "RANK", "RSHN"]
+length_mm = 400
+[joints.hip_r]
+type = "spherical"
+parent = "pelvis"
+child = "thigh_r"
+[joints.knee_r]
+type = "revolute"
+parent = "thigh_r"
+child = "shank_r"
+"""
+
+
+def test_skin_motion_seen_elsewhere_unbounds_joints_beside_a_one_marker_segment(tmp_path):
+    """One thigh marker cannot show its own skin motion. On a rigid trial the hip is determined; with a shank
+    marker moving with the knee angle (misfit seen), both joints beside the thigh are unbounded, never a
+    number whose interval ignores the thigh marker's possible motion."""
+    import identcheck as ic
+    from identcheck.effects.registry import inject_effect
+
+    path = tmp_path / "mixed_leg.toml"
+    path.write_text(MIXED_LEG)
+    model = Model.from_toml(path)
+    sim = simulate(model, n_frames=600, noise_mm=0.5, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rigid = ic.fit(model, sim.trial).to_dict()["joints"]
+        skin = inject_effect(sim, "soft_tissue", seed=0)
+        assert skin.settings["effect"]["where"]["segment"] == "shank_r"
+        moved = ic.fit(model, skin.trial).to_dict()["joints"]
+    assert rigid["hip_r"]["practical"]["verdict"] == "determined"
+    for j in ("hip_r", "knee_r"):
+        assert moved[j]["practical"]["verdict"] == "undetermined", j
+        assert set(moved[j]["interval_method"].values()) == {"unbounded"}, j
