@@ -87,14 +87,27 @@ def segment_poses(points, local=None) -> Poses:
     D[:, 2] = np.sign(np.linalg.det(U @ Vt))
     R = np.einsum("fij,fj,fjk->fik", U, D, Vt)
     t = cp - np.einsum("fij,fj->fi", R, cl)
-    sl = np.linalg.svd(Lc, compute_uv=False)
-    valid = (n >= MIN_MARKERS) & (sl[:, 1] > COLLINEAR_RATIO * np.maximum(sl[:, 0], 1e-300))
+    valid = (n >= MIN_MARKERS) & _spread(w, loc)
     R[~valid] = np.nan
     t[~valid] = np.nan
     pred = np.einsum("fij,kj->fki", R, loc) + t[:, None, :]
     res = np.where(w > 0, np.sum((pred - P) ** 2, axis=2), 0.0)
     rms = np.where(valid, np.sqrt(res.sum(axis=1) / np.maximum(n, 1)), np.nan)
     return Poses(R=R, t=t, valid=valid, local=loc, rms=rms)
+
+
+def _spread(w: np.ndarray, loc: np.ndarray) -> np.ndarray:
+    """Per frame (F,): whether the visible body-fixed points are not (nearly) collinear. It depends on the
+    frame only through which markers are seen, so it is decided once per visibility pattern (a trial has a
+    handful), not once per frame."""
+    patterns, which = np.unique(w > 0, axis=0, return_inverse=True)
+    ok = np.zeros(len(patterns), dtype=bool)
+    for i, seen in enumerate(patterns):
+        if seen.sum() >= 2:
+            pts = loc[seen] - loc[seen].mean(axis=0)
+            sv = np.linalg.svd(pts, compute_uv=False)
+            ok[i] = len(sv) > 1 and sv[1] > COLLINEAR_RATIO * max(sv[0], 1e-300)
+    return ok[np.asarray(which).reshape(-1)]
 
 
 def refine_local(points, n_iter: int = REFINE_MAX_ITER, tol: float = REFINE_TOL_MM,
