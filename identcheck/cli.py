@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import sys
 import traceback
@@ -178,6 +179,18 @@ def _cmd_batch(a) -> int:
     return summary.exit_code(df)
 
 
+def _seed(text: str) -> int:
+    """A ``--seed``: a whole number, 0 or more (NumPy's generators take no negative seed), checked by argparse
+    so that a bad one is a usage error (exit 2) before any work."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value}: a seed is 0 or more")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``identcheck`` argument parser: one subcommand per verb of CONTRACT.md."""
     p = argparse.ArgumentParser(prog="identcheck", description=(
@@ -199,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("p", type=int, help="markers on the parent link")
     s.add_argument("q", type=int, help="markers on the child link")
     s.add_argument("--samples", type=int, default=None, help="rows of M (default: number of unknowns)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0)
     s.add_argument("--save", metavar="FILE", help="also write the certificate to FILE")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_rank)
@@ -212,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("table", help="identifiability verdict and certificate for every joint type x markers")
     s.add_argument("--joint", action="append", choices=("revolute", "spherical", "universal", "prismatic"),
                    help="only this joint type (repeatable; default: all)")
-    s.add_argument("--seed", type=int, default=0, help="seed of the random rational points")
+    s.add_argument("--seed", type=_seed, default=0, help="seed of the random rational points")
     s.add_argument("--save", metavar="FILE", help="also write the table with its certificates to FILE")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_table)
@@ -222,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True)
     s.add_argument("--effect", default=None, choices=EFFECT_NAMES, metavar="NAME",
                    help="inject one named effect (%(choices)s); drawn from --seed")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0)
     s.add_argument("--frames", type=int, default=200)
     s.add_argument("--rate", type=float, default=100.0, help="Hz")
     s.add_argument("--rom-deg", type=float, default=60.0, help="range of motion of each exercised angle")
@@ -259,7 +272,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("--json", action="store_true")
     s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG/SVG)")
-    s.add_argument("--seed", type=int, default=0, help="seed of the random prime and point")
+    s.add_argument("--seed", type=_seed, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
@@ -311,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="plan: sweep these noise levels (practical verdicts)")
     s.add_argument("--motion", metavar="NAME|TRIAL[,...]", default=None,
                    help="plan: with --noise-mm, sweep these motions (functional, flexion, small, or recorded trials)")
-    s.add_argument("--seed", type=int, default=0, help="plan: seed of the random prime and point")
+    s.add_argument("--seed", type=_seed, default=0, help="plan: seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="plan: skip the per-marker robustness and motion analyses")
     s.add_argument("--json", action="store_true", help="print the counts and the failed jobs as JSON")
     s.set_defaults(func=_cmd_batch)
@@ -327,6 +340,7 @@ NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
 MAX_RANK_SAMPLES = 10_000
 PRECISION_DIGITS = (15, 1000)
+MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
 
 
 def preflight(a) -> list:
@@ -371,7 +385,7 @@ def preflight(a) -> list:
             if bad:
                 problems.append(f"--frames {a.frames}: comma-separated frame indices, 0 or more")
     if a.verb == "plan" and a.noise_mm is not None:
-        if not a.noise_mm > 0:
+        if not 0 < a.noise_mm < math.inf:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")
         if not 10 <= a.frames <= 20000:
             problems.append(f"--frames {a.frames}: between 10 and 20000 frames")
@@ -386,8 +400,9 @@ def preflight(a) -> list:
             problems.append("--workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                             "jobs: give one of them")
     if a.verb == "simulate":
-        for opt, ok in (("frames", a.frames >= 2), ("rate", a.rate > 0), ("noise_mm", a.noise_mm >= 0),
-                        ("occlusion", 0 <= a.occlusion < 1), ("rom_deg", 0 <= a.rom_deg <= 360)):
+        for opt, ok in (("frames", 2 <= a.frames <= MAX_SIMULATED_FRAMES), ("rate", 0 < a.rate < math.inf),
+                        ("noise_mm", 0 <= a.noise_mm < math.inf), ("occlusion", 0 <= a.occlusion < 1),
+                        ("rom_deg", 0 <= a.rom_deg <= 360)):
             if not ok:
                 problems.append(f"--{opt.replace('_', '-')} {getattr(a, opt)}: out of range")
     return problems
@@ -448,9 +463,17 @@ def main(argv=None) -> int:
         raise
     except Exception:                   # a bug: say so, with the traceback to report (exit 3, CONTRACT.md)
         traceback.print_exc(file=sys.stderr)
-        print(f"identcheck {a.verb}: internal error (a bug in identcheck {identcheck.__version__}); please "
-              "report it with the command line and the traceback above", file=sys.stderr)
+        print(f"identcheck {a.verb}: internal error (a bug in identcheck {identcheck.__version__}) on "
+              f"{_inputs(a)}; please report it with the command line, these inputs and the traceback above",
+              file=sys.stderr)
         return 3
+
+
+def _inputs(a) -> str:
+    """The input files of the command, for the internal-error message (what to attach to a report)."""
+    files = [getattr(a, k, None) for k in ("model", "trial", "certificate")] + list(getattr(a, "inputs", None) or [])
+    files = [str(f) for f in files if f]
+    return ", ".join(files) if files else "no input file"
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

@@ -31,6 +31,13 @@ class InputError(ValueError):
             msg = head + f"{len(self.problems)} problems:\n" + "\n".join(f"  - {p}" for p in self.problems)
         super().__init__(msg)
 
+    def naming(self, source: str, prefix: str = "") -> "InputError":
+        """The same problems, each after `prefix`, as found in `source`.
+
+        For an error raised on arrays below the readers (an estimator knows no file): the verb that read the
+        file re-raises it naming the file, and, with `prefix`, the joint or segment it was working on."""
+        return InputError([prefix + p for p in self.problems], source=source)
+
 
 class DegenerateError(ValueError):
     """The samples do not determine the answer (singular system, coincident markers, α = 0, ...)."""

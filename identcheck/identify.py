@@ -131,8 +131,9 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
     Raises
     ------
     InputError
-        Unknown joint, a marker case this verb does not cover, a marker missing from the trial,
-        or fewer than 5 frames where all the joint's markers are visible.
+        Unknown joint, a marker case this verb does not cover, a marker missing from the trial, never
+        visible or coinciding with another (:meth:`Trial.require_usable`), or fewer than 5 frames where all the
+        joint's markers are visible.
     """
     if joint not in model.joints:
         raise InputError([f"unknown joint {joint!r}; the model has: {', '.join(model.joints) or 'none'}"],
@@ -147,6 +148,7 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
     label, n_min, solver = _CASES.get(key, _CASES[("spherical", 3, 1)])
     parent = list(parent)[:3] if jt.type == "spherical" else list(parent)
     names = list(parent) + list(child)
+    trial.require_usable(names, {m: model.marker_segment(m) for m in names})
     frames = _frames(trial, names, frames, n_min, label)
     sel = trial.select(names).as_array()[frames]
     cands = solver(sel, parent, list(child), precision)

@@ -14,7 +14,11 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.io.c3d import read_c3d, write_c3d
-from identcheck.io.trc import UNITS_TO_MM, duplicates, read_trc, write_trc
+from identcheck.io.trc import FARTHEST_MM, UNITS_TO_MM, duplicates, far_samples, read_trc, write_trc
+
+COINCIDENT_MM = 1.0
+"""Two markers closer than this in every frame where both are seen are one marker under two labels: the balls
+of real markers are several millimetres wide, so their centres cannot come this close, let alone stay so."""
 
 FORMATS = (".trc", ".c3d")
 """File extensions :meth:`Trial.from_file` and :meth:`Trial.to_file` understand."""
@@ -87,10 +91,12 @@ class Trial:
             rate_hz = float("nan")
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             problems.append(f"rate_hz must be a positive number of Hz, got {rate_hz!r}")
-        if not problems and np.isinf(xyz).any():
-            f, m, _ = np.argwhere(np.isinf(xyz))[0]
-            problems.append(f"infinite coordinate (first at frame {f}, marker {labels[m]!r}); "
-                            "use NaN for occluded samples")
+        far = far_samples(xyz) if not problems else ()
+        if len(far):
+            f, m = far[0]
+            problems.append(f"infinite coordinate or one farther than {FARTHEST_MM / 1e6:g} km from the origin in "
+                            f"{len(far)} sample(s) (first: frame {int(first_frame) + f}, row {f}, marker "
+                            f"{labels[m]!r}): not marker positions; use NaN for occluded samples")
         if problems:
             raise InputError(problems, source=source)
         xyz.flags.writeable = False
@@ -208,8 +214,8 @@ class Trial:
         """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
         return self._xyz[:, self.index(name)].copy()
 
-    def require_visible(self, labels: Sequence[str], where: dict | None = None) -> None:
-        """Raise unless every label is in the trial and visible in at least one frame.
+    def require_usable(self, labels: Sequence[str], where: dict | None = None) -> None:
+        """Raise unless every label is in the trial, visible in at least one frame, and no two of them coincide.
 
         Parameters
         ----------
@@ -221,21 +227,57 @@ class Trial:
         Raises
         ------
         InputError
-            Names every marker missing from the trial and every marker never visible, at once: a model marker
-            that is never seen is not silently dropped (its segment and the joints beside it would change
-            case without a word).
+            Names, at once, every marker missing from the trial, every marker never visible (not silently dropped:
+            its segment and the joints beside it would change case without a word), and every pair of markers
+            that coincide (:meth:`coincident`).
         """
         where = where or {}
+        seg = lambda lab: f" (segment {where[lab]!r})" if lab in where else ""  # noqa: E731
         problems = []
         for lab in labels:
-            seg = f" (segment {where[lab]!r})" if lab in where else ""
             if lab not in self._index:
-                problems.append(f"marker {lab!r}{seg} of the model is not in the trial")
+                problems.append(f"marker {lab!r}{seg(lab)} of the model is not in the trial")
             elif not np.isfinite(self._xyz[:, self._index[lab]]).all(axis=1).any():
-                problems.append(f"marker {lab!r}{seg} is in the model but never visible in the trial (every sample "
-                                "is empty): fix its labelling, or remove it from the model")
+                problems.append(f"marker {lab!r}{seg(lab)} is in the model but never visible in the trial (every "
+                                "sample is empty): fix its labelling, or remove it from the model")
+        for a, b in self.coincident([lab for lab in labels if lab in self._index]):
+            problems.append(f"markers {a!r}{seg(a)} and {b!r}{seg(b)} coincide: closer than {COINCIDENT_MM:g} mm in "
+                            "every frame where both are seen, which two real markers cannot be; one marker exported "
+                            "under two labels? fix the labelling, or remove one from the model")
         if problems:
             raise InputError(problems, source=self._source)
+
+    def coincident(self, labels: Sequence[str]) -> list[tuple[str, str]]:
+        """Pairs of `labels` that are seen together in some frame and are closer than :data:`COINCIDENT_MM` in
+        every frame where both are seen: one marker under two labels (two real markers cannot overlap), which
+        leaves its segment without a pose in any frame.
+
+        Pairs are screened on up to 64 frames spread over the trial first, so a trial of many markers and frames
+        costs little; only pairs that stay close there are checked on every frame."""
+        cols = [self._index[lab] for lab in labels]
+        xyz = self._xyz[:, cols]
+        near = np.ones((len(cols), len(cols)), dtype=bool)
+        for f in np.unique(np.linspace(0, self.n_frames - 1, min(self.n_frames, 64)).astype(int)):
+            with np.errstate(invalid="ignore"):
+                near &= ~(np.linalg.norm(xyz[f, :, None] - xyz[f, None, :], axis=2) >= COINCIDENT_MM)
+        pairs = []
+        for i, k in zip(*np.nonzero(np.triu(near, 1))):
+            d = np.linalg.norm(xyz[:, i] - xyz[:, k], axis=1)
+            both = np.isfinite(d)
+            if both.any() and (d[both] < COINCIDENT_MM).all():
+                pairs.append((labels[i], labels[k]))
+        return pairs
+
+    def recentred(self) -> tuple["Trial", np.ndarray]:
+        """The trial moved so that the median of its samples is near the origin, and the move (whole mm).
+
+        Joint parameters do not depend on where the capture volume's origin is, but sums of squares of
+        coordinates do, in float64: a volume 100 m from its origin moved fitted distances by a millimetre. The
+        verbs fit the recentred trial and add the move back to whatever they write in world coordinates. The move
+        is rounded to whole millimetres so that subtracting it loses no digit of the file's numbers."""
+        seen = np.isfinite(self._xyz).all(axis=2)
+        offset = np.round(np.median(self._xyz[seen], axis=0)) if seen.any() else np.zeros(3)
+        return (self if not offset.any() else self.replace(xyz=self._xyz - offset)), offset
 
     def select(self, labels: Sequence[str]) -> "Trial":
         """Trial with only `labels`, in that order.

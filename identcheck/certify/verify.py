@@ -91,7 +91,7 @@ def verify(certificate, source: str | None = None) -> VerifyResult:
     else:
         doc, source = read(certificate), source or str(certificate)
     fmt = doc.get("format")
-    if fmt not in CHECKS:
+    if not isinstance(fmt, str) or fmt not in CHECKS:
         raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(CHECKS))})"],
                          source=source)
     try:

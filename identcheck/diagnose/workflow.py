@@ -145,12 +145,24 @@ def undetermined(h: Hypothesis) -> int:
 
 
 # ---------------------------------------------------------------------- the loop
+def _naming(files: str, call, *args):
+    """``call(*args)``; an InputError it raises naming no file (the noise floor and the starting poses see
+    arrays) is raised again naming `files`."""
+    try:
+        return call(*args)
+    except InputError as exc:
+        if exc.source is not None:
+            raise
+        raise exc.naming(files) from None
+
+
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial`."""
-    trial.require_visible(model.markers, {m: model.marker_segment(m) for m in model.markers})
-    data = trial.select(model.markers).as_array()
+    trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
+    data = trial.recentred()[0].select(model.markers).as_array()    # float64 sums: the origin near the data
     seen = np.all(np.isfinite(data), axis=2)
-    noise = noise_floor(data, model.markers, {s: model.segments[s].markers for s in model.segments})
+    files = f"{trial.source} (model {model.source})"
+    noise = _naming(files, noise_floor, data, model.markers, {s: model.segments[s].markers for s in model.segments})
     if noise.sigma_mm <= 0:
         raise InputError(["the distances within every segment are exactly constant: no measurement noise to "
                           "scale the gap against (a noise-free synthetic trial?)"], source=trial.source)
@@ -158,7 +170,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     chain = Skeleton.from_model(model)
     if progress:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
-    state = initial_state(chain, data)
+    state = _naming(files, initial_state, chain, data)
     weights = seen.astype(float)
     fit = fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER)
     return ctx, Hypothesis(chain, fit.terms, data, weights, fit)

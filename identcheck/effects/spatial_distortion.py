@@ -117,6 +117,6 @@ class SpatialDistortion(Effect):
         disp = proposal.payload.get("displacement")
         z = before.data[..., 2].reshape(-1)
         r = np.linalg.norm(np.nan_to_num(before.residuals()), axis=2).reshape(-1)
-        return {"x": z, "x_label": "height in the volume (mm)", "y": r,
+        return {"x": z, "x_label": "height in the volume, from the trial's median (mm)", "y": r,
                 "y_after": None if disp is None else np.linalg.norm(disp, axis=2).reshape(-1),
                 "y_label": "residual before (mm); fitted distortion (mm)", "kind": "scatter"}

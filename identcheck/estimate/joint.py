@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from identcheck.errors import DegenerateError, IdentifiabilityWarning
+from identcheck.io.model import virtual_names  # noqa: F401  (re-exported: the estimators' name for it)
 from identcheck.solve import revolute21, spherical31
 from identcheck.geometry.frames import pair_frame
 from identcheck.solve.gamage_lasenby import sphere_centre
@@ -76,11 +77,6 @@ class JointEstimate:
         if self.kind == "spherical":
             return dict(zip(virtual_names(name, "spherical"), [self.centre]))
         return dict(zip(virtual_names(name, "revolute"), [self.point, self.point + AXIS_HANDLE_MM * self.direction]))
-
-
-def virtual_names(joint: str, kind: str) -> tuple:
-    """The names of a joint's virtual markers: ``JOINT.centre`` (ball), ``JOINT.axis0``, ``JOINT.axis1`` (hinge)."""
-    return (f"{joint}.centre",) if kind == "spherical" else (f"{joint}.axis0", f"{joint}.axis1")
 
 
 def _full(F: int, frames: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -11,12 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import forward
-from identcheck.estimate.joint import AXIS_HANDLE_MM, virtual_names
+from identcheck.estimate.joint import AXIS_HANDLE_MM
+from identcheck.io.model import virtual_names
 from identcheck.trial import Trial
 
-def reserved_names(model) -> set:
-    """The virtual-marker names of the model's joints, of either type (no measured marker may carry one)."""
-    return {n for j in model.joints for kind in ("spherical", "revolute") for n in virtual_names(j, kind)}
 
 
 def joint_trajectories(fit) -> dict:
@@ -34,15 +32,16 @@ def joint_trajectories(fit) -> dict:
     return out
 
 
-def export_markers(path, trial: Trial, fit) -> Trial:
+def export_markers(path, trial: Trial, fit, offset=(0.0, 0.0, 0.0)) -> Trial:
     """Write `trial`'s markers plus the fitted joints' virtual markers to `path` (TRC or C3D by extension);
-    returns the trial written."""
+    returns the trial written. `offset`: what the fitted trial was moved by (:meth:`Trial.recentred`), added
+    back to the joints' trajectories."""
     data = trial.as_array()
     seen = np.all(np.isfinite(data), axis=2).any(axis=1)
     extra = joint_trajectories(fit)
     cols = []
     for name, xyz in extra.items():
-        xyz = np.array(xyz, dtype=float)
+        xyz = np.array(xyz, dtype=float) + np.asarray(offset, dtype=float)
         xyz[~seen] = np.nan
         cols.append(xyz[:, None, :])
     out = trial.replace(xyz=np.concatenate([data] + cols, axis=1), labels=trial.labels + tuple(extra))

@@ -18,6 +18,7 @@ import numpy as np
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate import joint as E
+from identcheck.io.model import reserved_names
 
 log = logging.getLogger("identcheck")
 SPHERE_MARGIN = 3.0        # a far marker decides among revolute (2,1) candidates by 3x and this many (2,1) rms
@@ -106,6 +107,9 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
                 pending.remove(name)
                 progressed = True
                 continue
+            except InputError as exc:        # the estimators see arrays: name the file and the joint
+                raise exc.naming(trial.source, f"joint {name!r} ({case} with {', '.join(par)} | "
+                                               f"{', '.join(chi)}): ") from None
             if not est.unique and jt.type == "revolute" and len(P) == 2:
                 one_side = jt.child if len(par) >= len(chi) else jt.parent
                 est = _decide_revolute21(model, name, one_side, est, C, points)
@@ -244,14 +248,16 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
     from identcheck.estimate.labels import screen
     from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
 
-    from identcheck.fit.export import export_markers, reserved_names
+    from identcheck.fit.export import export_markers
 
-    trial.require_visible(model.markers, {m: model.marker_segment(m) for m in model.markers})
-    clash = sorted(reserved_names(model) & (set(trial.labels) | set(model.markers)))
+    reserved = reserved_names(model.joints)
+    clash = sorted(set(reserved) & set(trial.labels))
     if clash:
-        raise InputError([f"marker {m!r} carries the name fit gives a joint's virtual marker; rename it" for m in clash],
-                         source=trial.source)
-    screened, swaps = screen(model, trial)
+        raise InputError([f"marker {m!r} carries the name fit gives a virtual marker of joint {reserved[m]!r}; rename "
+                          "it" for m in clash], source=trial.source)
+    trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
+    centred, offset = trial.recentred()
+    screened, swaps = screen(model, centred)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
         fitted, points = fit_model(model, screened, progress=progress)
@@ -272,5 +278,5 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
         if tree.best is None:
             raise InputError([f"--export-markers {export}: no whole-tree fit to export ({tree.problem})"],
                              source=trial.source)
-        export_markers(export, trial, tree.best.fit)
+        export_markers(export, trial, tree.best.fit, offset)
     return rep

@@ -15,11 +15,13 @@ import os
 import struct
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from identcheck.errors import InputError
-from identcheck.io.trc import MarkerData, duplicates, read_bytes, unit_factor
+from identcheck.io.trc import (FARTHEST_MM, MarkerData, check_units, duplicates, far_samples, read_bytes,
+                               unit_factor)
 
 INSTALL_HINT = "reading and writing C3D files needs ezc3d: pip install identcheck[c3d]"
 
@@ -46,6 +48,196 @@ def _header_frames(raw: bytes) -> int | None:
     if last == 0xFFFF or last < first:  # long files keep the count in POINT:FRAMES only
         return None
     return last - first + 1
+
+
+PROCESSORS = {84: "<", 85: "<", 86: ">"}
+"""C3D processor-type byte (Intel, DEC, MIPS) -> the byte order of its integers."""
+
+PARAMETER_TYPES = {-1: "characters", 1: "bytes", 2: "integers", 4: "floats"}
+"""Parameter data types of a C3D file."""
+
+MAX_DIMENSIONS = 7
+"""A C3D parameter has at most 7 dimensions (the format's own limit)."""
+
+_MAX_RECORDS = 65536  # more parameter records than any writer makes: a file whose links loop
+
+REQUIRED = {("POINT", "USED"), ("POINT", "SCALE"), ("POINT", "RATE"), ("POINT", "DATA_START"),
+            ("ANALOG", "GEN_SCALE")}
+"""Numeric parameters ezc3d reads a first value of while opening any file: each must be present and hold a
+finite number (ezc3d reads an empty one past its end)."""
+
+IF_GROUP = {"ROTATION": ({("ROTATION", "USED"), ("ROTATION", "DATA_START")}, {("ROTATION", "RATIO"),
+                                                                              ("ROTATION", "RATE")})}
+"""Optional groups ezc3d reads when present: the parameters each then needs all of, and those it needs one of."""
+
+NUMERIC = REQUIRED | {("POINT", "FRAMES"), ("ANALOG", "USED"), ("ANALOG", "RATE"), ("ROTATION", "USED"),
+                      ("ROTATION", "DATA_START"), ("ROTATION", "RATIO"), ("ROTATION", "RATE")}
+"""Parameters that must hold a finite number when present."""
+
+NOT_NEGATIVE = {("POINT", "USED"), ("POINT", "DATA_START"), ("POINT", "FRAMES"), ("ANALOG", "USED"),
+                ("ANALOG", "RATE"), ("ROTATION", "USED"), ("ROTATION", "DATA_START"), ("ROTATION", "RATIO"),
+                ("ROTATION", "RATE")}
+"""Counts, block numbers and rates: ezc3d sizes its reading by them, and reads a negative one as about 2**64."""
+
+
+class _Record(NamedTuple):
+    """One record of a C3D parameter section: a group (``group`` < 0, its id) or a parameter of group ``group``."""
+
+    pos: int
+    name: str
+    group: int
+    kind: int = 0
+    dims: tuple = ()
+    values: tuple = ()
+
+
+def _structure_problems(raw: bytes) -> list[str]:
+    """What keeps a C3D file's header and parameter section from being read safely, naming the byte, group or
+    parameter (empty: safe to hand to ezc3d).
+
+    ezc3d trusts these bytes: on a file cut inside its parameter section, a record whose links point outside it,
+    or a parameter it needs that is missing, empty or of another type, it loops forever, crashes the interpreter
+    (seen with ezc3d 1.7 on single-byte changes) or raises a message in its own terms. So the section is walked
+    and checked here first, and every problem is said in the file's terms."""
+    if raw[0] < 2:
+        return [f"header byte 1 puts the parameter section at block {raw[0]}; it follows the header (block 2 "
+                "or later)"]
+    start = (raw[0] - 1) * 512
+    if len(raw) < start + 4:
+        return [f"the file ends at byte {len(raw)}, before its parameter section (block {raw[0]}, byte {start})"]
+    n_blocks, proc = raw[start + 2], raw[start + 3]
+    if proc not in PROCESSORS:
+        return [f"parameter section byte 4 (byte {start + 3} of the file): processor type {proc} is none of 84 "
+                "(Intel), 85 (DEC), 86 (MIPS)"]
+    if n_blocks == 0 or len(raw) < start + 512 * n_blocks:
+        return [f"the file ends at byte {len(raw)}, inside its parameter section ({n_blocks} blocks from byte "
+                f"{start}): the file is cut short"]
+    records: list[_Record] = []
+    problem = _walk(raw, start + 4, start + 512 * n_blocks, proc, records)
+    if problem:
+        return [problem]
+    return _meaning_problems(records) or _header_problems(raw, records, raw[0] + n_blocks, PROCESSORS[proc])
+
+
+def _walk(raw: bytes, pos: int, end: int, proc: int, records: list) -> str:
+    """Read the parameter records from byte `pos` into `records`; the first record that does not lie inside the
+    section (`end`), end where the next one starts, or declare a known type and 1 to 7 dimensions ('' if none)."""
+    order = PROCESSORS[proc]
+    for _ in range(_MAX_RECORDS):
+        if pos + 2 > end:
+            return f"parameter section: a record at byte {pos} runs past the section's end (byte {end})"
+        n_name, group = struct.unpack("bb", raw[pos:pos + 2])
+        if n_name == 0:
+            return ""
+        link = pos + 2 + abs(n_name)
+        name = raw[pos + 2:link].decode("latin-1")
+        what = f"{'parameter' if group > 0 else 'group'} {name!r} at byte {pos}"
+        if group == 0:
+            return f"{what}: group id 0 (groups are numbered from 1)"
+        if link + 2 > end:
+            return f"{what} runs past the section's end (byte {end})"
+        offset = struct.unpack(order + "H", raw[link:link + 2])[0]
+        body = link + 2
+        record = _Record(pos, name, group)
+        if group > 0:
+            if body + 2 > end:
+                return f"{what} runs past the section's end (byte {end})"
+            kind, n_dims = struct.unpack("bB", raw[body:body + 2])
+            if kind not in PARAMETER_TYPES:
+                return f"{what}: data type {kind} is none of -1 (characters), 1 (bytes), 2 (integers), 4 (floats)"
+            if n_dims > MAX_DIMENSIONS or (kind == -1 and n_dims == 0):
+                return (f"{what}: {n_dims} dimensions ({'characters need 1 or more, ' if kind == -1 else ''}"
+                        f"at most {MAX_DIMENSIONS})")
+            dims = tuple(raw[body + 2:body + 2 + n_dims])
+            data = body + 2 + n_dims
+            body = data + abs(kind) * math.prod(dims)
+            if body <= end:
+                record = _Record(pos, name, group, kind, dims, _numbers(raw[data:body], kind, proc))
+        if body + 1 > end or body + 1 + raw[body] > end:
+            return f"{what} runs past the section's end (byte {end})"
+        records.append(record)
+        if offset == 0:
+            return ""
+        if link + offset != body + 1 + raw[body]:
+            return (f"{what}: its bytes end at byte {body + 1 + raw[body]} but it links the next record to byte "
+                    f"{link + offset}")
+        pos = link + offset
+    return f"parameter section: more than {_MAX_RECORDS} records (their links loop)"
+
+
+def _numbers(data: bytes, kind: int, proc: int) -> tuple:
+    """A numeric parameter's values (empty for characters; DEC floats, whose VAX format this does not decode, as
+    zeros: only their count is checked)."""
+    order = PROCESSORS[proc]
+    if kind == 1:
+        return struct.unpack(f"{len(data)}b", data)
+    if kind == 2:
+        return struct.unpack(f"{order}{len(data) // 2}h", data)
+    if kind == 4 and proc != 85:
+        return struct.unpack(f"{order}{len(data) // 4}f", data)
+    return (0.0,) * (len(data) // 4) if kind == 4 else ()
+
+
+def _meaning_problems(records: list) -> list[str]:
+    """Groups and parameters ezc3d would misread: a parameter of no group, two groups with one id or name, a
+    parameter twice in its group, a parameter of :data:`REQUIRED` (or of a present group of :data:`IF_GROUP`)
+    missing, one of :data:`NUMERIC` empty, not numeric or not finite, one of :data:`NOT_NEGATIVE` negative."""
+    groups: dict[int, str] = {}
+    problems = []
+    for r in records:
+        if r.group < 0:
+            if -r.group in groups or r.name.upper() in groups.values():
+                problems.append(f"group {r.name!r} at byte {r.pos}: a second group with id {-r.group} or that name")
+            groups[-r.group] = r.name.upper()
+    params = {}
+    for r in (r for r in records if r.group > 0):
+        key = (groups.get(r.group), r.name.upper())
+        if r.group not in groups:
+            problems.append(f"parameter {r.name!r} at byte {r.pos} belongs to group {r.group}, which the file "
+                            "does not define")
+        elif key in params:
+            problems.append(f"parameter {key[0]}:{key[1]} at byte {r.pos}: a second parameter of that name")
+        params[key] = r
+    needed = set(REQUIRED)
+    for group, (every, one_of) in IF_GROUP.items():
+        if group in groups.values():
+            needed |= every
+            if not one_of & set(params):
+                problems.append(f"the {group} group has none of " + ", ".join(f"{g}:{n}" for g, n in sorted(one_of)))
+    problems += [f"no {g}:{n} parameter (a C3D file needs it{', even without analog data' if g == 'ANALOG' else ''})"
+                 for g, n in sorted(needed - set(params))]
+    for key in sorted(NUMERIC & set(params)):
+        r, where = params[key], f"parameter {key[0]}:{key[1]} at byte {params[key].pos}"
+        if r.kind == -1 or not r.values or not math.isfinite(r.values[0]):
+            held = "characters" if r.kind == -1 else "nothing" if not r.values else r.values[0]
+            problems.append(f"{where} holds {held}, not a number")
+        elif key in NOT_NEGATIVE and r.values[0] < 0:
+            problems.append(f"{where} is {r.values[0]:g}: a count, block number or rate, never negative")
+    return problems
+
+
+def _header_problems(raw: bytes, records: list, first_data_block: int, order: str) -> list[str]:
+    """The header against the parameters: the point count against POINT:USED, and the data start (header and
+    POINT:DATA_START) after the parameter section and inside the file."""
+    groups = {-r.group: r.name.upper() for r in records if r.group < 0}
+    value = {(groups[r.group], r.name.upper()): r.values[0] for r in records if r.group > 0 and r.values}
+    n_points, data_start = struct.unpack(order + "H", raw[2:4])[0], struct.unpack(order + "H", raw[16:18])[0]
+    problems = []
+    if value[("POINT", "USED")] != n_points:
+        problems.append(f"POINT:USED says {value[('POINT', 'USED')]:g} points but the header (word 2) says "
+                        f"{n_points}")
+    blocks = -(-len(raw) // 512)
+    for where, block in (("the header's data start (word 9)", data_start),
+                         ("POINT:DATA_START", int(value[("POINT", "DATA_START")]))):
+        if not first_data_block <= block <= blocks:
+            problems.append(f"{where} is block {block}, outside the file's data (blocks {first_data_block} to "
+                            f"{blocks}): no frame can be read")
+    layout = _header_layout(raw)
+    if not problems and layout is not None and n_points and _frames_in_file(raw, layout, n_points, data_start) == 0:
+        problems.append(f"the file ends at byte {len(raw)}, before the end of its first frame (data from byte "
+                        f"{(data_start - 1) * 512}, {_frame_bytes(layout, n_points)} bytes a frame): the file is "
+                        "cut short")
+    return problems
 
 
 def _header_layout(raw: bytes) -> dict | None:
@@ -85,11 +277,26 @@ def _ends_whole(raw: bytes, layout: dict, n_points: int, start, n_frames: int) -
     return len(raw) % 512 == 0 and -(-end // 512) * 512 == len(raw)
 
 
-def _value(params: dict, group: str, name: str):
+def _value(params: dict, group: str, name: str, problems: list[str], text: bool = False):
+    """The values of parameter GROUP:NAME as ezc3d gives them (None when absent). A parameter of the other
+    kind than expected (characters when `text`, numbers otherwise) or, for numbers, empty or not finite, adds a
+    problem naming it and gives None."""
     try:
-        return params[group][name]["value"]
+        entry = params[group][name]
+        value = entry["value"]
     except (KeyError, TypeError):
         return None
+    if text != (entry.get("type") == -1):
+        problems.append(f"{group}:{name} holds {'numbers' if text else 'characters'} where "
+                        f"{'characters' if text else 'a number'} belong(s)")
+        return None
+    if text:
+        return [str(v) for v in value]
+    value = np.asarray(value, dtype=float).ravel()
+    if not len(value) or not np.isfinite(value[0]):
+        problems.append(f"{group}:{name} is {'empty' if not len(value) else f'{value[0]:g}'}, not a number")
+        return None
+    return value
 
 
 def read_c3d(path) -> MarkerData:
@@ -127,12 +334,15 @@ def read_c3d(path) -> MarkerData:
     if len(raw) < 512 or raw[1] != 0x50:
         raise InputError(["not a C3D file (its first 512-byte header block lacks the C3D key "
                           "byte 0x50)"], source=src)
+    broken = _structure_problems(raw)
+    if broken:
+        raise InputError([f"not a readable C3D file: {broken[0]}"], source=src)
     ezc3d = _ezc3d(src)
     try:
         c3d = ezc3d.c3d(src)
-    except Exception as exc:  # ezc3d raises OSError/RuntimeError with its own text
-        raise InputError([f"not a readable C3D file: truncated or malformed (ezc3d says: "
-                          f"{str(exc).strip()})"], source=src) from None
+    except Exception as exc:  # what the checks above do not foresee: ezc3d's own words, marked as such
+        raise InputError([f"not a readable C3D file: malformed in a way these checks do not name; the C3D library "
+                          f"(ezc3d) stopped with: {str(exc).strip()}"], source=src) from None
     params = c3d["parameters"]
     points = np.asarray(c3d["data"]["points"], dtype=np.float64)
     problems: list[str] = []
@@ -144,7 +354,7 @@ def read_c3d(path) -> MarkerData:
         problems.append("no frames")
     announced = _header_frames(raw)
     layout = _header_layout(raw)
-    scale, start = _value(params, "POINT", "SCALE"), _value(params, "POINT", "DATA_START")
+    scale, start = _value(params, "POINT", "SCALE", problems), _value(params, "POINT", "DATA_START", problems)
     in_file = None
     if layout is not None and scale is not None and len(scale) and np.isfinite(layout["scale"]) \
             and layout["scale"] != 0 and float(scale[0]) != 0 and (float(scale[0]) < 0) != (layout["scale"] < 0):
@@ -155,7 +365,7 @@ def read_c3d(path) -> MarkerData:
     elif layout is not None and n_points:
         in_file = _frames_in_file(raw, layout, n_points, int(start[0]) if start is not None and len(start)
                                   else layout["start"])
-    frames_param = _value(params, "POINT", "FRAMES")
+    frames_param = _value(params, "POINT", "FRAMES", problems)
     frames_param = int(frames_param[0]) if frames_param is not None and len(frames_param) else None
     if announced is not None and n_frames > announced:
         problems.append(f"POINT:FRAMES says {frames_param} frames but the header's frame range says {announced}: "
@@ -173,8 +383,8 @@ def read_c3d(path) -> MarkerData:
     elif frames_param is not None and n_frames < frames_param and announced is None:
         problems.append(f"truncated file: POINT:FRAMES announces {frames_param} frames but only {n_frames} are present")
     rate_hz = _rate(params, c3d, problems)
-    units = _value(params, "POINT", "UNITS")
-    if not units or not str(units[0]).strip():
+    units = _value(params, "POINT", "UNITS", problems, text=True)
+    if not units or not units[0].strip():
         warnings.warn(f"{src}: no POINT:UNITS parameter; assuming mm", UserWarning, stacklevel=3)
         factor = 1.0
     else:
@@ -190,17 +400,25 @@ def read_c3d(path) -> MarkerData:
         first = int(c3d["header"]["points"]["first_frame"])
     except (KeyError, TypeError, ValueError):
         first = 0
+    check_units(xyz, factor, "POINT:UNITS", src)
+    far = far_samples(xyz)
+    if len(far):
+        raise InputError([f"{len(far)} sample(s) farther than {FARTHEST_MM / 1e6:g} km from the origin, or infinite "
+                          f"(first: frame {first + far[0][0]}, marker {labels[far[0][1]]!r}, "
+                          f"{np.array2string(xyz[tuple(far[0])], precision=4)} mm): not marker positions (a sentinel "
+                          "for a missing sample? mark it invalid with a negative residual)"], source=src)
     return MarkerData(np.ascontiguousarray(xyz), labels, rate_hz, first)
 
 
 def _rate(params: dict, c3d, problems: list[str]) -> float:
-    rate = _value(params, "POINT", "RATE")
+    """POINT:RATE (the header's frame rate when absent), Hz; a problem when it is not positive."""
+    rate = _value(params, "POINT", "RATE", problems)
     try:
-        rate_hz = float(rate[0]) if rate is not None and len(rate) else float(c3d["header"]["points"]["frame_rate"])
+        rate_hz = float(rate[0]) if rate is not None else float(c3d["header"]["points"]["frame_rate"])
     except (TypeError, ValueError, KeyError):
         rate_hz = float("nan")
     if not (math.isfinite(rate_hz) and rate_hz > 0):
-        problems.append(f"POINT:RATE = {rate!r} is not a positive frame rate")
+        problems.append(f"POINT:RATE = {rate_hz:g} is not a positive frame rate")
         return 1.0
     return rate_hz
 
@@ -208,10 +426,10 @@ def _rate(params: dict, c3d, problems: list[str]) -> float:
 def _labels(params: dict, n_points: int, problems: list[str]) -> tuple[str, ...]:
     labels: list[str] = []
     for key in ["LABELS"] + [f"LABELS{k}" for k in range(2, 100)]:
-        value = _value(params, "POINT", key)
+        value = _value(params, "POINT", key, problems, text=True)
         if value is None:
             break
-        labels += [str(v).strip() for v in value]
+        labels += [v.strip() for v in value]
     if len(labels) < n_points:
         problems.append(f"POINT:LABELS names {len(labels)} points but the file has {n_points}")
         return tuple(labels)

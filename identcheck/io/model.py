@@ -38,6 +38,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 from identcheck.errors import InputError
+from identcheck.io.text import decode
 
 JOINT_TYPES = ("revolute", "spherical")
 """Joint types a model may declare."""
@@ -171,7 +172,7 @@ class Model:
         path = Path(path)
         source = str(path)
         try:
-            text = path.read_bytes().decode("utf-8")
+            text = decode(path.read_bytes())
         except FileNotFoundError:
             raise InputError(["file not found"], source=source) from None
         except IsADirectoryError:
@@ -185,6 +186,8 @@ class Model:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise InputError([f"TOML syntax error: {exc}"], source=source) from None
+        except RecursionError:
+            raise InputError(["arrays or tables nested too deeply to be a model file"], source=source) from None
         return cls.from_dict(data, source=source)
 
     @classmethod
@@ -221,7 +224,7 @@ class Model:
         scale = MODEL_UNITS[units]
         segments = _parse_segments(d.get("segments"), scale, problems)
         joints, dropped = _parse_joints(d.get("joints", {}), segments, scale, problems)
-        problems += _check_tree(segments, joints, check_roots=not dropped)
+        problems += _check_tree(segments, joints, check_roots=not dropped) + _reserved_markers(segments, joints)
         if problems:
             raise InputError(problems, source=source)
         return cls(segments=segments, joints=joints, units=units, source=source)
@@ -420,11 +423,33 @@ def _parse_joints(raw, segments, scale: float, problems: list[str]) -> tuple[dic
     return joints, dropped
 
 
+# ---------------------------------------------------------------------- virtual markers
+def virtual_names(joint: str, kind: str) -> tuple:
+    """The names of a joint's virtual markers: ``JOINT.centre`` (ball), ``JOINT.axis0``, ``JOINT.axis1`` (hinge)."""
+    return (f"{joint}.centre",) if kind == "spherical" else (f"{joint}.axis0", f"{joint}.axis1")
+
+
+def reserved_names(joints) -> dict[str, str]:
+    """Virtual-marker name -> its joint, for the joints named in `joints`, of either type: no measured marker
+    may carry one (fit, plan and ``--export-markers`` add markers of these names beside the measured ones)."""
+    return {n: j for j in joints for kind in JOINT_TYPES for n in virtual_names(j, kind)}
+
+
+def _reserved_markers(segments: Mapping[str, Segment], joints: Mapping[str, Joint]) -> list[str]:
+    """A marker named like a joint's virtual marker (``hip_r.centre``): the two would be taken for each other."""
+    reserved = reserved_names(joints)
+    return [f"segments.{s.name}.markers: marker {m!r} carries the name of a virtual marker of joint "
+            f"{reserved[m]!r} (its centre or a point of its hinge axis); rename the marker"
+            for s in segments.values() for m in s.markers if m in reserved]
+
+
 # ---------------------------------------------------------------------- tree checks
 def _check_parts(segments: Mapping[str, Segment], joints: Mapping[str, Joint]) -> list[str]:
-    """Joint types and duplicate markers, for models built without :meth:`Model.from_dict`."""
+    """Joint types, duplicate markers and markers named like virtual ones, for models built without
+    :meth:`Model.from_dict`."""
     problems = [f"joints.{j.name}.type: unknown joint type {j.type!r} (allowed: {', '.join(JOINT_TYPES)})"
                 for j in joints.values() if j.type not in JOINT_TYPES]
+    problems += _reserved_markers(segments, joints)
     owner: dict[str, str] = {}
     for s in segments.values():
         for m in s.markers:

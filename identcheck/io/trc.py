@@ -9,8 +9,8 @@ Layout (tab-separated; line numbers from 1)::
     5  <tab><tab>  X1  Y1  Z1  X2  Y2  Z2 ...
     6+ 1  0.000  x  y  z  x  y  z ...     (blank lines are skipped; empty cell = occluded)
 
-Coordinates are converted to millimetres. Frame# and Time columns are not used: the frame
-rate comes from ``DataRate`` (``CameraRate`` if absent).
+Coordinates are converted to millimetres. The frame rate comes from ``DataRate`` (``CameraRate`` if
+absent); Frame# gives the file's numbering of its frames, and Frame# and Time must not go backwards.
 """
 from __future__ import annotations
 
@@ -22,11 +22,17 @@ from typing import NamedTuple
 import numpy as np
 
 from identcheck.errors import InputError
+from identcheck.io.text import decode
 
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 """Length units a trial file may use, with their factor to millimetres."""
 
 _MAX_LISTED = 10  # per kind of problem, so a broken file does not print thousands of lines
+
+FARTHEST_MM = 1e6
+"""No marker of a capture is a kilometre from the origin: a coordinate beyond that is a sentinel, a corrupt
+sample or wrong units (1e30 as "missing"), never a position, and one such sample wrecks every pose of its
+frame (and float64 precision with it). A 100 m offset of the whole volume stays well inside."""
 
 
 class MarkerData(NamedTuple):
@@ -76,6 +82,54 @@ def duplicates(labels) -> dict[str, list[int]]:
     for i, lab in enumerate(labels):
         where.setdefault(lab, []).append(i)
     return {lab: idx for lab, idx in where.items() if len(idx) > 1}
+
+
+BODY_SPAN_MM = (10.0, 1e5)
+"""What the markers of one frame may span (the median over frames of their bounding box's diagonal), in mm:
+a capture holds a body, not a point and not a kilometre. Outside it the units field is wrong: millimetres
+labelled m (a span of kilometres) are refused; metres labelled mm (a span of a few "millimetres") are warned
+about, since a small rig could span that little."""
+
+
+def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool]:
+    """Whether the file's units field (at `where`, read as `factor` to mm) contradicts its coordinates `xyz` (mm,
+    as converted): the message and whether it is an error (else a warning); ('', False) when they agree or there
+    is too little to tell (no frame with three markers seen)."""
+    seen = np.isfinite(xyz).all(axis=2)
+    rows = np.flatnonzero(seen.sum(axis=1) >= 3)
+    if not len(rows):
+        return "", False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        box = np.nanmax(xyz[rows], axis=1) - np.nanmin(xyz[rows], axis=1)
+    span = float(np.median(np.linalg.norm(box, axis=1)))
+    name = next((k for k, v in UNITS_TO_MM.items() if v == factor), "?")
+    low, high = BODY_SPAN_MM
+    if span > high and factor > 1.0:
+        return (f"{where} says {name}, but then the markers of a frame span {span / 1e6:.3g} km (median over "
+                "frames): the coordinates are in mm; fix the units field"), True
+    if span < low and factor == 1.0:
+        return (f"{where} says {name}, but the markers of a frame span only {span:.3g} mm (median over frames): are "
+                "the coordinates in metres?"), False
+    return "", False
+
+
+def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel: int = 4) -> None:
+    """:func:`units_problem` acted on, for both readers: an InputError for a contradiction, a warning for a
+    suspicion, nothing when the units field and the coordinates agree."""
+    units, error = units_problem(xyz, factor, where)
+    if error:
+        raise InputError([units], source=src)
+    if units:
+        warnings.warn(f"{src}: {units}", UserWarning, stacklevel=stacklevel)
+
+
+def far_samples(xyz: np.ndarray) -> np.ndarray:
+    """(row, marker) of every sample of `xyz` (n_frames, n_markers, 3), mm, with a coordinate beyond
+    :data:`FARTHEST_MM` (infinite ones included), in row order: the one test the readers and
+    :class:`~identcheck.trial.Trial` apply."""
+    with np.errstate(invalid="ignore"):
+        return np.argwhere((np.abs(xyz) > FARTHEST_MM).any(axis=2))
 
 
 def _capped(items: list[str], what: str) -> list[str]:
@@ -131,10 +185,7 @@ def read_trc(path) -> MarkerData:
     path = Path(path)
     src = str(path)
     raw = read_bytes(path)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
+    text = decode(raw, fallback="latin-1")
     if not text.strip():
         raise InputError(["empty file"], source=src)
     if "\x00" in text[:4096]:
@@ -176,7 +227,8 @@ def read_trc(path) -> MarkerData:
         warnings.warn(f"{src}: the file ends inside line {linenos[-1]} without a line end, so its last number may "
                       "be cut short; that row is left out", UserWarning, stacklevel=3)
         rows, linenos = rows[:-1], linenos[:-1]
-        n_frames_hdr = None if n_frames_hdr is None else min(n_frames_hdr, len(rows))
+        if n_frames_hdr == len(rows) + 1:        # the row left out was the last one NumFrames announces
+            n_frames_hdr = len(rows)
     if not rows and not bad_width:
         problems.append("no data rows after the header (data start on line 6)")
     if n_frames_hdr is not None and rows and not bad_width:
@@ -192,6 +244,7 @@ def read_trc(path) -> MarkerData:
     if problems:
         raise InputError(problems, source=src)
     xyz = values.reshape(len(rows), len(labels), 3)
+    _check_samples(xyz * factor, factor, rows, linenos, labels, src)
     partial = np.isnan(xyz).any(axis=2) & ~np.isnan(xyz).all(axis=2)
     if partial.any():
         f, m = np.argwhere(partial)[0]
@@ -200,6 +253,50 @@ def read_trc(path) -> MarkerData:
                       UserWarning, stacklevel=3)
         xyz[partial] = np.nan
     return MarkerData(xyz * factor, tuple(labels), rate_hz, _first_frame(rows, linenos, src))
+
+
+def _check_samples(mm: np.ndarray, factor: float, rows: list, linenos: list, labels, src: str) -> None:
+    """The numbers of a well-formed file against what a capture can be: the units field against the markers'
+    span, no sample beyond :data:`FARTHEST_MM`, rows in time order. Raises InputError naming the line, the
+    columns and the marker (or warns, for a span that only suggests metres labelled mm)."""
+    check_units(mm, factor, "line 3: Units", src, stacklevel=5)
+    far = far_samples(mm)
+    if len(far):
+        listed = [f"line {linenos[f]}, columns {3 + 3 * m}-{5 + 3 * m} (marker {labels[m]!r}): "
+                  f"{' '.join(rows[f][2 + 3 * m:5 + 3 * m])} is farther than {FARTHEST_MM / 1e6:g} km from the origin: "
+                  "not a marker position (a sentinel for a missing sample? leave the cells empty)"
+                  for f, m in far[:_MAX_LISTED]]
+        more = [f"... and {len(far) - _MAX_LISTED} more samples that far"] if len(far) > _MAX_LISTED else []
+        raise InputError(listed + more, source=src)
+    order = _frame_order(rows, linenos)
+    if order:
+        raise InputError(order, source=src)
+
+
+def _column(rows: list, col: int) -> np.ndarray | None:
+    """Column `col` of the data rows as numbers, or None when some cell is not a number."""
+    try:
+        return np.array([float(r[col]) for r in rows])
+    except (ValueError, IndexError):
+        return None
+
+
+def _frame_order(rows: list, linenos: list) -> list[str]:
+    """Frame# must rise and Time must not fall from row to row: rows out of order (a sort by another column,
+    two takes pasted together) would be read as motion that never happened. The first such row is named;
+    equal times are allowed (a high rate printed with few decimals repeats them)."""
+    problems = []
+    for col, name, bad in ((0, "Frame#", lambda step: step <= 0), (1, "Time", lambda step: step < 0)):
+        values = _column(rows, col)
+        if values is None or len(values) < 2:
+            continue
+        wrong = np.flatnonzero(bad(np.diff(values)))
+        if len(wrong):
+            k = int(wrong[0])
+            problems.append(f"line {linenos[k + 1]}: {name} {rows[k + 1][col]} after {rows[k][col]} (line "
+                            f"{linenos[k]}): {name} must {'rise' if col == 0 else 'not fall'} from row to row; the "
+                            "rows are out of order")
+    return problems
 
 
 def _first_frame(rows: list, linenos: list, src: str) -> int:
