@@ -159,7 +159,7 @@ def _naming(files: str, call, *args):
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial`."""
     trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
-    data = trial.recentred()[0].select(model.markers).as_array()    # float64 sums: the origin near the data
+    data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
     files = f"{trial.source} (model {model.source})"
     noise = _naming(files, noise_floor, data, model.markers, {s: model.segments[s].markers for s in model.segments})
