@@ -160,7 +160,8 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
 
 
 @_one_blas_thread
-def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: str | None = None):
+def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: str | None = None,
+             export_markers=None):
     """Where the rigid-joint model and `trial` disagree: the named effects, adopted one at a time while
     they earn their parameters, with the gap before and after each.
 
@@ -174,6 +175,9 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
         Most effects adopted (default :data:`identcheck.diagnose.workflow.MAX_STEPS`).
     frames : str, optional
         ``"START:END"`` in the file's own frame numbers, both included (:meth:`Trial.frames`).
+    export_markers : str or os.PathLike, optional
+        Also write the trial's markers plus each joint's centre / hinge-axis points, as the model with the
+        adopted effects places them, to this TRC or C3D file (:mod:`identcheck.fit.export`).
 
     Returns
     -------
@@ -187,7 +191,13 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
     from identcheck.diagnose import workflow
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
-    return workflow.diagnose(load_model(model), _frames(trial, frames), progress=progress, max_steps=steps)
+    data = _frames(trial, frames)
+    diag = workflow.diagnose(load_model(model), data, progress=progress, max_steps=steps)
+    if export_markers is not None:
+        from identcheck.fit.export import export_markers as write_markers
+
+        write_markers(export_markers, data, diag.after.fit, diag.offset)
+    return diag
 
 
 @_one_blas_thread

@@ -1,5 +1,5 @@
 """Command-line interface: parse, make one :mod:`identcheck.api` call, render it with
-:mod:`identcheck.report`, exit with the code of CONTRACT.md.
+:mod:`identcheck.report`, exit with the code of docs/contract.md.
 
 0 success, 1 negative answer (not identifiable / derivation mismatch / certificate rejected / gap not
 explained), 2 bad input (message on stderr naming the file, marker or option), 3 internal error (never
@@ -147,7 +147,8 @@ def _cmd_plan(a) -> int:
 
 
 def _cmd_diagnose(a) -> int:
-    diag = api.diagnose(a.model, a.trial, progress=_progress("diagnose"), frames=a.frames)
+    diag = api.diagnose(a.model, a.trial, progress=_progress("diagnose"), frames=a.frames,
+                        export_markers=a.export_markers)
     if a.plots:
         from identcheck.report.diagnose_figures import write_all
 
@@ -191,23 +192,53 @@ def _seed(text: str) -> int:
     return value
 
 
+class _Help(argparse.HelpFormatter):
+    """Help wrapped to the terminal with its line breaks kept: the epilog's example and exit codes, one per line."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        lines = []
+        for line in text.splitlines():
+            lead = indent + line[:len(line) - len(line.lstrip())]
+            if line.lstrip().startswith("identcheck "):        # an example command: one line, to copy as it is
+                lines.append(lead + line.strip())
+            elif line.strip():
+                lines.append(textwrap.fill(" ".join(line.split()), width, initial_indent=lead,
+                                           subsequent_indent=lead + ("  " if lead != indent else "")))
+        return "\n".join(lines)
+
+
+def _epilog(example: str, ok: str, no: str | None = None) -> str:
+    """A verb's ``--help`` epilog: a one-line example and the exit codes of docs/contract.md (docs/cli.md)."""
+    codes = [f"  0  {ok}"] + ([f"  1  {no}"] if no else []) + [
+        "  2  bad input or arguments (the message names the file, line, marker, frame or option)",
+        "  3  internal error (a bug: the message asks for a report)"]
+    return f"example:\n  {example}\nexit codes:\n" + "\n".join(codes) + "\nreference: docs/cli.md"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The ``identcheck`` argument parser: one subcommand per verb of CONTRACT.md."""
-    p = argparse.ArgumentParser(prog="identcheck", description=(
+    """The ``identcheck`` argument parser: one subcommand per verb of docs/contract.md (reference: docs/cli.md)."""
+    p = argparse.ArgumentParser(prog="identcheck", formatter_class=_Help, epilog=(
+        "example:\n  identcheck plan examples/leg.toml && identcheck fit examples/leg.toml trial.c3d --json\n"
+        "exit codes: 0 success, 1 a negative answer (not identifiable, not determined, gap not explained), "
+        "2 bad input, 3 internal error; each verb's --help gives its own. Reference: docs/cli.md"), description=(
         "Can the joint parameters of this skeleton be identified from these markers? "
         "Certified answers, generated solvers."))
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
     p.add_argument("--version", action="version", version=f"identcheck {identcheck.__version__}")
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
 
-    s = sub.add_parser("derive", help="regenerate and check every derivation against the paper")
+    s = sub.add_parser("derive", formatter_class=_Help, epilog=_epilog("identcheck derive --out derivations/out --json", "every derivation agrees with the paper (or a recorded erratum) and the generated code is up to date", "an unrecorded disagreement, or stale generated code (--regenerate rewrites it)"),
+                       help="regenerate and check every derivation against the paper")
     s.add_argument("--out", default="derivations/out", help="directory for the rendered Markdown")
     s.add_argument("--regenerate", action="store_true",
                    help="rewrite the solvers' generated code (identcheck/solve/generated/) from these derivations")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_derive)
 
-    s = sub.add_parser("rank", help="exact generic rank of the sampled M-matrix of a case")
+    s = sub.add_parser("rank", formatter_class=_Help, epilog=_epilog("identcheck rank revolute 2 1 --save cert.json", "M has full rank", "M is rank-deficient: the case is not identifiable from these samples"),
+                       help="exact generic rank of the sampled M-matrix of a case")
     s.add_argument("joint", help="joint type (revolute | spherical)")
     s.add_argument("p", type=int, help="markers on the parent link")
     s.add_argument("q", type=int, help="markers on the child link")
@@ -217,12 +248,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_rank)
 
-    s = sub.add_parser("verify", help="re-check a saved certificate from scratch (rank, local, counterexample, table)")
+    s = sub.add_parser("verify", formatter_class=_Help, epilog=_epilog("identcheck verify cert.json", "the certificate holds", "it does not (the message names the row and field)"),
+                       help="re-check a saved certificate from scratch (rank, local, counterexample, table)")
     s.add_argument("certificate")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_verify)
 
-    s = sub.add_parser("table", help="identifiability verdict and certificate for every joint type x markers")
+    s = sub.add_parser("table", formatter_class=_Help, epilog=_epilog("identcheck table --joint revolute --save table.json", "the table was made"),
+                       help="identifiability verdict and certificate for every joint type x markers")
     s.add_argument("--joint", action="append", choices=("revolute", "spherical", "universal", "prismatic"),
                    help="only this joint type (repeatable; default: all)")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the random rational points")
@@ -230,7 +263,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_table)
 
-    s = sub.add_parser("simulate", help="write a synthetic trial (TRC or C3D by extension)")
+    s = sub.add_parser("simulate", formatter_class=_Help, epilog=_epilog("identcheck simulate examples/leg.toml --out leg.c3d --noise-mm 0.5 --truth truth.json", "the trial was written"),
+                       help="write a synthetic trial (TRC or C3D by extension)")
     s.add_argument("model")
     s.add_argument("--out", required=True)
     s.add_argument("--effect", default=None, choices=EFFECT_NAMES, metavar="NAME",
@@ -247,7 +281,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_simulate)
 
-    s = sub.add_parser("identify", help="every joint a trial's samples admit (exact-case solvers)")
+    s = sub.add_parser("identify", formatter_class=_Help, epilog=_epilog("identcheck identify examples/knee_21.toml knee.c3d --json", "every joint asked is unique", "some joint admits several joint-parameter sets (revolute (2,1): four), or the data are degenerate"),
+                       help="every joint a trial's samples admit (exact-case solvers)")
     s.add_argument("model")
     s.add_argument("trial")
     s.add_argument("--joint", action="append", help="joint name (repeatable; default: all)")
@@ -256,7 +291,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_identify)
 
-    s = sub.add_parser("fit", help="joint parameters from a recorded trial, with uncertainty and excitation checks")
+    s = sub.add_parser("fit", formatter_class=_Help, epilog=_epilog("identcheck fit examples/real/walking2_right_leg.toml examples/real/opensim_walking2.c3d --json", "every joint is identifiable and determined by the trial", "some joint is not (ambiguous or undetermined: see practical)"),
+                       help="joint parameters from a recorded trial, with uncertainty and excitation checks")
     s.add_argument("model")
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
@@ -267,7 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_fit)
 
-    s = sub.add_parser("plan", help="check a marker plan before capture: which joints are identifiable, how; "
+    s = sub.add_parser("plan", formatter_class=_Help, epilog=_epilog("identcheck plan examples/leg.toml --noise-mm 1 --motion functional", "every joint is uniquely identifiable", "some joint is not (suggestions names the markers to add)"),
+                       help="check a marker plan before capture: which joints are identifiable, how; "
                                     "the fewest markers to add")
     s.add_argument("model")
     s.add_argument("--json", action="store_true")
@@ -286,18 +323,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--frames", type=int, default=1000, metavar="N", help="frames of that capture")
     s.set_defaults(func=_cmd_plan)
 
-    s = sub.add_parser("diagnose", help="where the rigid-joint model and a trial disagree: name the missing "
+    s = sub.add_parser("diagnose", formatter_class=_Help, epilog=_epilog("identcheck diagnose examples/diagnose_leg.toml trial.trc --plots figures/", "the residual left is consistent with noise", "a gap stays unexplained"),
+                       help="where the rigid-joint model and a trial disagree: name the missing "
                                         "effects, model them, show the gap shrink")
     s.add_argument("model")
     s.add_argument("trial")
     s.add_argument("--json", action="store_true")
     s.add_argument("--plots", metavar="DIR", default=None, help="write the figures into DIR")
+    s.add_argument("--export-markers", metavar="OUT.trc|OUT.c3d", default=None,
+                   help="also write the markers plus each joint's centre and hinge-axis points (with the adopted "
+                        "effects) as virtual markers")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
                         "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_diagnose)
 
-    s = sub.add_parser("batch", help="run fit, diagnose or plan over many trials on a Dask cluster (local by "
+    s = sub.add_parser("batch", formatter_class=_Help, epilog=_epilog("identcheck batch fit examples/leg.toml trials/ --out results/", "no job failed", "some jobs failed (2: all did); 130: interrupted, rerun to resume"),
+                       help="run fit, diagnose or plan over many trials on a Dask cluster (local by "
                                      "default): one JSON per job, a summary table; resumable",
                        description="Run fit, diagnose or plan over many trials on a Dask cluster: one JSON per job "
                                    "(the verb's own --json output) and DIR/summary.csv + .parquet, one row per job x "
@@ -334,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------- checks before any work
 FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
-                "fit": ("export_markers",)}
+                "fit": ("export_markers",), "diagnose": ("export_markers",)}
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
@@ -461,7 +503,7 @@ def main(argv=None) -> int:
         return 1
     except BrokenPipeError:
         raise
-    except Exception:                   # a bug: say so, with the traceback to report (exit 3, CONTRACT.md)
+    except Exception:                   # a bug: say so, with the traceback to report (exit 3, docs/contract.md)
         traceback.print_exc(file=sys.stderr)
         print(f"identcheck {a.verb}: internal error (a bug in identcheck {identcheck.__version__}) on "
               f"{_inputs(a)}; please report it with the command line, these inputs and the traceback above",

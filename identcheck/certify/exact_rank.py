@@ -10,6 +10,7 @@ bound and is reported with ``deterministic: false``.
 """
 from __future__ import annotations
 
+import json
 import random
 from dataclasses import asdict, dataclass, field
 
@@ -168,6 +169,16 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
     rng = random.Random(seed)
     params = draw_parameters(cs, rng)
     angles = draw_angles(cs, rng, n)
+    return certificate(cs, params, angles, seed)
+
+
+def certificate(cs: Case, params: dict, angles: list, seed: int) -> RankCertificate:
+    """The rank certificate of case `cs` at constants `params` and per-sample half-angle tangents `angles`:
+    every stored field follows from these (and `seed`, which records where they were drawn), so that
+    :func:`verify` rebuilds the whole document from them and compares it field by field."""
+    dv = derive.for_case(cs, disk_cache=False)
+    n_unknowns = len(dv.result("Y"))
+    n = len(angles)
     points = [sample_point(cs, params, ts) for ts in angles]
     rows, rhs = m_rows(cs, points)
     rk, prow, pcol, det = exact_rank(rows)
@@ -229,23 +240,40 @@ def verify(cert: dict) -> Verification:
     """Re-check a saved certificate from scratch, trusting none of its derived numbers.
 
     Checks that every sample point is exactly the output of the stated parameters and angles,
-    rebuilds M from the points with the derivation, recomputes the exact rank and the minor.
+    rebuilds M from the points with the derivation, recomputes the exact rank and the minor; then rebuilds
+    the whole certificate from its parameters and angles (:func:`certificate`) and rejects every stored
+    field that differs from the rebuilt one (the matrix, the statement, the counts, the expressions of the
+    unknowns, the flags, each with its JSON type), and a seed that does not draw the stored parameters and
+    angles.
     """
     problems = []
     if cert.get("format") != FORMAT:
         return Verification(False, [f"unknown certificate format {cert.get('format')!r}; expected {FORMAT}"])
     try:
         cs = get_case(cert["joint"], cert["p"], cert["q"])
+        if sorted(cert["parameters"]) != sorted(draw_parameters(cs, random.Random(0))):
+            return Verification(False, [f"parameters: expected exactly {', '.join(sorted(draw_parameters(cs, random.Random(0))))}"
+                                        f" for {cs.joint} ({cs.p},{cs.q})"])
         params = {k: _rat(v) for k, v in cert["parameters"].items()}
-        points = []
+        points, angles = [], []
         for i, smp in enumerate(cert["samples"]):
             ts = [_rat(t) for t in smp["t"]]
+            if len(ts) != len(cs.variables):
+                problems.append(f"sample {i}: {len(ts)} angles, the case has {len(cs.variables)}")
             pt = tuple(_rat(c) for c in smp["xyz"])
             if sample_point(cs, params, ts) != pt:
                 problems.append(f"sample {i}: the point is not the output of the stated parameters and angles")
             points.append(pt)
+            angles.append(tuple(ts))
         rows, _ = m_rows(cs, points)
         rk, prow, pcol, det = exact_rank(rows)
+        seed = cert["seed"]
+        if type(seed) is not int:
+            raise TypeError(f"seed must be an integer, got {seed!r}")
+        rebuilt = certificate(cs, params, angles, seed).to_dict() if not problems else {}
+        rng = random.Random(seed)
+        if not problems and (draw_parameters(cs, rng) != params or draw_angles(cs, rng, len(angles)) != angles):
+            problems.append(f"seed {seed} does not draw the stored parameters and angles")
     except (KeyError, TypeError, ValueError) as exc:
         return Verification(False, [f"malformed certificate: {exc}"])
     if rk != cert["rank"]:
@@ -254,6 +282,13 @@ def verify(cert: dict) -> Verification:
         problems.append(f"minor recomputed as {det} on rows {prow}, columns {pcol}; certificate differs")
     if bool(cert["full_rank"]) != (rk == len(cert["unknowns"])):
         problems.append("full_rank flag does not match the recomputed rank")
-    if cert.get("matrix") and [[rational_text(v) for v in row] for row in rows] != cert["matrix"]:
-        problems.append("the stored matrix differs from the one rebuilt from the sample points")
+    said = {"rank", "minor_determinant", "pivot_rows", "pivot_columns"}   # reported above when they differ
+    for key in sorted(set(rebuilt) | set(cert)):
+        if key in said or not rebuilt:
+            continue
+        if key not in rebuilt:
+            problems.append(f"field {key!r}: not a field of {FORMAT}")
+        elif json.dumps(rebuilt[key], sort_keys=True) != json.dumps(cert.get(key), sort_keys=True):
+            problems.append(f"field {key!r} differs from the one rebuilt from the certificate's parameters and samples"
+                            + ("" if key in cert else " (missing)"))
     return Verification(not problems, problems)

@@ -6,6 +6,7 @@ the gap before and after each.
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,6 +84,11 @@ class Diagnosis:
         The adopted effects, in order (most important first).
     test_before, test_after : dict
         Whether the gap is consistent with noise: ``consistent``, ``ratio`` (gap²/floor²), ``limit``, ``dof``.
+    offset : array (3,)
+        What the trial was moved by before the fit (:meth:`identcheck.trial.Trial.recentred`): ``ctx``,
+        ``before`` and ``after`` live in the moved frame, so a world position from them (a joint centre,
+        a predicted marker) plus ``offset`` is in the file's own coordinates. Everything in :meth:`to_dict`
+        is a distance and does not depend on it.
     """
 
     ctx: Context
@@ -91,6 +97,7 @@ class Diagnosis:
     steps: tuple
     test_before: dict
     test_after: dict
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def gap_before(self) -> float:
@@ -157,7 +164,11 @@ def _naming(files: str, call, *args):
 
 
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
-    """Noise floor and the rigid-joint fit of `trial`."""
+    """Noise floor and the rigid-joint fit of `trial` (a subject prefix taken off its labels first, with a warning:
+    :meth:`identcheck.trial.Trial.unprefixed`)."""
+    trial, unprefixed = trial.unprefixed(model.markers)
+    if unprefixed:
+        warnings.warn(unprefixed, UserWarning, stacklevel=2)
     trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
@@ -184,7 +195,11 @@ def creep(ctx: Context, h: Hypothesis) -> float:
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:
-    """Find, name and model what the rigid-joint model misses in `trial` (see the module docstring)."""
+    """Find, name and model what the rigid-joint model misses in `trial` (see the module docstring).
+
+    The trial is fitted moved near the origin (:meth:`identcheck.trial.Trial.recentred`: float64 sums of squares
+    of coordinates 100 m from the origin lose the millimetres); the result carries the move (``offset``)."""
+    trial, offset = trial.recentred()
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)
     h, steps = base, []
@@ -236,7 +251,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
                      f"(floor {cand.floor(ctx):.3g})")
         h = cand
-    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h))
+    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset)
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them

@@ -25,14 +25,14 @@ SEEDS = range(5)
 N_FRAMES = 500
 
 
-def joint_error(sim, hyp) -> float:
+def joint_error(sim, hyp, offset) -> float:
     """RMS over frames and joints of how far the model's joints are from the true ones, mm: a ball joint's
     centre; for a hinge, the true centre's distance from the fitted axis line (a hinge's centre may
     slide along its axis)."""
     errs = []
     for j in hyp.chain.joints:
         true = true_centre_world(sim, j)
-        c = centre_world(hyp, j)
+        c = centre_world(hyp, j) + offset           # the diagnosis lives in the trial moved near the origin
         if hyp.chain.types[j] == "revolute":
             a = np.einsum("fij,j->fi", hyp.fit.seg_R[hyp.chain.parent[j]], hyp.fit.state.axis[j])
             d = true - c
@@ -58,7 +58,8 @@ def run_case(name: str, seed: int, tmp: Path) -> dict:
     return {"name": name, "seed": seed, "noise": noise, "occlusion": occlusion, "rep": rep,
             "found": [e["name"] for e in rep["effects"]],
             "truth_where": sim.settings.get("effect", {}).get("where", {}),
-            "error_before": joint_error(sim, diag.before), "error_after": joint_error(sim, diag.after)}
+            "error_before": joint_error(sim, diag.before, diag.offset),
+            "error_after": joint_error(sim, diag.after, diag.offset)}
 
 
 @pytest.fixture(scope="module")
