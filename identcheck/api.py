@@ -203,13 +203,16 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 @_one_blas_thread
 def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
          fewest: bool = False, witness: bool = False, progress=None, noise_mm: float | None = None,
-         practical_motion: str = "functional", frames: int = 1000):
+         practical_motion: str = "functional", frames: int = 1000, max_seconds: float | None = None):
     """Check a marker plan before capture: which joints `model`'s markers identify, how, with how many
     samples, and the fewest markers to add (see :func:`identcheck.plan.analysis.plan_model`).
 
     With ``noise_mm``, each joint also gets ``practical``: what a capture of ``frames`` frames of
     ``practical_motion`` (a name of :data:`identcheck.fit.predict.MOTIONS`, or a recorded TRC/C3D trial whose
     motion to judge) with that noise would determine (:mod:`identcheck.fit.predict`).
+
+    ``max_seconds`` bounds the motion and robustness analyses together (default
+    :data:`identcheck.plan.analysis.ANALYSES_BUDGET_S`); what they leave unchecked is listed in ``unfinished``.
 
     Returns
     -------
@@ -220,7 +223,7 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
 
     m = load_model(model)
     res = plan_model(m, seed=seed, motion=motion, robust=robust, suggest=suggest,
-                     fewest=fewest, witness=witness, progress=progress)
+                     fewest=fewest, witness=witness, progress=progress, max_seconds=max_seconds)
     if noise_mm is None:
         return res
     if progress:

@@ -133,7 +133,8 @@ def _cmd_fit(a) -> int:
 
 def _cmd_plan(a) -> int:
     res = api.plan(a.model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest, witness=a.witness,
-                   progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion, frames=a.frames)
+                   progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion, frames=a.frames,
+                   max_seconds=a.max_seconds)
     if a.figure:
         from identcheck.report.plan_figure import draw
 
@@ -311,6 +312,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG/SVG)")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
+    s.add_argument("--max-seconds", type=float, default=None, metavar="S",
+                   help="time budget of the robustness and motion analyses together (default 30); what they leave "
+                        "unchecked is listed under 'unfinished'")
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.add_argument("--witness", action="store_true",
@@ -426,6 +430,8 @@ def preflight(a) -> list:
                 bad = ["(not integers)"]
             if bad:
                 problems.append(f"--frames {a.frames}: comma-separated frame indices, 0 or more")
+    if a.verb == "plan" and a.max_seconds is not None and not 0 < a.max_seconds <= 86400:
+        problems.append(f"--max-seconds {a.max_seconds}: a positive number of seconds, at most a day")
     if a.verb == "plan" and a.noise_mm is not None:
         if not 0 < a.noise_mm < math.inf:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")

@@ -34,6 +34,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import time
 from dataclasses import dataclass, field
 from importlib import resources
 
@@ -320,11 +321,44 @@ def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str 
 
 
 # -- motion, robustness, suggestions ---------------------------------------------------------------------
-def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0) -> dict:
+ANALYSES_BUDGET_S = 30.0
+"""Seconds the optional per-joint and per-marker analyses (motion, robustness) may take together by default
+(``plan --max-seconds``): each variant is a whole-tree rank, so their cost grows with the model's size; past the
+budget the plan says which joints and markers were not analysed (``unfinished``) instead of running on."""
+
+
+class Budget:
+    """A deadline shared by the optional analyses, with a progress line per variant (throttled to one a second)."""
+
+    def __init__(self, seconds: float | None, progress=None):
+        self.seconds = ANALYSES_BUDGET_S if seconds is None else float(seconds)
+        self.start = time.monotonic()
+        self.progress = progress
+        self._said = -1.0
+        self.skipped: dict = {}
+
+    def spent(self) -> bool:
+        return time.monotonic() - self.start > self.seconds
+
+    def tick(self, what: str, k: int, n: int) -> None:
+        now = time.monotonic() - self.start
+        if self.progress and (now - self._said >= 1.0 or k == n):
+            self._said = now
+            self.progress(f"{what}: {k} of {n} ({now:.0f} s of at most {self.seconds:g} s)")
+
+
+def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: Budget | None = None) -> dict:
     """For each locally identifiable joint, the joints whose motion must be exercised: held at one angle in
-    every frame, they would leave it undetermined (whole-tree rank with that joint frozen)."""
+    every frame, they would leave it undetermined (whole-tree rank with that joint frozen). Joints whose
+    freezing the budget left unchecked are listed in ``budget.skipped["motion_needed"]``."""
+    budget = budget or Budget(float("inf"))
     need = {n: [] for n in plan.joints}
-    for name, *_ in spec.joints:
+    names = [j[0] for j in spec.joints]
+    for k, name in enumerate(names):
+        if budget.spent():
+            budget.skipped["motion_needed"] = names[k:]
+            break
+        budget.tick("motion each joint needs", k + 1, len(names))
         frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1)
         for other, jr in frozen.joints.items():
             if plan.joints[other]["local"] and not jr.local:
@@ -332,16 +366,22 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0) -> dict:
     return need
 
 
-def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0) -> dict:
-    """For each marker: does the plan stay all-identifiable without it, and which joints would it lose."""
+def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, budget: Budget | None = None) -> dict:
+    """For each marker: does the plan stay all-identifiable without it, and which joints would it lose. Markers
+    the budget left unchecked are listed in ``budget.skipped["robustness"]`` (and absent here)."""
+    budget = budget or Budget(float("inf"))
     out = {}
-    for seg, ms in spec.markers.items():
-        for m in ms:
-            alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1)
-            lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
-            lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
-            out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
-                      "joints_lost": lost, "joints_no_longer_local": lost_local}
+    every = [(seg, m) for seg, ms in spec.markers.items() for m in ms]
+    for k, (seg, m) in enumerate(every):
+        if budget.spent():
+            budget.skipped["robustness"] = [mk for _, mk in every[k:]]
+            break
+        budget.tick("markers the plan cannot lose", k + 1, len(every))
+        alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1)
+        lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
+        lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
+        out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
+                  "joints_lost": lost, "joints_no_longer_local": lost_local}
     return out
 
 
@@ -542,7 +582,7 @@ def _suggestion_keys(fix: Fix) -> dict:
 
 
 def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
-               fewest: bool = False, witness: bool = False, progress=None) -> PlanResult:
+               fewest: bool = False, witness: bool = False, progress=None, max_seconds: float | None = None) -> PlanResult:
     """Check a marker plan: every joint's verdict and explanation, the fewest markers to add, and (optional
     analyses) the motion each joint needs, the markers the plan cannot lose, the fewest markers that keep
     every joint locally identifiable.
@@ -558,7 +598,10 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         Also simulate the plan and search every joint it does not identify for a second skeleton verified
         at 50 digits (:mod:`identcheck.plan.witness`; seconds to a minute).
     progress : callable, optional
-        Called with a message per stage of the witness search.
+        Called with a message per stage (at most one a second in the per-joint and per-marker analyses).
+    max_seconds : float, optional
+        Budget of the motion and robustness analyses together (default :data:`ANALYSES_BUDGET_S`); what it
+        leaves unchecked is listed under ``unfinished``.
 
     Returns
     -------
@@ -566,7 +609,10 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     """
     spec = tree_rank.TreeSpec.from_model(model)
     rows = table_summary()
+    if progress:
+        progress(f"whole-tree rank of {len(spec.joints)} joints")
     plan = analyse(spec, rows, seed=seed)
+    budget = Budget(max_seconds, progress)
     doc = {"all_identifiable": plan.all_identifiable, "all_local": plan.all_local, "joints": plan.joints}
     if witness:
         from identcheck.plan import witness as plan_witness
@@ -574,13 +620,18 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         for n, w in plan_witness.witnesses(model, spec, plan, seed, progress).items():
             doc["joints"][n]["alternative"] = w
     if motion:
-        for n, needs in motion_needed(spec, plan, seed).items():
-            doc["joints"][n]["motion_needed"] = needs
+        needs = motion_needed(spec, plan, seed, budget)
+        for n in doc["joints"]:
+            doc["joints"][n]["motion_needed"] = None if "motion_needed" in budget.skipped else needs[n]
     doc["suggestions"] = []
     if suggest and not plan.all_identifiable:
         doc.update(_suggestion_keys(fewest_markers(spec, rows, seed, base=plan)))
     if robust:
-        doc["robustness"] = robustness(spec, plan, rows, seed)
+        doc["robustness"] = robustness(spec, plan, rows, seed, budget)
+    if budget.skipped:
+        doc["unfinished"] = dict(budget.skipped, reason=(
+            f"the motion and robustness analyses stopped at their budget of {budget.seconds:g} s (one whole-tree rank "
+            "per joint and per marker); `plan --max-seconds` raises it, `--fast` skips them"))
     if fewest:
         doc["fewest_local"] = fewest_local(spec, rows, seed)
     undetermined = {n: list(plan.rank.joints[n].undetermined) for n, j in plan.joints.items() if not j["local"]}

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from identcheck.io.jsonable import frozen, plain
 
 OPTIONAL = ("suggestions_note", "suggestions_check", "suggestions_unique", "suggestions_unique_note", "undetermined",
-            "robustness", "fewest_local", "shared_motion")
+            "robustness", "fewest_local", "shared_motion", "unfinished")
 """Top-level keys present only when the analysis ran (or had something to say)."""
 
 
@@ -34,6 +34,10 @@ class PlanResult:
         How the whole-tree verdict was computed (prime, frames, failure probability bound, seed).
     suggestions_note, suggestions_check, robustness, fewest_local, shared_motion
         Present (not None) when computed; as in the JSON.
+    unfinished : Mapping
+        Present when the motion and robustness analyses ran out of their time budget: the joints
+        (``motion_needed``; their ``motion_needed`` is then null) and markers (``robustness``) not analysed,
+        and the ``reason``.
     suggestions_unique, suggestions_unique_note
         The fewest markers after which the propagation settles every joint uniquely, when they differ from
         ``suggestions`` (jointly identifiable joints' candidates are not counted).
@@ -61,6 +65,7 @@ class PlanResult:
     robustness: Mapping | None = None
     fewest_local: Mapping | None = None
     shared_motion: str | None = None
+    unfinished: Mapping | None = None
 
     @classmethod
     def from_dict(cls, doc: dict, root: str, markers: dict) -> "PlanResult":

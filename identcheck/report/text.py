@@ -195,7 +195,14 @@ def plan_text(result) -> str:
                      f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
     if "robustness" in doc:
         weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
-        lines.append("markers the plan cannot lose: " + (", ".join(weak) or "none"))
+        partial = bool((doc.get("unfinished") or {}).get("robustness"))
+        lines.append("markers the plan cannot lose" + (f" (of the {len(doc['robustness'])} checked)" if partial else "")
+                     + ": " + (", ".join(weak) or "none"))
+    if doc.get("unfinished"):
+        u = doc["unfinished"]
+        left = [f"{len(u[k])} {what}" for k, what in (("motion_needed", "joints' motion"), ("robustness", "markers"))
+                if u.get(k)]
+        lines.append(f"not analysed: {', '.join(left)} ({u['reason']})")
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
     return "\n".join(lines)

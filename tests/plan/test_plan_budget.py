@@ -1,0 +1,61 @@
+"""The plan's optional analyses (motion each joint needs, markers the plan cannot lose) are one whole-tree rank
+per joint and per marker: on a long chain they stop at their time budget, say what they did not analyse, and
+report progress, instead of running on; within the budget they analyse everything."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from identcheck import api, cli
+
+
+def chain_model(path, n: int):
+    """A chain of n joints, alternating hinge and ball, three markers on every third segment and one elsewhere."""
+    lines = ['units = "mm"']
+    for i in range(n + 1):
+        names = [f"m{i}{c}" for c in ("a", "b", "c")] if i % 3 == 0 else [f"m{i}a"]
+        lines += [f"[segments.s{i}]", "markers = [" + ", ".join(f'"{m}"' for m in names) + "]"]
+    for i in range(n):
+        lines += [f"[joints.j{i}]", f'type = "{"spherical" if i % 2 else "revolute"}"', f'parent = "s{i}"',
+                  f'child = "s{i + 1}"']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_spent_budget_lists_every_joint_and_marker_not_analysed(tmp_path):
+    model = chain_model(tmp_path / "chain.toml", 8)
+    res = api.plan(model, max_seconds=1e-9).to_dict()
+    every = [f"m{i}{c}" for i in range(9) for c in (("a", "b", "c") if i % 3 == 0 else ("a",))]
+    assert res["unfinished"]["motion_needed"] == [f"j{i}" for i in range(8)]
+    assert sorted(res["unfinished"]["robustness"]) == sorted(every)
+    assert res["robustness"] == {}
+    assert all(j["motion_needed"] is None for j in res["joints"].values())
+    assert "--max-seconds" in res["unfinished"]["reason"]
+    assert res["all_identifiable"] is True          # the verdicts themselves never depend on the budget
+
+
+def test_within_the_budget_everything_is_analysed(tmp_path):
+    model = chain_model(tmp_path / "chain.toml", 4)
+    res = api.plan(model, max_seconds=600).to_dict()
+    assert "unfinished" not in res
+    assert sorted(res["robustness"]) == sorted(["m0a", "m0b", "m0c", "m1a", "m2a", "m3a", "m3b", "m3c", "m4a"])
+    assert all(isinstance(j["motion_needed"], list) for j in res["joints"].values())
+    # every hinge and ball of a chain needs its own motion
+    assert all(n in j["motion_needed"] for n, j in res["joints"].items())
+
+
+def test_the_cli_reports_progress_and_what_it_left(tmp_path, capsys):
+    model = chain_model(tmp_path / "chain.toml", 8)
+    assert cli.main(["plan", str(model), "--max-seconds", "0.001", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert "whole-tree rank of 8 joints" in err and " of at most 0.001 s" in err
+    doc = json.loads(out)
+    assert "unfinished" in doc
+
+
+@pytest.mark.parametrize("value", ["0", "-3", "nan", "1e9"])
+def test_a_budget_out_of_range_is_named(tmp_path, capsys, value):
+    model = chain_model(tmp_path / "chain.toml", 2)
+    assert cli.main(["plan", str(model), "--max-seconds", value]) == 2
+    assert "--max-seconds" in capsys.readouterr().err
