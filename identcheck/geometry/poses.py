@@ -1,9 +1,10 @@
-"""Segment poses from three or more markers by SVD (Kabsch/Horn/Challis), vectorised over frames.
+"""Segment poses from three or more markers (Kabsch/Horn/Challis least squares), vectorised over frames.
 
 A segment's markers have body-fixed coordinates ``local`` (m, 3); in frame f they are measured
 at ``points[f]`` (m, 3, NaN where occluded). The least-squares rotation and translation with
-``points[f] ≈ R[f] @ local + t[f]`` come from the SVD of the weighted cross-covariance
-(Challis 1995), with the reflection guard. Frames with fewer than three visible markers, or
+``points[f] ≈ R[f] @ local + t[f]`` come from the weighted cross-covariance (Challis 1995), its rotation
+with the reflection guard by Horn's quaternion method (:func:`identcheck.geometry.rotations.best_rotations`,
+the SVD's answer without a LAPACK call per frame). Frames with fewer than three visible markers, or
 with visible markers (nearly) collinear, get no pose (``valid`` False, NaN R and t).
 """
 from __future__ import annotations
@@ -12,6 +13,8 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from identcheck.geometry.rotations import best_rotations
 
 MIN_MARKERS = 3
 COLLINEAR_RATIO = 1e-6   # second singular value of the centred local points / first
@@ -82,10 +85,7 @@ def segment_poses(points, local=None) -> Poses:
     Pc = (P - cp[:, None]) * w[..., None]
     Lc = (loc[None] - cl[:, None]) * w[..., None]
     H = np.einsum("fki,fkj->fij", Pc, Lc)                          # Σ p lᵀ
-    U, S, Vt = np.linalg.svd(H)
-    D = np.ones((len(pts), 3))
-    D[:, 2] = np.sign(np.linalg.det(U @ Vt))
-    R = np.einsum("fij,fj,fjk->fik", U, D, Vt)
+    R = best_rotations(H, bound=0.5 * (np.einsum("fki,fki->f", Pc, Pc) + np.einsum("fki,fki->f", Lc, Lc)))
     t = cp - np.einsum("fij,fj->fi", R, cl)
     valid = (n >= MIN_MARKERS) & _spread(w, loc)
     R[~valid] = np.nan
@@ -100,7 +100,13 @@ def _spread(w: np.ndarray, loc: np.ndarray) -> np.ndarray:
     """Per frame (F,): whether the visible body-fixed points are not (nearly) collinear. It depends on the
     frame only through which markers are seen, so it is decided once per visibility pattern (a trial has a
     handful), not once per frame."""
-    patterns, which = np.unique(w > 0, axis=0, return_inverse=True)
+    seen_all = w > 0
+    if seen_all.shape[1] <= 62:             # each pattern as one integer: a 1-D unique, not a sort of rows
+        codes = seen_all @ (1 << np.arange(seen_all.shape[1], dtype=np.int64))
+        _, first, which = np.unique(codes, return_index=True, return_inverse=True)
+        patterns = seen_all[first]
+    else:
+        patterns, which = np.unique(seen_all, axis=0, return_inverse=True)
     ok = np.zeros(len(patterns), dtype=bool)
     for i, seen in enumerate(patterns):
         if seen.sum() >= 2:

@@ -54,3 +54,79 @@ def matrix_quaternion(R: np.ndarray) -> np.ndarray:
     xyzw = Rotation.from_matrix(R).as_quat()
     xyzw = np.where(xyzw[..., 3:] < 0, -xyzw, xyzw)          # w >= 0: nearby rotations, nearby quaternions
     return np.concatenate([xyzw[..., 3:], xyzw[..., :3]], axis=-1)
+
+
+# ---------------------------------------------------------------------- the least-squares rotation (Kabsch)
+DEGENERATE_GAP = 1e-6
+"""Relative size of the eigenvector's adjugate below which the largest eigenvalue of Horn's matrix counts as
+(nearly) repeated: the rotation is then taken from the SVD instead (collinear points, a zero matrix)."""
+
+
+def best_rotations(H: np.ndarray, bound: np.ndarray | None = None) -> np.ndarray:
+    """The rotations R (F, 3, 3) maximising tr(Rᵀ H_f), H (F, 3, 3) = Σ p lᵀ of centred points: the Kabsch
+    rotation with the reflection guard, the same as ``U diag(1, 1, det(U Vᵀ)) Vᵀ`` from the SVD of H.
+
+    Why not the SVD: numpy's batched 3×3 SVD is a LAPACK call per frame, and poses of every segment in every
+    frame are most of a joint fit's start. This is Horn's quaternion method (J. Opt. Soc. Am. A 4, 1987)
+    solved as Theobald's QCP (Acta Cryst. A 61, 2005), with array operations only: the largest eigenvalue of
+    Horn's symmetric 4×4 matrix by Newton's method on its characteristic polynomial
+    ``λ⁴ − 2‖H‖²λ² − 8 det(H) λ + det(N)`` from an upper bound (``bound``, e.g. (Σ|p|² + Σ|l|²)/2 per frame,
+    close to the root for a good fit; by default √3‖H‖), then the eigenvector from the adjugate of
+    ``N − λI``. Where that eigenvalue is (nearly) repeated the eigenvector is ill-defined and the SVD is used.
+    """
+    H = np.asarray(H, dtype=float)
+    xx, yx, zx = H[:, 0, 0], H[:, 0, 1], H[:, 0, 2]
+    xy, yy, zy = H[:, 1, 0], H[:, 1, 1], H[:, 1, 2]
+    xz, yz, zz = H[:, 2, 0], H[:, 2, 1], H[:, 2, 2]
+    N = [[xx + yy + zz, yz - zy, zx - xz, xy - yx],
+         [yz - zy, xx - yy - zz, xy + yx, zx + xz],
+         [zx - xz, xy + yx, -xx + yy - zz, yz + zy],
+         [xy - yx, zx + xz, yz + zy, -xx - yy + zz]]
+    _, det_n = _adjugate4(N)
+    f2 = np.einsum("fij,fij->f", H, H)
+    det_h = (xx * (yy * zz - zy * yz) - yx * (xy * zz - zy * xz) + zx * (xy * yz - yy * xz))
+    lam = np.sqrt(3.0 * f2) if bound is None else np.minimum(np.asarray(bound, dtype=float), np.sqrt(3.0 * f2))
+    scale = np.maximum(np.sqrt(3.0 * f2), 1e-300)
+    for _ in range(100):                     # from above the largest root, Newton's steps fall monotonically
+        l2 = lam * lam
+        p = (l2 - 2.0 * f2) * l2 - 8.0 * det_h * lam + det_n
+        dp = 4.0 * lam * (l2 - f2) - 8.0 * det_h
+        step = np.where(dp > 0, p / np.where(dp > 0, dp, 1.0), 0.0)
+        lam = lam - step
+        if not np.any(np.abs(step) > 1e-15 * scale):
+            break
+    b, _ = _adjugate4([[N[i][j] - lam if i == j else N[i][j] for j in range(4)] for i in range(4)])
+    cols = np.array([[b[i][j] for i in range(4)] for j in range(4)])          # (column, entry, F)
+    norms = np.sqrt(np.einsum("jif,jif->jf", cols, cols))
+    k = np.argmax(norms, axis=0)
+    frames = np.arange(len(H))
+    q = cols[k, :, frames]                                                      # (F, 4)
+    size = norms[k, frames]
+    ok = size > 0
+    R = quaternion_matrix(np.where(ok[:, None], q / np.where(ok, size, 1.0)[:, None], np.array([1.0, 0.0, 0.0, 0.0])))
+    bad = ~(size > DEGENERATE_GAP * scale ** 3) | ~np.isfinite(R).all(axis=(1, 2))
+    if bad.any():
+        U, _, Vt = np.linalg.svd(H[bad])
+        D = np.ones((int(bad.sum()), 3))
+        D[:, 2] = np.sign(np.linalg.det(U @ Vt))
+        R[bad] = np.einsum("fij,fj,fjk->fik", U, D, Vt)
+    return R
+
+
+def _adjugate4(a):
+    """Adjugate (as nested lists of arrays) and determinant of 4×4 matrices given entry by entry (arrays)."""
+    (a00, a01, a02, a03), (a10, a11, a12, a13), (a20, a21, a22, a23), (a30, a31, a32, a33) = a
+    s0, s1, s2 = a00 * a11 - a10 * a01, a00 * a12 - a10 * a02, a00 * a13 - a10 * a03
+    s3, s4, s5 = a01 * a12 - a11 * a02, a01 * a13 - a11 * a03, a02 * a13 - a12 * a03
+    c5, c4, c3 = a22 * a33 - a32 * a23, a21 * a33 - a31 * a23, a21 * a32 - a31 * a22
+    c2, c1, c0 = a20 * a33 - a30 * a23, a20 * a32 - a30 * a22, a20 * a31 - a30 * a21
+    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+    adj = [[a11 * c5 - a12 * c4 + a13 * c3, -a01 * c5 + a02 * c4 - a03 * c3,
+            a31 * s5 - a32 * s4 + a33 * s3, -a21 * s5 + a22 * s4 - a23 * s3],
+           [-a10 * c5 + a12 * c2 - a13 * c1, a00 * c5 - a02 * c2 + a03 * c1,
+            -a30 * s5 + a32 * s2 - a33 * s1, a20 * s5 - a22 * s2 + a23 * s1],
+           [a10 * c4 - a11 * c2 + a13 * c0, -a00 * c4 + a01 * c2 - a03 * c0,
+            a30 * s4 - a31 * s2 + a33 * s0, -a20 * s4 + a21 * s2 - a23 * s0],
+           [-a10 * c3 + a11 * c1 - a12 * c0, a00 * c3 - a01 * c1 + a02 * c0,
+            -a30 * s3 + a31 * s1 - a32 * s0, a20 * s3 - a21 * s1 + a22 * s0]]
+    return adj, det
