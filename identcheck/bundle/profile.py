@@ -82,7 +82,7 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
         bound = None
         for _ in range(MAX_POINTS):
             target = max(prev_d + side * step, 0.0)
-            f = fit_chain(chain, data, state, weights=weights, max_iter=MAX_ITER,
+            f = fit_chain(chain, data, state, terms=fit.terms, weights=weights, max_iter=MAX_ITER,
                           penalty=distance_penalty(chain, joint, marker, target, weight, n_params))
             refits += 1
             lowest = min(lowest, f.rss)

@@ -15,8 +15,8 @@ from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.chain import fit_chain, information, initial_state
-from identcheck.bundle.practical import Z95, judge, single_axis
-from identcheck.bundle.uncertainty import covariance, distance_gradients, gauge_free_inverse
+from identcheck.bundle.honest import assess, joint_answer
+from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, joint_angles, score
 from identcheck.estimate.noise import noise_floor
@@ -273,36 +273,26 @@ def worst_sd(ctx: Context, h: Hypothesis) -> float:
 
 
 def joint_report(ctx: Context, h: Hypothesis) -> dict:
-    """Each joint as ``fit`` reports it, from the final model and with fit's rules (one estimator, one set of
-    rules): marker distances with 95 % intervals from the sandwich covariance (correlated noise and what
-    misfit remains allowed), the largest standard error, the practical verdict (:mod:`identcheck.bundle.practical`),
-    the residual of the joint's markers and the range of motion."""
+    """Each joint as ``fit`` reports it, from the final model and by fit's rules (one estimator, one set of
+    rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
+    covariance (correlated noise allowed), widened for markers that still move with the angles, profiled where
+    wide, unbounded where the data leave the joint free; the largest standard error; the practical verdict;
+    and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion."""
     ch = h.chain
-    cov = covariance(h.fit, h.data, h.weights)
-    grads = distance_gradients(ch, h.fit.state, len(cov.information))
+    judged = assess(h.fit, h.data, h.weights)
     angles = joint_angles(h)
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:
         P, C = ch.parent[j], ch.child[j]
-        rev = ch.types[j] == "revolute"
         idx = np.concatenate([ch.seg_markers[P], ch.seg_markers[C]])
         rom = np.rad2deg(np.ptp(np.unwrap(angles[j], axis=0), axis=0))
-        dist = {m: (d, cov.se(g)) for m, (d, g) in grads[j].items()}
-        practical = judge(ch, h.fit, cov, j, dist)
+        answer = joint_answer(judged, j)
+        practical = answer["practical"]
         determined = practical["verdict"] == "determined"
-        # as fit reports them: a direction the data leave free bounds nothing
-        unbounded = any(cov.free(g) for _, g in grads[j].values()) or single_axis(ch, h.fit, cov.sigma_mm, j)[0]
         reason = "ok" if determined else (f"{practical['reason']}; range of motion {', '.join(f'{x:.1f}' for x in rom)} "
                                           f"deg{'. ' + practical['motion_advice'] if practical['motion_advice'] else ''}")
-        sd = max(v[1] for v in dist.values())
-        out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type,
-                  "unique": determined,
-                  "marker_distances": {m: round(v[0], 3) for m, v in dist.items()},
-                  "marker_distances_ci95": {m: [0.0, None] if unbounded else [round(max(d - Z95 * se, 0.0), 3),
-                                                                             round(d + Z95 * se, 3)]
-                                            for m, (d, se) in dist.items()},
-                  "alternatives": [], "practical": practical,
+        out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type, "unique": determined, **answer,
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),
-                  "uncertainty_mm": round(sd, 4), "excitation": {"ok": determined, "reason": reason}}
+                  "excitation": {"ok": determined, "reason": reason}}
     return out

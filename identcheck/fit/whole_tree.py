@@ -28,10 +28,9 @@ import numpy as np
 from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
+from identcheck.bundle.honest import (Minimum, ci, honest_intervals, joint_answer, likelihood_scale, minimum,
+                                      posed_by_itself, with_misfit, with_model_error)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
-from identcheck.bundle.joint_frames import joint_geometry
-from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge, single_axis
-from identcheck.bundle.profile import profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import Poses, refine_local
@@ -44,32 +43,6 @@ MAX_ITER = 200           # LM iterations per start
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
                          # reach the same minimum to ~1e-3 mm)
-SIGMA_FLOOR_MM = 0.01
-"""The likelihood ratio's noise is never taken below this: far below any capture system's noise, above
-float32 file precision and the optimiser's own slack, so that two exactly tying joints on noise-free data
-are not told apart by rounding."""
-
-
-@dataclass(frozen=True)
-class Minimum:
-    """One local minimum of the whole-tree likelihood: its fit, covariance and marker distances."""
-
-    fit: object
-    cov: object
-    distances: dict            # joint -> marker -> (distance mm, standard error mm)
-    start: tuple               # which candidate of each ambiguous joint started it
-    intervals: dict = field(default_factory=dict)
-    """joint -> marker -> ([lo, hi], method) where the quadratic interval is not to be trusted (see
-    :func:`honest_intervals`); the other distances' 95 % intervals are ``d ± 1.96 SE``."""
-    misfit: dict = field(default_factory=dict)
-    """marker -> :class:`~identcheck.bundle.misfit.MarkerMisfit`: how much of its residual follows the angles."""
-    model_error: dict = field(default_factory=dict)
-    """joint -> model-error standard deviation (mm) already inside its distances' standard errors."""
-    rivals: dict = field(default_factory=dict)
-    """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded
-    joint (:func:`_without_incidental_rolls`), for the joints refitted so; others use ``TreeFit.others``."""
-
-
 @dataclass
 class TreeFit:
     """The whole-tree answer: the best minimum, the others with their likelihood-ratio statistics."""
@@ -191,26 +164,19 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
             problems.append(str(exc))
             continue
         fit = fit_chain(chain, data, state, max_iter=MAX_ITER)
-        cov = covariance(fit, data)
-        grads = distance_gradients(chain, fit.state, len(cov.information))
-        dist = {j: {m: (d, cov.se(g)) for m, (d, g) in per.items()} for j, per in grads.items()}
-        minima.append(Minimum(fit, cov, dist, tuple(id(e) for e in combo.values())))
+        minima.append(minimum(fit, data, start=tuple(id(e) for e in combo.values())))
     if not minima:
         return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out)
     minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
     best = minima[0]
-    tau = max(1.0, float(np.median([best.cov.inflation(g) for per in distance_gradients(
-        chain, best.fit.state, len(best.cov.information)).values() for _, g in per.values()])))
-    scale = max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau
+    scale = likelihood_scale(best)
     others = []
     for m in minima[1:]:
         delta = (m.fit.rss - best.fit.rss) / scale
         others.append((m, float(delta), float(chdtrc(1, delta))))
-    misfit = angle_dependence(best.fit, data)
-    model_error = {j: model_error_sd(best.fit, j, misfit) for j in chain.joints}
-    model_error = {j: sd for j, sd in model_error.items() if sd > 0}
-    best = _with_model_error(replace(best, misfit=misfit), model_error)
-    others = [(_with_model_error(m, model_error), delta, p) for m, delta, p in others]
+    best = with_misfit(best, data)
+    model_error = best.model_error
+    others = [(with_model_error(m, model_error), delta, p) for m, delta, p in others]
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     best = _without_incidental_rolls(best, others, data, model_error, scale)
     return TreeFit(best, others, n_starts=tried, starts_left_out=left_out)
@@ -276,100 +242,6 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
                    model_error=errors, misfit={**best.misfit, **{k: v for k, v in misfit.items()}})
 
 
-def _with_model_error(m: Minimum, model_error: dict) -> Minimum:
-    """The minimum with each joint's model-error SD added in quadrature to its distances' standard errors."""
-    if not model_error:
-        return m
-    dist = {j: {k: (d, float(np.hypot(se, model_error.get(j, 0.0)))) for k, (d, se) in per.items()}
-            for j, per in m.distances.items()}
-    return replace(m, distances=dist, model_error=dict(model_error))
-
-
-PROFILE_BUDGET_S = 60.0
-"""Seconds of profile-likelihood refits per trial at most; distances left over get an unbounded interval
-(said so in ``interval_method``), never a quadratic one known to be untrustworthy."""
-
-
-def posed_by_itself(chain: Skeleton, segment: str) -> bool:
-    """Whether a segment's pose in each frame follows from its own markers plus the points its parent joint
-    fixes on it (a ball's centre: one; a hinge's axis: two), as three points do. When it does not, the
-    segment's roll in every frame is a free unknown seen only through the joints below it: an incidental
-    parameter per frame, which biases the likelihood towards joints whose marker orbits absorb noise (on
-    simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820)."""
-    up = [j for j in chain.joints if chain.child[j] == segment]
-    fixed = 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
-    return len(chain.seg_markers[segment]) + fixed >= 3
-
-
-def posed_above(chain: Skeleton, joint: str) -> bool:
-    """Whether every segment from the root down to `joint`'s parent is posed by itself
-    (:func:`posed_by_itself`): otherwise a per-frame roll seen only through the joints below reaches `joint`."""
-    seg = chain.parent[joint]
-    while True:
-        if not posed_by_itself(chain, seg):
-            return False
-        up = [j for j in chain.joints if chain.child[j] == seg]
-        if not up:
-            return True
-        seg = chain.parent[up[0]]
-
-
-def skin_unseen(chain: Skeleton, joint: str) -> bool:
-    """Whether a segment beside `joint` has fewer than three markers: no distance within it shows its markers'
-    skin motion, which the joint then absorbs whole (a thigh marker that slides by e with the hip angle is a hip
-    centre moved by about e / θ). When skin motion is seen elsewhere in the trial, nothing bounds it here: on
-    simulated minimal legs (3 pelvis, 1 thigh, 1 shank marker) with 2-10 mm of skin motion, hips whose intervals
-    took the motion seen on the pelvis as their model error were 4-23 half-widths off."""
-    return any(len(chain.seg_markers[s]) < 3 for s in (chain.parent[joint], chain.child[joint]))
-
-
-def honest_intervals(best: Minimum, data, scale: float, progress=None) -> dict:
-    """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
-    those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
-
-    - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`),
-      or the joint hangs below a segment that is not posed by itself
-      (:func:`posed_above`) and is wide or misfitted, or it is misfitted beside a segment that cannot show its
-      own skin motion (:func:`skin_unseen`): ``[0, None]`` (the likelihood does not bound it), method
-      ``unbounded``;
-    - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
-      interval stays (a profile of a wrong likelihood would not be better);
-    - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
-      side that does not close within its span is ``None``; a profile that meets a better fit than the
-      minimum (the fit had not found the best joint) makes the interval unbounded.
-    Returns joint -> marker -> ([lo, hi], method)."""
-    fit, cov = best.fit, best.cov
-    chain = fit.chain
-    n_params = len(cov.information)
-    grads = distance_gradients(chain, fit.state, n_params)
-    start, out = time.monotonic(), {}
-    for j in chain.joints:
-        dist = best.distances[j]
-        free = any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
-        wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
-        misfit = j in best.model_error
-        if not (free or wide or misfit):
-            continue
-        if free or not posed_above(chain, j) or (misfit and skin_unseen(chain, j)):
-            out[j] = {m: ([0.0, None], "unbounded") for m in dist}
-            continue
-        if misfit:
-            continue                   # the likelihood itself is off: its widened quadratic interval stays
-        out[j] = {}
-        for m, (d, se) in dist.items():
-            if time.monotonic() - start > PROFILE_BUDGET_S:
-                out[j][m] = ([0.0, None], "unbounded")
-                continue
-            if progress:
-                progress(f"profile likelihood of {m}'s distance to {j}")
-            pi = profile_interval(fit, data, j, m, scale, se, n_params)
-            if pi.lowest_rss < fit.rss - scale:
-                out[j][m] = ([0.0, None], "unbounded")
-            else:
-                out[j][m] = ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
-    return out
-
-
 def _distinct(minima: list) -> list:
     """Minima with the same marker distances (within SAME_MM) kept once, best first."""
     kept = []
@@ -386,50 +258,25 @@ def _same(a: Minimum, b: Minimum, joints=None) -> bool:
 
 
 def joint_answers(tree: TreeFit, model) -> dict:
-    """Per joint: the contract's fit keys from the whole-tree fit (marker distances, 95 % intervals,
-    uncertainty, alternatives with their likelihood-ratio statistics, practical verdict)."""
+    """Per joint: the contract's fit keys from the whole-tree fit (:func:`identcheck.bundle.honest.joint_answer`),
+    with the other candidates the likelihood keeps (``alternatives``, with their likelihood-ratio statistics) and
+    rejects."""
     best = tree.best
     chain = best.fit.chain
     out = {}
     for j in chain.joints:
-        dist = best.distances[j]
         differing = [(m, delta, p) for m, delta, p in best.rivals.get(j, tree.others)
                      if not _same(m, best, [j])]                                             # this joint differs
         alts = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
-                 "marker_distances_ci95": _ci(m.distances[j]),
+                 "marker_distances_ci95": ci(m.distances[j]),
                  "delta_chi2": round(delta, 3), "p_value": round(p, 4),
                  "rms_residual": round(float(np.sqrt(m.fit.rss / max(m.fit.n_samples, 1))), 4)}
                 for m, delta, p in differing if delta <= REJECT_CHI2]          # not rejected at the 95 % level
         rejected = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in differing if delta > REJECT_CHI2]
-        practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alts))
-        if any(how == "unbounded" for _, how in best.intervals.get(j, {}).values()):
-            practical = dict(practical, verdict="undetermined", reason=(
-                f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
-                "markers do not pose (a roll in every frame seen only through the joints below), with wide "
-                "intervals or markers moving with the angles, or markers move with the angles in this trial and "
-                "a segment beside it has too few markers (under three) to show its own skin motion"))
-        if j in best.model_error:
-            practical["model_error_sd_mm"] = round(best.model_error[j], 3)
-            if practical["verdict"] != "determined":
-                practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
-                                        "for markers that move with the joint angles (see warnings; `identcheck "
-                                        "diagnose` models that motion)")
-        ci = _ci(dist)
-        method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
-        for k, (interval, how) in best.intervals.get(j, {}).items():
-            ci[k], method[k] = interval, how
-        out[j] = {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
-                  "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
-                  "marker_distances_ci95": ci, "interval_method": method,
-                  "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
-                  "alternatives": alts, "rejected_candidates": rejected, "practical": practical}
+        out[j] = joint_answer(best, j, alts, rejected)
     return out
-
-
-def _ci(dist: dict) -> dict:
-    return {k: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
 
 
 def noise_report(tree: TreeFit) -> dict:

@@ -1,0 +1,207 @@
+"""The rules by which one whole-tree fit answers for each joint, shared by ``fit`` and ``diagnose`` (one
+estimator, one set of rules): the sandwich covariance, model error for markers that move with the angles,
+intervals the likelihood supports (profile likelihood where the parabola misleads, unbounded where the data
+or the tree leave a joint free), and the per-joint answer with its practical verdict.
+
+``fit`` (:mod:`identcheck.fit.whole_tree`) adds the candidates: several minima started from the closed forms,
+compared by the likelihood ratio. ``diagnose`` answers from its final model, effects included.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from identcheck.bundle.joint_frames import joint_geometry
+from identcheck.bundle.misfit import angle_dependence, model_error_sd
+from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge, single_axis
+from identcheck.bundle.profile import profile_interval
+from identcheck.bundle.uncertainty import covariance, distance_gradients
+from identcheck.skeleton import Skeleton
+
+SIGMA_FLOOR_MM = 0.01
+"""The likelihood ratio's noise is never taken below this: far below any capture system's noise, above
+float32 file precision and the optimiser's own slack, so that two exactly tying joints on noise-free data
+are not told apart by rounding."""
+
+
+@dataclass(frozen=True)
+class Minimum:
+    """One local minimum of the whole-tree likelihood: its fit, covariance and marker distances."""
+
+    fit: object
+    cov: object
+    distances: dict            # joint -> marker -> (distance mm, standard error mm)
+    start: tuple               # which candidate of each ambiguous joint started it
+    intervals: dict = field(default_factory=dict)
+    """joint -> marker -> ([lo, hi], method) where the quadratic interval is not to be trusted (see
+    :func:`honest_intervals`); the other distances' 95 % intervals are ``d ± 1.96 SE``."""
+    misfit: dict = field(default_factory=dict)
+    """marker -> :class:`~identcheck.bundle.misfit.MarkerMisfit`: how much of its residual follows the angles."""
+    model_error: dict = field(default_factory=dict)
+    """joint -> model-error standard deviation (mm) already inside its distances' standard errors."""
+    rivals: dict = field(default_factory=dict)
+    """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded
+    joint (:func:`_without_incidental_rolls`), for the joints refitted so; others use ``TreeFit.others``."""
+
+
+def with_model_error(m: Minimum, model_error: dict) -> Minimum:
+    """The minimum with each joint's model-error SD added in quadrature to its distances' standard errors."""
+    if not model_error:
+        return m
+    dist = {j: {k: (d, float(np.hypot(se, model_error.get(j, 0.0)))) for k, (d, se) in per.items()}
+            for j, per in m.distances.items()}
+    return replace(m, distances=dist, model_error=dict(model_error))
+
+
+PROFILE_BUDGET_S = 60.0
+"""Seconds of profile-likelihood refits per trial at most; distances left over get an unbounded interval
+(said so in ``interval_method``), never a quadratic one known to be untrustworthy."""
+
+
+def posed_by_itself(chain: Skeleton, segment: str) -> bool:
+    """Whether a segment's pose in each frame follows from its own markers plus the points its parent joint
+    fixes on it (a ball's centre: one; a hinge's axis: two), as three points do. When it does not, the
+    segment's roll in every frame is a free unknown seen only through the joints below it: an incidental
+    parameter per frame, which biases the likelihood towards joints whose marker orbits absorb noise (on
+    simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820)."""
+    up = [j for j in chain.joints if chain.child[j] == segment]
+    fixed = 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
+    return len(chain.seg_markers[segment]) + fixed >= 3
+
+
+def posed_above(chain: Skeleton, joint: str) -> bool:
+    """Whether every segment from the root down to `joint`'s parent is posed by itself
+    (:func:`posed_by_itself`): otherwise a per-frame roll seen only through the joints below reaches `joint`."""
+    seg = chain.parent[joint]
+    while True:
+        if not posed_by_itself(chain, seg):
+            return False
+        up = [j for j in chain.joints if chain.child[j] == seg]
+        if not up:
+            return True
+        seg = chain.parent[up[0]]
+
+
+def skin_unseen(chain: Skeleton, joint: str) -> bool:
+    """Whether a segment beside `joint` has fewer than three markers: no distance within it shows its markers'
+    skin motion, which the joint then absorbs whole (a thigh marker that slides by e with the hip angle is a hip
+    centre moved by about e / θ). When skin motion is seen elsewhere in the trial, nothing bounds it here: on
+    simulated minimal legs (3 pelvis, 1 thigh, 1 shank marker) with 2-10 mm of skin motion, hips whose intervals
+    took the motion seen on the pelvis as their model error were 4-23 half-widths off."""
+    return any(len(chain.seg_markers[s]) < 3 for s in (chain.parent[joint], chain.child[joint]))
+
+
+def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=None) -> dict:
+    """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
+    those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
+
+    - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`),
+      or the joint hangs below a segment that is not posed by itself
+      (:func:`posed_above`) and is wide or misfitted, or it is misfitted beside a segment that cannot show its
+      own skin motion (:func:`skin_unseen`): ``[0, None]`` (the likelihood does not bound it), method
+      ``unbounded``;
+    - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
+      interval stays (a profile of a wrong likelihood would not be better);
+    - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
+      side that does not close within its span is ``None``; a profile that meets a better fit than the
+      minimum (the fit had not found the best joint) makes the interval unbounded.
+    Returns joint -> marker -> ([lo, hi], method)."""
+    fit, cov = best.fit, best.cov
+    chain = fit.chain
+    n_params = len(cov.information)
+    grads = distance_gradients(chain, fit.state, n_params)
+    start, out = time.monotonic(), {}
+    for j in chain.joints:
+        dist = best.distances[j]
+        free = any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
+        wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
+        misfit = j in best.model_error
+        if not (free or wide or misfit):
+            continue
+        if free or not posed_above(chain, j) or (misfit and skin_unseen(chain, j)):
+            out[j] = {m: ([0.0, None], "unbounded") for m in dist}
+            continue
+        if misfit:
+            continue                   # the likelihood itself is off: its widened quadratic interval stays
+        out[j] = {}
+        for m, (d, se) in dist.items():
+            if time.monotonic() - start > PROFILE_BUDGET_S:
+                out[j][m] = ([0.0, None], "unbounded")
+                continue
+            if progress:
+                progress(f"profile likelihood of {m}'s distance to {j}")
+            pi = profile_interval(fit, data, j, m, scale, se, n_params, weights=weights)
+            if pi.lowest_rss < fit.rss - scale:
+                out[j][m] = ([0.0, None], "unbounded")
+            else:
+                out[j][m] = ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
+    return out
+
+
+def minimum(fit, data, weights=None, start: tuple = ()) -> Minimum:
+    """A fitted chain as a :class:`Minimum`: its sandwich covariance and every joint's marker distances with
+    their standard errors (no model error, no intervals yet)."""
+    cov = covariance(fit, data, weights)
+    grads = distance_gradients(fit.chain, fit.state, len(cov.information))
+    dist = {j: {m: (d, cov.se(g)) for m, (d, g) in per.items()} for j, per in grads.items()}
+    return Minimum(fit, cov, dist, start)
+
+
+def likelihood_scale(best: Minimum) -> float:
+    """mm² per unit of χ² in likelihood ratios and profiles: the noise variance (never below
+    :data:`SIGMA_FLOOR_MM`) times the median variance inflation of the distances under correlated noise."""
+    grads = distance_gradients(best.fit.chain, best.fit.state, len(best.cov.information))
+    tau = max(1.0, float(np.median([best.cov.inflation(g) for per in grads.values() for _, g in per.values()])))
+    return max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau
+
+
+def with_misfit(m: Minimum, data) -> Minimum:
+    """The minimum with the markers' angle-following motion measured and each joint's model error added to its
+    distances' standard errors (:mod:`identcheck.bundle.misfit`)."""
+    misfit = angle_dependence(m.fit, data)
+    errors = {j: model_error_sd(m.fit, j, misfit) for j in m.fit.chain.joints}
+    return with_model_error(replace(m, misfit=misfit), {j: sd for j, sd in errors.items() if sd > 0})
+
+
+def assess(fit, data, weights=None, progress=None) -> Minimum:
+    """One fit judged by every rule: covariance, model error, honest intervals (what ``diagnose`` reports; ``fit``
+    does the same for its best minimum, then weighs the other candidates)."""
+    best = with_misfit(minimum(fit, data, weights), data)
+    return replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
+
+
+def ci(dist: dict) -> dict:
+    """marker -> the quadratic 95 % interval ``[max(d − 1.96 SE, 0), d + 1.96 SE]``."""
+    return {k: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
+
+
+def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list = ()) -> dict:
+    """The contract's per-joint keys from a judged minimum: geometry, marker distances, 95 % intervals and how each
+    was made, the largest standard error, the practical verdict; ``alternatives`` / ``rejected`` (already
+    rendered) are the other candidates the likelihood keeps / rejects."""
+    chain = best.fit.chain
+    dist = best.distances[j]
+    practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alternatives))
+    if any(how == "unbounded" for _, how in best.intervals.get(j, {}).values()):
+        practical = dict(practical, verdict="undetermined", reason=(
+            f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
+            "markers do not pose (a roll in every frame seen only through the joints below), with wide "
+            "intervals or markers moving with the angles, or markers move with the angles in this trial and "
+            "a segment beside it has too few markers (under three) to show its own skin motion"))
+    if j in best.model_error:
+        practical["model_error_sd_mm"] = round(best.model_error[j], 3)
+        if practical["verdict"] != "determined":
+            practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
+                                    "for markers that move with the joint angles (see warnings; `identcheck "
+                                    "diagnose` models that motion)")
+    interval = ci(dist)
+    method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
+    for k, (iv, how) in best.intervals.get(j, {}).items():
+        interval[k], method[k] = iv, how
+    return {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
+            "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
+            "marker_distances_ci95": interval, "interval_method": method,
+            "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
+            "alternatives": list(alternatives), "rejected_candidates": list(rejected), "practical": practical}

@@ -1,0 +1,39 @@
+"""fit is diagnose's model with no effect adopted (one estimator, one set of rules, bundle.honest): on trials
+where diagnose adopts nothing, both report the same marker distances, 95 % intervals (and how each was made),
+standard errors and practical verdicts (a joint the data leave free: unbounded in both, wherever along its
+valley each fit stopped)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from hypothesis import assume, given, settings, strategies as st
+
+import identcheck as ic
+from identcheck.diagnose.workflow import diagnose
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+
+MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
+
+
+@settings(max_examples=3, deadline=None)
+@given(seed=st.integers(0, 10_000), noise=st.floats(0.2, 1.5), frames=st.integers(300, 450),
+       n_axes=st.sampled_from([1, 2, 3]))
+def test_fit_and_diagnose_answer_alike_when_no_effect_is_adopted(seed, noise, frames, n_axes):
+    sim = simulate(MODEL, n_frames=frames, seed=seed, n_axes=n_axes, noise_mm=noise)
+    diag = diagnose(MODEL, sim.trial)
+    assume(not diag.steps)
+    fit, dg = ic.fit(MODEL, sim.trial).to_dict()["joints"], diag.to_dict()["joints"]
+    for j, a in fit.items():
+        b = dg[j]
+        assert a["practical"]["verdict"] == b["practical"]["verdict"], j
+        assert a["interval_method"] == b["interval_method"], j
+        for m, d in a["marker_distances"].items():
+            if a["interval_method"][m] == "unbounded":
+                continue                 # a flat valley: any point of it is the estimate (checked: both unbounded)
+            assert abs(d - b["marker_distances"][m]) <= 5e-3, (j, m)
+            for x, y in zip(a["marker_distances_ci95"][m], b["marker_distances_ci95"][m]):
+                assert (x is None and y is None) or abs(x - y) <= 5e-3, (j, m, a["marker_distances_ci95"][m],
+                                                                         b["marker_distances_ci95"][m])
+        if "unbounded" not in a["interval_method"].values():
+            assert abs(a["uncertainty_mm"] - b["uncertainty_mm"]) <= 1e-3 * max(1.0, a["uncertainty_mm"]), j
