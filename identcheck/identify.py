@@ -8,6 +8,7 @@ fitting with uncertainty is ``identcheck fit`` (a separate capability).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -122,6 +123,10 @@ def identify(model: Model, trial: Trial, joints=None, frames=None, precision=Non
     """
     names = list(joints) if joints else list(model.joint_order)
     frames = None if frames is None else list(frames)
+    used = [m for n in names if n in model.joints for m in model.joint_markers(n)[0] + model.joint_markers(n)[1]]
+    trial, unprefixed = trial.unprefixed(used)      # Vicon's 'Subject:Marker' labels (Trial.unprefixed)
+    if unprefixed:
+        warnings.warn(unprefixed, UserWarning, stacklevel=2)
     return IdentifyResult(tuple(identify_joint(model, trial, n, frames=frames, precision=precision) for n in names))
 
 

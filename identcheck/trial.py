@@ -20,6 +20,9 @@ COINCIDENT_MM = 1.0
 """Two markers closer than this in every frame where both are seen are one marker under two labels: the balls
 of real markers are several millimetres wide, so their centres cannot come this close, let alone stay so."""
 
+SUBJECT_SEPARATOR = ":"
+"""What ends a subject prefix in a marker label (Vicon Nexus writes ``Subject:Marker``): :meth:`Trial.unprefixed`."""
+
 FORMATS = (".trc", ".c3d")
 """File extensions :meth:`Trial.from_file` and :meth:`Trial.to_file` understand."""
 
@@ -236,7 +239,12 @@ class Trial:
         problems = []
         for lab in labels:
             if lab not in self._index:
-                problems.append(f"marker {lab!r}{seg(lab)} of the model is not in the trial")
+                prefixed = [t for t in self._labels if t.endswith(SUBJECT_SEPARATOR + lab)]
+                hint = "" if not prefixed else (
+                    f" (the trial has {', '.join(map(repr, prefixed[:3]))}: a subject prefix, as Vicon writes "
+                    "'Subject:Marker', which is removed by itself only when one prefix makes every marker of the "
+                    f"model match; name the model's marker {prefixed[0]!r}, or fix the trial's labels)")
+                problems.append(f"marker {lab!r}{seg(lab)} of the model is not in the trial{hint}")
             elif not np.isfinite(self._xyz[:, self._index[lab]]).all(axis=1).any():
                 problems.append(f"marker {lab!r}{seg(lab)} is in the model but never visible in the trial (every "
                                 "sample is empty): fix its labelling, or remove it from the model")
@@ -246,6 +254,61 @@ class Trial:
                             "under two labels? fix the labelling, or remove one from the model")
         if problems:
             raise InputError(problems, source=self._source)
+
+    def unprefixed(self, labels: Sequence[str]) -> tuple["Trial", str | None]:
+        """The trial with a subject prefix taken off its labels, when that alone makes them match `labels`.
+
+        Vicon Nexus labels a subject's markers ``Subject:Marker`` (``Name:RASI``); a model names them ``RASI``.
+        When no marker of `labels` is in the trial, but every one of them is there behind one and the same
+        prefix ending in ``:``, the prefix is removed from every label that carries it (a label it would make
+        equal to another is left as it is) and a warning naming the prefix is returned. Otherwise the trial is
+        returned as it is (:meth:`require_usable` then names the prefixed labels in its message).
+
+        Parameters
+        ----------
+        labels : sequence of str
+            The model's markers.
+
+        Returns
+        -------
+        trial : Trial
+            This trial, or one with the prefix removed.
+        warning : str or None
+            The warning to report when the prefix was removed.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> t = Trial.from_array(np.zeros((2, 2, 3)), ["Sub:RASI", "Sub:LASI"], rate_hz=100.0)
+        >>> t2, warning = t.unprefixed(["RASI", "LASI"])
+        >>> t2.labels
+        ('RASI', 'LASI')
+        """
+        labels = list(labels)
+        if not labels or any(lab in self._index for lab in labels):
+            return self, None
+        common = None
+        for lab in labels:
+            found = {t[:-len(lab)] for t in self._labels
+                     if t.endswith(SUBJECT_SEPARATOR + lab) and len(t) > len(lab) + 1}
+            common = found if common is None else common & found
+            if not common:
+                return self, None
+        if len(common) != 1:
+            return self, None
+        (prefix,) = common
+        taken = set(self._labels)
+        renamed = []
+        for t in self._labels:
+            short = t[len(prefix):] if t.startswith(prefix) else t
+            renamed.append(short if short == t or short not in taken else t)
+        if len(set(renamed)) != len(renamed):           # two prefixed labels with the same marker name: leave them
+            return self, None
+        n = sum(a != b for a, b in zip(renamed, self._labels))
+        return self.replace(labels=renamed), (
+            f"{self._source}: the trial's marker labels carry the subject prefix {prefix!r} (Vicon's 'Subject:Marker') "
+            f"and none of the model's markers is in the trial without it: the prefix was removed from {n} label(s) "
+            f"so that they match the model (e.g. {prefix + labels[0]!r} is read as {labels[0]!r})")
 
     def coincident(self, labels: Sequence[str]) -> list[tuple[str, str]]:
         """Pairs of `labels` that are seen together in some frame and are closer than :data:`COINCIDENT_MM` in

@@ -25,3 +25,17 @@ if str(TESTS) not in sys.path:           # shared helpers (strategies, float_tre
 def examples() -> Path:
     """The repository's bundled example models."""
     return ROOT / "examples"
+
+
+@pytest.fixture(scope="session")
+def real_file():
+    """``real_file(name)``: a real recording, the repository's copy (``examples/real/``) first, else the shared
+    folder's (``tests/real_data.py``); the test skips when neither exists."""
+    from real_data import real_file as find
+
+    def get(name: str) -> Path:
+        path = find(name)
+        if not path.exists():
+            pytest.skip(f"real recording {name} not available (examples/real/ or the shared folder)")
+        return path
+    return get

@@ -1,4 +1,4 @@
-"""The one registry of named effects (the names of CONTRACT.md), in the contract's order.
+"""The one registry of named effects (the names of docs/contract.md), in the contract's order.
 
 Everything that needs the list reads it here: the simulator's ``--effect`` (:func:`inject_effect`),
 ``diagnose``'s selection loop, the CLI's choices and the tests. Each effect is one module in this package

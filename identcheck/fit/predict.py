@@ -45,7 +45,8 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
         tree = fit_tree(model, sim.trial, closed)
     if tree.best is None:
         return {j: {"verdict": "undetermined", "reason": f"no whole-tree fit of the simulated trial: {tree.problem}",
-                    "predicted": True} for j in model.joints}
+                    "predicted": True, "noise_mm": noise_mm, "motion": motion, "frames": n_frames}
+                for j in model.joints}
     best = tree.best
     chain = best.fit.chain
     S = best.cov.information

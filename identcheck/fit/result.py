@@ -22,7 +22,8 @@ class FitResult:
         ``excitation`` (``ok``, ``reason``), and ``case``, ``estimator``, ``identifiable`` and the rest
         ``identcheck fit --json`` prints.
     warnings : tuple
-        Every warning of the fit, in the order found (the label screen's first).
+        Every warning of the fit, in the order found (a subject prefix removed from the labels and the label
+        screen's findings first).
     noise : Mapping or None
         The estimated noise model, when the fit reports one.
     other : Mapping

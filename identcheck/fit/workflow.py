@@ -241,8 +241,9 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
     (the contract's ``fit`` JSON: joints, ``noise``, ``warnings``).
 
-    Warnings raised by the estimators, the label screen's findings and a model misfit are all in
-    ``warnings`` (dicts with ``message`` and, where there is one, ``markers`` / ``frames``)."""
+    A subject prefix removed from the labels (:meth:`Trial.unprefixed`), the label screen's findings, warnings
+    raised by the estimators and a model misfit are all in ``warnings`` (dicts with ``message`` and ``kind`` and,
+    where there is one, ``markers`` / ``frames``)."""
     import warnings as _w
 
     from identcheck.estimate.labels import screen
@@ -250,6 +251,7 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
 
     from identcheck.fit.export import export_markers
 
+    trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
     reserved = reserved_names(model.joints)
     clash = sorted(set(reserved) & set(trial.labels))
     if clash:
@@ -264,7 +266,7 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
         tree = fit_tree(model, screened, fitted, progress=progress,
                         restart=lambda fixed: fit_model(model, screened, fixed=fixed)[0])
     rep = merge_report(report(model, fitted, points), tree, model, screened)
-    notes = list(swaps)
+    notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
               if issubclass(c.category, UserWarning)]
     if tree.best is not None:

@@ -1,6 +1,6 @@
 """Marker-plan model: segments, their markers and the joints that connect them (TOML).
 
-The model file is the one described in CONTRACT.md::
+The model file is the one described in docs/contract.md (reference: docs/model.md)::
 
     units = "mm"
     [segments.pelvis]
@@ -151,7 +151,7 @@ class Model:
         Parameters
         ----------
         path : str or os.PathLike
-            TOML model file (CONTRACT.md, "Model file").
+            TOML model file (docs/model.md).
 
         Returns
         -------

@@ -1,6 +1,6 @@
 """Results as JSON: one plain, sorted document per result, written with the standard ``json`` module.
 
-Every result object of identcheck has ``to_dict()``, which gives the JSON keys of CONTRACT.md with only
+Every result object of identcheck has ``to_dict()``, which gives the JSON keys of docs/contract.md with only
 JSON values (dict, list, str, int, float, bool, None). Nothing is converted here: a value the encoder
 does not know is a bug in the result's ``to_dict`` and raises ``TypeError`` (no ``default=str``
 that would hide it as a string).

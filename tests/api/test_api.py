@@ -13,10 +13,11 @@ import pytest
 
 import identcheck as ic
 from identcheck import cli
+from real_data import real_file
 
 ROOT = Path(__file__).resolve().parents[2]
 EX = ROOT / "examples"
-HIP = Path("/work/shared/data/real/biobuddy_right_hip.c3d")
+HIP = real_file("biobuddy_right_hip.c3d")
 
 
 def cli_json(capsys, *argv) -> tuple[int, dict]:
@@ -50,7 +51,7 @@ def test_fit_is_the_cli_fit(trials, capsys):
     assert same_json(ic.fit(ic.load_model(EX / "sparse_leg.toml"), ic.read_trial(trials["sparse_leg"]))) == doc
 
 
-@pytest.mark.skipif(not HIP.exists(), reason="real trials not available in /work/shared/data/real")
+@pytest.mark.skipif(not HIP.exists(), reason="real trials not available in examples/real or the shared folder")
 def test_real_hip_fit_runs_the_label_screen_like_the_cli(capsys):
     """The library used to skip the label-swap screen the CLI ran (rms 8.98 mm against the CLI's 7.42 mm)."""
     rc, doc = cli_json(capsys, "fit", EX / "real_right_hip.toml", HIP)

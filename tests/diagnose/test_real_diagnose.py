@@ -26,10 +26,10 @@ from identcheck.diagnose.workflow import diagnose
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.trial import Trial
+from real_data import real_file
 
 ROOT = Path(__file__).resolve().parents[2]
-DATA = Path(os.environ.get("IDENTCHECK_REAL_DATA", "/work/shared/data/real"))
-TRIAL = DATA / "opensim_subject01_walk1.trc"
+TRIAL = real_file("opensim_subject01_walk1.trc")
 MODEL = ROOT / "examples" / "real_walk_leg.toml"
 EFFECT_NAMES = {"soft_tissue", "marker_slip", "marker_swap", "joint_translation", "extra_dof", "time_offset",
                 "outliers", "spatial_distortion"}

@@ -21,14 +21,14 @@ from identcheck.fit.workflow import fit_model
 from identcheck.estimate.score_sara import score
 from identcheck.io.model import Model
 from identcheck.trial import Trial
+from real_data import real_file
 
 ROOT = Path(__file__).resolve().parents[2]
 EX = ROOT / "examples"
-DATA = Path("/work/shared/data/real")
-HIP, KNEE, STATIC = DATA / "biobuddy_right_hip.c3d", DATA / "biobuddy_right_knee.c3d", DATA / "biobuddy_anat_pose_ECH.c3d"
+HIP, KNEE, STATIC = (real_file(n) for n in ("biobuddy_right_hip.c3d", "biobuddy_right_knee.c3d", "biobuddy_anat_pose_ECH.c3d"))
 
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(not (HIP.exists() and KNEE.exists() and STATIC.exists()),
-                                reason="real trials not available in /work/shared/data/real")]
+                                reason="real trials not available in examples/real or the shared folder")]
 
 # Tolerances (mm / deg): soft tissue moves skin markers by ~10 mm relative to bone (rms residuals
 # of 6-10 mm here), and the estimators weigh it differently, so agreement is judged at that scale.
@@ -189,7 +189,7 @@ def test_the_real_label_swap_is_caught_and_clean_trials_are_not_flagged(capsys):
     swaps = [w for w in doc["warnings"] if w["kind"] == "label_swap"]
     assert len(swaps) == 1 and "RLFE and RMFE" in swaps[0]["message"]
     assert doc["joints"]["hip_r"]["rms_residual"] < 8.5           # 9.0 mm with the swapped span in
-    walking2 = DATA / "opensim_walking2.c3d"
+    walking2 = real_file("opensim_walking2.c3d")
     runs = [("real_right_knee.toml", KNEE), ("real_right_knee_cluster.toml", KNEE),
             ("real_right_hip.toml", STATIC)] + ([("real_walking2_legs.toml", walking2)] if walking2.exists() else [])
     for model, trial in runs:
