@@ -201,6 +201,51 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
 
 @_one_blas_thread
+def skeleton(trial, out=None, segments=None, root: str | None = None, frames: str | None = None,
+             export_markers=None, progress=None):
+    """A skeleton from a trial alone: the markers grouped into rigid segments, the tree by the minimum spanning
+    tree over pairwise O'Brien joint-fit residuals (O'Brien et al. 2000, section 3.3), each joint's type from its
+    motion, written as a model file the other verbs read (``identcheck skeleton``, docs/skeleton.md).
+
+    Parameters
+    ----------
+    trial : Trial, str or os.PathLike
+    out : str or os.PathLike, optional
+        The model file (TOML) to write, with each joint's evidence as comments.
+    segments : str, os.PathLike or dict, optional
+        The grouping when it is known: a segments file (``[segments] NAME = ["M1", ...]``, or a model file) or a
+        dict NAME -> markers; then only the tree and the types are inferred.
+    root : str, optional
+        The root segment, or one of its markers (default: the tree's centre).
+    frames : str, optional
+        ``"START:END"`` in the file's own frame numbers, both included (:meth:`Trial.frames`).
+    export_markers : str or os.PathLike, optional
+        A TRC or C3D file for the measured markers beside the articulated model's playback of them (``M.model``)
+        and each joint's virtual markers.
+    progress : callable, optional
+        Called with a one-line message per stage.
+
+    Returns
+    -------
+    SkeletonResult
+
+    Raises
+    ------
+    InputError
+        A bad trial or segments file, fewer than two markers, a never-visible marker, one rigid body, an unknown
+        marker in `segments`, no group of three markers, or a bad root.
+    """
+    from identcheck.infer.workflow import infer_skeleton
+    from identcheck.io.segments import read_segments
+
+    source = "--segments"
+    if segments is not None and not isinstance(segments, dict):
+        source, segments = str(segments), read_segments(segments)
+    return infer_skeleton(_frames(trial, frames), segments=segments, segments_source=source, root=root, out=out,
+                          export=export_markers, progress=progress)
+
+
+@_one_blas_thread
 def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
          fewest: bool = False, witness: bool = False, progress=None, noise_mm: float | None = None,
          practical_motion: str = "functional", frames: int = 1000, max_seconds: float | None = None):

@@ -162,6 +162,18 @@ def _cmd_diagnose(a) -> int:
     return 0 if diag.consistent else 1
 
 
+def _cmd_skeleton(a) -> int:
+    res = api.skeleton(a.trial, out=a.out, segments=a.segments, root=a.root, frames=a.frames,
+                       export_markers=a.export_markers, progress=_progress("skeleton"))
+    for w in res.other.get("warnings", ()):
+        print(f"identcheck skeleton: warning: {w}", file=sys.stderr)
+    if a.json:
+        _print_json(res)
+    else:
+        print(text.skeleton_text(res))
+    return 0 if res.ok else 1
+
+
 def _cmd_batch(a) -> int:
     from identcheck.batch import summary
 
@@ -207,6 +219,8 @@ class _Help(argparse.HelpFormatter):
             elif line.strip():
                 lines.append(textwrap.fill(" ".join(line.split()), width, initial_indent=lead,
                                            subsequent_indent=lead + ("  " if lead != indent else "")))
+            else:
+                lines.append("")
         return "\n".join(lines)
 
 
@@ -342,6 +356,32 @@ def build_parser() -> argparse.ArgumentParser:
                         "it), both included; either end may be left out")
     s.set_defaults(func=_cmd_diagnose)
 
+    s = sub.add_parser("skeleton", formatter_class=_Help, epilog=_epilog(
+                           "identcheck skeleton trial.c3d --out model.toml --export-markers playback.c3d",
+                           "a skeleton the data settle (no joint ambiguous, every group of markers placed)",
+                           "the model was written, but some joint is ambiguous or some group cannot be placed"),
+                       help="infer the segments, the tree and the joint types from a trial alone and write a model file",
+                       description="Group the markers into rigid segments (or take --segments), join them by the "
+                                   "minimum spanning tree over pairwise O'Brien joint-fit residuals, type each joint "
+                                   "from its motion, and write a model file that fit, plan and diagnose read, with "
+                                   "the evidence as comments. Exit 0: a skeleton the data settle; 1: written, but "
+                                   "some joint is ambiguous or some group cannot be placed; 2: bad input. See "
+                                   "docs/skeleton.md.")
+    s.add_argument("trial", help="the trial (TRC or C3D)")
+    s.add_argument("--out", required=True, metavar="MODEL.toml", help="the model file to write")
+    s.add_argument("--segments", metavar="FILE", default=None,
+                   help='the grouping, when known: a TOML file with [segments] NAME = ["M1", "M2", ...] (or a model '
+                        "file); then only the tree and the joint types are inferred")
+    s.add_argument("--root", metavar="NAME", default=None,
+                   help="the root segment, or one of its markers (default: the tree's centre)")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--frames", metavar="START:END", default=None,
+                   help="only these frames, in the file's own numbering, both included; either end may be left out")
+    s.add_argument("--export-markers", metavar="OUT.trc|OUT.c3d", default=None,
+                   help="also write the measured markers beside the articulated model's playback of them (M.model) "
+                        "and each joint's virtual markers")
+    s.set_defaults(func=_cmd_skeleton)
+
     s = sub.add_parser("batch", formatter_class=_Help, epilog=_epilog("identcheck batch fit examples/leg.toml trials/ --out results/", "no job failed", "some jobs failed (2: all did); 130: interrupted, rerun to resume"),
                        help="run fit, diagnose or plan over many trials on a Dask cluster (local by "
                                      "default): one JSON per job, a summary table; resumable",
@@ -380,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------- checks before any work
 FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
-                "fit": ("export_markers",), "diagnose": ("export_markers",)}
+                "fit": ("export_markers",), "diagnose": ("export_markers",), "skeleton": ("out", "export_markers")}
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
@@ -447,12 +487,33 @@ def preflight(a) -> list:
         if a.workers is not None and a.scheduler:
             problems.append("--workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                             "jobs: give one of them")
+    if a.verb == "skeleton":
+        problems += _skeleton_problems(a)
     if a.verb == "simulate":
         for opt, ok in (("frames", 2 <= a.frames <= MAX_SIMULATED_FRAMES), ("rate", 0 < a.rate < math.inf),
                         ("noise_mm", 0 <= a.noise_mm < math.inf), ("occlusion", 0 <= a.occlusion < 1),
                         ("rom_deg", 0 <= a.rom_deg <= 360)):
             if not ok:
                 problems.append(f"--{opt.replace('_', '-')} {getattr(a, opt)}: out of range")
+    return problems
+
+
+def _skeleton_problems(a) -> list:
+    """``skeleton``'s own checks: a trial first, a .toml model to write, and no output over an input."""
+    problems = []
+    if str(a.trial).lower().endswith(".toml"):
+        problems.append(f"{a.trial} is a TOML file; skeleton takes the trial (.trc or .c3d) and writes the model "
+                        f"with --out (identcheck skeleton TRIAL --out MODEL.toml)")
+    if a.out and not str(a.out).lower().endswith(".toml"):
+        problems.append(f"--out {a.out}: give a .toml file name (the model file to write)")
+    inputs = {os.path.abspath(p): opt for p, opt in ((a.trial, "the trial"), (a.segments, "--segments")) if p}
+    for opt in ("out", "export_markers"):
+        path = getattr(a, opt)
+        if path and os.path.abspath(path) in inputs:
+            problems.append(f"--{opt.replace('_', '-')} {path}: is {inputs[os.path.abspath(path)]}; it would be "
+                            "overwritten: give another file name")
+    if a.out and a.export_markers and os.path.abspath(a.out) == os.path.abspath(a.export_markers):
+        problems.append(f"--out and --export-markers are the same file {a.out}")
     return problems
 
 
@@ -519,7 +580,7 @@ def main(argv=None) -> int:
 
 def _inputs(a) -> str:
     """The input files of the command, for the internal-error message (what to attach to a report)."""
-    files = [getattr(a, k, None) for k in ("model", "trial", "certificate")] + list(getattr(a, "inputs", None) or [])
+    files = [getattr(a, k, None) for k in ("model", "trial", "certificate", "segments")] + list(getattr(a, "inputs", None) or [])
     files = [str(f) for f in files if f]
     return ", ".join(files) if files else "no input file"
 

@@ -251,3 +251,43 @@ def batch_text(doc: dict) -> str:
     for e in doc["errors"]:
         lines.append(f"FAILED {e['job']}: {e['error']}")
     return "\n".join(lines)
+
+
+def skeleton_text(result) -> str:
+    """``identcheck skeleton``: the segments, the joints with their evidence, what the data leave open, and
+    where the model (and the playback) went."""
+    doc = document(result)
+    g = doc["grouping"]
+    how = (f"grouped by rigidity within {g['tolerance_mm']:.3g} mm" if g["source"] == "inferred"
+           else f"as given in {g['source']}")
+    lines = [f"{len(doc['segments'])} segments ({how}); root {doc['root']} ({doc['root_rule']})"]
+    for name, markers in doc["segments"].items():
+        lines.append(f"  {name}: {', '.join(markers)}")
+    lines.append("joints (parent -> child, type, O'Brien or sphere/circle residual, confidence):")
+    for j in doc["joints"]:
+        ru = j["evidence"]["tree"]["runner_up"]
+        flag = "  AMBIGUOUS" if j["evidence"]["tree"]["ambiguous"] else ""
+        lines.append(f"  {j['name']}: {j['parent']} -> {j['child']}, {j['type']}, {j['residual_mm']:.3g} mm, "
+                     f"confidence {j['confidence']:.2f}"
+                     + (f" (runner-up {ru['parent']}-{ru['child']} {ru['residual_mm']:.3g} mm)" if ru else "") + flag)
+        lines.append(f"     {j['evidence']['type']['rule']}")
+    for a in doc["ambiguous"]:
+        lines.append(f"ambiguous: {a['joint'][0]}-{a['joint'][1]} ({a['residual_mm']:.3g} mm) or "
+                     f"{a['alternative'][0]}-{a['alternative'][1]} ({a['alternative_residual_mm']:.3g} mm); "
+                     f"to separate them: {a['separating_motion']}")
+    for p in doc.get("poor_joints", []):
+        lines.append(f"poor joint {p['joint'][0]}-{p['joint'][1]}: {p['note']}")
+    for lp in doc["loops"]:
+        lines.append(f"loop? {lp['segments'][0]}-{lp['segments'][1]} fits a joint ({lp['residual_mm']:.3g} mm) the tree "
+                     "does not use")
+    for c in doc["cannot_place"]:
+        lines.append(f"cannot place {c['segment']} ({', '.join(c['markers'])}): {c['reason']}")
+    for m in doc["unassigned_markers"]:
+        lines.append(f"unassigned marker {m}: {doc['unassigned'][m]}")
+    pb = doc.get("playback") or {}
+    if pb.get("rms_mm") is not None:
+        lines.append(f"playback through the articulated model: {pb['rms_mm']:.3g} mm RMS from the measured markers"
+                     + (f"; written to {pb['export']}" if pb.get("export") else ""))
+    if doc.get("model"):
+        lines.append(f"model written to {doc['model']}")
+    return "\n".join(lines)

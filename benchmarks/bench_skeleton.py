@@ -1,0 +1,208 @@
+"""``identcheck skeleton`` on trials it was not tuned on: grouping, tree and joint-type recovery, and time.
+
+The trials come from the independent generator in ``benchmarks/heldout_skeleton/`` (written without reading
+identcheck: its own skeletons of 3-15 segments, chains, stars, human-like and random trees, spherical and
+revolute joints, one- and two-marker segments, soft tissue, occlusions, AR(1) noise, gait-like motion, weak third
+degrees of freedom and unattached markers). Only its output files are read: ``index.json``, each trial's TRC and
+``truth.json`` (``segments``, ``root``, ``joints``, ``unattached_markers``). For each trial ``identcheck.skeleton``
+runs on the TRC alone (no model, no grouping), and:
+
+- **grouping**: the inferred segments equal the true ones as sets of markers, and the unassigned markers equal the
+  unattached ones (``grouping_exact``); also the fraction of true segments found exactly (``segments_found``);
+- **tree**: each inferred segment is named by the true segment holding most of its markers, and the inferred
+  joints, as unordered pairs, equal the true joints (``tree_exact``); also the fraction of true joints found
+  (``joints_found``), and whether every wrong or missing joint was reported (ambiguous, a loop, a group that cannot
+  be placed, or an unassigned marker: ``wrong_but_reported``);
+- **types**: among true joints found, the fraction typed right;
+- **honesty**: how often the tool calls a trial settled (``ok``, exit 0) when its tree is right, and when it is
+  wrong (the second should be near 0);
+- **time**: wall-clock seconds of the library call (the trial already read; one untimed call first, so that
+  imports are not counted), and of trials with 40+ markers and
+  1400+ frames (the issue's target: 40 markers, 1500 frames in 5 s or less).
+
+Rows are broken down by the generator's categories. Results: a printed table and
+``benchmarks/results.json["skeleton"]`` (through ``benchmarks/results_io.py``).
+
+Usage::
+
+    python benchmarks/heldout_skeleton/generator.py --out /tmp/hs --n 100 --seed 7
+    PYTHONPATH=. python benchmarks/bench_skeleton.py /tmp/hs [--shard K/N --rows R.json] [--merge R0 R1]
+    PYTHONPATH=. python benchmarks/bench_skeleton.py --generate 40 --seed 7      # generate into a temporary folder
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import identcheck as ic  # noqa: E402
+from identcheck.api import skeleton  # noqa: E402  (not ic.skeleton: that name is the module identcheck.skeleton)
+from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
+
+GENERATOR = Path(__file__).resolve().parent / "heldout_skeleton" / "generator.py"
+TARGET = {"markers": 40, "frames": 1400, "seconds": 5.0}
+
+
+def _owner(truth: dict) -> dict:
+    return {m: s for s, ms in truth["segments"].items() for m in ms}
+
+
+def evaluate(trial_dir: Path, entry: dict) -> dict:
+    """Run ``skeleton`` on one trial and compare it with the truth."""
+    truth = json.loads((trial_dir / entry["truth"]).read_text())
+    trial = ic.read_trial(trial_dir / entry["trc"])
+    row = {"id": entry["id"], "categories": entry["categories"], "n_markers": trial.n_markers,
+           "n_frames": trial.n_frames, "n_segments": len(truth["segments"])}
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            doc = skeleton(trial).to_dict()
+        except ic.InputError as exc:
+            return {**row, "error": str(exc), "seconds": time.perf_counter() - t0}
+    row["seconds"] = time.perf_counter() - t0
+    true_sets = {frozenset(ms) for ms in truth["segments"].values()}
+    found_sets = {frozenset(ms) for ms in doc["segments"].values()}
+    unattached = set(truth.get("unattached_markers", []))
+    row["grouping_exact"] = found_sets == true_sets and set(doc["unassigned_markers"]) == unattached
+    row["segments_found"] = len(true_sets & found_sets) / len(true_sets)
+    row["unattached_found"] = (len(unattached & set(doc["unassigned_markers"])) / len(unattached)) if unattached else None
+    owner = _owner(truth)
+    name = {}
+    for g, ms in doc["segments"].items():
+        votes = [owner[m] for m in ms if m in owner]
+        name[g] = max(set(votes), key=votes.count) if votes else None
+    true_edges = {frozenset((j["parent"], j["child"])): j["type"] for j in truth["joints"]}
+    found = {}
+    for j in doc["joints"]:
+        e = frozenset((name.get(j["parent"]), name.get(j["child"])))
+        found[e] = j["type"]
+    row["tree_exact"] = set(found) == set(true_edges)
+    row["joints_found"] = len(set(found) & set(true_edges)) / max(len(true_edges), 1)
+    typed = [found[e] == t for e, t in true_edges.items() if e in found]
+    row["types_right"], row["types_checked"] = int(sum(typed)), len(typed)
+    row["type_errors"] = [{"joint": sorted(e), "true": t, "found": found[e]} for e, t in true_edges.items()
+                          if e in found and found[e] != t]
+    reported = bool(doc["ambiguous"] or doc["loops"] or doc["cannot_place"] or doc["unassigned_markers"])
+    row["wrong_but_reported"] = None if row["tree_exact"] else reported
+    row["ok"] = bool(doc["ok"])
+    row["flags"] = {"ambiguous": len(doc["ambiguous"]), "loops": len(doc["loops"]),
+                    "cannot_place": len(doc["cannot_place"]), "unassigned": len(doc["unassigned_markers"])}
+    return row
+
+
+def _rate(rows, key) -> float | None:
+    vals = [r[key] for r in rows if r.get(key) is not None]
+    return float(np.mean(vals)) if vals else None
+
+
+def summarise(rows: list) -> dict:
+    ok = [r for r in rows if "error" not in r]
+
+    def block(rs):
+        types_checked = sum(r["types_checked"] for r in rs)
+        return {"trials": len(rs), "grouping_exact": _rate(rs, "grouping_exact"),
+                "segments_found": _rate(rs, "segments_found"), "tree_exact": _rate(rs, "tree_exact"),
+                "joints_found": _rate(rs, "joints_found"),
+                "types_right": (sum(r["types_right"] for r in rs) / types_checked) if types_checked else None,
+                "wrong_but_reported": _rate([r for r in rs if r["wrong_but_reported"] is not None],
+                                            "wrong_but_reported"),
+                "ok_when_tree_right": _rate([r for r in rs if r["tree_exact"]], "ok"),
+                "ok_when_tree_wrong": _rate([r for r in rs if not r["tree_exact"]], "ok"),
+                "median_seconds": float(np.median([r["seconds"] for r in rs])) if rs else None,
+                "max_seconds": float(np.max([r["seconds"] for r in rs])) if rs else None}
+
+    cats = defaultdict(list)
+    for r in ok:
+        for c in r["categories"]:
+            cats[c].append(r)
+    big = [r for r in ok if r["n_markers"] >= TARGET["markers"] and r["n_frames"] >= TARGET["frames"]]
+    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in sorted(cats.items())},
+            "errors": [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r],
+            "speed_target": {**TARGET, "trials": len(big),
+                             "max_seconds": float(max(r["seconds"] for r in big)) if big else None,
+                             "met": all(r["seconds"] <= TARGET["seconds"] for r in big) if big else None},
+            "type_errors": [{"id": r["id"], **e} for r in ok for e in r["type_errors"]]}
+
+
+def table(summary: dict) -> str:
+    def pct(x):
+        return "   -" if x is None else f"{100 * x:4.0f}"
+
+    head = (f"{'trials':<22}{'n':>4} {'group%':>7} {'seg%':>6} {'tree%':>6} {'joint%':>7} {'type%':>6} "
+            f"{'reported%':>10} {'ok|right':>9} {'ok|wrong':>9} {'med s':>6} {'max s':>6}")
+    lines = [head, "-" * len(head)]
+    rows = [("all", summary["all"])] + list(summary["by_category"].items())
+    for name, b in rows:
+        lines.append(f"{name:<22}{b['trials']:>4} {pct(b['grouping_exact']):>7} {pct(b['segments_found']):>6} "
+                     f"{pct(b['tree_exact']):>6} {pct(b['joints_found']):>7} {pct(b['types_right']):>6} "
+                     f"{pct(b['wrong_but_reported']):>10} {pct(b['ok_when_tree_right']):>9} "
+                     f"{pct(b['ok_when_tree_wrong']):>9} {b['median_seconds'] or 0:6.2f} {b['max_seconds'] or 0:6.2f}")
+    st = summary["speed_target"]
+    lines.append(f"speed target ({st['markers']}+ markers, {st['frames']}+ frames <= {st['seconds']:g} s): "
+                 f"{st['trials']} trials, max {st['max_seconds'] if st['max_seconds'] is None else round(st['max_seconds'], 2)}"
+                 f" s, met: {st['met']}")
+    if summary["errors"]:
+        lines.append(f"errors: {len(summary['errors'])}: " + "; ".join(f"{e['id']}: {e['error'][:120]}"
+                                                                       for e in summary["errors"][:5]))
+    lines.append("group%: segments and unassigned markers exactly right; seg%: true segments found; tree%: every "
+                 "joint right; joint%: true joints found; type%: joints found typed right; reported%: trials with a "
+                 "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; ok|right, ok|wrong: "
+                 "trials the tool calls settled (exit 0) among those whose tree is right, wrong")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("trials", nargs="?", type=Path, help="a folder written by the held-out generator")
+    ap.add_argument("--generate", type=int, metavar="N", help="generate N trials into a temporary folder first")
+    ap.add_argument("--seed", type=int, default=7, help="generator seed (with --generate)")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results.json")
+    ap.add_argument("--key", default="skeleton", help="key of results.json to write")
+    add_shard_arguments(ap)
+    args = ap.parse_args(argv)
+    folder = args.trials
+    if args.generate:
+        folder = Path(tempfile.mkdtemp(prefix="heldout_skeleton_"))
+        subprocess.run([sys.executable, str(GENERATOR), "--out", str(folder), "--n", str(args.generate),
+                        "--seed", str(args.seed)], check=True)
+    if folder is None and not args.merge:
+        ap.error("give a trials folder or --generate N")
+    index = json.loads((folder / "index.json").read_text()) if folder else {"trials": []}
+    if index["trials"] and not args.merge:             # warm up: imports and first-call costs are not timed
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                skeleton(ic.read_trial(folder / index["trials"][0]["trc"]))
+            except ic.InputError:
+                pass
+    rows = run_trials(index["trials"], lambda e: evaluate(folder, e), args,
+                      lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
+                          f"ERROR {r['error'][:100]}" if "error" in r else
+                          f"group {r['grouping_exact']}, tree {r['tree_exact']}, types {r['types_right']}/"
+                          f"{r['types_checked']}, {r['seconds']:.2f} s"))
+    if rows is None:
+        return 0
+    summary = summarise(rows)
+    print(table(summary))
+    write_json(args.out, args.key, {"summary": summary, "rows": rows, "source": {
+        "folder": str(folder) if folder else None, "generator": index.get("generator"), "seed": index.get("seed"),
+        "n": index.get("n")}, "machine": machine_info()})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,104 @@
+"""``identcheck skeleton`` on measured trials (/work/shared/data/real, see its README): the inferred segments and
+trees against the hand-written models in examples/.
+
+Walking moves the hips and knees mostly about one axis and hardly moves the trunk against the pelvis, so the
+checks are the anatomy the motion can show: the leg clusters are found as segments, the hips join the thighs to
+the pelvis and the knees the shanks to the thighs, and, given the example models' segments, the tree and the joint
+types are the examples' own (hips spherical, knees revolute). The functional trials (one joint moving, the rest of
+the body still) are checked with their clusters given: the knee is a hinge, the hip a ball joint.
+"""
+import json
+from pathlib import Path
+
+import pytest
+
+from identcheck import cli
+from identcheck.api import skeleton
+from identcheck.io.model import Model
+
+ROOT = Path(__file__).resolve().parents[2]
+EX = ROOT / "examples"
+DATA = Path("/work/shared/data/real")
+WALK, WALK2 = DATA / "opensim_subject01_walk1.trc", DATA / "opensim_walking2.c3d"
+HIP, KNEE = DATA / "biobuddy_right_hip.c3d", DATA / "biobuddy_right_knee.c3d"
+
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(not all(p.exists() for p in (WALK, WALK2, HIP, KNEE)),
+                                                   reason="real trials not available in /work/shared/data/real")]
+
+
+def named(doc: dict, model: Model) -> set:
+    """The result's joints as (parent, child) pairs of the model's segment names (each result segment named by the
+    model segment holding its first marker)."""
+    owner = {m: s for s, seg in model.segments.items() for m in seg.markers}
+    name = {g: owner.get(ms[0], g) for g, ms in doc["segments"].items()}
+    return {(name[j["parent"]], name[j["child"]]) for j in doc["joints"]}
+
+
+def test_walk_trial_alone_gives_the_leg_segments_and_joints():
+    """subject01_walk1 (OpenSim, 41 markers, one stride): the pelvis, thigh and shank clusters of both legs, the
+    trunk and the head come out as segments; hips and knees join them as in examples/real_walk_leg.toml (both
+    legs); the knees are hinges."""
+    pytest.importorskip("scipy")
+    doc = skeleton(WALK).to_dict()
+    groups = {frozenset(ms) for ms in doc["segments"].values()}
+    clusters = [["R.ASIS", "L.ASIS", "V.Sacral"], ["Sternum", "R.Acromium", "L.Acromium"],
+                ["R.Temple", "L.Temple", "Top.Head"]] + [
+        [f"{s}.{part}.{where}" for where in ("Upper", "Front", "Rear")] for s in "RL" for part in ("Thigh", "Shank")]
+    assert all(frozenset(c) in groups for c in clusters)
+    owner = {m: s for s, ms in doc["segments"].items() for m in ms}
+    seg = {k: owner[m] for k, m in {"pelvis": "R.ASIS", "thigh_r": "R.Thigh.Upper", "shank_r": "R.Shank.Upper",
+                                    "thigh_l": "L.Thigh.Upper", "shank_l": "L.Shank.Upper"}.items()}
+    joints = {(j["parent"], j["child"]): j for j in doc["joints"]}
+    for p, c in (("pelvis", "thigh_r"), ("pelvis", "thigh_l"), ("thigh_r", "shank_r"), ("thigh_l", "shank_l")):
+        assert (seg[p], seg[c]) in joints
+    assert joints[seg["thigh_r"], seg["shank_r"]]["type"] == "revolute"
+    assert joints[seg["thigh_l"], seg["shank_l"]]["type"] == "revolute"
+    assert doc["root"] == seg["pelvis"] and doc["playback"]["rms_mm"] < 20
+
+
+def test_walking2_with_the_example_segments_gives_the_example_model(tmp_path, capsys):
+    """opensim_walking2 (Vicon, gaps) with the segments of examples/real_walking2_legs.toml: the tree and every
+    joint type are the example's."""
+    example = Model.from_toml(EX / "real_walking2_legs.toml")
+    rc = cli.main(["skeleton", str(WALK2), "--segments", str(EX / "real_walking2_legs.toml"), "--out",
+                   str(tmp_path / "m.toml"), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert rc in (0, 1)
+    got = {(j["parent"], j["child"], j["type"]) for j in doc["joints"]}
+    assert got == {(j.parent, j.child, j.type) for j in example.joints.values()}
+
+
+def test_walking2_alone_gives_anatomically_sensible_legs():
+    """Without the segments: pelvis, right thigh and right shank clusters are found and chained hip - knee; the
+    left thigh's markers join the left shank to the pelvis (a two-marker thigh is put between them, or the thigh
+    cluster is posed), never a pelvis-shank joint."""
+    doc = skeleton(WALK2).to_dict()
+    owner = {m: s for s, ms in doc["segments"].items() for m in ms}
+    pelvis, thigh_r, shank_r = owner["RASI"], owner["RTH1"], owner["RTB1"]
+    assert {"RTH1", "RTH2", "RTH3"} <= set(doc["segments"][thigh_r])
+    assert {"RTB1", "RTB2", "RTB3"} <= set(doc["segments"][shank_r])
+    parent = {j["child"]: j["parent"] for j in doc["joints"]}
+    assert parent[thigh_r] == pelvis and parent[shank_r] == thigh_r
+    shank_l = owner["LTB1"]
+    assert parent[shank_l] == owner["LTH1"] and parent[owner["LTH1"]] == pelvis
+
+
+@pytest.mark.parametrize("trial, example, kind", [(KNEE, "real_right_knee_cluster.toml", "revolute"),
+                                                  (HIP, "real_right_hip_cluster.toml", "spherical")])
+def test_functional_trials_type_their_joint(trial, example, kind):
+    """biobuddy's knee flexion trial gives a hinge, its hip star-arc trial a ball joint (clusters as in the examples)."""
+    pytest.importorskip("ezc3d")
+    doc = skeleton(trial, segments=EX / example).to_dict()
+    (j,) = doc["joints"]
+    assert j["type"] == kind and j["confidence"] > 0.8 and doc["ok"]
+    assert (j["parent"], j["child"]) == next((v.parent, v.child) for v in Model.from_toml(EX / example).joints.values())
+
+
+def test_fit_accepts_the_model_inferred_from_a_real_trial(tmp_path, capsys):
+    """The model written from subject01_walk1 with the segments of examples/real_walk_leg.toml runs through fit."""
+    out = tmp_path / "walk.toml"
+    assert cli.main(["skeleton", str(WALK), "--segments", str(EX / "real_walk_leg.toml"), "--out", str(out)]) in (0, 1)
+    capsys.readouterr()
+    rc = cli.main(["fit", str(out), str(WALK), "--json"])
+    fitted = json.loads(capsys.readouterr().out)
+    assert rc in (0, 1) and set(fitted["joints"]) == set(Model.from_toml(out).joints)

@@ -1,0 +1,182 @@
+"""The tree and the joint types from a trial (identcheck.infer.tree, identcheck.infer.joint_types), through the
+workflow (identcheck.infer.workflow)."""
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from identcheck.estimate.obrien import joint_location
+from identcheck.infer.joint_types import classify_posed, noise_wobble_deg
+from identcheck.infer.tree import compare_residuals, orient
+from identcheck.infer.workflow import infer_skeleton
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+from strategies_skeleton import cases, make_case
+
+
+@settings(max_examples=12, deadline=None)
+@given(cases(noise=(0.0, 0.3), wobble=(0.0,), loose=(0,)))
+def test_tree_and_types_of_random_skeletons(case):
+    """Random trees (2-5 segments), random types, every ball joint turned about three axes, noise up to 0.3 mm and
+    occlusions: the grouping, the tree (as unordered joints) and every joint type come out right, and the
+    result says so (ok)."""
+    doc = infer_skeleton(case.trial).to_dict()
+    assert {frozenset(ms) for ms in doc["segments"].values()} == {frozenset(ms) for ms in case.segments.values()}
+    found = case.named_edges(doc)
+    assert set(found) == case.edges
+    assert found == case.types
+    assert all(0.5 <= j["confidence"] <= 1 for j in doc["joints"])
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 2**16), st.integers(3, 5), st.sampled_from([0.0, 0.3]))
+def test_given_segments_give_the_tree_and_types(seed, n, noise):
+    """With the grouping given, only the tree and the types are inferred; the names are the user's."""
+    case = make_case(seed, n, noise_mm=noise)
+    names = {f"seg_{s}": ms for s, ms in case.segments.items()}
+    doc = infer_skeleton(case.trial, segments=names).to_dict()
+    assert doc["segments"] == names and doc["grouping"]["source"] == "--segments"
+    edges = {frozenset((j["parent"][4:], j["child"][4:])): j["type"] for j in doc["joints"]}
+    assert edges == case.types
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 2**16), st.sampled_from([1, 2]))
+def test_a_one_or_two_marker_leaf_is_placed_on_its_parent(seed, q):
+    """A leaf segment with one or two markers has no pose; a sphere (or circle) fit in its parent's frame places it,
+    and its joint is typed from the sphere against the circle."""
+    case = make_case(seed, 4, counts=[3, 4, 3, q], parents=[0, 1, 1], types=["spherical", "revolute", "spherical"],
+                     noise_mm=0.2)
+    doc = infer_skeleton(case.trial).to_dict()
+    found = case.named_edges(doc)
+    leaf = [j for j in doc["joints"] if len(doc["segments"][j["child"]]) == q][0]
+    assert leaf["evidence"]["tree"]["method"].startswith("sphere and circle")
+    if set(found) != case.edges:
+        # The simulator puts both children of s1 at one joint centre, so the leaf's markers stay on a sphere about
+        # it in s2's frame as well: then it must say so (its placement ambiguous, s1 the alternative).
+        owner = case.owner()
+        name = {g: owner[ms[0]] for g, ms in doc["segments"].items()}
+        amb = [a for a in doc["ambiguous"] if name[a["joint"][1]] == "s3"]
+        assert amb and {name[x] for x in amb[0]["joint"] + amb[0]["alternative"]} == {"s1", "s2", "s3"}
+    else:
+        assert found[frozenset(("s1", "s3"))] == "spherical"
+
+
+def test_a_two_marker_segment_inside_a_chain_goes_between_its_neighbours():
+    """s0 - s1 - s2 with s1 carrying two markers: the posed segments s0 and s2 fit no joint (their best one leaves
+    tens of mm), and s1 fits a joint with both: it is put between them."""
+    case = make_case(5, 3, counts=[3, 2, 3], parents=[0, 1], types=["spherical", "spherical"], noise_mm=0.2)
+    doc = infer_skeleton(case.trial).to_dict()
+    assert set(case.named_edges(doc)) == case.edges
+    assert any("inserted" in j["evidence"]["tree"] for j in doc["joints"])
+    assert not doc["poor_joints"]
+
+
+AMBIGUOUS_MODEL = """
+units = "mm"
+[segments.pelvis]
+markers = ["P1", "P2", "P3"]
+positions = { P1 = [60, 0, 40], P2 = [-40, 80, 20], P3 = [-40, -80, 30] }
+[segments.thigh_l]
+markers = ["L1", "L2", "L3"]
+positions = { L1 = [40, 20, -120], L2 = [-30, 40, -200], L3 = [10, -30, -300] }
+length_mm = 400
+[segments.thigh_r]
+markers = ["R1", "R2", "R3"]
+positions = { R1 = [40, -20, -120], R2 = [-30, -40, -200], R3 = [10, 30, -300] }
+length_mm = 400
+[joints.hip_l]
+type = "revolute"
+parent = "pelvis"
+child = "thigh_l"
+axis = [0, 1, 0]
+centre_parent = [0, 90, -50]
+centre_child = [0, 0, 0]
+[joints.hip_r]
+type = "revolute"
+parent = "pelvis"
+child = "thigh_r"
+axis = [0, 1, 0]
+centre_parent = [0, -90, -50]
+centre_child = [0, 0, 0]
+"""
+
+
+def test_two_trees_within_the_noise_are_reported_with_the_motion_that_separates_them(tmp_path):
+    """Both hips flex about one common axis (walking, idealised): a joint between the thighs anywhere on that axis
+    fits as well as either hip, so the tree is not determined. The result says which joint is ambiguous, gives both
+    trees, names a motion that would separate them, lists the unused low-residual pair as a loop, and is not ok."""
+    path = tmp_path / "hips.toml"
+    path.write_text(AMBIGUOUS_MODEL)
+    sim = simulate(Model.from_toml(path), n_frames=300, seed=4, noise_mm=0.3, rom_deg=50)
+    res = infer_skeleton(sim.trial, segments={"pelvis": ["P1", "P2", "P3"], "thigh_l": ["L1", "L2", "L3"],
+                                              "thigh_r": ["R1", "R2", "R3"]}, root="pelvis")
+    doc = res.to_dict()
+    assert not res.ok and doc["ambiguous"]
+    amb = doc["ambiguous"][0]
+    pairs = [set(amb["joint"]), set(amb["alternative"])]
+    assert {"thigh_l", "thigh_r"} in pairs
+    assert set(map(tuple, map(sorted, amb["trees"]["chosen"]))) != set(map(tuple, map(sorted, amb["trees"]["alternative"])))
+    assert "record" in amb["separating_motion"] and "thigh" in amb["separating_motion"]
+    assert doc["loops"] and all(j["type"] == "revolute" for j in doc["joints"])
+
+
+def test_runner_up_and_confidence_when_the_tree_is_clear():
+    case = make_case(11, 4, noise_mm=0.3)
+    doc = infer_skeleton(case.trial).to_dict()
+    assert doc["ok"] and not doc["ambiguous"]
+    assert {r["joint"] for r in doc["runner_up"]} == {j["name"] for j in doc["joints"]}
+    for r in doc["runner_up"]:
+        assert r["margin_mm"] > 0 and r["residual_mm"] > r["margin_mm"] - 1e-9
+
+
+# ---------------------------------------------------------------------- pieces
+def test_compare_residuals_counts_what_noise_allows():
+    rng = np.random.default_rng(0)
+    a = np.abs(rng.normal(5, 1, 500))
+    same = np.abs(rng.normal(5, 1, 500))
+    x_same, unit = compare_residuals(a, same, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(same**2))))
+    assert abs(x_same) < 2 and unit >= 0.1 * 5
+    far = a + 10
+    x_far, _ = compare_residuals(a, far, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(far**2))))
+    assert x_far > 10
+
+
+def test_orient_walks_from_the_root():
+    assert orient([("b", "a"), ("b", "c"), ("d", "c")], "a") == [["a", "b"], ["b", "c"], ["c", "d"]]
+
+
+@pytest.mark.parametrize("sigma", [0.5, 2.0])
+def test_the_predicted_noise_wobble_of_a_hinge_matches_simulation(sigma):
+    """A perfect hinge under marker noise σ: the wobble off its axis that O'Brien's fit shows is what
+    noise_wobble_deg predicts, within a factor of two (median over seeds)."""
+    ratios = []
+    for seed in range(6):
+        case = make_case(seed, 2, counts=[3, 3], types=["revolute"], noise_mm=sigma, n_frames=400)
+        X = case.trial.xyz
+        p, c = X[:, :3], X[:, 3:]
+        fit = joint_location(p, c)
+        from identcheck.geometry.poses import segment_poses
+        pred = noise_wobble_deg(segment_poses(p).local, segment_poses(c).local, sigma)
+        ratios.append(fit.spread_deg[0] / pred)
+    assert 0.5 < np.median(ratios) < 2.0
+
+
+class _Fit:
+    def __init__(self, spread):
+        self.spread_deg = np.array(spread, dtype=float)
+        self.singular_values = np.ones(6)
+        self.n_frames = 100
+
+
+@pytest.mark.parametrize("spread, noise, kind", [
+    ((0.3, 20, 20), 0.2, "revolute"),          # a clean hinge
+    ((4.0, 25, 26), 0.2, "revolute"),          # a knee with skin wobble: under a quarter of the flexion
+    ((12, 18, 25), 0.2, "spherical"),          # a ball joint turned about three axes
+    ((6.0, 15, 16), 0.2, "spherical"),         # more than a quarter of the main rotation off the axis
+    ((0.5, 1.0, 1.2), 0.2, "spherical"),       # hardly moves: the general type, no confidence
+])
+def test_type_rule(spread, noise, kind):
+    jt = classify_posed(_Fit(spread), noise)
+    assert jt.type == kind and jt.evidence["wobble_deg"] == spread[0] and "rule" in jt.evidence
+    if spread[1] < 2:
+        assert jt.confidence == 0.5
