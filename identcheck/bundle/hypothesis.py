@@ -159,6 +159,23 @@ def joint_angles(h) -> dict:
     return out
 
 
+def main_angle(h, joint: str) -> tuple[np.ndarray, str]:
+    """The angle a figure puts on its axis for `joint` (F,) in degrees, and its label: a hinge's own angle; for a
+    ball joint, the rotation along the direction it turned most (the first principal direction of its rotation
+    vectors about the median pose, named by its components in the parent's technical frame), not one
+    component of a rotation vector."""
+    ang = joint_angles(h)[joint]
+    if ang.shape[1] == 1:
+        return np.rad2deg(ang[:, 0]), f"{joint} hinge angle (deg)"
+    centred = ang - ang.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    axis = vt[0] * np.sign(vt[0][np.argmax(np.abs(vt[0]))])
+    share = sv[0] ** 2 / max(float(np.sum(sv ** 2)), 1e-300)
+    return (np.rad2deg(centred @ axis),
+            f"{joint} rotation about ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f}) in the parent's frame "
+            f"(deg from the median pose; {100 * share:.0f} % of its motion)")
+
+
 def rescale(values: np.ndarray, low: float = -1.0) -> np.ndarray:
     """Each column of `values` mapped linearly from its [min, max] to [low, 1] (a column that does not move
     maps to `low`): the one angle scaling of the soft-tissue and joint-translation models, used both to

@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 
 from identcheck.bundle.chain import Terms
-from identcheck.bundle.hypothesis import angle_basis, joint_angles
+from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import explained
@@ -83,6 +83,7 @@ class JointTranslation(Effect):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 return np.linalg.norm(np.nanmean(r, axis=1), axis=1)
-        return {"x": np.rad2deg(joint_angles(before)[j][:, 0]), "x_label": f"{j} angle (deg)",
+        x, x_label = main_angle(before, j)
+        return {"x": x, "x_label": x_label,
                 "y": moved(before), "y_after": moved(after),
                 "y_label": f"mean residual of the markers below {j} (mm)", "kind": "scatter"}

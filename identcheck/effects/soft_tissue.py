@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import Terms
-from identcheck.bundle.hypothesis import angle_basis, joint_angles, segment_residuals
+from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
@@ -93,13 +93,13 @@ class SoftTissue(Effect):
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]
-        ang = np.rad2deg(joint_angles(before)[j])
+        x, x_label = main_angle(before, j)
 
         def moved(h):  # noqa: E306 - the marker's (the cluster's mean) residual on its segment
             with np.errstate(all="ignore"):
                 return np.linalg.norm(np.nanmean(segment_residuals(h)[:, col], axis=1), axis=1)
         who = proposal.where["markers"][0] if len(col) == 1 else "the cluster's mean"
-        return {"x": ang[:, 0], "x_label": f"{j} angle (deg)",
+        return {"x": x, "x_label": x_label,
                 "y": moved(before), "y_after": moved(after),
                 "y_label": f"{who} residual on {proposal.where['segment']} (mm)",
                 "kind": "scatter"}

@@ -9,15 +9,50 @@ import numpy as np
 from identcheck.report.figure_io import figure, save
 
 
+def where_text(where: dict) -> str:
+    """An effect's ``where`` as a reader writes it: ``markers RANK, RTIB; segment shank; joint knee`` (frames and
+    long lists shortened), not Python's repr."""
+    parts = []
+    for k, v in where.items():
+        if k == "frames":
+            continue
+        if isinstance(v, (list, tuple)):
+            shown = ", ".join(str(x) for x in v[:6]) + (f" ... ({len(v)})" if len(v) > 6 else "")
+        elif isinstance(v, float):
+            shown = f"{v:.3g}"
+        else:
+            shown = str(v)
+        parts.append(f"{k.replace('_', ' ')} {shown}")
+    return "; ".join(parts)
+
+
+def seen_alone(h) -> np.ndarray:
+    """(F, M): where a marker's residual says something. A segment whose visible markers in a frame cannot
+    over-determine its pose there (the root with two or fewer, a ball joint's child with one: three coordinates
+    for three unknowns) fits them exactly whatever the truth: its zero residual is no evidence of a good fit, so
+    the figures show those samples as missing rather than as a perfect fit."""
+    chain = h.chain
+    seen = h.weights > 0
+    dof = {chain.root: 6} | {chain.child[j]: (3 if chain.types[j] == "spherical" else 1) for j in chain.joints}
+    ok = seen.copy()
+    for seg, cols in chain.seg_markers.items():
+        if len(cols):
+            exact = 3 * seen[:, cols].sum(axis=1) <= dof.get(seg, 6)
+            ok[np.ix_(exact, cols)] = False
+    return ok
+
+
 def residual_map(diag, path) -> Path:
-    """Residual size per marker and frame, before and after the effects, and each marker's RMS."""
+    """Residual size per marker and frame, before and after the effects, and each marker's RMS; samples that say
+    nothing (occluded, or on a segment its visible markers cannot over-determine: :func:`seen_alone`) are grey."""
     ctx = diag.ctx
-    maps = [np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
+    maps = [np.linalg.norm(np.where(seen_alone(h)[..., None], h.residuals(), np.nan), axis=2)
             for h in (diag.before, diag.after)]
     top = np.nanpercentile(maps[0], 99.5) or 1.0
     fig = figure(figsize=(10, 8))
     axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [2, 2, 1.4]})
     for ax, m, what in zip(axes[:2], maps, ("rigid-joint model", "with the named effects")):
+        ax.set_facecolor("0.8")                       # missing samples: grey, never black (a perfect fit)
         im = ax.imshow(m.T, aspect="auto", interpolation="nearest", cmap="magma", vmin=0, vmax=top)
         ax.set_yticks(range(len(ctx.labels)), ctx.labels, fontsize=7)
         ax.set_title(f"residual |measured − model| (mm), {what}; gap {np.sqrt(np.nanmean(m ** 2)):.3g} mm", fontsize=9)
@@ -35,7 +70,7 @@ def residual_map(diag, path) -> Path:
 
 def gap_steps(diag, path) -> Path:
     """The gap after each adopted effect, with the noise floor."""
-    names = ["rigid model"] + [s.name for s in diag.steps]
+    names = ["rigid model"] + [f"{s.name}\n{_short_where(s.where)}" for s in diag.steps]
     gaps = [diag.gap_before] + [s.gap_after for s in diag.steps]
     fig = figure(figsize=(1.6 + 1.3 * len(names), 3.4))
     ax = fig.subplots()
@@ -43,10 +78,20 @@ def gap_steps(diag, path) -> Path:
     ax.axhline(diag.noise_floor, color="C3", ls="--", label=f"noise floor {diag.noise_floor:.3g} mm")
     for i, g in enumerate(gaps):
         ax.text(i, g, f"{g:.3g}", ha="center", va="bottom", fontsize=8)
-    ax.set_xticks(range(len(names)), names, rotation=20, fontsize=8)
+    ax.set_xticks(range(len(names)), names, fontsize=7)
     ax.set_ylabel("gap: RMS 3-D marker error (mm)")
     ax.legend(fontsize=8)
     return save(fig, path)
+
+
+def _short_where(where: dict) -> str:
+    """The marker(s), else the joint or segment, of an effect: what a bar of the gap-per-step figure names."""
+    for key in ("markers", "joint", "segment"):
+        v = where.get(key)
+        if v:
+            v = list(v) if isinstance(v, (list, tuple)) else [v]
+            return ", ".join(map(str, v[:3])) + (" ..." if len(v) > 3 else "")
+    return ""
 
 
 def evidence(step, path) -> Path:
@@ -77,8 +122,8 @@ def evidence(step, path) -> Path:
         ax.axvspan(ev["span"][0], ev["span"][1], color="C3", alpha=0.15, label="span")
     ax.set_xlabel(ev.get("x_label", ""))
     ax.set_ylabel(ev.get("y_label", ""), fontsize=8)
-    where = ", ".join(f"{k}={v}" for k, v in step.where.items() if k not in ("frames",))
-    ax.set_title(f"{step.name} ({where}): gap {step.gap_before:.3g} → {step.gap_after:.3g} mm", fontsize=9)
+    ax.set_title(f"{step.name}: {where_text(step.where)}\ngap {step.gap_before:.3g} → {step.gap_after:.3g} mm",
+                 fontsize=9)
     ax.legend(fontsize=7)
     return save(fig, path)
 
