@@ -216,3 +216,26 @@ def test_skin_motion_seen_elsewhere_unbounds_joints_beside_a_one_marker_segment(
     for j in ("hip_r", "knee_r"):
         assert moved[j]["practical"]["verdict"] == "undetermined", j
         assert set(moved[j]["interval_method"].values()) == {"unbounded"}, j
+
+
+def test_candidates_compared_through_an_unposed_segment_are_not_trusted(examples):
+    """A knee below a one-marker thigh (its roll in every frame seen only through the knee) with a rival the
+    likelihood does not reject: the candidates are listed, but neither the answer's intervals nor its verdict
+    claim anything (unbounded, undetermined). The hip, posed by three pelvis markers, is not touched."""
+    from dataclasses import replace
+
+    from identcheck.fit.whole_tree import TreeFit
+
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    sim = simulate(model, n_frames=400, noise_mm=0.5, seed=11)
+    tree, _ = _answers(model, sim.trial)
+    best = tree.best
+    rival = replace(best, distances={**best.distances,
+                                     "knee_r": {m: (d + 40.0, se) for m, (d, se) in best.distances["knee_r"].items()}},
+                    rivals={})
+    ans = joint_answers(TreeFit(replace(best, rivals={}), [(rival, 1.0, 0.32)]), model)
+    knee = ans["knee_r"]
+    assert len(knee["alternatives"]) == 1
+    assert all(v == [0.0, None] for v in knee["marker_distances_ci95"].values())
+    assert set(knee["interval_method"].values()) == {"unbounded"} and knee["practical"]["verdict"] == "undetermined"
+    assert not ans["hip_r"]["alternatives"] and "unbounded" not in ans["hip_r"]["interval_method"].values()
