@@ -29,16 +29,10 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
 from identcheck.errors import InputError
-from identcheck.io.text import decode
+from identcheck.io.text import read_toml
 
 JOINT_TYPES = ("revolute", "spherical")
 """Joint types a model may declare."""
@@ -169,25 +163,7 @@ class Model:
         >>> model.root, model.joint_order                  # doctest: +SKIP
         ('pelvis', ('hip_r', 'knee_r', 'ankle_r'))
         """
-        path = Path(path)
-        source = str(path)
-        try:
-            text = decode(path.read_bytes())
-        except FileNotFoundError:
-            raise InputError(["file not found"], source=source) from None
-        except IsADirectoryError:
-            raise InputError(["is a directory, expected a TOML model file"], source=source) from None
-        except UnicodeDecodeError as exc:
-            raise InputError([f"not UTF-8 text ({exc.reason} at byte {exc.start})"],
-                             source=source) from None
-        except OSError as exc:
-            raise InputError([f"cannot read file: {exc.strerror}"], source=source) from None
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError([f"TOML syntax error: {exc}"], source=source) from None
-        except RecursionError:
-            raise InputError(["arrays or tables nested too deeply to be a model file"], source=source) from None
+        data, source = read_toml(path, "model file")
         return cls.from_dict(data, source=source)
 
     @classmethod

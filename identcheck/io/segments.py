@@ -14,15 +14,9 @@ markers are checked against the trial by the caller, who has it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
-
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 from identcheck.errors import InputError
-from identcheck.io.text import decode
+from identcheck.io.text import read_toml
 
 IGNORED_KEYS = ("units", "joints")
 """Top-level keys of a model file that a segments file may carry and that are not read."""
@@ -51,24 +45,7 @@ def read_segments(path) -> dict[str, tuple[str, ...]]:
     >>> read_segments("legs.toml")                      # doctest: +SKIP
     {'pelvis': ('RASI', 'LASI', 'RPSI', 'LPSI'), 'thigh_r': ('RTH1', 'RTH2', 'RTH3')}
     """
-    path = Path(path)
-    source = str(path)
-    try:
-        text = decode(path.read_bytes())
-    except FileNotFoundError:
-        raise InputError(["file not found"], source=source) from None
-    except IsADirectoryError:
-        raise InputError(["is a directory, expected a TOML segments file"], source=source) from None
-    except UnicodeDecodeError as exc:
-        raise InputError([f"not UTF-8 text ({exc.reason} at byte {exc.start})"], source=source) from None
-    except OSError as exc:
-        raise InputError([f"cannot read file: {exc.strerror}"], source=source) from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError([f"TOML syntax error: {exc}"], source=source) from None
-    except RecursionError:
-        raise InputError(["arrays or tables nested too deeply to be a segments file"], source=source) from None
+    data, source = read_toml(path, "segments file")
     return segments_from_dict(data, source)
 
 

@@ -7,6 +7,14 @@ readers agree on what a text file is.
 from __future__ import annotations
 
 import codecs
+from pathlib import Path
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+from identcheck.errors import InputError
 
 BOMS = ((codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16"))
 """Byte-order marks and the codec that reads a file starting with each."""
@@ -28,3 +36,27 @@ def decode(raw: bytes, fallback: str | None = None) -> str:
         if fallback is None:
             raise
         return raw.decode(fallback)
+
+
+def read_toml(path, kind: str) -> tuple[dict, str]:
+    """The TOML file at `path` parsed, and its name for messages; every way it can fail is an InputError naming
+    the file (`kind`, e.g. "model file", says what was expected): missing, a directory, unreadable, not text,
+    a syntax error, nested too deeply. One reader for every TOML input (models, segments files)."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = decode(path.read_bytes())
+    except FileNotFoundError:
+        raise InputError(["file not found"], source=source) from None
+    except IsADirectoryError:
+        raise InputError([f"is a directory, expected a TOML {kind}"], source=source) from None
+    except UnicodeDecodeError as exc:
+        raise InputError([f"not UTF-8 text ({exc.reason} at byte {exc.start})"], source=source) from None
+    except OSError as exc:
+        raise InputError([f"cannot read file: {exc.strerror}"], source=source) from None
+    try:
+        return tomllib.loads(text), source
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError([f"TOML syntax error: {exc}"], source=source) from None
+    except RecursionError:
+        raise InputError([f"arrays or tables nested too deeply to be a {kind}"], source=source) from None
