@@ -271,6 +271,10 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
               if issubclass(c.category, UserWarning)]
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
+        if not tree.best.fit.converged:
+            notes.append({"kind": "not_converged", "message": (
+                f"{trial.source}: the whole-tree fit did not converge (its iteration and time budget ran out): no "
+                "joint is reported as determined; a longer or richer trial, or more markers, make it converge")})
     if tree.starts_left_out:
         notes.append({"kind": "starts_left_out", "message": (
             f"{trial.source}: {tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations of candidate "

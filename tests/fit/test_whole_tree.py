@@ -239,3 +239,26 @@ def test_candidates_compared_through_an_unposed_segment_are_not_trusted(examples
     assert all(v == [0.0, None] for v in knee["marker_distances_ci95"].values())
     assert set(knee["interval_method"].values()) == {"unbounded"} and knee["practical"]["verdict"] == "undetermined"
     assert not ans["hip_r"]["alternatives"] and "unbounded" not in ans["hip_r"]["interval_method"].values()
+
+
+def test_a_fit_stopped_by_its_iteration_cap_goes_on_or_claims_nothing(examples, monkeypatch):
+    """With the iteration cap at 2, converged_fit restarts until the fit converges (the same minimum as one long
+    run); with no time to go on, the best fit is not converged and every joint is undetermined and unbounded."""
+    import identcheck.fit.whole_tree as wt
+    from identcheck.bundle.chain import fit_chain, initial_state
+
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=300, noise_mm=0.5, seed=2)
+    chain = wt.skeleton_of(model, sim.trial)
+    data = sim.trial.select(chain.labels).as_array()
+    state = initial_state(chain, data)
+    long = fit_chain(chain, data, state, max_iter=500)
+    monkeypatch.setattr(wt, "MAX_ITER", 2)
+    fit = wt.converged_fit(chain, data, state)
+    assert fit.converged and abs(fit.rss - long.rss) <= 1e-6 * long.rss
+    monkeypatch.setattr(wt, "CONVERGE_BUDGET_S", 0.0)
+    tree, ans = _answers(model, sim.trial)
+    assert not tree.best.fit.converged
+    for j in ans.values():
+        assert j["practical"]["verdict"] == "undetermined" and "did not converge" in j["practical"]["reason"]
+        assert all(v == [0.0, None] for v in j["marker_distances_ci95"].values())
