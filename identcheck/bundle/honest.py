@@ -43,7 +43,7 @@ class Minimum:
     """joint -> model-error standard deviation (mm) already inside its distances' standard errors."""
     rivals: dict = field(default_factory=dict)
     """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded
-    joint (:func:`_without_incidental_rolls`), for the joints refitted so; others use ``TreeFit.others``."""
+    joint (``fit.whole_tree._without_incidental_rolls``), for the joints refitted so; others use ``TreeFit.others``."""
 
 
 def with_model_error(m: Minimum, model_error: dict) -> Minimum:
