@@ -161,7 +161,7 @@ def test_plan_sweeps_models_x_noise_x_motion(tmp_path):
         (0.5, "functional"), (0.5, "flexion"), (1.0, "functional"), (1.0, "flexion")}
     assert all(j.trial is None and j.settings["frames"] == 200 and j.settings["fast"] for j in jobs)
     plain = resolve("plan", [str(ROOT / "examples")])          # a folder of models, no sweep: one job per model
-    assert len(plain) == len(list((ROOT / "examples").glob("*.toml"))) and plain[0].settings["noise_mm"] is None
+    assert len(plain) == len(list((ROOT / "examples").rglob("*.toml"))) and plain[0].settings["noise_mm"] is None
     for kw, msg in (({"noise_mm": "0,-1"}, "--noise-mm 0: a positive"), ({"motion": "flexion"}, "--motion applies"),
                     ({"noise_mm": 1, "motion": "jogging"}, "--motion jogging: one of functional")):
         with pytest.raises(InputError, match=msg):
