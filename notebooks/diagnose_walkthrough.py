@@ -187,15 +187,16 @@ def axis_line(h, joint):
     parent = h.chain.parent[joint]
     direction = h.fit.seg_R[parent] @ h.fit.state.axis[joint]
     direction = direction / np.linalg.norm(direction, axis=-1, keepdims=True)
-    return centre_world(h, joint), direction
+    return centre_world(h, joint) + diag.offset, direction     # diagnose fits the trial moved near the origin
 
 
 def joint_error(h, joint):
-    """Per-frame error (mm) of `joint` in hypothesis `h` against the truth."""
+    """Per-frame error (mm) of `joint` in hypothesis `h` against the truth (the fit's world moved back by
+    ``diag.offset`` into the file's coordinates)."""
     true = true_centre_world(sim, joint)
     line = axis_line(h, joint)
     if line is None:
-        return np.linalg.norm(centre_world(h, joint) - true, axis=1)
+        return np.linalg.norm(centre_world(h, joint) + diag.offset - true, axis=1)
     point, direction = line
     v = true - point
     return np.linalg.norm(v - np.sum(v * direction, axis=1, keepdims=True) * direction, axis=1)
