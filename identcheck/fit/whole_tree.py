@@ -255,16 +255,21 @@ def joints_below(chain: Skeleton, joint: str) -> list:
 
 
 def _without_incidental_rolls(best: Minimum, others: list, data, model_error: dict, scale: float) -> Minimum:
-    """The other joints refitted without the markers below each joint whose interval is unbounded because it
-    hangs from a segment that is not posed by itself (:func:`posed_by_itself`).
+    """The other joints refitted without the markers below each joint that hangs from a segment not posed by
+    itself (:func:`posed_by_itself`).
 
     Those markers are all that sees the segment's roll in each frame; a likelihood with one free roll per
     frame prefers joints whose marker orbits absorb the noise (the incidental-parameter bias), and through the
     shared segment that bias reaches the joints above: on simulated 3 pelvis / 1 thigh / 1 shank legs the
     hip came out 5-17 mm off at ±2-5 mm. Without them, the joints above are fitted from what poses them.
-    The cut joints keep their unbounded intervals and the whole fit's distances."""
+    The cut joints keep their intervals and the whole fit's distances.
+
+    Every such joint is cut, whether or not its own interval came out wide: when the one below the one-marker
+    thigh happened to look narrow the hip kept the information the rolls lend it, and its intervals were half
+    the spread of its estimates (simulated minimal legs, white and AR(1) noise, 10 replicates each: the hip's
+    standard error switched between 0.2 and 1.4 mm from one noise draw to the next)."""
     chain = best.fit.chain
-    cut = [j for j in best.intervals if not posed_by_itself(chain, chain.parent[j])]
+    cut = [j for j in chain.joints if not posed_by_itself(chain, chain.parent[j])]
     if not cut:
         return best
     below = set(cut) | {k for c in cut for k in joints_below(chain, c)}
