@@ -129,7 +129,7 @@ def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
 
     The line is taken on the side with three markers or more, where a pose is measured (the centroid averaged
     into its frame), so the moved centre is a rigid point of that side; with no such side it is scaled about
-    the centroid in every frame (a rigid point of the sparse side). None for a revolute joint, or when both
+    the centroid in every frame (a rigid point of the sparse side). No copies for a revolute joint, or when both
     sides carry three markers or more (the fit is well conditioned there)."""
     if est.kind != "spherical" or est.centre is None:
         return []
