@@ -262,3 +262,32 @@ def test_a_fit_stopped_by_its_iteration_cap_goes_on_or_claims_nothing(examples, 
     for j in ans.values():
         assert j["practical"]["verdict"] == "undetermined" and "did not converge" in j["practical"]["reason"]
         assert all(v == [0.0, None] for v in j["marker_distances_ci95"].values())
+
+
+def test_an_e1_ambiguous_knee_below_an_unposed_thigh_claims_no_interval(examples, monkeypatch):
+    """A minimal leg's knee that the likelihood ranks first (determined) is relabelled ambiguous by ERRATA E1
+    (revolute (2,1), nothing beyond decides); below a thigh that its one marker does not pose, its quadratic
+    interval is not kept either: every distance is [0, None], method unbounded."""
+    import identcheck.fit.whole_tree as wt
+    from identcheck.fit.workflow import fit_trial
+
+    real = wt.joint_answers
+
+    def ranked_first(tree, model):                       # the knee as a held-out trial had it: determined, narrow
+        out = real(tree, model)
+        knee = out["knee_r"]
+        d = knee["marker_distances"]
+        out["knee_r"] = dict(knee, practical=dict(knee["practical"], verdict="determined"),
+                             marker_distances_ci95={m: [v - 0.5, v + 0.5] for m, v in d.items()},
+                             interval_method={m: "quadratic" for m in d})
+        return out
+
+    monkeypatch.setattr(wt, "joint_answers", ranked_first)
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    sim = simulate(model, n_frames=600, noise_mm=0.7, seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        knee = fit_trial(model, sim.trial)["joints"]["knee_r"]
+    assert knee["practical"]["verdict"] == "ambiguous" and "E1" in knee["practical"]["reason"]
+    assert all(v == [0.0, None] for v in knee["marker_distances_ci95"].values())
+    assert set(knee["interval_method"].values()) == {"unbounded"}
