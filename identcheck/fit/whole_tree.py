@@ -328,10 +328,13 @@ def _same(a: Minimum, b: Minimum, joints=None) -> bool:
                for j in (joints or a.distances) for mk, (d, _) in a.distances[j].items())
 
 
-def joint_answers(tree: TreeFit, model) -> dict:
+def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict:
     """Per joint: the contract's fit keys from the whole-tree fit (:func:`identcheck.bundle.honest.joint_answer`),
     with the other candidates the likelihood keeps (``alternatives``, with their likelihood-ratio statistics) and
-    rejects."""
+    rejects. ``undecidable`` maps each joint whose closed-form case admits several joints that fit any rigid data
+    equally, with nothing beyond it to decide (revolute (2,1) alone: ERRATA E1), to that case and the closed
+    form's rendered alternatives: such a joint is never ``determined`` (:func:`_undecided_twins`)."""
+    undecidable = undecidable or {}
     best = tree.best
     chain = best.fit.chain
     out = {}
@@ -355,10 +358,34 @@ def joint_answers(tree: TreeFit, model) -> dict:
             judged = replace(best, intervals={**best.intervals,
                                               j: {m: ([0.0, None], "unbounded") for m in best.distances[j]}})
         out[j] = joint_answer(judged, j, alts, rejected)
+        if j in undecidable and out[j]["practical"]["verdict"] == "determined":
+            out[j] = _undecided_twins(out[j], rejected, *undecidable[j], bounded=posed_above(chain, j))
         if not best.fit.converged:
             out[j]["practical"]["reason"] = (
                 f"the whole-tree fit did not converge within {CONVERGE_BUDGET_S:g} s of restarts after {MAX_ITER} "
                 "iterations: it is no maximum of the likelihood, so no interval is claimed")
+    return out
+
+
+def _undecided_twins(answer: dict, rejected: list, case: str, start_alternatives: list, bounded: bool) -> dict:
+    """A joint the likelihood ranked first although its case admits several joints that fit any rigid data
+    equally (revolute (2,1): ERRATA E1) and no marker beyond it decides: its likelihood differences can only come
+    from how the trial departs from the rigid model, so it is ``ambiguous``, with the candidates it beat (or the
+    closed form's) as alternatives. Below a segment not posed by itself (``bounded`` False) its quadratic
+    interval is no more to be trusted than the ranking (held-out minimal gait knee: ±0.3-1.9 mm while 32-85 mm
+    off, no candidate near the truth), so it claims none, as candidates the likelihood cannot tell apart there
+    already do in :func:`joint_answers`."""
+    out = dict(answer)
+    out["practical"] = dict(answer["practical"], verdict="ambiguous", reason=(
+        f"{case} admits several joints that fit rigid data equally well (ERRATA E1/E2: four for revolute "
+        "(2,1), mirror images included) and no other marker decides between them; their likelihood differences "
+        "here come from how the trial departs from the rigid model, not from the joint"),
+        motion_advice="add a marker on the one-marker segment, or one beyond it (ERRATA E8)")
+    out["alternatives"] = [dict(r, p_value=None) for r in rejected] or \
+        _distinct_alternatives(start_alternatives, answer["marker_distances"])
+    if not bounded:
+        out["marker_distances_ci95"] = {m: [0.0, None] for m in answer["marker_distances_ci95"]}
+        out["interval_method"] = {m: "unbounded" for m in answer["interval_method"]}
     return out
 
 
@@ -408,9 +435,9 @@ def _distinct_alternatives(alternatives: list, best: dict) -> list:
 
 
 def rep_unique(j: dict) -> bool:
-    """False when the closed-form case admits several joints that fit any rigid data equally and no marker
-    beyond it can decide (revolute (2,1) alone: ERRATA E1); True otherwise."""
-    return not (j.get("twins_undecidable") and j["start_alternatives"])
+    """False when a closed-form joint report's case admits several joints that fit any rigid data equally and no
+    marker beyond it can decide (revolute (2,1) alone: ERRATA E1); True otherwise."""
+    return not (j.get("twins_undecidable") and j.get("alternatives"))
 
 
 def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
@@ -419,7 +446,9 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
     ``unique`` (= determined); the closed-form estimate stays as ``start`` (and in ``notes``). Without a
     whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined."""
     joints = {}
-    answers = joint_answers(tree, model) if tree.best is not None else {}
+    undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
+                   if j.get("marker_distances") and not rep_unique(j)}
+    answers = joint_answers(tree, model, undecidable) if tree.best is not None else {}
     residual = None
     if tree.best is not None:
         fit = tree.best.fit
@@ -442,23 +471,6 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
             j["rejected_candidates"] = a["rejected_candidates"]
             j["practical"] = a["practical"]
             j["geometry"] = a["geometry"]
-            if a["practical"]["verdict"] == "determined" and j["start"]["marker_distances"] and not rep_unique(j):
-                # the case itself admits several joints that fit any rigid data equally (revolute (2,1): ERRATA E1)
-                # and nothing beyond it decided: a likelihood difference can only come from the model's misfit
-                j["practical"] = dict(a["practical"], verdict="ambiguous", reason=(
-                    f"{j['case']} admits several joints that fit rigid data equally well (ERRATA E1/E2: four "
-                    "for revolute (2,1), mirror images included) and no other marker decides between them; their "
-                    "likelihood differences here "
-                    "come from how the trial departs from the rigid model, not from the joint"),
-                    motion_advice="add a marker on the one-marker segment, or one beyond it (ERRATA E8)")
-                j["alternatives"] = [dict(r, p_value=None) for r in a["rejected_candidates"]] or \
-                    _distinct_alternatives(j["start_alternatives"], j["marker_distances"])
-                if not posed_above(tree.best.fit.chain, name):
-                    # compared through a segment whose roll in every frame only the candidates see: the best one's
-                    # quadratic interval is no more to be trusted than the ranking (held-out minimal gait knee:
-                    # ±0.3-1.9 mm, 32-85 mm off, no candidate near the truth), as in :func:`joint_answers`
-                    j["marker_distances_ci95"] = {m: [0.0, None] for m in j["marker_distances_ci95"]}
-                    j["interval_method"] = {m: "unbounded" for m in j["interval_method"]}
             j["unique"] = j["practical"]["verdict"] == "determined"
             res = [residual[m] for m in a["marker_distances"] if m in residual]
             j["rms_residual"] = round(float(np.sqrt(np.nanmean(np.square(res)))), 4) if res else None

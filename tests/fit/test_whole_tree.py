@@ -271,18 +271,18 @@ def test_an_e1_ambiguous_knee_below_an_unposed_thigh_claims_no_interval(examples
     import identcheck.fit.whole_tree as wt
     from identcheck.fit.workflow import fit_trial
 
-    real = wt.joint_answers
+    real = wt.joint_answer
 
-    def ranked_first(tree, model):                       # the knee as a held-out trial had it: determined, narrow
-        out = real(tree, model)
-        knee = out["knee_r"]
-        d = knee["marker_distances"]
-        out["knee_r"] = dict(knee, practical=dict(knee["practical"], verdict="determined"),
-                             marker_distances_ci95={m: [v - 0.5, v + 0.5] for m, v in d.items()},
-                             interval_method={m: "quadratic" for m in d})
-        return out
+    def ranked_first(best, j, alternatives=(), rejected=()):  # the knee as a held-out trial had it: determined, narrow
+        out = real(best, j, alternatives, rejected)
+        if j != "knee_r":
+            return out
+        d = out["marker_distances"]
+        return dict(out, practical=dict(out["practical"], verdict="determined"), alternatives=[],
+                    marker_distances_ci95={m: [v - 0.5, v + 0.5] for m, v in d.items()},
+                    interval_method={m: "quadratic" for m in d})
 
-    monkeypatch.setattr(wt, "joint_answers", ranked_first)
+    monkeypatch.setattr(wt, "joint_answer", ranked_first)
     model = Model.from_toml(examples / "sparse_leg.toml")
     sim = simulate(model, n_frames=600, noise_mm=0.7, seed=0)
     with warnings.catch_warnings():
