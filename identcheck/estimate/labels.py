@@ -29,16 +29,37 @@ def _partners(chain, col: int, exclude: set) -> np.ndarray:
     return np.array([k for k in chain.seg_markers[seg] if k not in exclude], dtype=int)
 
 
-def swap_costs(data: np.ndarray, chain, i: int, j: int):
+class _Distances:
+    """Each marker's distances to the other markers of its segment (F, n) and their medians over frames, computed
+    once per search and shared by every pair it is tested in (the medians are what make the search slow)."""
+
+    def __init__(self, data: np.ndarray, chain):
+        self.data, self.chain, self._own = data, chain, {}
+
+    def to(self, a: int, ks: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(self.data[:, [a]] - self.data[:, ks], axis=2)
+
+    def own(self, a: int, exclude: set):
+        """(partner columns, their distances' medians (n,), per-frame squared misfit from them (F,)) of marker `a`,
+        its partners being the other markers of its segment not in `exclude`."""
+        ks = _partners(self.chain, a, exclude | {a})
+        key = (a, tuple(ks))
+        if key not in self._own:
+            d = self.to(a, ks)
+            med = np.nanmedian(d, axis=0) if len(ks) else np.zeros(0)
+            self._own[key] = (ks, med, np.nansum((d - med) ** 2, axis=1))
+        return self._own[key]
+
+
+def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None = None):
     """Per-frame misfit of the within-segment distances with labels i, j as given and exchanged (F,)."""
-    Pi, Pj = _partners(chain, i, {i, j}), _partners(chain, j, {i, j})
+    dists = dists or _Distances(data, chain)
+    Pi, Di, keep_i = dists.own(i, {j})
+    Pj, Dj, keep_j = dists.own(j, {i})
     if len(Pi) + len(Pj) == 0:
         return None, None
-    def dist(a, ks):  # noqa: E306
-        return np.linalg.norm(data[:, [a]] - data[:, ks], axis=2)
-    Di, Dj = np.nanmedian(dist(i, Pi), axis=0), np.nanmedian(dist(j, Pj), axis=0)
-    keep = np.nansum((dist(i, Pi) - Di) ** 2, axis=1) + np.nansum((dist(j, Pj) - Dj) ** 2, axis=1)
-    swap = np.nansum((dist(j, Pi) - Di) ** 2, axis=1) + np.nansum((dist(i, Pj) - Dj) ** 2, axis=1)
+    keep = keep_i + keep_j
+    swap = np.nansum((dists.to(j, Pi) - Di) ** 2, axis=1) + np.nansum((dists.to(i, Pj) - Dj) ** 2, axis=1)
     both = np.all(np.isfinite(data[:, [i, j]]), axis=(1, 2))
     keep[~both], swap[~both] = np.nan, np.nan
     return keep, swap
@@ -68,14 +89,17 @@ def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
     margin ``clear`` a frame's improvement had to exceed."""
     sig2, pen = sigma_mm ** 2, np.log(max(n_obs, 2))
     out = []
+    dists = _Distances(data, chain)
     for i in range(chain.n_markers):
         for j in range(i + 1, chain.n_markers):
-            keep, swap = swap_costs(data, chain, i, j)
+            keep, swap = swap_costs(data, chain, i, j, dists)
             if keep is None:
                 continue
             n_terms = len(_partners(chain, i, {i, j})) + len(_partners(chain, j, {i, j}))
             clear = 2 * sig2 * n_terms * 9          # well beyond the distances' own noise
             better = (keep - swap > clear)
+            if not np.any(better):
+                continue
             doubt = ~np.isfinite(keep) | (np.abs(keep - swap) <= clear)
             a, b = longest_run(np.nan_to_num(better, nan=0).astype(bool), doubt)
             if a < 0 or b - a + 1 < MIN_RUN:
