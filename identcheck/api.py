@@ -124,7 +124,7 @@ def _frames(trial, frames: str | None):
 
 
 @_one_blas_thread
-def fit(model, trial, progress=None, frames: str | None = None, export_markers=None):
+def fit(model, trial, progress=None, frames: str | None = None, export_markers=None, report=None):
     """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
 
     First the trial is screened for swapped marker labels (a span where two markers' labels are
@@ -142,6 +142,9 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     export_markers : str or os.PathLike, optional
         Also write the trial's markers plus each joint's centre / hinge-axis points as virtual markers to
         this TRC or C3D file (:mod:`identcheck.fit.export`).
+    report : str or os.PathLike, optional
+        Also write a self-contained HTML page of the fit to this file: the skeleton and its joints in 3-D, each
+        marker's residual, every joint's verdict and intervals (:mod:`identcheck.report.html`).
 
     Returns
     -------
@@ -155,13 +158,32 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     from identcheck.fit.result import FitResult
     from identcheck.fit.workflow import fit_trial
 
-    return FitResult.from_dict(fit_trial(load_model(model), _frames(trial, frames), progress=progress,
-                                         export=export_markers))
+    scene = {}
+
+    def keep(fitted_trial, fit, offset):
+        from identcheck.fit.scene import trial_scene
+
+        scene["scene"] = trial_scene(fitted_trial, fit, offset)
+
+    data, model = _frames(trial, frames), load_model(model)
+    res = FitResult.from_dict(fit_trial(model, data, progress=progress, export=export_markers,
+                                        on_fit=keep if report is not None else None))
+    if report is not None:
+        _write_report(report, "fit", res.to_dict(), scene.get("scene"), f"{data.source} (model {model.source})")
+    return res
+
+
+def _write_report(path, kind: str, doc: dict, scene, title: str) -> None:
+    """The run's HTML page (:mod:`identcheck.report.html`)."""
+    import identcheck
+    from identcheck.report.html import write_html
+
+    write_html(path, kind, doc, scene, title, identcheck.__version__)
 
 
 @_one_blas_thread
 def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: str | None = None,
-             export_markers=None):
+             export_markers=None, report=None):
     """Where the rigid-joint model and `trial` disagree: the named effects, adopted one at a time while
     they earn their parameters, with the gap before and after each.
 
@@ -178,6 +200,9 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
     export_markers : str or os.PathLike, optional
         Also write the trial's markers plus each joint's centre / hinge-axis points, as the model with the
         adopted effects places them, to this TRC or C3D file (:mod:`identcheck.fit.export`).
+    report : str or os.PathLike, optional
+        Also write a self-contained HTML page: the skeleton with the adopted effects' fit in 3-D, each marker's
+        residual, the effects with the gap each closed, and the joints (:mod:`identcheck.report.html`).
 
     Returns
     -------
@@ -197,6 +222,12 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
         from identcheck.fit.export import export_markers as write_markers
 
         write_markers(export_markers, data, diag.after.fit, diag.offset)
+    if report is not None:
+        from identcheck.fit.scene import fit_scene
+
+        rows = data.frame_number(range(data.n_frames))
+        scene = fit_scene(diag.after.fit, diag.after.data, rows, diag.offset)
+        _write_report(report, "diagnose", diag.to_dict(), scene, f"{data.source} (model {diag.ctx.model.source})")
     return diag
 
 

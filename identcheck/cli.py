@@ -121,7 +121,10 @@ def _cmd_identify(a) -> int:
 
 
 def _cmd_fit(a) -> int:
-    res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames, export_markers=a.export_markers)
+    res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames, export_markers=a.export_markers,
+                  report=a.report)
+    if a.report:
+        log.info("report written to %s", a.report)
     for w in res.warnings:
         print(f"identcheck fit: warning: {w['message']}", file=sys.stderr)
     if a.json:
@@ -149,7 +152,9 @@ def _cmd_plan(a) -> int:
 
 def _cmd_diagnose(a) -> int:
     diag = api.diagnose(a.model, a.trial, progress=_progress("diagnose"), frames=a.frames,
-                        export_markers=a.export_markers)
+                        export_markers=a.export_markers, report=a.report)
+    if a.report:
+        log.info("report written to %s", a.report)
     if a.plots:
         from identcheck.report.diagnose_figures import write_all
 
@@ -313,6 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.add_argument("--export-markers", metavar="OUT.trc|OUT.c3d", default=None,
                    help="also write the markers plus each joint's centre and hinge-axis points as virtual markers")
+    s.add_argument("--report", metavar="OUT.html", default=None,
+                   help="also write one self-contained HTML page: the skeleton and fitted joints in 3-D, residuals, "
+                        "verdicts and intervals (opens offline in a browser)")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
                         "it), both included; either end may be left out")
@@ -351,6 +359,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--export-markers", metavar="OUT.trc|OUT.c3d", default=None,
                    help="also write the markers plus each joint's centre and hinge-axis points (with the adopted "
                         "effects) as virtual markers")
+    s.add_argument("--report", metavar="OUT.html", default=None,
+                   help="also write one self-contained HTML page: the skeleton in 3-D, residuals, the effects with "
+                        "the gap each closed, and the joints (opens offline in a browser)")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
                         "it), both included; either end may be left out")
@@ -420,7 +431,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------- checks before any work
 FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
-                "fit": ("export_markers",), "diagnose": ("export_markers",), "skeleton": ("out", "export_markers")}
+                "fit": ("export_markers", "report"), "diagnose": ("export_markers", "report"), "skeleton": ("out", "export_markers")}
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
@@ -456,6 +467,14 @@ def preflight(a) -> list:
     out = getattr(a, "export_markers", None)
     if out and not str(out).lower().endswith(TRIAL_SUFFIXES):
         problems.append(f"--export-markers {out}: give a .trc or .c3d file name")
+    page = getattr(a, "report", None)
+    if page and not str(page).lower().endswith((".html", ".htm")):
+        problems.append(f"--report {page}: give an .html file name")
+    inputs = {os.path.abspath(p) for p in (model, trial) if p}
+    for opt in ("export_markers", "report"):
+        path = getattr(a, opt, None)
+        if path and os.path.abspath(path) in inputs:
+            problems.append(f"--{opt.replace('_', '-')} {path}: is an input file; it would be overwritten")
     if a.verb == "rank" and a.samples is not None and not 1 <= a.samples <= MAX_RANK_SAMPLES:
         problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the exact rank of a larger "
                         "matrix would not end in reasonable time)")

@@ -236,14 +236,16 @@ def report(model, fitted: dict, points: dict) -> dict:
     return {"joints": out}
 
 
-def fit_trial(model, trial, progress=None, export=None) -> dict:
+def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
     (the contract's ``fit`` JSON: joints, ``noise``, ``warnings``).
 
     A subject prefix removed from the labels (:meth:`Trial.unprefixed`), the label screen's findings, warnings
     raised by the estimators and a model misfit are all in ``warnings`` (dicts with ``message`` and ``kind`` and,
-    where there is one, ``markers`` / ``frames``)."""
+    where there is one, ``markers`` / ``frames``). `on_fit`, when given, is called as ``on_fit(trial, fit, offset)``
+    with the whole-tree fit (if one was made), the trial it was fitted to and what that trial was moved by: what a
+    figure of the fit needs (:func:`identcheck.fit.scene.fit_scene`)."""
     import warnings as _w
 
     from identcheck.estimate.labels import screen
@@ -285,4 +287,6 @@ def fit_trial(model, trial, progress=None, export=None) -> dict:
             raise InputError([f"--export-markers {export}: no whole-tree fit to export ({tree.problem})"],
                              source=trial.source)
         export_markers(export, trial, tree.best.fit, offset)
+    if on_fit is not None and tree.best is not None:
+        on_fit(screened, tree.best.fit, offset)
     return rep

@@ -95,6 +95,7 @@ def test_fit_frames_that_hold_no_frame_are_named(run, corpus, spec):
     (["table", "--save", "{}"], "--save"),
     (["plan", LEG, "--figure", "{}"], "--figure"),
     (["fit", LEG, "{corpus}/leg.trc", "--export-markers", "{}"], "--export-markers"),
+    (["fit", LEG, "{corpus}/leg.trc", "--report", "{}"], "--report"),
 ])
 def test_an_output_file_that_cannot_be_written_is_refused_first(run, no_work, corpus, tmp_path, argv, option, where):
     """An output file that is a directory, under a missing directory, or under a file: exit 2 before any work,
