@@ -124,7 +124,8 @@ def _frames(trial, frames: str | None):
 
 
 @_one_blas_thread
-def fit(model, trial, progress=None, frames: str | None = None, export_markers=None, report=None):
+def fit(model, trial, progress=None, frames: str | None = None, export_markers=None, report=None,
+        export_osim=None):
     """Joint parameters of every joint of `model` from `trial`, with uncertainty and excitation checks.
 
     First the trial is screened for swapped marker labels (a span where two markers' labels are
@@ -145,6 +146,10 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     report : str or os.PathLike, optional
         Also write a self-contained HTML page of the fit to this file: the skeleton and its joints in 3-D, each
         marker's residual, every joint's verdict and intervals (:mod:`identcheck.report.html`).
+    export_osim : str or os.PathLike, optional
+        Also write the fitted skeleton as an OpenSim model (.osim: bodies, ball and pin joints at the fitted
+        centres and axes, the markers on their bodies) with OpenSim's own package, the extra
+        ``identcheck[osim]`` (:mod:`identcheck.fit.osim`).
 
     Returns
     -------
@@ -161,13 +166,21 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     scene = {}
 
     def keep(fitted_trial, fit, offset):
-        from identcheck.fit.scene import trial_scene
+        scene["fitted"] = True
+        if report is not None:
+            from identcheck.fit.scene import trial_scene
 
-        scene["scene"] = trial_scene(fitted_trial, fit, offset)
+            scene["scene"] = trial_scene(fitted_trial, fit, offset)
+        if export_osim is not None:
+            from identcheck.fit.osim import export_osim as write_osim
+
+            write_osim(export_osim, fit, name=Path(str(model.source)).stem or "identcheck")
 
     data, model = _frames(trial, frames), load_model(model)
     res = FitResult.from_dict(fit_trial(model, data, progress=progress, export=export_markers,
-                                        on_fit=keep if report is not None else None))
+                                        on_fit=keep if report is not None or export_osim is not None else None))
+    if export_osim is not None and not scene.get("fitted"):
+        raise InputError([f"--export-osim {export_osim}: no whole-tree fit to export"], source=data.source)
     if report is not None:
         _write_report(report, "fit", res.to_dict(), scene.get("scene"), f"{data.source} (model {model.source})")
     return res

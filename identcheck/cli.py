@@ -122,7 +122,9 @@ def _cmd_identify(a) -> int:
 
 def _cmd_fit(a) -> int:
     res = api.fit(a.model, a.trial, progress=_progress("fit"), frames=a.frames, export_markers=a.export_markers,
-                  report=a.report)
+                  report=a.report, export_osim=a.export_osim)
+    if a.export_osim:
+        log.info("OpenSim model written to %s", a.export_osim)
     if a.report:
         log.info("report written to %s", a.report)
     for w in res.warnings:
@@ -321,6 +323,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--report", metavar="OUT.html", default=None,
                    help="also write one self-contained HTML page: the skeleton and fitted joints in 3-D, residuals, "
                         "verdicts and intervals (opens offline in a browser)")
+    s.add_argument("--export-osim", metavar="OUT.osim", default=None,
+                   help="also write the fitted skeleton as an OpenSim model (bodies, ball and pin joints at the "
+                        "fitted centres and axes, the markers), for OpenSim's inverse kinematics; needs "
+                        "identcheck[osim]")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
                         "it), both included; either end may be left out")
@@ -431,7 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 # ---------------------------------------------------------------------- checks before any work
 FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "truth"), "plan": ("figure",),
-                "fit": ("export_markers", "report"), "diagnose": ("export_markers", "report"), "skeleton": ("out", "export_markers")}
+                "fit": ("export_markers", "report", "export_osim"), "diagnose": ("export_markers", "report"), "skeleton": ("out", "export_markers")}
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
@@ -470,8 +476,16 @@ def preflight(a) -> list:
     page = getattr(a, "report", None)
     if page and not str(page).lower().endswith((".html", ".htm")):
         problems.append(f"--report {page}: give an .html file name")
+    osim = getattr(a, "export_osim", None)
+    if osim:
+        from identcheck.fit.osim import opensim_missing
+
+        if not str(osim).lower().endswith(".osim"):
+            problems.append(f"--export-osim {osim}: give an .osim file name")
+        if opensim_missing():
+            problems.append(f"--export-osim {osim}: {opensim_missing()}")
     inputs = {os.path.abspath(p) for p in (model, trial) if p}
-    for opt in ("export_markers", "report"):
+    for opt in ("export_markers", "report", "export_osim"):
         path = getattr(a, opt, None)
         if path and os.path.abspath(path) in inputs:
             problems.append(f"--{opt.replace('_', '-')} {path}: is an input file; it would be overwritten")
