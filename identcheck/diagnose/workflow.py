@@ -89,6 +89,10 @@ class Diagnosis:
         ``before`` and ``after`` live in the moved frame, so a world position from them (a joint centre,
         a predicted marker) plus ``offset`` is in the file's own coordinates. Everything in :meth:`to_dict`
         is a distance and does not depend on it.
+    first_frame : int
+        The file's number of the trial's first row (TRC ``Frame#``, the C3D header's first frame): each effect's
+        ``where`` gives its frames as row indices and, beside them, in the file's numbering (``file_frame``,
+        ``file_frames``), as the capture software shows them.
     """
 
     ctx: Context
@@ -98,6 +102,16 @@ class Diagnosis:
     test_before: dict
     test_after: dict
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    first_frame: int = 0
+
+    def _numbered(self, where: dict) -> dict:
+        """`where` with its row indices also in the file's numbering."""
+        out = dict(where)
+        if "frame" in where:
+            out["file_frame"] = self.first_frame + int(where["frame"])
+        if "frames" in where:
+            out["file_frames"] = [self.first_frame + int(f) for f in where["frames"]]
+        return out
 
     @property
     def gap_before(self) -> float:
@@ -125,9 +139,10 @@ class Diagnosis:
             "gap_before": round(self.gap_before, 4),
             "gap_after": round(self.gap_after, 4),
             "consistent_before": plain(self.test_before), "consistent_after": plain(self.test_after),
-            "effects": [{"name": s.name, "where": plain(s.where), "gap_before": round(s.gap_before, 4),
+            "effects": [{"name": s.name, "where": plain(self._numbered(s.where)), "gap_before": round(s.gap_before, 4),
                          "gap_after": round(s.gap_after, 4), "score": round(s.score, 1),
-                         "indistinguishable_from": [{"name": n, "where": plain(w)} for n, w in s.equivalents()]}
+                         "indistinguishable_from": [{"name": n, "where": plain(self._numbered(w))}
+                                                    for n, w in s.equivalents()]}
                         for s in self.steps],
             "joints": joint_report(self.ctx, self.after),
         }
@@ -251,7 +266,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
                      f"(floor {cand.floor(ctx):.3g})")
         h = cand
-    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset)
+    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)))
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them
