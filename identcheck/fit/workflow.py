@@ -251,6 +251,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     from identcheck.estimate.labels import screen
     from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
 
+    from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
@@ -282,6 +283,10 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
             f"{trial.source}: {tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations of candidate "
             "joints were not tried (a cap on count and time): a joint listed unique could have a rival among them")})
     rep["warnings"] = list({n["message"]: n for n in notes}.values())
+    rep["anatomical"] = None
+    if tree.best is not None:
+        chain = tree.best.fit.chain
+        rep["anatomical"] = anatomical_report(screened.select(chain.labels).as_array(), chain.labels, tree.best.fit)
     if export is not None:
         if tree.best is None:
             raise InputError([f"--export-markers {export}: no whole-tree fit to export ({tree.problem})"],

@@ -207,6 +207,24 @@ def effects_section(doc: dict) -> str:
     return "".join(parts)
 
 
+def anatomical_section(anatomical: dict | None) -> str:
+    """The fitted hip centres beside Harrington's regression, in the ISB pelvis frame (``fit``'s ``anatomical``)."""
+    if not anatomical or not anatomical.get("hips"):
+        return ""
+    pelvis = anatomical["pelvis"]
+    rows = [f"<h2>Hip centres against Harrington (2007)</h2><p>{_e(pelvis['frame'])}. Pelvis width "
+            f"{_num(pelvis['width_mm'])} mm, depth {_num(pelvis['depth_mm'])} mm.</p><table><tr><th>joint</th>"
+            "<th>side</th><th>functional centre (x, y, z)</th><th>Harrington 2007 (x, y, z)</th><th>distance (mm)</th>"
+            "</tr>"]
+    for name, h in anatomical["hips"].items():
+        rows.append(f"<tr><td>{_e(name)}</td><td>{_e(h['side'])}</td><td>"
+                    + ", ".join(f"{v:.1f}" for v in h["functional_centre"]) + "</td><td>"
+                    + ", ".join(f"{v:.1f}" for v in h["harrington_2007"])
+                    + f"</td><td class='num'>{h['distance_mm']:.1f}</td></tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
 def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = "") -> str:
     """The page's HTML text. `kind`: ``fit`` or ``diagnose``; `doc`: that verb's JSON document; `scene`:
     :func:`identcheck.fit.scene.fit_scene` output, or None (no 3-D view, e.g. no whole-tree fit)."""
@@ -249,6 +267,7 @@ def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = 
     if kind == "diagnose":
         parts.append("<h2>Effects</h2>" + effects_section(doc))
     parts.append("<h2>Joints</h2>" + joints_table(joints))
+    parts.append(anatomical_section(doc.get("anatomical")))
     if kind == "fit":
         parts.append("<p><small>Verdicts: <b>determined</b> — unique, every marker distance's 95 % interval within "
                      "±10 mm; <b>ambiguous</b> — other joints explain the trial as well; <b>undetermined</b> — the "
