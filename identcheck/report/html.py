@@ -86,9 +86,9 @@ def _num(x, digits: int = 3) -> str:
 
 
 def _up_axis(scene: dict) -> str:
-    """The world's vertical, guessed as the axis along which the markers spread most over the whole trial is
-    not enough (a walk spreads along the floor); the axis of the largest spread within single frames is the
-    body's length, which is vertical in a standing or walking subject."""
+    """The world's vertical, y or z (the view starts upright; the page lets the user switch): the one of the two
+    along which the markers spread most within single frames, the body's length in a standing or walking
+    subject (the spread over the whole trial would pick the direction of walking)."""
     spreads = [0.0, 0.0, 0.0]
     for frame in scene["xyz"]:
         pts = [p for p in frame if p]
