@@ -249,10 +249,9 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     import warnings as _w
 
     from identcheck.estimate.labels import screen
-    from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
-
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
+    from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
     reserved = reserved_names(model.joints)
