@@ -30,7 +30,8 @@ def fit_scene(fit, data: np.ndarray, frame_numbers, offset=(0.0, 0.0, 0.0), max_
     Returns a dict: ``frames`` (file frame numbers of the sampled rows), ``markers`` (labels),
     ``marker_segment`` (label -> segment), ``joints`` (list of ``{name, type, parent, child, points}``, the
     points being the names of its virtual markers: a centre, or a hinge's two axis points), ``xyz`` (per sampled
-    frame, per marker, [x, y, z] mm or None where occluded), ``joint_xyz`` (per sampled frame, per joint point),
+    frame, per marker, [x, y, z] mm or None where occluded), ``joint_xyz`` (per sampled frame, per joint point;
+    None in a frame where no marker was seen, since the fit there only bridges the gap),
     ``residual_rms_mm`` (label -> RMS of measured minus fitted over the frames it is seen) and ``units``."""
     chain = fit.chain
     data = np.asarray(data, dtype=float)
@@ -52,7 +53,8 @@ def fit_scene(fit, data: np.ndarray, frame_numbers, offset=(0.0, 0.0, 0.0), max_
         "joints": [{"name": j, "type": chain.types[j], "parent": chain.parent[j], "child": chain.child[j],
                     "points": list(virtual_names(j, chain.types[j]))} for j in chain.joints],
         "xyz": [coords(data[r] + shift) for r in rows],
-        "joint_xyz": [coords(np.array([points[n][r] for n in names]) + shift) for r in rows],
+        "joint_xyz": [coords(np.array([points[n][r] for n in names]) + (shift if seen[r].any() else np.nan))
+                      for r in rows],
         "joint_points": names,
         "residual_rms_mm": {m: (None if not np.isfinite(v) else round(float(v), 3)) for m, v in zip(chain.labels, rms)},
         "units": "mm",

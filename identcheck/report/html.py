@@ -44,10 +44,10 @@ var slider=document.getElementById('frame'),lab=document.getElementById('frame-l
 var yaw=0.7,pitch=0.35,k=0,up=S.up,timer=null,drag=null;
 var segs={};S.markers.forEach(function(m,i){var s=S.marker_segment[m];(segs[s]=segs[s]||[]).push(i);});
 var jp={};S.joint_points.forEach(function(n,i){jp[n]=i;});
-var all=[];S.xyz.concat(S.joint_xyz).forEach(function(f){f.forEach(function(p){if(p)all.push(p);});});
-var c=[0,0,0];all.forEach(function(p){for(var a=0;a<3;a++)c[a]+=p[a]/all.length;});
-var r=1;all.forEach(function(p){var d=Math.hypot(p[0]-c[0],p[1]-c[1],p[2]-c[2]);if(d>r)r=d;});
-function proj(p){var x=p[0]-c[0],y=p[1]-c[1],z=p[2]-c[2];
+var cen=[],r=1;S.xyz.forEach(function(f,i){var pts=f.concat(S.joint_xyz[i]).filter(function(p){return p;});
+ var c=[0,0,0];pts.forEach(function(p){for(var a=0;a<3;a++)c[a]+=p[a]/pts.length;});cen.push(c);
+ pts.forEach(function(p){var d=Math.hypot(p[0]-c[0],p[1]-c[1],p[2]-c[2]);if(d>r)r=d;});});
+function proj(p){var c=cen[k],x=p[0]-c[0],y=p[1]-c[1],z=p[2]-c[2];
  if(up==='y'){var t=y;y=-z;z=t;}
  var X=Math.cos(yaw)*x-Math.sin(yaw)*y,Y=Math.sin(yaw)*x+Math.cos(yaw)*y;
  var Z=Math.cos(pitch)*z-Math.sin(pitch)*Y;
@@ -65,7 +65,8 @@ function draw(){
   dot(pts[0],col,6);if(pts[0]){var p=proj(pts[0]);g.fillStyle='#222';g.font='12px sans-serif';g.fillText(j.name,p[0]+8,p[1]-8);}});
  lab.textContent='frame '+S.frames[k]+' ('+(k+1)+' of '+S.frames.length+' shown)';
  document.body.dataset.rendered='ok';}
-slider.max=S.frames.length-1;slider.oninput=function(){k=+slider.value;draw();};
+var most=-1;S.xyz.forEach(function(f,i){var n=f.filter(function(p){return p;}).length;if(n>most){most=n;k=i;}});
+slider.max=S.frames.length-1;slider.value=k;slider.oninput=function(){k=+slider.value;draw();};
 document.getElementById('play').onclick=function(){if(timer){clearInterval(timer);timer=null;this.textContent='play';return;}
  this.textContent='pause';timer=setInterval(function(){k=(k+1)%S.frames.length;slider.value=k;draw();},60);};
 document.getElementById('up').onchange=function(){up=this.value;draw();};
@@ -258,8 +259,9 @@ def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = 
                      "<div class='controls'><button id='play'>play</button> <input id='frame' type='range' min='0' "
                      "value='0' style='width:420px'> <span id='frame-label'></span> · up <select id='up'>"
                      "<option value='z'>z</option><option value='y'>y</option></select></div>"
-                     f"<div class='legend'>{legend}</div><small>Drag to turn. Hinge axes drawn as thick lines; "
-                     "grey lines join each joint to its segments' markers.</small></div>"
+                     f"<div class='legend'>{legend}</div><small>Drag to turn; the view follows the "
+                     "subject (centred on each frame's points). Hinge axes drawn as thick lines; grey lines join each "
+                     "joint to its segments' markers.</small></div>"
                      f"<div><h3>Residual per marker (RMS, mm)</h3>"
                      f"{residual_svg(scene['residual_rms_mm'], scene['marker_segment'], colours, sigma)}</div></div>")
         payload = json.dumps(data, allow_nan=False).replace("</", "<\\/")

@@ -124,3 +124,28 @@ def test_the_page_renders_in_a_headless_browser(leg_report, tmp_path):
     dom = out.stdout
     assert re.search(r"<body[^>]*data-rendered=\"ok\"", dom), (dom[:500], out.stderr[-2000:])
     assert "frame 50 (1 of" in dom
+
+
+def test_the_scene_draws_no_joint_in_a_frame_where_no_marker_was_seen():
+    """A frame with every marker occluded: the fit only bridges it, so the scene leaves its joints out (None);
+    the other frames keep them, in the file's numbering."""
+    import warnings
+
+    from identcheck.fit.scene import fit_scene
+    from identcheck.fit.workflow import fit_trial
+    from identcheck.io.model import Model
+    from identcheck.simulate.rigid import simulate
+
+    model = Model.from_toml(LEG)
+    sim = simulate(model, n_frames=120, noise_mm=0.5, seed=3)
+    got = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_trial(model, sim.trial, on_fit=lambda t, fit, offset: got.update(fit=fit, trial=t))
+    fit = got["fit"]
+    data = got["trial"].select(fit.chain.labels).as_array()
+    data[0] = np.nan
+    scene = fit_scene(fit, data, np.arange(120) + 10, max_frames=120)
+    assert scene["frames"][:2] == [10, 11]
+    assert all(p is None for p in scene["joint_xyz"][0]) and all(p is None for p in scene["xyz"][0])
+    assert all(p is not None for p in scene["joint_xyz"][1])
