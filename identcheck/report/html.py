@@ -196,7 +196,7 @@ def effects_section(doc: dict) -> str:
     parts.append("</table>")
     gaps = [("rigid model", doc.get("gap_before"))] + [(e["name"], e.get("gap_after")) for e in effects]
     top = max(v for _, v in gaps if v is not None) or 1.0
-    svg = [f'<svg xmlns="http://www.w3.org/2000/svg" width="560" height="{22 * len(gaps) + 16}" role="img" '
+    svg = [f'<svg xmlns="http://www.w3.org/2000/svg" width="640" height="{22 * len(gaps) + 16}" role="img" '
            'aria-label="gap after each effect">']
     for i, (name, v) in enumerate(gaps):
         w = 380 * (v or 0) / top
