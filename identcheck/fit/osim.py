@@ -39,6 +39,15 @@ def hinge_frames(axis: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.nda
     return F_p, rest.T @ F_p
 
 
+def _opensim():
+    """OpenSim's module, its log kept off the user's disk: by default it appends to ``opensim.log`` in whatever
+    folder the user runs from, which a library must not do."""
+    import opensim as osim
+
+    osim.Logger.removeFileSink()
+    return osim
+
+
 def _vec(v) -> "object":
     import opensim as osim
 
@@ -53,7 +62,7 @@ def _euler(F: np.ndarray):
 
 def build_model(fit, name: str = "identcheck"):
     """The opensim.Model of a whole-chain fit (see the module docstring)."""
-    import opensim as osim
+    osim = _opensim()
 
     chain, s = fit.chain, fit.state
     model = osim.Model()

@@ -100,3 +100,26 @@ def test_export_osim_is_refused_before_any_work(tmp_path, capsys, monkeypatch, p
     assert "--export-osim" in err and str(out) in err
     assert ("identcheck[osim]" in err) if problem == "missing" else (".osim" in err)
     assert not out.exists()
+
+
+@pytest.mark.skipif(bool(opensim_missing()), reason="OpenSim's Python package is not installed (identcheck[osim])")
+def test_the_export_leaves_no_opensim_log_where_it_runs(tmp_path, monkeypatch):
+    """OpenSim appends to opensim.log in the working folder by default; the export turns that off, so neither
+    writing the model nor loading it back leaves a file beside the user's data."""
+    import opensim as osim
+
+    from identcheck.fit.osim import export_osim
+    from identcheck.fit.workflow import fit_trial
+    from identcheck.io.model import Model
+    from identcheck.simulate.rigid import simulate
+
+    monkeypatch.chdir(tmp_path)
+    model = Model.from_toml(ROOT / "examples" / "leg.toml")
+    got = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit_trial(model, simulate(model, n_frames=100, noise_mm=0.5, seed=1).trial,
+                  on_fit=lambda t, fit, offset: got.update(fit=fit))
+    export_osim(tmp_path / "leg.osim", got["fit"])
+    osim.Model(str(tmp_path / "leg.osim"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.osim"]
