@@ -29,6 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from identcheck import cli  # noqa: E402
 from identcheck.report.figure_io import figure, save  # noqa: E402
+from identcheck.fit import anatomy  # noqa: E402
 from identcheck.fit.workflow import fit_model  # noqa: E402
 from identcheck.estimate.obrien import as_poses  # noqa: E402
 from identcheck.estimate.score_sara import sara, score  # noqa: E402
@@ -112,21 +113,9 @@ def run_api(model: Model, trial: Trial) -> dict:
 
 # ------------------------------------------------------------------ geometry
 def pelvis_frame(trial: Trial, which: str):
-    """ISB pelvis frame per frame: origin mid-ASIS, x anterior, y superior, z right. (R (F,3,3), o (F,3), PW, PD)."""
+    """ISB pelvis frame per frame (:func:`identcheck.fit.anatomy.pelvis_frame`): (R (F,3,3), o (F,3), PW, PD)."""
     r, l, post = PELVIS[which]
-    ra, la = trial.marker(r), trial.marker(l)
-    pm = np.mean([trial.marker(p) for p in post], axis=0)
-    o = (ra + la) / 2
-    z = ra - la
-    z /= np.linalg.norm(z, axis=1, keepdims=True)
-    xt = o - pm
-    y = np.cross(z, xt)
-    y /= np.linalg.norm(y, axis=1, keepdims=True)
-    x = np.cross(y, z)
-    R = np.stack([x, y, z], axis=2)          # columns: world = o + R @ local
-    pw = float(np.nanmedian(np.linalg.norm(ra - la, axis=1)))
-    pd = float(np.nanmedian(np.linalg.norm(o - pm, axis=1)))
-    return R, o, pw, pd
+    return anatomy.pelvis_frame(trial.marker(r), trial.marker(l), np.mean([trial.marker(p) for p in post], axis=0))
 
 
 def to_frame(R, o, pts):
@@ -134,8 +123,8 @@ def to_frame(R, o, pts):
 
 
 def harrington(pw: float, pd: float, side: str = "r") -> np.ndarray:
-    """Harrington et al. (2007) hip centre in the ISB pelvis frame (mm)."""
-    return np.array([-0.24 * pd - 9.9, -0.30 * pw - 10.9, (1 if side == "r" else -1) * (0.33 * pw + 7.3)])
+    """Harrington et al. (2007) hip centre in the ISB pelvis frame (mm): :func:`identcheck.fit.anatomy.harrington`."""
+    return anatomy.harrington(pw, pd, right=side == "r")
 
 
 def line_point_distance(point, direction, q):
