@@ -100,33 +100,37 @@ def _up_axis(scene: dict) -> str:
     return "y" if spreads[1] > spreads[2] else "z"
 
 
-def residual_svg(residual: dict, segment_of: dict, colours: dict, noise_mm: float | None) -> str:
-    """Horizontal bars of each marker's RMS residual (mm), coloured by segment, with the level noise alone
-    would leave (σ√3 for a 3-D distance) as a dashed line."""
-    items = [(m, v) for m, v in residual.items() if v is not None]
-    if not items:
-        return "<p>No residuals.</p>"
-    floor = noise_mm * math.sqrt(3) if noise_mm else None
-    top = max([v for _, v in items] + ([floor * 1.5] if floor else [])) or 1.0
-    bar_h, left, width = 18, 120, 420
-    h = bar_h * len(items) + 40
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 80}" height="{h}" role="img" '
-           f'aria-label="RMS residual per marker">']
-    for i, (m, v) in enumerate(items):
-        y = 10 + i * bar_h
-        w = width * v / top
-        out.append(f'<text x="{left - 6}" y="{y + 12}" text-anchor="end" font-size="12">{_e(m)}</text>'
-                   f'<rect x="{left}" y="{y + 2}" width="{w:.1f}" height="{bar_h - 5}" '
-                   f'fill="{colours.get(segment_of.get(m), "#888")}"><title>{_e(m)} ({_e(segment_of.get(m))}): '
-                   f'{v:.3g} mm</title></rect>'
-                   f'<text x="{left + w + 4:.1f}" y="{y + 12}" font-size="11">{v:.3g}</text>')
-    if floor:
-        x = left + width * floor / top
-        out.append(f'<line x1="{x:.1f}" x2="{x:.1f}" y1="6" y2="{h - 24}" stroke="#d73027" stroke-dasharray="4,3"/>'
-                   f'<text x="{x:.1f}" y="{h - 8}" font-size="11" text-anchor="middle" fill="#d73027">'
-                   f'noise alone ≈ {floor:.2g} mm</text>')
+def bars_svg(rows: list, label: str, line: tuple | None = None) -> str:
+    """Horizontal bars, one per ``(name, value, colour, tooltip)`` row (values in mm, drawn to the largest), each
+    with its value; `line` = ``(value, text)`` adds a dashed reference line with its caption."""
+    if not rows:
+        return "<p>Nothing to draw.</p>"
+    top = max([v for _, v, _, _ in rows] + ([1.5 * line[0]] if line else [])) or 1.0
+    bar_h, left, width = 20, 150, 400
+    h = bar_h * len(rows) + (40 if line else 16)
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 90}" height="{h}" role="img" '
+           f'aria-label="{_e(label)}">']
+    for i, (name, v, colour, tip) in enumerate(rows):
+        y, w = 6 + i * bar_h, width * v / top
+        out.append(f'<text x="{left - 6}" y="{y + 12}" text-anchor="end" font-size="12">{_e(name)}</text>'
+                   f'<rect x="{left}" y="{y + 1}" width="{w:.1f}" height="{bar_h - 5}" fill="{colour}">'
+                   f'<title>{_e(tip)}</title></rect>'
+                   f'<text x="{left + w + 4:.1f}" y="{y + 12}" font-size="11">{v:.3g} mm</text>')
+    if line:
+        x = left + width * line[0] / top
+        out.append(f'<line x1="{x:.1f}" x2="{x:.1f}" y1="4" y2="{h - 24}" stroke="#d73027" stroke-dasharray="4,3"/>'
+                   f'<text x="{x:.1f}" y="{h - 8}" font-size="11" text-anchor="middle" fill="#d73027">{_e(line[1])}</text>')
     out.append("</svg>")
     return "".join(out)
+
+
+def residual_svg(residual: dict, segment_of: dict, colours: dict, noise_mm: float | None) -> str:
+    """Each marker's RMS residual (mm), coloured by segment, against the level noise alone would leave (σ√3 for a
+    3-D distance)."""
+    rows = [(m, v, colours.get(segment_of.get(m), "#888"), f"{m} ({segment_of.get(m)}): {v:.3g} mm")
+            for m, v in residual.items() if v is not None]
+    floor = noise_mm * math.sqrt(3) if noise_mm else None
+    return bars_svg(rows, "RMS residual per marker", (floor, f"noise alone ≈ {floor:.2g} mm") if floor else None)
 
 
 def _interval(ci) -> str:
@@ -195,16 +199,8 @@ def effects_section(doc: dict) -> str:
                      f"{_num(e.get('gap_before'))}</td><td class='num'>{_num(e.get('gap_after'))}</td></tr>")
     parts.append("</table>")
     gaps = [("rigid model", doc.get("gap_before"))] + [(e["name"], e.get("gap_after")) for e in effects]
-    top = max(v for _, v in gaps if v is not None) or 1.0
-    svg = [f'<svg xmlns="http://www.w3.org/2000/svg" width="640" height="{22 * len(gaps) + 16}" role="img" '
-           'aria-label="gap after each effect">']
-    for i, (name, v) in enumerate(gaps):
-        w = 380 * (v or 0) / top
-        svg.append(f'<text x="150" y="{16 + 22 * i}" text-anchor="end" font-size="12">{_e(name)}</text>'
-                   f'<rect x="156" y="{4 + 22 * i}" width="{w:.1f}" height="16" fill="#4575b4"/>'
-                   f'<text x="{160 + w:.1f}" y="{16 + 22 * i}" font-size="11">{_num(v)} mm</text>')
-    svg.append("</svg>")
-    parts.append("".join(svg))
+    parts.append(bars_svg([(name, v, "#4575b4", f"gap after {name}: {v:.3g} mm") for name, v in gaps if v is not None],
+                          "gap after each effect", (doc["noise_floor"], "noise floor") if doc.get("noise_floor") else None))
     return "".join(parts)
 
 
