@@ -63,8 +63,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
 from identcheck.skeleton import Skeleton  # noqa: E402
-from identcheck.bundle.chain import (REL_TOL, State, Terms, tangents, fit_chain, forward,  # noqa: E402
-                                       initial_state)
+from identcheck.bundle.chain import REL_TOL, fit_chain, initial_state  # noqa: E402
+from identcheck.bundle.model import State, Terms, forward, tangents  # noqa: E402
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
 from identcheck.effects.registry import NAMES as EFFECTS, inject_effect  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
@@ -207,17 +207,17 @@ def diagnose_row(frames: int, effect: str | None, repeats: int, repeat_limit: fl
 # ---------------------------------------------------------------------- profile of one row
 STAGES = {  # stage -> (file suffix, function names); cumulative times, summed
     "start: noise floor + rigid fit": ("diagnose/workflow.py", ("start",)),
-    "  noise floor": ("diagnose/noise.py", ("noise_floor",)),
-    "consistency test": ("diagnose/hypothesis.py", ("consistency",)),
-    "propose (all effects)": ("diagnose/effects/", ("propose",)),
-    "apply = refit (all effects)": ("diagnose/effects/", ("apply",)),
+    "  noise floor": ("estimate/noise.py", ("noise_floor",)),
+    "consistency test": ("bundle/hypothesis.py", ("consistency",)),
+    "propose (all effects)": ("effects/", ("propose",)),
+    "apply = refit (all effects)": ("effects/", ("apply",)),
     "identifiability check (undetermined)": ("diagnose/workflow.py", ("undetermined",)),
-    "polish adopted": ("diagnose/hypothesis.py", ("polish",)),
+    "polish adopted": ("bundle/hypothesis.py", ("polish",)),
     "standard-error guard (worst_sd)": ("diagnose/workflow.py", ("worst_sd",)),
-    "evidence for figures": ("diagnose/effects/", ("evidence",)),
-    "fit_chain (all calls)": ("diagnose/chain.py", ("fit_chain",)),
-    "  _normal (normal equations)": ("diagnose/chain.py", ("_normal",)),
-    "  _jacobians": ("diagnose/chain.py", ("_jacobians",)),
+    "evidence for figures": ("effects/", ("evidence",)),
+    "fit_chain (all calls)": ("bundle/chain.py", ("fit_chain",)),
+    "  _normal (normal equations)": ("bundle/chain.py", ("_normal",)),
+    "  _jacobians": ("bundle/jacobian.py", ("jacobian_blocks",)),
 }
 
 

@@ -8,6 +8,8 @@ expected: the message asks for a report). Progress and warnings go to stderr, re
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import logging
 import math
 import os
@@ -576,8 +578,24 @@ def _unwritable_dir(path) -> str:
     return "" if os.access(parent, os.W_OK) else f"cannot create it under {parent} (not writable)"
 
 
+def keep_freed_memory() -> None:
+    """Ask the C library's allocator to keep freed memory for reuse: arrays under 32 MiB come from the heap, and
+    the heap is not handed back to the system below 1 GiB. By default glibc maps fresh pages for every large
+    temporary and unmaps them when it is freed, and the whole-chain fit allocates and drops a few MB per
+    iteration: first-touch page faults measured about a third of the time of its normal equations (both legs of
+    walking2, 1500 frames: 72 ms → 48 ms). A process-wide setting, so the command line makes it, not the
+    library; nothing happens on a C library without ``mallopt``."""
+    try:
+        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(-3, 32 << 20)                # M_MMAP_THRESHOLD
+    mallopt(-1, 1 << 30)                 # M_TRIM_THRESHOLD
+
+
 def main(argv=None) -> int:
     """Run the CLI in-process; returns the exit code (tests call this)."""
+    keep_freed_memory()
     parser = build_parser()
     try:
         a = parser.parse_args(argv)

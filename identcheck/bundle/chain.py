@@ -1,322 +1,29 @@
 """The whole rigid-joint model fitted to a trial at once: the simulation that ``diagnose`` compares
-with the measured markers.
+with the measured markers, and the maximum-likelihood fit ``fit`` reports.
 
-Every segment is rigid and every joint holds: the root has a free pose per frame, a spherical joint
-a free relative rotation per frame, a revolute joint a hinge angle per frame; the constants are the
-markers' positions on their segments, each joint's centre in both adjacent segments and each hinge's
-direction. Markers are predicted by forward kinematics and the sum of squared 3-D marker errors is
-minimised over everything together by Levenberg-Marquardt, with the per-frame unknowns eliminated by
-the Schur complement (bundle adjustment), so a 1500-frame trial costs a few small dense solves.
-
-Effects add to this model through :class:`Terms`: marker offsets on their segment and joint-centre
-offsets in the parent, each a fixed basis of per-frame functions times fitted 3-vectors (soft tissue,
-a slipped marker, a translating joint), and a hinge's second rotation about a fixed axis perpendicular
-to it, its angle a fixed basis times fitted coefficients (a knee's varus/valgus or axial play). Effects of the recording (swapped labels, a delay, a distorted
-volume, gross errors) change the data or the weights instead.
-
-Rotation updates are applied on the left in the world frame, so the Jacobian of every marker with
-respect to a rotation ω about a point c is ``ω × (x − c)``: about the root origin, or about the
-joint's centre for every marker downstream of the joint.
+The model (:mod:`identcheck.bundle.model`) predicts every marker by forward kinematics; the sum of squared
+3-D marker errors is minimised over every per-frame unknown and every constant together by
+Levenberg-Marquardt, with the per-frame unknowns eliminated by the Schur complement (bundle adjustment) and
+the normal equations built block by block (:mod:`identcheck.bundle.normal`), so a 1500-frame trial costs a
+few small dense solves.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from identcheck.bundle.jacobian import jacobian_blocks
+from identcheck.bundle.model import Fit, State, Terms, _rot, apply_step, forward, n_const, tangents
+from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 from identcheck.errors import InputError
-from identcheck.geometry.kinematics import chain_poses
-from identcheck.geometry.rotations import hinge_matrix, rotvec_matrix
-from identcheck.skeleton import Skeleton
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
+from identcheck.skeleton import Skeleton
 
 MAX_ITER = 60
 REL_TOL = 1e-8        # stop when the cost falls by less than this fraction
-
-
-@dataclass
-class Terms:
-    """Linear effect terms: a per-frame basis times fitted 3-vectors.
-
-    ``markers``: list of (column or columns of one segment, basis (F, K)): the marker's (or each of the
-    markers') position on its segment moves by ``basis @ B`` (B (K, 3), segment frame, shared). ``centres``: list of (joint, basis (F, K)): the joint's
-    centre in the parent moves by ``basis @ D``. ``rotations``: list of (hinge, basis (F, K), β₀): the
-    hinge's relative rotation becomes ``Rot(a, θ) Exp(ψ u) rest`` with ψ = ``basis @ p[:K]`` (p (K + 1, 1))
-    and u the unit vector at angle β = β₀ + p[K] in the plane perpendicular to the hinge axis a
-    (:func:`tangents`): a second rotation about a fitted axis that turns with the child. ``world``: list of (columns (m,), field (F, m, 3)):
-    those markers' predictions move by a scalar times the field (a delay's velocity, a distortion's
-    basis field), in the world. Parameters are kept in that order: markers, centres, rotations, world.
-    """
-
-    markers: list = field(default_factory=list)
-    centres: list = field(default_factory=list)
-    world: list = field(default_factory=list)
-    rotations: list = field(default_factory=list)
-
-    def size(self) -> int:
-        return 3 * sum(b.shape[1] for _, b in self.markers + self.centres) \
-            + sum(b.shape[1] + 1 for _, b, _ in self.rotations) + len(self.world)
-
-    def shapes(self) -> list:
-        """Shape of each term's parameters, in ``State.term_params`` order."""
-        return [(b.shape[1], 3) for _, b in self.markers + self.centres] \
-            + [(b.shape[1] + 1, 1) for _, b, _ in self.rotations] + [(1,)] * len(self.world)
-
-    def ordered(self) -> list:
-        """Every term in ``State.term_params`` order."""
-        return self.markers + self.centres + self.rotations + self.world
-
-    def __add__(self, other: "Terms") -> "Terms":
-        return Terms(self.markers + other.markers, self.centres + other.centres, self.world + other.world,
-                     self.rotations + other.rotations)
-
-
-@dataclass
-class State:
-    """Constants and per-frame motion of a fitted chain (world-from-segment convention)."""
-
-    local: np.ndarray            # (M, 3) each marker on its segment
-    c_parent: dict               # joint -> (3,)
-    c_child: dict                # joint -> (3,)
-    axis: dict                   # revolute joint -> (3,) unit, parent frame
-    rest: dict                   # revolute joint -> (3, 3): R_rel = Rot(axis, θ) @ rest
-    root_R: np.ndarray           # (F, 3, 3)
-    root_t: np.ndarray           # (F, 3)
-    rel_R: dict                  # spherical joint -> (F, 3, 3) child-from-parent relative rotation
-    theta: dict                  # revolute joint -> (F,) radians
-    term_params: list = field(default_factory=list)   # one (K, 3) per term, markers then centres
-
-    def copy(self) -> "State":
-        cp = lambda d: {k: np.array(v) for k, v in d.items()}  # noqa: E731
-        return State(self.local.copy(), cp(self.c_parent), cp(self.c_child), cp(self.axis), cp(self.rest),
-                     self.root_R.copy(), self.root_t.copy(), cp(self.rel_R), cp(self.theta),
-                     [p.copy() for p in self.term_params])
-
-
-@dataclass
-class Fit:
-    """A fitted chain: the state, its predictions and the cost."""
-
-    chain: Skeleton
-    terms: Terms
-    state: State
-    pred: np.ndarray             # (F, M, 3)
-    rss: float                   # Σ w |x̂ − y|², mm²
-    n_samples: int               # visible (weight > 0) marker samples
-    n_params: int                # free parameters net of the gauge
-    iterations: int
-    converged: bool
-    seg_R: dict = field(default_factory=dict)
-    seg_t: dict = field(default_factory=dict)
-
-    @property
-    def gap(self) -> float:
-        """RMS 3-D distance between measured and predicted markers, mm (the contract's gap)."""
-        return float(np.sqrt(self.rss / max(self.n_samples, 1)))
-
-
-# ---------------------------------------------------------------------- kinematics
-def _rot(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    return hinge_matrix(axis, theta)
-
-
-def _exp(w: np.ndarray) -> np.ndarray:
-    return rotvec_matrix(w)
-
-
-def second_axis(axis: np.ndarray, beta: float) -> np.ndarray:
-    """The unit vector at angle β in the plane perpendicular to `axis` (from :func:`tangents`)."""
-    b1, b2 = tangents(axis)
-    return np.cos(beta) * b1 + np.sin(beta) * b2
-
-
-def _hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
-    """Each revolute joint's ``Rot(a, θ) Exp(ψ u)`` (F, 3, 3), the second rotations of ``terms.rotations``
-    included: the relative rotation is this times the rest rotation."""
-    n0 = len(terms.markers) + len(terms.centres)
-    extra = {}
-    for (j, basis, beta), p in zip(terms.rotations, s.term_params[n0:n0 + len(terms.rotations)]):
-        extra[j] = extra.get(j, 0.0) + (basis @ p[:-1])[:, 0, None] * second_axis(s.axis[j], beta + p[-1, 0])
-    return {j: _rot(s.axis[j], s.theta[j]) @ _exp(extra[j]) if j in extra else _rot(s.axis[j], s.theta[j])
-            for j in chain.joints if chain.types[j] == "revolute"}
-
-
-def forward(chain: Skeleton, terms: Terms, s: State):
-    """Segment rotations/translations and predicted markers (F, M, 3) of state `s`."""
-    F = s.root_R.shape[0]
-    coffs = {}
-    for (j, basis), D in zip(terms.centres, s.term_params[len(terms.markers):]):
-        coffs[j] = coffs.get(j, 0.0) + basis @ D
-    turns = _hinge_turns(chain, terms, s)
-    rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else turns[j] @ s.rest[j] for j in chain.joints}
-    cp = {j: s.c_parent[j] + coffs[j] if j in coffs else s.c_parent[j] for j in chain.joints}
-    R, t, centre = chain_poses([(j, chain.parent[j], chain.child[j]) for j in chain.joints], chain.root,
-                               s.root_R, s.root_t, rel, cp, s.c_child)
-    local = np.broadcast_to(s.local, (F,) + s.local.shape).copy()
-    for (col, basis), B in zip(terms.markers, s.term_params[:len(terms.markers)]):
-        local[:, np.atleast_1d(col)] += (basis @ B)[:, None]
-    pred = np.empty((F, chain.n_markers, 3))
-    for seg in chain.segments:
-        idx = chain.seg_markers[seg]
-        pred[:, idx] = np.einsum("fij,fkj->fki", R[seg], local[:, idx]) + t[seg][:, None]
-    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
-    for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
-        pred[:, cols] += p[0] * fld
-    return R, t, centre, pred
-
-
-def tangents(a: np.ndarray):
-    b1 = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
-    b1 /= np.linalg.norm(b1)
-    return b1, np.cross(a, b1)
-
-
-def _turn_rate(chain: Skeleton, terms: Terms, s: State, joint: str, move, h: float = 1e-6):
-    """The rotation vector (parent frame, (F, 3)) of ``d(turn)/dε · turnᵀ`` of the joint's
-    :func:`_hinge_turns` when ``move(state, ε)`` changes the state (central differences): where a second
-    rotation's axis moves with the hinge axis or its own angle β, no closed form is worth its length."""
-    def turn(eps):
-        st = s.copy()
-        move(st, eps)
-        return _hinge_turns(chain, terms, st)[joint]
-    dT = (turn(h) - turn(-h)) / (2 * h)
-    W = dT @ np.swapaxes(turn(0.0), 1, 2)
-    return 0.5 * np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], axis=1)
-
-
-def _tilt_axis(joint: str, direction: np.ndarray):
-    """``move`` for :func:`_turn_rate`: the hinge axis tilted by ε towards `direction`, as :func:`_apply` does."""
-    def move(st, eps):
-        a = st.axis[joint] + eps * direction
-        st.axis[joint] = a / np.linalg.norm(a)
-    return move
-
-
-def _turn_beta(index: int):
-    """``move`` for :func:`_turn_rate`: term parameter `index`'s β (its last row) moved by ε."""
-    def move(st, eps):
-        st.term_params[index] = st.term_params[index].copy()
-        st.term_params[index][-1, 0] += eps
-    return move
-
-
-def _jacobians(chain: Skeleton, terms: Terms, s: State, R, t, centre, pred):
-    """Per-frame Jacobian (F, M, 3, k) and constants' Jacobian (F, M, 3, P) of the predictions."""
-    F, M = pred.shape[:2]
-    k = chain.frame_dof()
-    J = np.zeros((F, M, 3, k))
-    eye = np.eye(3)
-    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
-    if terms.world:                                   # lever arms are the rigid bodies' points, not the fields'
-        pred = pred.copy()
-        for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
-            pred[:, cols] -= p[0] * fld
-    d = pred - s.root_t[:, None]
-    for a in range(3):
-        J[..., a] = np.cross(eye[a], d)
-    J[..., 3:6] = eye
-    col = 6
-    n_const = 3 * M + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints) + terms.size()
-    G = np.zeros((F, M, 3, n_const))
-    turns = _hinge_turns(chain, terms, s) if terms.rotations else {}
-    for seg in chain.segments:
-        for i in chain.seg_markers[seg]:
-            G[:, i, :, 3 * i:3 * i + 3] = R[seg]
-    c = 3 * M
-    for j in chain.joints:
-        P, C, idx = chain.parent[j], chain.child[j], chain.downstream[j]
-        dx = pred[:, idx] - centre[j][:, None]
-        if chain.types[j] == "spherical":
-            for a in range(3):
-                J[..., col + a][:, idx] = np.cross(eye[a], dx)
-            col += 3
-        else:
-            aw = R[P] @ s.axis[j]
-            J[..., col][:, idx] = np.cross(aw[:, None], dx)
-            col += 1
-        G[:, idx, :, c:c + 3] = R[P][:, None]
-        G[:, idx, :, c + 3:c + 6] = -R[C][:, None]
-        c += 6
-        if chain.types[j] == "revolute":
-            th = s.theta[j]
-            rot = turns.get(j, None)
-            rot = _rot(s.axis[j], th) if rot is None else rot
-            for a in range(3):                              # rest rotation, pre-multiplied by Rot(a, θ) Exp(ψu)
-                w = np.einsum("fij,fj->fi", R[P], rot[:, :, a])
-                G[..., c + a][:, idx] = np.cross(w[:, None], dx)
-            ax = s.axis[j]
-            for a, b in enumerate(tangents(ax)):           # axis direction, tangent plane
-                if any(r[0] == j for r in terms.rotations):
-                    wp = _turn_rate(chain, terms, s, j, _tilt_axis(j, b))  # the second axis moves with it
-                else:
-                    wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * np.cross(ax, b)
-                w = np.einsum("fij,fj->fi", R[P], wp)
-                G[..., c + 3 + a][:, idx] = np.cross(w[:, None], dx)
-            c += 5
-    for (i, basis) in terms.markers:
-        cols = np.atleast_1d(i)
-        seg = chain.marker_seg[int(cols[0])]
-        for kk in range(basis.shape[1]):
-            G[:, cols, :, c:c + 3] = (R[seg] * basis[:, kk, None, None])[:, None]
-            c += 3
-    for (j, basis) in terms.centres:
-        idx = chain.downstream[j]
-        for kk in range(basis.shape[1]):
-            G[:, idx, :, c:c + 3] = (R[chain.parent[j]] * basis[:, kk, None, None])[:, None]
-            c += 3
-    n_mc = len(terms.markers) + len(terms.centres)
-    for r, (j, basis, beta) in enumerate(terms.rotations):  # d/dψ: about R_P Rot(a, θ) u, through the centre
-        idx = chain.downstream[j]
-        dx = pred[:, idx] - centre[j][:, None]
-        u = second_axis(s.axis[j], beta + s.term_params[n_mc + r][-1, 0])
-        w = np.einsum("fij,fjk,k->fi", R[chain.parent[j]], _rot(s.axis[j], s.theta[j]), u)
-        turn = np.cross(w[:, None], dx)
-        for kk in range(basis.shape[1]):
-            G[..., c][:, idx] = turn * basis[:, kk, None, None]
-            c += 1
-        w = np.einsum("fij,fj->fi", R[chain.parent[j]], _turn_rate(chain, terms, s, j, _turn_beta(n_mc + r)))
-        G[..., c][:, idx] = np.cross(w[:, None], dx)
-        c += 1
-    for (cols, fld) in terms.world:
-        G[..., c][:, cols] = fld
-        c += 1
-    return J, G
-
-
-def _apply(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: np.ndarray) -> State:
-    """The state moved by per-frame steps dq (F, k) and constant steps dc (P,)."""
-    n = s.copy()
-    n.root_R = _exp(dq[:, :3]) @ s.root_R
-    n.root_t = s.root_t + dq[:, 3:6]
-    col = 6
-    M = chain.n_markers
-    n.local = s.local + dc[:3 * M].reshape(M, 3)
-    c = 3 * M
-    for j in chain.joints:
-        P = chain.parent[j]
-        if chain.types[j] == "spherical":
-            wp = np.einsum("fji,fj->fi", R[P], dq[:, col:col + 3])
-            n.rel_R[j] = _exp(wp) @ s.rel_R[j]
-            col += 3
-        else:
-            n.theta[j] = s.theta[j] + dq[:, col]
-            col += 1
-        n.c_parent[j] = s.c_parent[j] + dc[c:c + 3]
-        n.c_child[j] = s.c_child[j] + dc[c + 3:c + 6]
-        c += 6
-        if chain.types[j] == "revolute":
-            n.rest[j] = _exp(dc[c:c + 3])[0] @ s.rest[j]
-            b1, b2 = tangents(s.axis[j])
-            a = s.axis[j] + dc[c + 3] * b1 + dc[c + 4] * b2
-            n.axis[j] = a / np.linalg.norm(a)
-            c += 5
-    for i, p in enumerate(s.term_params):
-        size = p.size
-        n.term_params[i] = p + dc[c:c + size].reshape(p.shape)
-        c += size
-    return n
 
 
 def _cost(pred, data, w) -> float:
@@ -343,7 +50,7 @@ def _extend(chain: Skeleton, terms: Terms, s: State, R, dq, dc, y, w, pen, taken
     (state, R, t, centre, pred, cost); the best of it and its extensions is returned."""
     best, alpha = taken, 1.0
     while alpha < 2.0 ** 13:
-        far = _apply(chain, terms, s, R, 2 * alpha * dq, 2 * alpha * dc)
+        far = apply_step(chain, terms, s, R, 2 * alpha * dq, 2 * alpha * dc)
         R2, t2, c2, p2 = forward(chain, terms, far)
         cost = _cost(p2, y, w) + pen(far)
         if not cost < best[-1]:
@@ -395,17 +102,12 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         improved = False
         for _ in range(12):
             Ad = A + lam * (A * np.eye(k)) + 1e-9 * scaleA[..., None] * np.eye(k)
-            sol = np.linalg.inv(Ad) @ np.concatenate([B, g[..., None]], axis=2)  # batched k×k: inv + matmul
-                                                                                   # beats solve 3x here
-            Ainv_B, Ainv_g = sol[..., :-1], sol[..., -1]
             Cd = C + lam * np.diag(np.diag(C)) + 1e-9 * (np.trace(C) / max(len(C), 1)) * np.eye(len(C))
-            B2 = B.reshape(-1, B.shape[-1])
-            S = Cd - B2.T @ Ainv_B.reshape(B2.shape)
-            rhs = -h + B2.T @ Ainv_g.reshape(-1)
-            dc = np.linalg.lstsq(S, rhs, rcond=None)[0]
-            dq = -(Ainv_g + Ainv_B @ dc)
+            S, reduced, back = eliminate_frames(Ad, B, Cd, g, h)
+            dc = np.linalg.lstsq(S, -reduced, rcond=None)[0]
+            dq = -back(dc)
             dq[~frame_has] = 0.0
-            trial = _apply(chain, terms, s, R, dq, dc)
+            trial = apply_step(chain, terms, s, R, dq, dc)
             R2, t2, c2, p2 = forward(chain, terms, trial)
             new = _cost(p2, y, w) + pen(trial)
             if new <= cost:
@@ -422,38 +124,16 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             converged = True
             break
     n_samples = int((w > 0).sum())
-    n_params = int(frame_has.sum()) * chain.frame_dof() + _n_const(chain, terms) - chain.gauge()
+    n_params = int(frame_has.sum()) * chain.frame_dof() + n_const(chain, terms) - chain.gauge()
     rss = _cost(pred, y, w) if penalty else cost
     return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
-
-
-def normal_products(J: np.ndarray, G: np.ndarray, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
-    """Weighted Gauss-Newton products from the Jacobians J (F,M,3,k), G (F,M,3,P) and residuals r (F,M,3):
-    A = JᵀJ per frame (F,k,k), B = JᵀG per frame (F,k,P), C = Σ_f G_fᵀG_f (P,P), g = Jᵀr per frame (F,k),
-    and h = Σ_f G_fᵀr_f (P,), or per frame (F,P) when `per_frame` (the scores' first term).
-
-    Dense on purpose: taken segment by segment over each one's own constant columns (a marker touches 12-26
-    of walking2's 82) the products measured 10 % slower at these sizes, the gathers costing more than the
-    skipped zeros; building G (:func:`_jacobians`) costs several times the products either way."""
-    F, k, P = J.shape[0], J.shape[-1], G.shape[-1]
-    if np.all(w == 1.0):                 # every sample seen at unit weight (most trials): no weighted copies
-        Jw, Gw, rw = J.reshape(F, -1, k), G.reshape(F, -1, P), r.reshape(F, -1)
-    else:
-        sw = np.sqrt(w)[..., None]
-        Jw = (J * sw[..., None]).reshape(F, -1, k)
-        Gw = (G * sw[..., None]).reshape(F, -1, P)
-        rw = (r * sw).reshape(F, -1)
-    Jt = Jw.transpose(0, 2, 1)
-    G2 = Gw.reshape(-1, P)
-    h = np.einsum("fmp,fm->fp", Gw, rw) if per_frame else G2.T @ rw.reshape(-1)
-    return Jt @ Jw, Jt @ Gw, G2.T @ G2, (Jt @ rw[..., None])[..., 0], h
 
 
 def _normal(chain, terms, s, R, t, centre, pred, y, w):
     """Gauss-Newton normal-equation blocks: per-frame A (F,k,k), coupling B (F,k,P), constants C (P,P),
     gradients g (F,k) and h (P,)."""
-    J, G = _jacobians(chain, terms, s, R, t, centre, pred)
-    return normal_products(J, G, np.where(w[..., None] > 0, pred - y, 0.0), w)
+    lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
+    return normal_equations(lay, blocks, np.where(w[..., None] > 0, pred - y, 0.0), w)
 
 
 def information(fit: "Fit", data, weights=None) -> np.ndarray:
@@ -463,19 +143,9 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
     y, w = _prepare(data, weights)
     s = fit.state
     R, t, centre, pred = forward(fit.chain, fit.terms, s)
-    A, B, C, _, _ = _normal(fit.chain, fit.terms, s, R, t, centre, pred, y, w)
-    k = A.shape[1]
-    scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k
-    ridge = 1e-12 * np.maximum(scale, np.median(scale) + 1e-300)      # frames without markers stay finite
-    Ainv_B = np.linalg.solve(A + ridge * np.eye(k), B)
-    B2 = B.reshape(-1, B.shape[-1])
-    S = C - B2.T @ Ainv_B.reshape(B2.shape)
-    return 0.5 * (S + S.T)
+    A, B, C, g, h = _normal(fit.chain, fit.terms, s, R, t, centre, pred, y, w)
+    return eliminate_frames(ridged(A), B, C, g, h)[0]
 
-
-def _n_const(chain: Skeleton, terms: Terms) -> int:
-    return 3 * chain.n_markers + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints) \
-        + terms.size()
 
 
 # ---------------------------------------------------------------------- starting point

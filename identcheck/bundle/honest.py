@@ -56,8 +56,12 @@ def with_model_error(m: Minimum, model_error: dict) -> Minimum:
 
 
 PROFILE_BUDGET_S = 60.0
-"""Seconds of profile-likelihood refits per trial at most; distances left over get an unbounded interval
-(said so in ``interval_method``), never a quadratic one known to be untrustworthy."""
+"""Seconds of profile-likelihood refits per trial at most; distances left over get no bound, ``[0, None]``
+with the method ``not_profiled`` (not ``unbounded``: nothing was learnt about them), never a quadratic
+interval known to be untrustworthy."""
+NO_BOUND = ("unbounded", "not_profiled")
+"""Interval methods that claim no bound: the likelihood does not bound the distance, or its profile was not
+computed within :data:`PROFILE_BUDGET_S`."""
 
 
 def posed_by_itself(chain: Skeleton, segment: str) -> bool:
@@ -128,7 +132,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         out[j] = {}
         for m, (d, se) in dist.items():
             if time.monotonic() - start > PROFILE_BUDGET_S:
-                out[j][m] = ([0.0, None], "unbounded")
+                out[j][m] = ([0.0, None], "not_profiled")
                 continue
             if progress:
                 progress(f"profile likelihood of {m}'s distance to {j}")
@@ -184,12 +188,18 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     chain = best.fit.chain
     dist = best.distances[j]
     practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alternatives))
+    skipped = [k for k, (_, how) in best.intervals.get(j, {}).items() if how == "not_profiled"]
     if any(how == "unbounded" for _, how in best.intervals.get(j, {}).values()):
         practical = dict(practical, verdict="undetermined", reason=(
             f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
             "markers do not pose (a roll in every frame seen only through the joints below), with wide "
             "intervals or markers moving with the angles, or markers move with the angles in this trial and "
             "a segment beside it has too few markers (under three) to show its own skin motion"))
+    elif skipped:
+        practical = dict(practical, verdict="undetermined", reason=(
+            f"the quadratic intervals of {j} are too wide or too curved to trust, and the profile likelihood of "
+            f"{', '.join(skipped)} was not computed within the {PROFILE_BUDGET_S:g} s budget: no bound is claimed "
+            "for them (fit fewer frames, or one joint at a time, to have them profiled)"))
     if j in best.model_error:
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         if practical["verdict"] != "determined":

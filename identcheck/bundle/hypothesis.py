@@ -13,7 +13,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.skeleton import Skeleton
-from identcheck.bundle.chain import Fit, State, Terms, fit_chain, forward
+from identcheck.bundle.chain import fit_chain
+from identcheck.bundle.model import Fit, State, Terms, forward
 from identcheck.estimate.noise import NoiseFloor
 
 SCREEN_ITER = 6          # LM iterations when screening a candidate (warm start)

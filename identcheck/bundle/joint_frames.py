@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import tangents
+from identcheck.bundle.model import tangents
 from identcheck.bundle.uncertainty import joint_offsets
 from identcheck.geometry.rotations import rotvec_matrix
 

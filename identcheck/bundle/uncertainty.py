@@ -27,7 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identcheck.bundle.chain import _jacobians, _prepare, forward, normal_products, tangents
+from identcheck.bundle.chain import _prepare
+from identcheck.bundle.jacobian import jacobian_blocks
+from identcheck.bundle.model import forward, tangents
+from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 
@@ -104,18 +107,11 @@ def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.nd
     y, w = _prepare(data, weights)
     s = fit.state
     R, t, centre, pred = forward(fit.chain, fit.terms, s)
-    J, G = _jacobians(fit.chain, fit.terms, s, R, t, centre, pred)
+    lay, blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
     r = np.where(w[..., None] > 0, pred - y, 0.0)
-    A, B, C, Jr, Gr = normal_products(J, G, r, w, per_frame=True)
-    k = A.shape[1]
-    scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k
-    ridge = 1e-12 * np.maximum(scale, np.median(scale) + 1e-300)
-    sol = np.linalg.solve(A + ridge * np.eye(k), np.concatenate([B, Jr[..., None]], axis=2))
-    Ainv_B, Ainv_Jr = sol[..., :-1], sol[..., -1]
-    g = Gr - np.einsum("fkp,fk->fp", B, Ainv_Jr)
-    B2 = B.reshape(-1, B.shape[-1])
-    S = C - B2.T @ Ainv_B.reshape(B2.shape)
-    return g, 0.5 * (S + S.T), r
+    A, B, C, Jr, Gr = normal_equations(lay, blocks, r, w, per_frame=True)
+    S, g, _ = eliminate_frames(ridged(A), B, C, Jr, Gr)
+    return g, S, r
 
 
 def lag1(x: np.ndarray) -> float:

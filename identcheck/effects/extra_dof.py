@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import Terms, convert_joint, forward, initial_state, second_axis, tangents
+from identcheck.bundle.chain import convert_joint, initial_state
+from identcheck.bundle.model import Terms, forward, second_axis, tangents
 from identcheck.bundle.hypothesis import time_basis
 from identcheck.effects.base import Effect, Proposal
 from identcheck.geometry.rotations import hinge_matrix

@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from identcheck.bundle.chain import Terms
+from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors

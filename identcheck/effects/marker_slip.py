@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import Terms
+from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import segment_residuals
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, draw_frame, pick, rotations, unit_vectors

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import Terms
+from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import Terms
+from identcheck.bundle.model import Terms
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import MONOMIALS, Change, cannot, monomials
 

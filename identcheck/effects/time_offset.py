@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from identcheck.bundle.chain import Terms
+from identcheck.bundle.model import Terms
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, pick
 

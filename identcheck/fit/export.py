@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import forward
+from identcheck.bundle.model import forward
 from identcheck.estimate.joint import AXIS_HANDLE_MM
 from identcheck.io.model import virtual_names
 from identcheck.trial import Trial

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from identcheck.bundle.chain import tangents
+from identcheck.bundle.model import tangents
 from identcheck.errors import InputError
 
 MM = 1e-3        # metres per millimetre

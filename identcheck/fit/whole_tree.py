@@ -35,8 +35,8 @@ import numpy as np
 from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
-from identcheck.bundle.honest import (Minimum, ci, honest_intervals, joint_answer, likelihood_scale, minimum,
-                                      posed_above, posed_by_itself, with_misfit, with_model_error)
+from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
+                                      minimum, posed_above, posed_by_itself, with_misfit, with_model_error)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -273,7 +273,7 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     if not cut:
         return best
     below = set(cut) | {k for c in cut for k in joints_below(chain, c)}
-    unbounded = {j for j, per in best.intervals.items() if any(how == "unbounded" for _, how in per.values())}
+    unbounded = {j for j, per in best.intervals.items() if any(how in NO_BOUND for _, how in per.values())}
     keep = [j for j in chain.joints if j not in below and j not in unbounded]
     if not keep:
         return best

@@ -98,7 +98,9 @@ def fit_text(result) -> str:
                 "       -" if row[m] is None else f"{row[m]:8.2f}" for m in rows[0]))
         how = j.get("interval_method", {})
         for m, (lo, hi) in j.get("marker_distances_ci95", {}).items():
-            if hi is None:
+            if hi is None and how.get(m) == "not_profiled":
+                lines.append(f"   {m}: 95% interval not computed (profile likelihood skipped: time budget)")
+            elif hi is None:
                 lines.append(f"   {m}: 95% interval {lo:.1f} mm .. not bounded by the data ({how.get(m, '')})")
             else:
                 lines.append(f"   {m}: 95% interval {lo:.1f} .. {hi:.1f} mm"

@@ -70,7 +70,8 @@ def test_fit_scaling_rows(quick):
 
 def test_scipy_parametrisation_starts_at_the_initial_state():
     """x = 0 is the starting state, and the sparsity pattern has one frame's columns plus the constants per row."""
-    from identcheck.bundle.chain import Terms, forward, initial_state
+    from identcheck.bundle.chain import initial_state
+    from identcheck.bundle.model import Terms, forward
     from identcheck.skeleton import Skeleton
     sim = bench.rigid(40)
     m = bench.model()

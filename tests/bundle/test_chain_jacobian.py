@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import Terms, _apply, _jacobians, forward, initial_state
+from identcheck.bundle.chain import initial_state
+from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
+from identcheck.bundle.model import Terms, apply_step, forward
 from identcheck.bundle.hypothesis import angle_basis, time_basis
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
@@ -34,14 +36,35 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size):
                   rotations=[(hinge, tb, beta)], world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
     s.term_params = [rng.normal(size=sh) * (size if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
     R, t, centre, pred = forward(chain, terms, s)
-    J, G = _jacobians(chain, terms, s, R, t, centre, pred)
+    lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
+    J, G = dense_jacobians(lay, blocks, chain.n_markers)
     P = G.shape[-1]
     for p in range(P):
         dc = np.zeros(P)
         h = 1e-6
         dc[p] = h
-        up = forward(chain, terms, _apply(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
+        up = forward(chain, terms, apply_step(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
         dc[p] = -h
-        down = forward(chain, terms, _apply(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
+        down = forward(chain, terms, apply_step(chain, terms, s, R, np.zeros((40, J.shape[-1])), dc))[3]
         numeric = (up - down) / (2 * h)
         assert np.allclose(G[..., p], numeric, atol=1e-4 * (1 + np.abs(numeric).max())), p
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_per_frame_jacobian_matches_finite_differences(seed):
+    """The per-frame columns (the root's pose, each joint's angles) against central differences of the step."""
+    sim = simulate(MODEL, n_frames=12, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    s = initial_state(chain, sim.trial.as_array())
+    R, t, centre, pred = forward(chain, Terms(), s)
+    lay, blocks = jacobian_blocks(chain, Terms(), s, R, centre, pred)
+    J, G = dense_jacobians(lay, blocks, chain.n_markers)
+    h = 1e-6
+    for p in range(lay.k):
+        dq = np.zeros((12, lay.k))
+        dq[:, p] = h
+        up = forward(chain, Terms(), apply_step(chain, Terms(), s, R, dq, np.zeros(lay.P)))[3]
+        down = forward(chain, Terms(), apply_step(chain, Terms(), s, R, -dq, np.zeros(lay.P)))[3]
+        numeric = (up - down) / (2 * h)
+        assert np.allclose(J[..., p], numeric, atol=1e-4 * (1 + np.abs(numeric).max())), p

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import identcheck.bundle.chain as chain_mod
-from identcheck.bundle.chain import _cost, _extend, _prepare, fit_chain, forward, initial_state
+from identcheck.bundle.chain import _cost, _extend, _prepare, fit_chain, initial_state
+from identcheck.bundle.model import Terms, apply_step, forward
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -26,17 +27,17 @@ def test_extending_a_step_never_raises_the_cost(seed, scale):
     chain = Skeleton.from_model(MODEL)
     y, w = _prepare(sim.trial.as_array(), None)
     s = initial_state(chain, sim.trial.as_array())
-    R, t, centre, pred = forward(chain, chain_mod.Terms(), s)
+    R, t, centre, pred = forward(chain, Terms(), s)
     rng = np.random.default_rng(seed)
     P = 3 * chain.n_markers + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints)
     dq = rng.normal(0, 1e-3 * scale, (60, chain.frame_dof()))
     dc = rng.normal(0, scale, P)
-    first = chain_mod._apply(chain, chain_mod.Terms(), s, R, dq, dc)
-    out = forward(chain, chain_mod.Terms(), first)
+    first = apply_step(chain, Terms(), s, R, dq, dc)
+    out = forward(chain, Terms(), first)
     taken = (first, *out, _cost(out[-1], y, w))
-    best = _extend(chain, chain_mod.Terms(), s, R, dq, dc, y, w, lambda st: 0.0, taken)
+    best = _extend(chain, Terms(), s, R, dq, dc, y, w, lambda st: 0.0, taken)
     assert best[-1] <= taken[-1]
-    assert np.isclose(_cost(forward(chain, chain_mod.Terms(), best[0])[-1], y, w), best[-1])
+    assert np.isclose(_cost(forward(chain, Terms(), best[0])[-1], y, w), best[-1])
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

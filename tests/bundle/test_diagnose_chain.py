@@ -11,7 +11,8 @@ from hypothesis import given, settings, strategies as st
 
 from identcheck import cli
 from identcheck.skeleton import Skeleton
-from identcheck.bundle.chain import Terms, convert_joint, fit_chain, initial_state
+from identcheck.bundle.chain import convert_joint, fit_chain, initial_state
+from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import Hypothesis, centre_world
 from identcheck.estimate.noise import noise_floor
 from identcheck.diagnose.workflow import MAX_SD_MM, SD_GROWTH, start, undetermined, worst_sd

@@ -1,33 +1,123 @@
-"""The Gauss-Newton products the whole-tree fit is built on, against their definition written out frame by frame."""
+"""The Gauss-Newton products the whole-tree fit is built on, assembled block by block, against their definition
+written out frame by frame from the full Jacobians: random chains' states, effect terms, weights and residuals."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
-from identcheck.bundle.chain import normal_products
+from identcheck.bundle.hypothesis import angle_basis, time_basis
+from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
+from identcheck.bundle.model import State, Terms, forward
+from identcheck.bundle.normal import normal_equations
+from identcheck.io.model import Model
+from identcheck.skeleton import Skeleton
+
+MODELS = {name: Model.from_toml(Path(__file__).parents[2] / "examples" / f"{name}.toml")
+          for name in ("diagnose_leg", "sparse_leg", "real_walking2_legs")}
 
 
-@settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), weights=st.sampled_from(["ones", "gaps", "fractional"]),
-       F=st.integers(1, 6), M=st.integers(1, 4), k=st.integers(1, 5), P=st.integers(1, 7))
-def test_products_are_the_weighted_sums_they_stand_for(seed, weights, F, M, k, P):
+def _random_state(chain: Skeleton, F: int, rng) -> State:
+    rot = lambda n: Rotation.random(n, random_state=rng).as_matrix()  # noqa: E731
+    unit = lambda v: v / np.linalg.norm(v)  # noqa: E731
+    hinges = [j for j in chain.joints if chain.types[j] == "revolute"]
+    return State(local=100 * rng.normal(size=(chain.n_markers, 3)),
+                 c_parent={j: 100 * rng.normal(size=3) for j in chain.joints},
+                 c_child={j: 100 * rng.normal(size=3) for j in chain.joints},
+                 axis={j: unit(rng.normal(size=3)) for j in hinges}, rest={j: rot(1)[0] for j in hinges},
+                 root_R=rot(F), root_t=500 * rng.normal(size=(F, 3)),
+                 rel_R={j: rot(F) for j in chain.joints if j not in hinges},
+                 theta={j: rng.uniform(-2, 2, F) for j in hinges})
+
+
+def _terms(chain: Skeleton, F: int, rng, kind: str) -> Terms:
+    if kind == "none":
+        return Terms()
+    hinge = [j for j in chain.joints if chain.types[j] == "revolute"]
+    ball = [j for j in chain.joints if chain.types[j] == "spherical"]
+    tb = time_basis(F, 100.0, 0.1)
+    seg = chain.seg_markers[chain.marker_seg[-1]]
+    cols = rng.choice(chain.n_markers, size=min(2, chain.n_markers), replace=False)
+    return Terms(markers=[(0, angle_basis(rng.normal(size=(F, 2)))), (np.array(seg), tb[:, :2])],
+                 centres=[(ball[0], tb[:, :3])] if ball else [],
+                 rotations=[(hinge[0], tb[:, :3], 0.4)] if hinge else [],
+                 world=[(np.arange(chain.n_markers), rng.normal(size=(F, chain.n_markers, 3))),
+                        (np.sort(cols), rng.normal(size=(F, len(cols), 3)))])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(sorted(MODELS)),
+       weights=st.sampled_from(["ones", "gaps", "fractional"]), terms=st.sampled_from(["none", "all"]),
+       F=st.integers(1, 7))
+def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weights, terms, F):
     rng = np.random.default_rng(seed)
-    J, G, r = rng.normal(size=(F, M, 3, k)), rng.normal(size=(F, M, 3, P)), rng.normal(size=(F, M, 3))
+    chain = Skeleton.from_model(MODELS[model])
+    s = _random_state(chain, F, rng)
+    tm = _terms(chain, F, rng, terms)
+    s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
+    R, _, centre, pred = forward(chain, tm, s)
+    lay, blocks = jacobian_blocks(chain, tm, s, R, centre, pred)
+    J, G = dense_jacobians(lay, blocks, chain.n_markers)
+    M = chain.n_markers
+    r = rng.normal(size=(F, M, 3))
     w = {"ones": np.ones((F, M)), "gaps": (rng.random((F, M)) < 0.7).astype(float),
          "fractional": rng.random((F, M))}[weights]
-    A, B, C, g, h = normal_products(J, G, r, w)
-    _, _, _, _, h_frames = normal_products(J, G, r, w, per_frame=True)
-    C_want, h_want = np.zeros((P, P)), np.zeros(P)
+    A, B, C, g, h = normal_equations(lay, blocks, r, w)
+    h_frames = normal_equations(lay, blocks, r, w, per_frame=True)[4]
+    C_want, h_want = np.zeros((lay.P, lay.P)), np.zeros(lay.P)
     for f in range(F):
         Jf = np.concatenate([np.sqrt(w[f, m]) * J[f, m] for m in range(M)])      # (3M, k)
         Gf = np.concatenate([np.sqrt(w[f, m]) * G[f, m] for m in range(M)])
         rf = np.concatenate([np.sqrt(w[f, m]) * r[f, m] for m in range(M)])
-        np.testing.assert_allclose(A[f], Jf.T @ Jf, atol=1e-9)
-        np.testing.assert_allclose(B[f], Jf.T @ Gf, atol=1e-9)
-        np.testing.assert_allclose(g[f], Jf.T @ rf, atol=1e-9)
-        np.testing.assert_allclose(h_frames[f], Gf.T @ rf, atol=1e-9)
+        scale = 1 + np.abs(Gf).max() ** 2
+        np.testing.assert_allclose(A[f], Jf.T @ Jf, atol=1e-9 * scale)
+        np.testing.assert_allclose(B[f], Jf.T @ Gf, atol=1e-9 * scale)
+        np.testing.assert_allclose(g[f], Jf.T @ rf, atol=1e-9 * scale)
+        np.testing.assert_allclose(h_frames[f], Gf.T @ rf, atol=1e-9 * scale)
         C_want += Gf.T @ Gf
         h_want += Gf.T @ rf
-    np.testing.assert_allclose(C, C_want, atol=1e-9)
-    np.testing.assert_allclose(h, h_want, atol=1e-9)
+    np.testing.assert_allclose(C, C_want, atol=1e-9 * (1 + np.abs(C_want).max()))
+    np.testing.assert_allclose(h, h_want, atol=1e-9 * (1 + np.abs(h_want).max()))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), F=st.integers(1, 6), k=st.integers(1, 6), P=st.integers(1, 8),
+       singular=st.booleans(), per_frame=st.booleans())
+def test_frames_eliminated_solve_the_whole_system(seed, F, k, P, singular, per_frame):
+    """The Schur complement and the back-substitution give the solution of the full normal equations (every
+    frame's unknowns and the constants together), whether each block's Cholesky factor exists or not (a block
+    that is not positive definite is solved as a general system)."""
+    from identcheck.bundle.normal import eliminate_frames
+    rng = np.random.default_rng(seed)
+    Jf = rng.normal(size=(F, k + 2, k))
+    A = Jf.transpose(0, 2, 1) @ Jf
+    Ad = A + 1e-3 * np.eye(k)
+    if singular:                                    # indefinite: no Cholesky factor, the general solve takes over
+        Ad[0, 0, 0] = -1.0 - Ad[0, 0, 0]
+        with pytest.raises(np.linalg.LinAlgError):
+            np.linalg.cholesky(Ad)
+    Gf = rng.normal(size=(F, k + 2, P))
+    B = Jf.transpose(0, 2, 1) @ Gf
+    C = sum(Gf[f].T @ Gf[f] for f in range(F)) + np.eye(P)
+    g, hf = rng.normal(size=(F, k)), rng.normal(size=(F, P))
+    h = hf if per_frame else hf.sum(axis=0)
+    S, reduced, back = eliminate_frames(Ad, B, C, g, h)
+    full = np.zeros((F * k + P, F * k + P))
+    for f in range(F):
+        full[f * k:(f + 1) * k, f * k:(f + 1) * k] = Ad[f]
+        full[f * k:(f + 1) * k, F * k:] = B[f]
+        full[F * k:, f * k:(f + 1) * k] = B[f].T
+    full[F * k:, F * k:] = C
+    rhs = np.concatenate([g.ravel(), hf.sum(axis=0)])
+    x = np.linalg.solve(full, rhs)
+    red_total = reduced.sum(axis=0) if per_frame else reduced
+    dc = np.linalg.solve(S, red_total)
+    np.testing.assert_allclose(dc, x[F * k:], rtol=1e-6, atol=1e-8 * (1 + np.abs(x).max()))
+    np.testing.assert_allclose(back(-dc), x[:F * k].reshape(F, k), rtol=1e-6, atol=1e-8 * (1 + np.abs(x).max()))
+    want = np.stack([hf[f] - B[f].T @ np.linalg.solve(Ad[f], g[f]) for f in range(F)])
+    np.testing.assert_allclose(reduced, want if per_frame else want.sum(axis=0), rtol=1e-6,
+                               atol=1e-8 * (1 + np.abs(want).max()))

@@ -3,6 +3,7 @@ the likelihood is a parabola and holds the truth, and segments that are not pose
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
@@ -93,3 +94,23 @@ def test_posed_by_itself_counts_markers_and_joint_points(examples):
     assert posed_by_itself(chain, "pelvis")
     assert not posed_by_itself(chain, "thigh_r")
     assert posed_by_itself(chain, "shank_r")
+
+
+def test_profiles_left_over_by_the_budget_claim_no_bound(tmp_path_factory, monkeypatch):
+    """When the profile-likelihood budget is spent, the distances it did not reach get [0, None] marked
+    ``not_profiled`` (not ``unbounded``: nothing was learnt), and the joint is undetermined, saying why."""
+    import identcheck.bundle.honest as honest
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, _ = _fit(model, 7)
+    best = honest.minimum(fit, data)
+    monkeypatch.setattr(honest, "TOLERANCE_MM", 0.0)           # every joint counts as wide: profiles are due
+    monkeypatch.setattr(honest, "PROFILE_BUDGET_S", -1.0)      # ... and the budget is already spent
+    joint = chain.joints[0]
+    intervals = honest.honest_intervals(best, data, best.cov.sigma_mm ** 2)
+    assert {how for _, how in intervals[joint].values()} == {"not_profiled"}
+    assert all(iv == [0.0, None] for iv, _ in intervals[joint].values())
+    answer = honest.joint_answer(replace(best, intervals=intervals), joint)
+    assert answer["practical"]["verdict"] == "undetermined"
+    assert "budget" in answer["practical"]["reason"]
+    assert set(answer["interval_method"].values()) == {"not_profiled"}

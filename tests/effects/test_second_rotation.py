@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import Terms, fit_chain, forward, initial_state
+from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.model import Terms, forward
 from identcheck.bundle.hypothesis import Hypothesis, score, time_basis
 from identcheck.diagnose.workflow import diagnose, start
 from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers

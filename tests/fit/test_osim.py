@@ -39,7 +39,7 @@ def test_pin_frames_carry_the_fits_relative_rotation(seed, theta):
 def test_opensim_poses_the_markers_where_the_fit_does(tmp_path):
     import opensim as osim
 
-    from identcheck.bundle.chain import forward
+    from identcheck.bundle.model import forward
     from identcheck.fit.osim import export_osim
     from identcheck.fit.workflow import fit_trial
     from identcheck.io.model import Model

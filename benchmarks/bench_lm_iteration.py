@@ -1,0 +1,190 @@
+"""What one Levenberg-Marquardt iteration of the whole-chain fit costs, side by side with an earlier commit, and
+what the command line's allocator setting adds.
+
+Every ``fit`` and ``diagnose`` call spends most of its time in :func:`identcheck.bundle.chain.fit_chain`
+iterations (the normal equations of every marker sample, the per-frame unknowns eliminated, the step tried).
+This script runs the same fits with this working tree and with a baseline commit (checked out into a temporary
+``git worktree``), each in a fresh process with one BLAS thread, with glibc's default allocator and with the
+setting ``identcheck`` makes at start (:func:`identcheck.cli.keep_freed_memory`: freed memory is kept for
+reuse instead of fresh pages being mapped, and page-faulted, for every large temporary).
+
+Chains (1500 frames at 100 Hz, 0.7 mm white noise, simulated unless said otherwise):
+
+* ``leg9``: examples/diagnose_leg.toml (3 + 3 + 3 markers, hip and knee; 44 constants);
+* ``walking2``: both legs of the real Vicon walking trial, examples/real_walking2_legs.toml on
+  examples/real/opensim_walking2.c3d (16 markers, 4 joints, 1249 frames with gaps; 82 constants);
+* ``body42``: a full body of 14 segments with 3 markers each (pelvis, trunk, thighs, shanks, feet, upper arms,
+  forearms, hands; 13 joints: 7 ball, 6 hinge; 234 constants).
+
+Each fit starts from :func:`identcheck.bundle.chain.initial_state` and runs ``--iterations`` iterations (fewer
+if it converges first; both versions take the same steps up to rounding). Reported: CPU seconds per iteration
+(median of ``--repeats`` processes) and the process's peak resident memory.
+
+Usage::
+
+    PYTHONPATH=. python3 benchmarks/bench_lm_iteration.py [--baseline b5194a3] [--iterations 8] [--repeats 3]
+
+Results go to ``benchmarks/results.json`` under ``"lm_iteration"``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from results_io import machine_info, write_json  # noqa: E402
+
+KEY = "lm_iteration"
+CHAINS = ("leg9", "walking2", "body42")
+
+
+def body42() -> str:
+    """The ``body42`` model file: 14 segments with 3 markers each, 13 joints."""
+    segs = [("pelvis", ["LASI", "RASI", "SACR"], None), ("trunk", ["C7", "T10", "STRN"], 450)]
+    joints = [("lumbar", "spherical", "pelvis", "trunk")]
+    for s in ("R", "L"):
+        side = s.lower()
+        for seg, marks, length, joint, kind, parent in (
+                ("thigh", ("GT", "THI", "KNE"), 420, "hip", "spherical", "pelvis"),
+                ("shank", ("TIB", "TIB2", "ANK"), 400, "knee", "revolute", "thigh"),
+                ("foot", ("HEE", "TOE", "MT5"), 200, "ankle", "revolute", "shank"),
+                ("upperarm", ("SHO", "UPA", "ELB"), 300, "shoulder", "spherical", "trunk"),
+                ("forearm", ("FRA", "WRA", "WRB"), 260, "elbow", "revolute", "upperarm"),
+                ("hand", ("FIN", "HND", "HN2"), 90, "wrist", "spherical", "forearm")):
+            segs.append((f"{seg}_{side}", [s + m for m in marks], length))
+            joints.append((f"{joint}_{side}", kind, parent if parent in ("pelvis", "trunk") else f"{parent}_{side}",
+                           f"{seg}_{side}"))
+    text = ['units = "mm"']
+    for name, marks, length in segs:
+        text += [f"[segments.{name}]", "markers = [" + ", ".join(f'"{m}"' for m in marks) + "]"]
+        text += [f"length_mm = {length}"] if length else []
+    for name, kind, parent, child in joints:
+        text += [f"[joints.{name}]", f'type = "{kind}"', f'parent = "{parent}"', f'child = "{child}"']
+    return "\n".join(text) + "\n"
+
+
+# ---------------------------------------------------------------------- one measurement, in a fresh process
+def _keep_freed_memory() -> None:
+    """The allocator setting of :func:`identcheck.cli.keep_freed_memory`, written out here so that the baseline
+    (which may predate it) is measured with it too."""
+    import ctypes
+    import ctypes.util
+
+    mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    mallopt(-3, 32 << 20)
+    mallopt(-1, 1 << 30)
+
+
+def _chain_data(name: str):
+    import warnings
+
+    from identcheck.io.model import Model
+    from identcheck.simulate.rigid import simulate
+    from identcheck.skeleton import Skeleton
+
+    warnings.simplefilter("ignore")
+    if name == "walking2":
+        from identcheck import api
+
+        model = Model.from_toml(ROOT / "examples" / "real_walking2_legs.toml")
+        trial = api.read_trial(ROOT / "examples" / "real" / "opensim_walking2.c3d").recentred()[0]
+        data = trial.select(model.markers).as_array()
+    else:
+        if name == "leg9":
+            model = Model.from_toml(ROOT / "examples" / "diagnose_leg.toml")
+        else:
+            with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as fh:
+                fh.write(body42())
+            model = Model.from_toml(fh.name)
+            os.unlink(fh.name)
+        data = simulate(model, n_frames=1500, noise_mm=0.7, seed=11).trial.as_array()
+    return Skeleton.from_model(model), data
+
+
+def worker(name: str, alloc: bool, iterations: int) -> dict:
+    from threadpoolctl import threadpool_limits
+
+    from identcheck.bundle.chain import fit_chain, initial_state
+
+    if alloc:
+        _keep_freed_memory()
+    chain, data = _chain_data(name)
+    state = initial_state(chain, data)
+    with threadpool_limits(1):
+        t0 = time.process_time()
+        fit = fit_chain(chain, data, state, max_iter=iterations)
+        cpu = time.process_time() - t0
+    return {"cpu_s": cpu, "iterations": fit.iterations, "s_per_iteration": cpu / max(fit.iterations, 1),
+            "rss": fit.rss, "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def measure(pythonpath: Path, name: str, alloc: bool, iterations: int) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(pythonpath), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, __file__, "--worker", name, "--alloc", str(int(alloc)),
+                          "--iterations", str(iterations)], env=env, cwd=ROOT, capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# ---------------------------------------------------------------------- the table
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", default="b5194a3", help="commit to compare with (default: before the block-wise "
+                                                          "normal equations)")
+    ap.add_argument("--iterations", type=int, default=8)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--chains", nargs="+", default=list(CHAINS), choices=CHAINS)
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
+    ap.add_argument("--worker", choices=CHAINS, help=argparse.SUPPRESS)
+    ap.add_argument("--alloc", type=int, default=0, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.worker:
+        print(json.dumps(worker(a.worker, bool(a.alloc), a.iterations)))
+        return 0
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(tmp) / "baseline"
+        subprocess.run(["git", "worktree", "add", "--detach", str(base), a.baseline], cwd=ROOT, check=True,
+                       capture_output=True)
+        try:
+            for name in a.chains:
+                for version, path in (("baseline", base), ("current", ROOT)):
+                    for alloc in (False, True):
+                        runs = [measure(path, name, alloc, a.iterations) for _ in range(a.repeats)]
+                        row = {"chain": name, "version": version, "allocator": "kept" if alloc else "default",
+                               "s_per_iteration": statistics.median(r["s_per_iteration"] for r in runs),
+                               "all_s_per_iteration": [r["s_per_iteration"] for r in runs],
+                               "iterations": runs[0]["iterations"], "rss": runs[0]["rss"],
+                               "max_rss_mib": max(r["max_rss_mib"] for r in runs)}
+                        rows.append(row)
+                        print(f"{name:9s} {version:9s} allocator {row['allocator']:8s} "
+                              f"{1000 * row['s_per_iteration']:8.1f} ms/iteration  ({row['iterations']} iterations, "
+                              f"peak {row['max_rss_mib']:.0f} MiB, rss {row['rss']:.6g})", flush=True)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
+    speedup = {}
+    for name in a.chains:
+        pick = {(r["version"], r["allocator"]): r["s_per_iteration"] for r in rows if r["chain"] == name}
+        speedup[name] = {"current_vs_baseline_default_allocator": pick[("baseline", "default")] / pick[("current", "default")],
+                         "current_kept_vs_baseline_default": pick[("baseline", "default")] / pick[("current", "kept")]}
+        print(f"{name:9s} speed-up {speedup[name]['current_vs_baseline_default_allocator']:.2f}x (same allocator), "
+              f"{speedup[name]['current_kept_vs_baseline_default']:.2f}x (with the command line's allocator)")
+    write_json(a.out, KEY, {"machine": machine_info(), "baseline": a.baseline, "current": head.strip(),
+                            "iterations": a.iterations, "repeats": a.repeats, "rows": rows, "speedup": speedup,
+                            "date": time.strftime("%Y-%m-%dT%H:%M:%S")})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

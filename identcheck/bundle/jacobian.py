@@ -1,0 +1,247 @@
+"""The derivatives of the whole chain's predicted markers, by blocks.
+
+A marker depends on few of the unknowns: its own position on its segment, the constants of the joints
+between its segment and the root, the effect terms that touch it, and per frame the root's pose and those
+joints' angles. Markers of one segment touched by the same terms share all of these but their own
+positions, so the Jacobian is kept as one block per such group (:class:`Group`): the group's markers'
+derivatives with respect to its own per-frame and constant columns only. A 16-marker pair of legs has 82 constants of which
+a shank marker touches 20, and a pelvis marker 3.
+
+Rotation updates are applied on the left in the world frame (:func:`identcheck.bundle.model.apply_step`),
+so the derivative of a marker at x with respect to a rotation ω about a point c is ``ω × (x − c)``: about
+the root origin, or about the joint's centre for every marker downstream of the joint.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from identcheck.bundle.model import (State, Terms, _hinge_turns, _rot, _tilt_axis, _turn_beta, _turn_rate,
+                                     cross3, n_const, second_axis, tangents)
+from identcheck.skeleton import Skeleton
+
+
+@dataclass(frozen=True)
+class Group:
+    """Markers of one segment touched by the same effect terms, and the columns they depend on.
+
+    ``cols``: the markers (trial columns, (m,)); ``joints``: the joints from the root down to the segment;
+    ``terms``: indices (``Terms.ordered()`` order) of the effect terms that touch them; ``frame_cols`` (kb,):
+    their per-frame unknowns (the root's pose, then each joint's angles); ``const_cols`` (pb,): their
+    constants (the markers' own positions, 3 each, then each joint's, root first, then each term's); and
+    both as :func:`runs`."""
+
+    segment: str
+    cols: np.ndarray
+    joints: tuple
+    terms: tuple
+    frame_cols: np.ndarray
+    const_cols: np.ndarray
+    frame_runs: tuple = ()
+    const_runs: tuple = ()
+
+
+def runs(cols: np.ndarray) -> tuple:
+    """The stretches of consecutive columns in `cols`: ((first, end, position in cols), ...). Adding a block's
+    products into the whole system stretch by stretch uses slices (views), not fancy indexing (copies)."""
+    out, at = [], 0
+    cols = [int(c) for c in cols]
+    while at < len(cols):
+        end = at + 1
+        while end < len(cols) and cols[end] == cols[end - 1] + 1:
+            end += 1
+        out.append((cols[at], cols[end - 1] + 1, at))
+        at = end
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where every unknown sits: ``k`` per-frame columns, ``P`` constant columns, and the groups."""
+
+    k: int
+    P: int
+    groups: tuple
+
+
+def _ancestors(chain: Skeleton, segment: str) -> tuple:
+    """The joints from the root down to `segment` (root first)."""
+    joint_of = {chain.child[j]: j for j in chain.joints}
+    out = []
+    while segment in joint_of:
+        j = joint_of[segment]
+        out.append(j)
+        segment = chain.parent[j]
+    return tuple(reversed(out))
+
+
+def _touched(chain: Skeleton, terms: Terms) -> list:
+    """For each term (``Terms.ordered()`` order), the set of marker columns it moves."""
+    out = [set(np.atleast_1d(c).tolist()) for c, _ in terms.markers]
+    out += [set(chain.downstream[j].tolist()) for j, _ in terms.centres]
+    out += [set(chain.downstream[j].tolist()) for j, _, _ in terms.rotations]
+    out += [set(np.atleast_1d(c).tolist()) for c, _ in terms.world]
+    return out
+
+
+def layout(chain: Skeleton, terms: Terms) -> Layout:
+    """The columns of the chain's unknowns and the marker groups that share them (same segment, same terms)."""
+    frame_start, col = {}, 6
+    for j in chain.joints:
+        frame_start[j] = col
+        col += 3 if chain.types[j] == "spherical" else 1
+    const_start, c = {}, 3 * chain.n_markers
+    for j in chain.joints:
+        const_start[j] = c
+        c += 6 + (5 if chain.types[j] == "revolute" else 0)
+    term_cols = []
+    for size in [3 * b.shape[1] for _, b in terms.markers + terms.centres] \
+            + [b.shape[1] + 1 for _, b, _ in terms.rotations] + [1] * len(terms.world):
+        term_cols.append(np.arange(c, c + size))
+        c += size
+    touched = _touched(chain, terms)
+    groups = []
+    for seg in chain.segments:
+        joints = _ancestors(chain, seg)
+        fcols = np.concatenate([np.arange(6)] + [np.arange(frame_start[j], frame_start[j] + (
+            3 if chain.types[j] == "spherical" else 1)) for j in joints]).astype(int)
+        ccols = [np.arange(const_start[j], const_start[j] + 6 + (5 if chain.types[j] == "revolute" else 0))
+                 for j in joints]
+        by_terms: dict = {}
+        for m in chain.seg_markers[seg]:
+            key = tuple(i for i, t in enumerate(touched) if int(m) in t)
+            by_terms.setdefault(key, []).append(int(m))
+        for key, cols in by_terms.items():
+            cols = np.array(cols, dtype=int)
+            ccol = np.concatenate([(3 * cols[:, None] + np.arange(3)).ravel()] + ccols
+                                  + [term_cols[i] for i in key]).astype(int)
+            groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), runs(ccol)))
+    return Layout(col, n_const(chain, terms), tuple(groups))
+
+
+@dataclass(frozen=True)
+class Block:
+    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, ``G`` (F, m, 3, pb) constants, in its columns."""
+
+    group: Group
+    J: np.ndarray
+    G: np.ndarray
+
+
+def _about(d: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) whose column a is ``e_a × d``: the derivative of a point at lever `d` (..., 3) with respect to
+    a rotation vector."""
+    z = np.zeros_like(d[..., 0])
+    d0, d1, d2 = d[..., 0], d[..., 1], d[..., 2]
+    return np.stack([np.stack([z, -d2, d1], -1), np.stack([d2, z, -d0], -1), np.stack([-d1, d0, z], -1)], -1)
+
+
+def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict, pred: np.ndarray,
+                    lay: Layout | None = None) -> tuple[Layout, list]:
+    """The derivatives of the predictions `pred` (F, M, 3) of state `s` (with the segments' rotations `R` and
+    the joints' world centres `centre` of :func:`identcheck.bundle.model.forward`), one :class:`Block` per group."""
+    lay = lay or layout(chain, terms)
+    F = pred.shape[0]
+    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    lever = pred
+    if terms.world:                                   # lever arms are the rigid bodies' points, not the fields'
+        lever = pred.copy()
+        for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
+            lever[:, cols] -= p[0] * fld
+    turns = _hinge_turns(chain, terms, s) if terms.rotations else {}
+    hinge_w, rest_w, tilt_w = {}, {}, {}
+    for j in chain.joints:
+        if chain.types[j] != "revolute":
+            continue
+        P, ax, th = chain.parent[j], s.axis[j], s.theta[j]
+        hinge_w[j] = R[P] @ ax
+        rot = turns.get(j)
+        rot = _rot(ax, th) if rot is None else rot
+        rest_w[j] = [np.einsum("fij,fj->fi", R[P], rot[:, :, a]) for a in range(3)]
+        tilt = []
+        for b in tangents(ax):
+            if any(r[0] == j for r in terms.rotations):
+                wp = _turn_rate(chain, terms, s, j, _tilt_axis(j, b))      # the second axis moves with it
+            else:
+                wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * cross3(ax, b)
+            tilt.append(np.einsum("fij,fj->fi", R[P], wp))
+        tilt_w[j] = tilt
+    n_mc = len(terms.markers) + len(terms.centres)
+    second = {}
+    for r, (j, basis, beta) in enumerate(terms.rotations):  # d/dψ: about R_P Rot(a, θ) u, through the centre
+        u = second_axis(s.axis[j], beta + s.term_params[n_mc + r][-1, 0])
+        P = chain.parent[j]
+        second[n_mc + r] = (np.einsum("fij,fjk,k->fi", R[P], _rot(s.axis[j], s.theta[j]), u),
+                            np.einsum("fij,fj->fi", R[P], _turn_rate(chain, terms, s, j, _turn_beta(n_mc + r))))
+    ordered = terms.ordered()
+    blocks = []
+    for grp in lay.groups:
+        idx, m = grp.cols, len(grp.cols)
+        J = np.zeros((F, m, 3, len(grp.frame_cols)))
+        G = np.zeros((F, m, 3, len(grp.const_cols)))
+        J[..., 0:3] = _about(lever[:, idx] - s.root_t[:, None])
+        J[..., 3:6] = np.eye(3)
+        for i in range(m):                                   # each marker's own position: the segment's rotation
+            G[:, i, :, 3 * i:3 * i + 3] = R[grp.segment]
+        fc, cc, dx = 6, 3 * m, {}
+        for j in grp.joints:
+            P, C = chain.parent[j], chain.child[j]
+            d = dx[j] = lever[:, idx] - centre[j][:, None]
+            if chain.types[j] == "spherical":
+                J[..., fc:fc + 3] = _about(d)
+                fc += 3
+            else:
+                J[..., fc] = cross3(hinge_w[j][:, None], d)
+                fc += 1
+            G[..., cc:cc + 3] = R[P][:, None]
+            G[..., cc + 3:cc + 6] = -R[C][:, None]
+            cc += 6
+            if chain.types[j] == "revolute":
+                for a in range(3):                          # rest rotation, pre-multiplied by Rot(a, θ) Exp(ψu)
+                    G[..., cc + a] = cross3(rest_w[j][a][:, None], d)
+                for a in range(2):                          # axis direction, tangent plane
+                    G[..., cc + 3 + a] = cross3(tilt_w[j][a][:, None], d)
+                cc += 5
+        for ti in grp.terms:
+            term = ordered[ti]
+            if ti < len(terms.markers):                      # the markers' position on their segment
+                basis = term[1]
+                for kk in range(basis.shape[1]):
+                    G[..., cc:cc + 3] = (R[grp.segment] * basis[:, kk, None, None])[:, None]
+                    cc += 3
+            elif ti < n_mc:                                  # the joint centre in the parent
+                j, basis = term
+                for kk in range(basis.shape[1]):
+                    G[..., cc:cc + 3] = (R[chain.parent[j]] * basis[:, kk, None, None])[:, None]
+                    cc += 3
+            elif ti < n0:                                    # a hinge's second rotation
+                j, basis, _ = term
+                w_psi, w_beta = second[ti]
+                turn = cross3(w_psi[:, None], dx[j])
+                for kk in range(basis.shape[1]):
+                    G[..., cc] = turn * basis[:, kk, None, None]
+                    cc += 1
+                G[..., cc] = cross3(w_beta[:, None], dx[j])
+                cc += 1
+            else:                                            # a field in the world
+                cols, fld = term
+                where = {int(c): i for i, c in enumerate(np.atleast_1d(cols))}
+                G[..., cc] = fld[:, [where[int(c)] for c in idx]]
+                cc += 1
+        blocks.append(Block(grp, J, G))
+    return lay, blocks
+
+
+def dense_jacobians(lay: Layout, blocks: list, n_markers: int):
+    """The blocks written out in full: per-frame J (F, M, 3, k) and constants' G (F, M, 3, P) (for checks)."""
+    F = blocks[0].J.shape[0] if blocks else 0
+    J = np.zeros((F, n_markers, 3, lay.k))
+    G = np.zeros((F, n_markers, 3, lay.P))
+    for b in blocks:
+        g = b.group
+        for i, col in enumerate(g.cols):
+            J[:, col][..., g.frame_cols] = b.J[:, i]
+            G[:, col][..., g.const_cols] = b.G[:, i]
+    return J, G
+

@@ -1,0 +1,92 @@
+"""The Gauss-Newton normal equations of the whole chain, built block by block.
+
+With J the per-frame Jacobian, G the constants' Jacobian, r the residuals and w the per-sample weights:
+A = JᵀWJ per frame (F, k, k), B = JᵀWG per frame (F, k, P), C = Σ_f GᵀWG (P, P), g = JᵀWr per frame
+(F, k) and h = Σ_f GᵀWr (P,) (or per frame, (F, P): the scores of the sandwich covariance). Each
+:class:`~identcheck.bundle.jacobian.Block` adds its products into its own rows and columns only, so the cost
+grows with the columns each marker touches, not with all of them: the dense products multiplied 82-column
+rows for markers that touch 9 to 20 of them.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.jacobian import Layout
+
+
+def _add(target: np.ndarray, rows: tuple, cols: tuple | None, x: np.ndarray) -> None:
+    """``target[..., rows, cols] += x`` (``target[..., rows] += x`` when `cols` is None), rows and columns given
+    as :func:`~identcheck.bundle.jacobian.runs`: slice by slice."""
+    for r0, r1, a in rows:
+        if cols is None:
+            target[..., r0:r1] += x[..., a:a + r1 - r0]
+            continue
+        for c0, c1, b in cols:
+            target[..., r0:r1, c0:c1] += x[..., a:a + r1 - r0, b:b + c1 - c0]
+
+
+def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
+    """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module)."""
+    F, k, P = r.shape[0], lay.k, lay.P
+    A, B, C = np.zeros((F, k, k)), np.zeros((F, k, P)), np.zeros((P, P))
+    g, h = np.zeros((F, k)), np.zeros((F, P) if per_frame else P)
+    unit = bool(np.all(w == 1.0))        # every sample seen at unit weight (most trials): no weighted copies
+    for b in blocks:
+        idx, kb, pb = b.group.cols, b.J.shape[-1], b.G.shape[-1]
+        fr, cr = b.group.frame_runs, b.group.const_runs
+        n = 3 * len(idx)
+        if unit:
+            Jf, Gf, rf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb), r[:, idx].reshape(F, n)
+        else:
+            sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
+            Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
+            rf = r[:, idx].reshape(F, n) * sw
+        Jt, Gt = Jf.transpose(0, 2, 1), Gf.transpose(0, 2, 1)
+        _add(A, fr, fr, Jt @ Jf)
+        _add(B, fr, cr, Jt @ Gf)
+        _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
+        G2 = Gf.reshape(F * n, pb)
+        _add(C, cr, cr, G2.T @ G2)
+        _add(h, cr, None, (Gt @ rf[..., None])[..., 0] if per_frame else G2.T @ rf.reshape(-1))
+    return A, B, C, g, h
+
+
+def ridged(A: np.ndarray) -> np.ndarray:
+    """The per-frame blocks A (F, k, k) with a ridge of 1e-12 of their (at least the median) scale: a frame
+    whose markers leave its pose free, or that has no marker at all, stays solvable and contributes nothing."""
+    k = A.shape[1]
+    scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k
+    return A + 1e-12 * np.maximum(scale, np.median(scale) + 1e-300) * np.eye(k)
+
+
+def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.ndarray, h: np.ndarray):
+    """The per-frame unknowns eliminated (Schur complement): ``S = C − Σ_f B_fᵀ A_f⁻¹ B_f`` (P, P) and the reduced
+    gradient ``h − Σ_f B_fᵀ A_f⁻¹ g_f`` ((P,), or per frame (F, P) when `h` is), with `A_damped` (F, k, k) the
+    per-frame blocks as the caller damps or ridges them; and ``back(dc)``, the per-frame ``A_f⁻¹ (g_f + B_f dc)``
+    (F, k) that goes with a step `dc` of the constants.
+
+    Through each block's Cholesky factor L (A = LLᵀ): X = L⁻¹[B g], so that S = C − XᵀX is one symmetric
+    product. A block that is not numerically positive definite (a pose the markers leave free, held by a tiny
+    ridge) is solved as a general system instead."""
+    F, k, P = B.shape
+    rhs = np.concatenate([B, g[..., None]], axis=2)
+    try:
+        Linv = np.linalg.inv(np.linalg.cholesky(A_damped))
+    except np.linalg.LinAlgError:
+        Linv = None
+    if Linv is not None:                                 # A⁻¹ = L⁻ᵀL⁻¹: both sides of each product are L⁻¹ times
+        X = Linv @ rhs
+        left = np.ascontiguousarray(X[..., :-1])
+        right, right_g = left, X[..., -1]
+        back = lambda dc: (Linv.transpose(0, 2, 1) @ (X[..., -1] + X[..., :-1] @ dc)[..., None])[..., 0]  # noqa: E731
+    else:
+        sol = np.linalg.solve(A_damped, rhs)
+        left, right, right_g = B, np.ascontiguousarray(sol[..., :-1]), sol[..., -1]
+        back = lambda dc: sol[..., -1] + sol[..., :-1] @ dc  # noqa: E731
+    L2 = left.reshape(F * k, P)
+    S = C - L2.T @ (L2 if right is left else right.reshape(F * k, P))
+    if h.ndim == 2:
+        reduced = h - (left.transpose(0, 2, 1) @ right_g[..., None])[..., 0]
+    else:
+        reduced = h - L2.T @ right_g.reshape(-1)
+    return 0.5 * (S + S.T), reduced, back
