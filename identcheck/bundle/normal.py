@@ -69,20 +69,18 @@ def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.n
     product. A block that is not numerically positive definite (a pose the markers leave free, held by a tiny
     ridge) is solved as a general system instead."""
     F, k, P = B.shape
-    rhs = np.concatenate([B, g[..., None]], axis=2)
     try:
         Linv = np.linalg.inv(np.linalg.cholesky(A_damped))
     except np.linalg.LinAlgError:
         Linv = None
     if Linv is not None:                                 # A⁻¹ = L⁻ᵀL⁻¹: both sides of each product are L⁻¹ times
-        X = Linv @ rhs
-        left = np.ascontiguousarray(X[..., :-1])
-        right, right_g = left, X[..., -1]
-        back = lambda dc: (Linv.transpose(0, 2, 1) @ (X[..., -1] + X[..., :-1] @ dc)[..., None])[..., 0]  # noqa: E731
+        left = Linv @ B                                   # (F, k, P), contiguous: XᵀX below is one symmetric product
+        right, right_g = left, (Linv @ g[..., None])[..., 0]
+        back = lambda dc: (Linv.transpose(0, 2, 1) @ (right_g + left @ dc)[..., None])[..., 0]  # noqa: E731
     else:
-        sol = np.linalg.solve(A_damped, rhs)
-        left, right, right_g = B, np.ascontiguousarray(sol[..., :-1]), sol[..., -1]
-        back = lambda dc: sol[..., -1] + sol[..., :-1] @ dc  # noqa: E731
+        left, right = B, np.linalg.solve(A_damped, B)
+        right_g = np.linalg.solve(A_damped, g[..., None])[..., 0]
+        back = lambda dc: right_g + right @ dc  # noqa: E731
     L2 = left.reshape(F * k, P)
     S = C - L2.T @ (L2 if right is left else right.reshape(F * k, P))
     if h.ndim == 2:
