@@ -4,8 +4,8 @@ A marker depends on few of the unknowns: its own position on its segment, the co
 between its segment and the root, the effect terms that touch it, and per frame the root's pose and those
 joints' angles. Markers of one segment touched by the same terms share all of these but their own
 positions, so the Jacobian is kept as one block per such group (:class:`Group`): the group's markers'
-derivatives with respect to its own per-frame and constant columns only. A 16-marker pair of legs has 82 constants of which
-a shank marker touches 20, and a pelvis marker 3.
+derivatives with respect to its own per-frame and constant columns only. A 16-marker pair of legs has 82
+constants, of which a shank marker touches 20 and a pelvis marker 3.
 
 Rotation updates are applied on the left in the world frame (:func:`identcheck.bundle.model.apply_step`),
 so the derivative of a marker at x with respect to a rotation ω about a point c is ``ω × (x − c)``: about
