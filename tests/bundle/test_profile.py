@@ -114,3 +114,23 @@ def test_profiles_left_over_by_the_budget_claim_no_bound(tmp_path_factory, monke
     assert answer["practical"]["verdict"] == "undetermined"
     assert "budget" in answer["practical"]["reason"]
     assert set(answer["interval_method"].values()) == {"not_profiled"}
+
+
+def test_profiles_on_threads_equal_profiles_one_by_one(tmp_path_factory, monkeypatch):
+    """The profile likelihoods run side by side on threads give the very intervals they give one at a time, and
+    ``IDENTCHECK_THREADS`` sets how many threads (a bad value falls back to the default)."""
+    import identcheck.bundle.honest as honest
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, _ = _fit(model, 11)
+    best = honest.minimum(fit, data)
+    monkeypatch.setattr(honest, "TOLERANCE_MM", 0.0)           # every joint counts as wide: profiles are due
+    results = {}
+    for threads in ("1", "3"):
+        monkeypatch.setenv("IDENTCHECK_THREADS", threads)
+        assert honest.profile_threads() == int(threads)
+        results[threads] = honest.honest_intervals(best, data, best.cov.sigma_mm ** 2)
+    assert {how for per in results["1"].values() for _, how in per.values()} == {"profile"}
+    assert results["1"] == results["3"]
+    monkeypatch.setenv("IDENTCHECK_THREADS", "many")
+    assert 1 <= honest.profile_threads() <= 4
