@@ -1,5 +1,5 @@
 """What one Levenberg-Marquardt iteration of the whole-chain fit costs, side by side with an earlier commit, and
-what the command line's allocator setting adds.
+what the command line's allocator setting adds; and what ``identcheck fit`` costs end to end on a real trial.
 
 Every ``fit`` and ``diagnose`` call spends most of its time in :func:`identcheck.bundle.chain.fit_chain`
 iterations (the normal equations of every marker sample, the per-frame unknowns eliminated, the step tried).
@@ -19,6 +19,11 @@ Chains (1500 frames at 100 Hz, 0.7 mm white noise, simulated unless said otherwi
 Each fit starts from :func:`identcheck.bundle.chain.initial_state` and runs ``--iterations`` iterations (fewer
 if it converges first; both versions take the same steps up to rounding). Reported: CPU seconds per iteration
 (median of ``--repeats`` processes) and the process's peak resident memory.
+
+End to end (``end_to_end`` rows; ``--no-end-to-end`` skips them): ``identcheck fit`` on both legs of walking2
+with the baseline, and with this tree on one thread and on its default threads (``IDENTCHECK_THREADS``): wall
+and CPU seconds of the whole command, and how many marker distances got a profile-likelihood interval rather
+than none (the profiles stop starting after 60 s of wall time).
 
 Usage::
 
@@ -136,6 +141,32 @@ def measure(pythonpath: Path, name: str, alloc: bool, iterations: int) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def fit_command(path: Path, version: str, threads: str | None) -> dict:
+    """``identcheck fit`` on both legs of walking2 with the package at `path`: wall and CPU seconds of the
+    process, and the interval methods of the knees' and hips' marker distances."""
+    env = dict(os.environ, PYTHONPATH=str(path))
+    env.pop("IDENTCHECK_THREADS", None)
+    if threads:
+        env["IDENTCHECK_THREADS"] = threads
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "identcheck", "fit", str(ROOT / "examples" / "real_walking2_legs.toml"),
+                          str(ROOT / "examples" / "real" / "opensim_walking2.c3d"), "--json"], env=env, cwd=ROOT,
+                         capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    methods: dict = {}
+    for joint in json.loads(out.stdout)["joints"].values():
+        for how in joint["interval_method"].values():
+            methods[how] = methods.get(how, 0) + 1
+    row = {"command": "identcheck fit examples/real_walking2_legs.toml examples/real/opensim_walking2.c3d",
+           "version": version, "threads": threads or "default", "exit_code": out.returncode, "wall_s": wall,
+           "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "interval_methods": methods}
+    print(f"fit walking2 {version:9s} threads {row['threads']:8s} {wall:6.1f} s wall {row['cpu_s']:6.1f} s CPU  "
+          f"intervals {methods}", flush=True)
+    return row
+
+
 # ---------------------------------------------------------------------- the table
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -144,6 +175,7 @@ def main(argv=None) -> int:
     ap.add_argument("--iterations", type=int, default=8)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--chains", nargs="+", default=list(CHAINS), choices=CHAINS)
+    ap.add_argument("--no-end-to-end", action="store_true")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     ap.add_argument("--worker", choices=CHAINS, help=argparse.SUPPRESS)
     ap.add_argument("--alloc", type=int, default=0, help=argparse.SUPPRESS)
@@ -171,6 +203,8 @@ def main(argv=None) -> int:
                         print(f"{name:9s} {version:9s} allocator {row['allocator']:8s} "
                               f"{1000 * row['s_per_iteration']:8.1f} ms/iteration  ({row['iterations']} iterations, "
                               f"peak {row['max_rss_mib']:.0f} MiB, rss {row['rss']:.6g})", flush=True)
+            end_to_end = [] if a.no_end_to_end else [
+                fit_command(base, "baseline", None), fit_command(ROOT, "current", "1"), fit_command(ROOT, "current", None)]
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
     speedup = {}
@@ -182,6 +216,7 @@ def main(argv=None) -> int:
               f"{speedup[name]['current_kept_vs_baseline_default']:.2f}x (with the command line's allocator)")
     write_json(a.out, KEY, {"machine": machine_info(), "baseline": a.baseline, "current": head.strip(),
                             "iterations": a.iterations, "repeats": a.repeats, "rows": rows, "speedup": speedup,
+                            "end_to_end": end_to_end,
                             "date": time.strftime("%Y-%m-%dT%H:%M:%S")})
     return 0
 

@@ -15,11 +15,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.jacobian import jacobian_blocks
-from identcheck.bundle.model import Fit, State, Terms, _rot, apply_step, forward, n_const, tangents
+from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, tangents
 from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 from identcheck.errors import InputError
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
+from identcheck.geometry.rotations import hinge_matrix
 from identcheck.skeleton import Skeleton
 
 MAX_ITER = 60
@@ -93,7 +94,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     lam, it, converged = 1e-3, 0, False
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
-        A, B, C, g, h = _normal(chain, terms, s, R, t, centre, pred, y, w)
+        A, B, C, g, h = _normal(chain, terms, s, R, centre, pred, y, w)
         if penalty:
             r_p, D = penalty(s)
             C, h = C + D.T @ D, h + D.T @ r_p
@@ -129,7 +130,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
 
 
-def _normal(chain, terms, s, R, t, centre, pred, y, w):
+def _normal(chain, terms, s, R, centre, pred, y, w):
     """Gauss-Newton normal-equation blocks: per-frame A (F,k,k), coupling B (F,k,P), constants C (P,P),
     gradients g (F,k) and h (P,)."""
     lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
@@ -143,7 +144,7 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
     y, w = _prepare(data, weights)
     s = fit.state
     R, t, centre, pred = forward(fit.chain, fit.terms, s)
-    A, B, C, g, h = _normal(fit.chain, fit.terms, s, R, t, centre, pred, y, w)
+    A, B, C, g, h = _normal(fit.chain, fit.terms, s, R, centre, pred, y, w)
     return eliminate_frames(ridged(A), B, C, g, h)[0]
 
 
@@ -229,7 +230,7 @@ def convert_joint(chain: Skeleton, state: State, joint: str, to: str) -> tuple[S
     new = replace(chain, types=types)
     s = state.copy()
     if to == "spherical" and chain.types[joint] == "revolute":
-        s.rel_R[joint] = _rot(s.axis[joint], s.theta[joint]) @ s.rest[joint]
+        s.rel_R[joint] = hinge_matrix(s.axis[joint], s.theta[joint]) @ s.rest[joint]
         del s.axis[joint], s.rest[joint], s.theta[joint]
     elif to != chain.types[joint]:
         raise ValueError(f"cannot convert {chain.types[joint]} joint {joint!r} to {to}")

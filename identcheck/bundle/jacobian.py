@@ -17,8 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identcheck.bundle.model import (State, Terms, _hinge_turns, _rot, _tilt_axis, _turn_beta, _turn_rate,
-                                     cross3, n_const, second_axis, tangents)
+from identcheck.bundle.model import (State, Terms, cross3, hinge_turns, n_const, second_axis, tangents, tilt_axis,
+                                     turn_beta, turn_rate)
+from identcheck.geometry.rotations import hinge_matrix
 from identcheck.skeleton import Skeleton
 
 
@@ -137,11 +138,11 @@ def _about(d: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([z, -d2, d1], -1), np.stack([d2, z, -d0], -1), np.stack([-d1, d0, z], -1)], -1)
 
 
-def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict, pred: np.ndarray,
-                    lay: Layout | None = None) -> tuple[Layout, list]:
+def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
+                    pred: np.ndarray) -> tuple[Layout, list]:
     """The derivatives of the predictions `pred` (F, M, 3) of state `s` (with the segments' rotations `R` and
     the joints' world centres `centre` of :func:`identcheck.bundle.model.forward`), one :class:`Block` per group."""
-    lay = lay or layout(chain, terms)
+    lay = layout(chain, terms)
     F = pred.shape[0]
     n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
     lever = pred
@@ -149,7 +150,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         lever = pred.copy()
         for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
             lever[:, cols] -= p[0] * fld
-    turns = _hinge_turns(chain, terms, s) if terms.rotations else {}
+    turns = hinge_turns(chain, terms, s) if terms.rotations else {}
     hinge_w, rest_w, tilt_w = {}, {}, {}
     for j in chain.joints:
         if chain.types[j] != "revolute":
@@ -157,12 +158,12 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         P, ax, th = chain.parent[j], s.axis[j], s.theta[j]
         hinge_w[j] = R[P] @ ax
         rot = turns.get(j)
-        rot = _rot(ax, th) if rot is None else rot
+        rot = hinge_matrix(ax, th) if rot is None else rot
         rest_w[j] = [np.einsum("fij,fj->fi", R[P], rot[:, :, a]) for a in range(3)]
         tilt = []
         for b in tangents(ax):
             if any(r[0] == j for r in terms.rotations):
-                wp = _turn_rate(chain, terms, s, j, _tilt_axis(j, b))      # the second axis moves with it
+                wp = turn_rate(chain, terms, s, j, tilt_axis(j, b))      # the second axis moves with it
             else:
                 wp = np.sin(th)[:, None] * b + (1 - np.cos(th))[:, None] * cross3(ax, b)
             tilt.append(np.einsum("fij,fj->fi", R[P], wp))
@@ -172,8 +173,8 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
     for r, (j, basis, beta) in enumerate(terms.rotations):  # d/dψ: about R_P Rot(a, θ) u, through the centre
         u = second_axis(s.axis[j], beta + s.term_params[n_mc + r][-1, 0])
         P = chain.parent[j]
-        second[n_mc + r] = (np.einsum("fij,fjk,k->fi", R[P], _rot(s.axis[j], s.theta[j]), u),
-                            np.einsum("fij,fj->fi", R[P], _turn_rate(chain, terms, s, j, _turn_beta(n_mc + r))))
+        second[n_mc + r] = (np.einsum("fij,fjk,k->fi", R[P], hinge_matrix(s.axis[j], s.theta[j]), u),
+                            np.einsum("fij,fj->fi", R[P], turn_rate(chain, terms, s, j, turn_beta(n_mc + r))))
     ordered = terms.ordered()
     blocks = []
     for grp in lay.groups:

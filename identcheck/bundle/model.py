@@ -106,29 +106,21 @@ class Fit:
 
 
 # ---------------------------------------------------------------------- kinematics
-def _rot(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    return hinge_matrix(axis, theta)
-
-
-def _exp(w: np.ndarray) -> np.ndarray:
-    return rotvec_matrix(w)
-
-
 def second_axis(axis: np.ndarray, beta: float) -> np.ndarray:
     """The unit vector at angle β in the plane perpendicular to `axis` (from :func:`tangents`)."""
     b1, b2 = tangents(axis)
     return np.cos(beta) * b1 + np.sin(beta) * b2
 
 
-def _hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
+def hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
     """Each revolute joint's ``Rot(a, θ) Exp(ψ u)`` (F, 3, 3), the second rotations of ``terms.rotations``
     included: the relative rotation is this times the rest rotation."""
     n0 = len(terms.markers) + len(terms.centres)
     extra = {}
     for (j, basis, beta), p in zip(terms.rotations, s.term_params[n0:n0 + len(terms.rotations)]):
         extra[j] = extra.get(j, 0.0) + (basis @ p[:-1])[:, 0, None] * second_axis(s.axis[j], beta + p[-1, 0])
-    return {j: _rot(s.axis[j], s.theta[j]) @ _exp(extra[j]) if j in extra else _rot(s.axis[j], s.theta[j])
-            for j in chain.joints if chain.types[j] == "revolute"}
+    turns = {j: hinge_matrix(s.axis[j], s.theta[j]) for j in chain.joints if chain.types[j] == "revolute"}
+    return {j: turn @ rotvec_matrix(extra[j]) if j in extra else turn for j, turn in turns.items()}
 
 
 def forward(chain: Skeleton, terms: Terms, s: State):
@@ -137,7 +129,7 @@ def forward(chain: Skeleton, terms: Terms, s: State):
     coffs = {}
     for (j, basis), D in zip(terms.centres, s.term_params[len(terms.markers):]):
         coffs[j] = coffs.get(j, 0.0) + basis @ D
-    turns = _hinge_turns(chain, terms, s)
+    turns = hinge_turns(chain, terms, s)
     rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else turns[j] @ s.rest[j] for j in chain.joints}
     cp = {j: s.c_parent[j] + coffs[j] if j in coffs else s.c_parent[j] for j in chain.joints}
     R, t, centre = chain_poses([(j, chain.parent[j], chain.child[j]) for j in chain.joints], chain.root,
@@ -171,29 +163,29 @@ def tangents(a: np.ndarray):
     return b1, cross3(a, b1)
 
 
-def _turn_rate(chain: Skeleton, terms: Terms, s: State, joint: str, move, h: float = 1e-6):
+def turn_rate(chain: Skeleton, terms: Terms, s: State, joint: str, move, h: float = 1e-6):
     """The rotation vector (parent frame, (F, 3)) of ``d(turn)/dε · turnᵀ`` of the joint's
-    :func:`_hinge_turns` when ``move(state, ε)`` changes the state (central differences): where a second
+    :func:`hinge_turns` when ``move(state, ε)`` changes the state (central differences): where a second
     rotation's axis moves with the hinge axis or its own angle β, no closed form is worth its length."""
     def turn(eps):
         st = s.copy()
         move(st, eps)
-        return _hinge_turns(chain, terms, st)[joint]
+        return hinge_turns(chain, terms, st)[joint]
     dT = (turn(h) - turn(-h)) / (2 * h)
     W = dT @ np.swapaxes(turn(0.0), 1, 2)
     return 0.5 * np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], axis=1)
 
 
-def _tilt_axis(joint: str, direction: np.ndarray):
-    """``move`` for :func:`_turn_rate`: the hinge axis tilted by ε towards `direction`, as :func:`_apply` does."""
+def tilt_axis(joint: str, direction: np.ndarray):
+    """``move`` for :func:`turn_rate`: the hinge axis tilted by ε towards `direction`, as :func:`apply_step` does."""
     def move(st, eps):
         a = st.axis[joint] + eps * direction
         st.axis[joint] = a / np.linalg.norm(a)
     return move
 
 
-def _turn_beta(index: int):
-    """``move`` for :func:`_turn_rate`: term parameter `index`'s β (its last row) moved by ε."""
+def turn_beta(index: int):
+    """``move`` for :func:`turn_rate`: term parameter `index`'s β (its last row) moved by ε."""
     def move(st, eps):
         st.term_params[index] = st.term_params[index].copy()
         st.term_params[index][-1, 0] += eps
@@ -203,7 +195,7 @@ def _turn_beta(index: int):
 def apply_step(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: np.ndarray) -> State:
     """The state moved by per-frame steps dq (F, k) and constant steps dc (P,)."""
     n = s.copy()
-    n.root_R = _exp(dq[:, :3]) @ s.root_R
+    n.root_R = rotvec_matrix(dq[:, :3]) @ s.root_R
     n.root_t = s.root_t + dq[:, 3:6]
     col = 6
     M = chain.n_markers
@@ -213,7 +205,7 @@ def apply_step(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: n
         P = chain.parent[j]
         if chain.types[j] == "spherical":
             wp = np.einsum("fji,fj->fi", R[P], dq[:, col:col + 3])
-            n.rel_R[j] = _exp(wp) @ s.rel_R[j]
+            n.rel_R[j] = rotvec_matrix(wp) @ s.rel_R[j]
             col += 3
         else:
             n.theta[j] = s.theta[j] + dq[:, col]
@@ -222,7 +214,7 @@ def apply_step(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: n
         n.c_child[j] = s.c_child[j] + dc[c + 3:c + 6]
         c += 6
         if chain.types[j] == "revolute":
-            n.rest[j] = _exp(dc[c:c + 3])[0] @ s.rest[j]
+            n.rest[j] = rotvec_matrix(dc[c:c + 3])[0] @ s.rest[j]
             b1, b2 = tangents(s.axis[j])
             a = s.axis[j] + dc[c + 3] * b1 + dc[c + 4] * b2
             n.axis[j] = a / np.linalg.norm(a)
