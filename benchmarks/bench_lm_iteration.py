@@ -143,7 +143,8 @@ def measure(pythonpath: Path, name: str, alloc: bool, iterations: int) -> dict:
 
 def fit_command(path: Path, version: str, threads: str | None) -> dict:
     """``identcheck fit`` on both legs of walking2 with the package at `path`: wall and CPU seconds of the
-    process, and the interval methods of the knees' and hips' marker distances."""
+    process, and the interval methods of the knees' and hips' marker distances. Run from `path`: ``python -m``
+    puts the working directory ahead of ``PYTHONPATH``."""
     env = dict(os.environ, PYTHONPATH=str(path))
     env.pop("IDENTCHECK_THREADS", None)
     if threads:
@@ -151,7 +152,7 @@ def fit_command(path: Path, version: str, threads: str | None) -> dict:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-m", "identcheck", "fit", str(ROOT / "examples" / "real_walking2_legs.toml"),
-                          str(ROOT / "examples" / "real" / "opensim_walking2.c3d"), "--json"], env=env, cwd=ROOT,
+                          str(ROOT / "examples" / "real" / "opensim_walking2.c3d"), "--json"], env=env, cwd=path,
                          capture_output=True, text=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
