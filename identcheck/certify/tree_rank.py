@@ -16,10 +16,17 @@ Rot(a_j, θ) (revolute, a_j a unit direction in the parent). A marker of segment
 x = R_s m + t_s. In frame i the columns are the per-frame variables (root rotation and
 translation, each joint's rotation) and the constants (m, c_j, the two tangent directions of a_j).
 
-Block structure. Frame i has rows [V_i | C_i]; the row space of J restricted to the constants
-is W = Σ_i {λ C_i : λ V_i = 0}, read off the reduced row echelon form of [V_i | C_i] (rows whose
-pivot lies in the constant columns). W only grows with N; frames are added until a new generic
-frame changes neither dim W nor any verdict (the stopping rule of :mod:`identcheck.certify.jacobian`).
+How it is computed. W = {λ C : λ V = 0} for the stacked rows [V | C] of all frames (V the per-frame
+columns). W does not depend on how the per-frame unknowns are parametrised, so the equations are
+written with every segment's pose as an unknown and each joint's constraint as rows
+(:mod:`identcheck.certify.tree_equations`): every row then touches one segment or one joint, and the
+unknowns are eliminated leaf to root and back (:mod:`identcheck.certify.tree_elimination`), each
+subtree summarised by what it fixes on its parent's poses. A joint's quantities involve only its own
+constants, its segments' markers and neighbouring centres (L_j), so each is judged against
+W ∩ span(L_j); dim W = rank [V | C] − rank V. The cost is linear in the number of segments (a
+200-segment chain in seconds), where one dense matrix per frame grew as the cube of the chain. W only
+grows with N; frames are added until a new generic frame changes neither dim W nor any verdict (the
+stopping rule of :mod:`identcheck.certify.jacobian`).
 
 What a joint is judged by. Its own parameters — its centre (and axis) in each of its two segments —
 relative to what the data determine in that segment: its distances to the segment's markers, or, on
@@ -50,7 +57,10 @@ from functools import cached_property
 
 from identcheck.errors import InputError
 from identcheck.exact.linalg import PRIME_BITS, Field
-from identcheck.exact.algebra import add as _add, axis_rotation as _axis_rotation, cross as _cross, dot as _dot, half_angle, mm as _mm, mv as _mv, quaternion_rotation, scale as _scale, sub as _sub, transpose as _T
+from identcheck.certify.tree_elimination import TreeElimination
+from identcheck.certify.tree_equations import (centre_keys, frame_pose, frozen_keys, joint_rows, marker_keys, marker_rows,
+                                               tangent_keys)
+from identcheck.exact.algebra import axis_rotation, dot as _dot, half_angle, quaternion_rotation, scale as _scale, sub as _sub
 
 SET_BITS = 40
 MAX_FRAMES = 60
@@ -87,13 +97,6 @@ class _Draw:
             t = self.scalar()
             if 1 + t * t != 0:
                 return half_angle(t)
-
-
-def _axis_rotation_derivative(a, u, c, s):
-    """d Rot(a, θ) along a → a + ε u (u ⟂ a): s [u]× + (1 − c)(u aᵀ + a uᵀ)."""
-    one = 1 - c
-    skew = [[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]]
-    return [[s * skew[i][j] + one * (u[i] * a[j] + a[i] * u[j]) for j in range(3)] for i in range(3)]
 
 
 # -- the tree ----------------------------------------------------------------------------------------
@@ -160,13 +163,14 @@ class _Constants:
 
 
 class TreeJacobian:
-    """Frames of the whole-tree Jacobian at one random point, accumulated into W (see module docstring)."""
+    """The whole-tree equations at one random point over the frames drawn so far, and what they determine
+    about each joint's constants (see the module docstring; the equations are
+    :mod:`identcheck.certify.tree_equations`', eliminated by :mod:`identcheck.certify.tree_elimination`)."""
 
     def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0):
         self.spec = spec
-        rng = random.Random(f"identcheck.tree_rank/{seed}/{field_kind}")
-        self.F = Field(field_kind, rng)
-        self.draw = _Draw(self.F, rng)
+        self._stream = f"identcheck.tree_rank/{seed}/{field_kind}"
+        self.F = Field(field_kind, random.Random(self._stream))
         cols = _Columns()
         for s, ms in spec.markers.items():
             for m in ms:
@@ -178,124 +182,130 @@ class TreeJacobian:
             if name in spec.frozen:
                 cols.frozen[name] = cols.take(VARS_PER_JOINT[kind])
         self.cols = cols
-        d = self.draw
+        self.col_key = [None] * cols.n          # constant column index -> its key in the equations
+        for m, i in cols.marker.items():
+            self.col_key[i:i + 3] = marker_keys(m)
+        for n, i in cols.centre.items():
+            self.col_key[i:i + 3] = centre_keys(n)
+        for n, i in cols.tangent.items():
+            self.col_key[i:i + 2] = tangent_keys(n)
+        for n, kind, _, _ in spec.joints:
+            if n in cols.frozen:
+                i, width = cols.frozen[n], VARS_PER_JOINT[kind]
+                self.col_key[i:i + width] = frozen_keys(n, width)
         axes = {}
         for name, kind, _, _ in spec.joints:
             if kind == "revolute":
-                R = d.rotation()
+                R = self.draw("axis", name).rotation()
                 axes[name] = ([R[i][2] for i in range(3)], [R[i][0] for i in range(3)], [R[i][1] for i in range(3)])
-        self.k = _Constants(m={m: d.vector() for ms in spec.markers.values() for m in ms},
-                            c={j[0]: d.vector() for j in spec.joints}, a=axes)
+        self.k = _Constants(m={m: self.draw("marker", m).vector() for ms in spec.markers.values() for m in ms},
+                            c={j[0]: self.draw("centre", j[0]).vector() for j in spec.joints}, a=axes)
         self.frozen_angles = {name: self._joint_rotation(name, kind) for name, kind, _, _ in spec.joints
                               if name in spec.frozen}
-        self.var_offset = {}
-        nv = 6
-        for name, kind, _, _ in spec.joints:
-            if name not in spec.frozen:
-                self.var_offset[name] = nv
-                nv += VARS_PER_JOINT[kind]
-        self.n_vars = nv
-        self.W: list = []
         self.frames = 0
+        self._frames: list = []            # per frame: (marker rows by segment, joint rows by joint, rank V_f)
+        self._states: dict = {}
+
+    def draw(self, *item) -> _Draw:
+        """The random source of one item (a marker's position, a joint's centre or axis, a frame's root pose
+        or joint turn): each item has its own stream, so plans that share an item draw it alike."""
+        return _Draw(self.F, random.Random("/".join([self._stream, *map(str, item)])))
 
     def _joint_rotation(self, name, kind):
+        d = self.draw("frozen", name)
         if kind == "spherical":
-            return (self.draw.rotation(), None)
-        c, s = self.draw.angle()
-        return (_axis_rotation(self.k.a[name][0], c, s), (c, s))
+            return (d.rotation(), None)
+        c, s = d.angle()
+        return (axis_rotation(self.k.a[name][0], c, s), (c, s))
 
-    def _frame_rows(self) -> list:
-        """Rows [V_i | C_i] of one generic frame."""
-        spec, k, F = self.spec, self.k, self.F
-        zero = F(0)
-        pose = {spec.root: (self.draw.rotation(), self.draw.vector())}
-        joint_frame = {}
-        for name, kind, par, chi in spec.joints:
-            RP, tP = pose[par]
-            Q, cs = self.frozen_angles.get(name) or self._joint_rotation(name, kind)
-            pose[chi] = (_mm(RP, Q), _add(_mv(RP, k.c[name]), tP))
-            joint_frame[name] = (RP, tP, Q, cs)
-        ncols = self.n_vars + self.cols.n
-        rows = []
-        seg_of = {m: s for s, ms in spec.markers.items() for m in ms}
-        for m, s in seg_of.items():
-            R, t = pose[s]
-            x = _add(_mv(R, k.m[m]), t)
-            block = [[zero] * ncols for _ in range(3)]
-            e = [[F(1), zero, zero], [zero, F(1), zero], [zero, zero, F(1)]]
-            for a in range(3):                                  # root rotation about the world origin
-                col = _cross(e[a], x)
-                for r in range(3):
-                    block[r][a] = col[r]
-                    block[r][3 + a] = e[a][r]                   # root translation
-            base = self.n_vars
-            for a in range(3):                                  # the marker's own position
-                for r in range(3):
-                    block[r][base + self.cols.marker[m] + a] = R[r][a]
-            seg = s
-            while seg != spec.root:                             # every joint above the marker
-                name, kind, par, _ = spec.parent_joint[seg]
-                RP, tP, Q, cs = joint_frame[name]
-                rel = _sub(x, pose[seg][1])                     # from the joint's centre (the child origin)
-                v0 = self.var_offset[name] if name in self.var_offset else base + self.cols.frozen[name]
-                if kind == "spherical":
-                    for a in range(3):                          # about the parent's axes (a constant
-                        col = _cross([RP[0][a], RP[1][a], RP[2][a]], rel)   # basis when frozen)
-                        for r in range(3):
-                            block[r][v0 + a] = col[r]
-                else:
-                    col = _cross(_mv(RP, k.a[name][0]), rel)
-                    for r in range(3):
-                        block[r][v0] = col[r]
-                c0 = base + self.cols.centre[name]
-                for a in range(3):
-                    for r in range(3):
-                        block[r][c0 + a] = RP[r][a]
-                if kind == "revolute":
-                    a_, u_, w_ = k.a[name]
-                    c, s_ = cs
-                    z = _mv(_T(Q), _sub(_mv(_T(RP), _sub(x, tP)), k.c[name]))       # y in the child frame
-                    for b, tv in enumerate((u_, w_)):
-                        col = _mv(RP, _mv(_axis_rotation_derivative(a_, tv, c, s_), z))
-                        for r in range(3):
-                            block[r][base + self.cols.tangent[name] + b] = col[r]
-                seg = par
-            rows.extend(block)
-        return rows
+    @property
+    def n_frame_unknowns(self) -> int:
+        """Per-frame unknowns of the equations: each segment's pose (6) and each moving hinge's angle."""
+        hinges = sum(1 for n, kind, _, _ in self.spec.joints if kind == "revolute" and n not in self.spec.frozen)
+        return 6 * len(self.spec.markers) + hinges
 
-    def add_frame(self, count: int = 1) -> int:
-        """Add ``count`` generic frames (W reduced once, after the last); returns dim W."""
-        ncols = self.n_vars + self.cols.n
-        new = []
+    def add_frame(self, count: int = 1) -> None:
+        """Add ``count`` generic frames: their equations, marker by marker and joint by joint, and the rank
+        of their per-frame columns (frames share no per-frame column, so rank V is a sum over frames)."""
+        spec = self.spec
         for _ in range(count):
-            red = self.F.rref_rows(self._frame_rows(), ncols)
-            new += [r[self.n_vars:] for r in red if all(v == 0 for v in r[:self.n_vars])]
+            f = self.frames
+            pose, turns = frame_pose(spec, self.k, lambda *item: self.draw("frame", f, *item), self.frozen_angles)
+            mrows = {s: [row for m in ms for row in marker_rows(s, f, pose[s][0], self.k.m[m], marker_keys(m))]
+                     for s, ms in spec.markers.items()}
+            jrows = {j[0]: joint_rows(j, f, pose[j[2]][0], turns[j[0]], self.k, j[0] in spec.frozen)
+                     for j in spec.joints}
+            rank_v = TreeElimination(self.F, spec, [f], mrows, jrows, None, None, None,
+                                     stream=self._stream).rank_per_frame()
+            self._frames.append((mrows, jrows, rank_v))
             self.frames += 1
-        self.W = self.F.rref_rows(self.W + new, self.cols.n)
-        self.pivots = [next(j for j, v in enumerate(r) if v != 0) for r in self.W]
-        return len(self.W)
 
-    def gradient_rows(self, grads) -> list:
-        """Dense rows of constant-gradients given as {column: value}."""
+    def at(self, frames: int) -> "FrameState":
+        """What the first ``frames`` frames determine (computed once per frame count)."""
+        if frames not in self._states:
+            self._states[frames] = FrameState(self, frames)
+        return self._states[frames]
+
+
+class FrameState:
+    """W after the first ``frames`` frames of a :class:`TreeJacobian`: dim W, and membership in W of
+    gradients supported on one joint's constants (against W ∩ span(L_j))."""
+
+    def __init__(self, tj: TreeJacobian, frames: int):
+        self.tj, self.frames = tj, frames
+        self._elimination = None
+        self._subspaces: dict = {}
+
+    @property
+    def elimination(self) -> TreeElimination:
+        if self._elimination is None:
+            tj, spec = self.tj, self.tj.spec
+            used = tj._frames[:self.frames]
+            marker_rows_ = {s: [r for m, _, _ in used for r in m[s]] for s in spec.markers}
+            joint_rows_ = {n: [r for _, j, _ in used for r in j[n]] for n, _, _, _ in spec.joints}
+            marker_cols = {s: [k for m in ms for k in marker_keys(m)] for s, ms in spec.markers.items()}
+            centre_cols = {n: centre_keys(n) for n, _, _, _ in spec.joints}
+            joint_cols = {n: centre_cols[n] + (tangent_keys(n) if kind == "revolute" else [])
+                          for n, kind, _, _ in spec.joints}
+            e = TreeElimination(tj.F, spec, range(self.frames), marker_rows_, joint_rows_,
+                                marker_cols, centre_cols, joint_cols, stream=tj._stream)
+            e.upward()
+            self._elimination = e
+        return self._elimination
+
+    def dim_w(self) -> int:
+        """dim W = rank [V | C] − rank V: the constants' combinations the data determine, whole tree."""
+        return self.elimination.rank_full - sum(r for _, _, r in self.tj._frames[:self.frames])
+
+    def in_joint_span(self, joint: str, grads: list) -> list:
+        """For each gradient ({constant column: value}, supported on the joint's constants, its segments'
+        markers and the centres it may be judged against), is it in W?"""
+        if not grads:
+            return []
+        if joint not in self._subspaces:
+            e = self.elimination
+            if not e.downward_done:
+                e.downward()
+            W = e.joint_subspace(next(j for j in self.tj.spec.joints if j[0] == joint))
+            pivots = [next(key for key in W.keys if key in r) for r in W.rows]
+            self._subspaces[joint] = (set(W.keys), list(zip(pivots, W.rows)))
+        keys, basis = self._subspaces[joint]
         out = []
         for grad in grads:
-            g = [self.F(0)] * self.cols.n
+            g = {}
             for i, v in grad.items():
-                g[i] = g[i] + v
-            out.append(g)
+                if v != 0:
+                    key = self.tj.col_key[i]
+                    g[key] = g.get(key, 0) + v
+            if any(key not in keys for key in g):
+                raise ValueError(f"gradient outside joint {joint!r}'s constants")
+            for piv, row in basis:                  # reduced echelon rows: one subtraction per pivot
+                v = g.get(piv)
+                if v is not None and v != 0:
+                    for key, x in row.items():
+                        g[key] = g.get(key, 0) - v * x
+            out.append(not any(v != 0 for v in g.values()))
         return out
-
-    def in_span(self, rows) -> list:
-        """For each dense row, is it in W? (Reduce by the echelon basis: one matrix product.)"""
-        if not rows:
-            return []
-        n = self.cols.n
-        if not self.W:
-            return [all(v == 0 for v in r) for r in rows]
-        G = self.F.matrix(rows, n)
-        P = self.F.matrix([[r[j] for j in self.pivots] for r in rows], len(self.pivots))
-        flat = (G - P * self.F.matrix(self.W, n)).entries()
-        return [not any(flat[i * n:(i + 1) * n]) for i in range(len(rows))]
 
 
 # -- what is asked: gauge-invariant quantities of each joint ------------------------------------------
@@ -477,20 +487,30 @@ class TreeRank:
     failure_bound: float              # probability the verdicts are wrong (QQ) / guidance only (GFp)
 
 
+def _rows_per_frame(spec: TreeSpec) -> list:
+    """(rows, segment) per frame of the equations (:mod:`identcheck.certify.tree_equations`): three per
+    marker on its segment; three per ball joint and six per hinge or frozen joint, counted at the child
+    (their entries — R_P, R_P c_j, R_P a_j, R_P g — are products of the rotations above the child)."""
+    out = [(3 * len(ms), s) for s, ms in spec.markers.items()]
+    out += [(3 if kind == "spherical" and name not in spec.frozen else 6, chi) for name, kind, _, chi in spec.joints]
+    return out
+
+
 def degree_bound(spec: TreeSpec, frames: int) -> int:
     """D: a bound on the degree, in the drawn coordinates, of the minors the verdicts rest on.
 
-    Entries of a row of J are, after clearing denominators, polynomials in the drawn coordinates:
-    each rotation on the chain from the root contributes degree ≤ 2 to numerator and denominator
-    (quaternion / |q|² or half-angle over 1 + t²), a joint at most two rotations (a hinge: its
-    axis' rotation and its angle), the constants degree 1; a row below d joints therefore has
-    degree ≤ 4(2d + 2) + 2 once its denominators are cleared, and a minor built from ≤ R rows (plus
-    one gradient row) has degree ≤ the sum over its rows, bounded by the sum over all rows.
+    Entries of a row are, after clearing denominators, polynomials in the drawn coordinates: each
+    rotation on the chain from the root contributes degree ≤ 2 to numerator and denominator
+    (quaternion / |q|² or half-angle over 1 + t²), a joint at most two rotations (a hinge: its axis'
+    rotation and its angle; an axis' tilt rate g is a product of two such), the constants degree 1; a
+    row below d joints therefore has degree ≤ 4(2d + 2) + 2 once its denominators are cleared, and a
+    minor built from ≤ R rows (plus one gradient row) has degree ≤ the sum over its rows, bounded by the
+    sum over all rows (:func:`_rows_per_frame`).
     """
     depth = {spec.root: 0}
     for _, _, par, chi in spec.joints:
         depth[chi] = depth[par] + 2
-    per_frame = sum(3 * len(ms) * (4 * (depth[s] + 2) + 2) for s, ms in spec.markers.items())
+    per_frame = sum(n * (4 * (depth[s] + 2) + 2) for n, s in _rows_per_frame(spec))
     grad_row = 8
     return per_frame * frames + grad_row
 
@@ -506,8 +526,7 @@ def content_bits(spec: TreeSpec, frames: int, ncols: int) -> int:
     depth = {spec.root: 0}
     for _, _, par, chi in spec.joints:
         depth[chi] = depth[par] + 1
-    per_frame = sum(3 * len(ms) * (math.ceil(math.log2(max(ncols, 2))) + 8 * (depth[s] + 3))
-                    for s, ms in spec.markers.items())
+    per_frame = sum(n * (math.ceil(math.log2(max(ncols, 2))) + 8 * (depth[s] + 3)) for n, s in _rows_per_frame(spec))
     return per_frame * frames + 64
 
 
@@ -529,29 +548,31 @@ def failure_bound(spec: TreeSpec, frames: int, n_claims: int, prime: int | None,
     return min(1.0, n_claims * per)
 
 
-def _not_in_w(tj: "TreeJacobian", asked: dict) -> dict:
-    """joint -> labels of its quantities whose gradients are not in W (one matrix product for all)."""
-    labels = [(n, q.label) for n, ql in asked.items() for q in ql]
-    G = tj.gradient_rows([q.grad for ql in asked.values() for q in ql])
-    out = {n: [] for n in asked}
-    for (n, label), ok in zip(labels, tj.in_span(G)):
-        if not ok:
-            out[n].append(label)
+def _not_in_w(state: FrameState, asked: dict) -> dict:
+    """joint -> labels of its quantities whose gradients are not in W (each joint against W ∩ span(L_j))."""
+    out = {}
+    for n, ql in asked.items():
+        found = state.in_joint_span(n, [q.grad for q in ql])
+        out[n] = [q.label for q, ok in zip(ql, found) if not ok]
     return out
 
 
-def _judge(tj: "TreeJacobian", asked: dict) -> tuple:
+def _judge(state: FrameState, asked: dict) -> tuple:
     """(joint -> (points, set aside), joint -> its judged quantities, joint -> judged labels not in W) at
-    the current W: every quantity over :func:`adjacent_points` is decided first, which fixes the anchored
+    the state's W: every quantity over :func:`adjacent_points` is decided first, which fixes the anchored
     centres; joints whose points then change are asked again, against :func:`judged_points`."""
-    spec = tj.spec
-    undetermined = _not_in_w(tj, asked)
+    spec = state.tj.spec
+    undetermined = _not_in_w(state, asked)
     anchored = anchored_centres(spec, asked, undetermined)
     points = {n: judged_points(spec, n, anchored) for n in asked}
-    redo = {n: quantities(tj, n, pts) for n, (pts, aside) in points.items() if aside}
-    again = _not_in_w(tj, redo)
+    redo = {n: quantities(state.tj, n, pts) for n, (pts, aside) in points.items() if aside}
+    again = _not_in_w(state, redo)
     judged = {n: redo.get(n, asked[n]) for n in asked}
     return points, judged, {n: again.get(n, undetermined[n]) for n in asked}
+
+
+def _local(judged: dict, verdict: dict) -> set:
+    return {n for n, qlist in judged.items() if qlist and not verdict[n]}
 
 
 def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
@@ -563,30 +584,45 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     other ball joints (:func:`judged_points`). An undetermined neighbour (a neck whose head carries no
     marker) is then the neighbour's undetermined quantity, reported in ``set_aside``, not this joint's.
 
+    The frames are nested, so W only grows: when one more frame leaves dim W unchanged, W and every
+    verdict are unchanged, and the scan stops there (only dim W is computed while scanning). A joint's
+    ``min_frames`` is the fewest frames from which on it is locally identifiable, found by judging again
+    at fewer frames, from the stop downwards, while some joint is still local there.
+
     ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
     plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count)."""
     tj = TreeJacobian(spec, field_kind, seed)
     asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
-    first = {}
-    prev = None
+    dims = {}
+    stable = False
     while tj.frames < max_frames:
-        dim = tj.add_frame(max(1, warm_frames - tj.frames))
-        points, judged, verdict = _judge(tj, asked)
-        for name, qlist in judged.items():
-            if qlist and not verdict[name] and name not in first:
-                first[name] = tj.frames
-        state = (dim, {n: (len(points[n][1]), len(m)) for n, m in verdict.items()})
-        if state == prev:
+        tj.add_frame(max(1, warm_frames - tj.frames))
+        dims[tj.frames] = tj.at(tj.frames).dim_w()
+        if dims.get(tj.frames - 1) == dims[tj.frames]:
+            stable = True
             break
-        prev = state
-    joints = {n: JointRank(local=bool(judged[n]) and not verdict[n], min_frames=first.get(n),
+    final, start = tj.frames, min(dims)
+    points, judged, verdict = _judge(tj.at(final), asked)
+    local = _local(judged, verdict)
+    first = {n: final for n in local}
+    frames = final - 1
+    if stable and frames >= start:            # same W one frame earlier: same verdicts
+        first = {n: frames for n in local}
+        frames -= 1
+    while frames >= start and any(first[n] == frames + 1 for n in local):
+        still = _local(*_judge(tj.at(frames), asked)[1:])
+        for n in local:
+            if first[n] == frames + 1 and n in still:
+                first[n] = frames
+        frames -= 1
+    joints = {n: JointRank(local=n in local, min_frames=first.get(n),
                            quantities=[q.label for q in judged[n]], undetermined=verdict[n],
                            points=points[n][0],
                            set_aside=[{"joint": q.point.name, "segment": q.point.segment, "quantity": q.label}
                                       for q in asked[n] if q.point in points[n][1]])
               for n in asked}
-    D = degree_bound(spec, tj.frames)
+    D = degree_bound(spec, final)
     n_claims = sum(len(q) for q in asked.values()) + sum(len(q) for n, q in judged.items() if points[n][1]) + 1
-    fail = failure_bound(spec, tj.frames, n_claims, tj.F.p, tj.n_vars * tj.frames + tj.cols.n)
-    return TreeRank(joints=joints, frames=tj.frames, dim_w=len(tj.W), n_constants=tj.cols.n, field=field_kind,
+    fail = failure_bound(spec, final, n_claims, tj.F.p, tj.n_frame_unknowns * final + tj.cols.n)
+    return TreeRank(joints=joints, frames=final, dim_w=dims[final], n_constants=tj.cols.n, field=field_kind,
                     prime=tj.F.p, degree_bound=D, failure_bound=fail)

@@ -117,18 +117,8 @@ class Field:
             return flint.nmod(x.numerator, self.p) / flint.nmod(x.denominator, self.p)
         return flint.nmod(x, self.p)
 
-    def matrix(self, rows, ncols: int):
-        if not rows:
-            return None
+    def zeros(self, nrows: int, ncols: int):
+        """The zero matrix of this field (entries set one by one, which FLINT does without conversions)."""
         if self.p is None:
-            return flint.fmpq_mat(len(rows), ncols, [v for r in rows for v in r])
-        return flint.nmod_mat(rows, self.p)
-
-    def rref_rows(self, rows, ncols: int) -> list:
-        """Non-zero rows of the reduced row echelon form (a basis of the row space)."""
-        M = self.matrix(rows, ncols)
-        if M is None:
-            return []
-        R, r = M.rref()
-        flat = R.entries()
-        return [flat[i * ncols:(i + 1) * ncols] for i in range(r)]
+            return flint.fmpq_mat(nrows, ncols)
+        return flint.nmod_mat(nrows, ncols, self.p)
