@@ -48,6 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from results_io import machine_info, write_json  # noqa: E402
+import worktree  # noqa: E402
 
 KEY = "lm_iteration"
 CHAINS = ("leg9", "walking2", "body42")
@@ -184,30 +185,24 @@ def main(argv=None) -> int:
     if a.worker:
         print(json.dumps(worker(a.worker, bool(a.alloc), a.iterations)))
         return 0
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    head = worktree.head()
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        base = Path(tmp) / "baseline"
-        subprocess.run(["git", "worktree", "add", "--detach", str(base), a.baseline], cwd=ROOT, check=True,
-                       capture_output=True)
-        try:
-            for name in a.chains:
-                for version, path in (("baseline", base), ("current", ROOT)):
-                    for alloc in (False, True):
-                        runs = [measure(path, name, alloc, a.iterations) for _ in range(a.repeats)]
-                        row = {"chain": name, "version": version, "allocator": "kept" if alloc else "default",
-                               "s_per_iteration": statistics.median(r["s_per_iteration"] for r in runs),
-                               "all_s_per_iteration": [r["s_per_iteration"] for r in runs],
-                               "iterations": runs[0]["iterations"], "rss": runs[0]["rss"],
-                               "max_rss_mib": max(r["max_rss_mib"] for r in runs)}
-                        rows.append(row)
-                        print(f"{name:9s} {version:9s} allocator {row['allocator']:8s} "
-                              f"{1000 * row['s_per_iteration']:8.1f} ms/iteration  ({row['iterations']} iterations, "
-                              f"peak {row['max_rss_mib']:.0f} MiB, rss {row['rss']:.6g})", flush=True)
-            end_to_end = [] if a.no_end_to_end else [
-                fit_command(base, "baseline", None), fit_command(ROOT, "current", "1"), fit_command(ROOT, "current", None)]
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
+    with worktree.checkout(a.baseline) as base:
+        for name in a.chains:
+            for version, path in (("baseline", base), ("current", ROOT)):
+                for alloc in (False, True):
+                    runs = [measure(path, name, alloc, a.iterations) for _ in range(a.repeats)]
+                    row = {"chain": name, "version": version, "allocator": "kept" if alloc else "default",
+                           "s_per_iteration": statistics.median(r["s_per_iteration"] for r in runs),
+                           "all_s_per_iteration": [r["s_per_iteration"] for r in runs],
+                           "iterations": runs[0]["iterations"], "rss": runs[0]["rss"],
+                           "max_rss_mib": max(r["max_rss_mib"] for r in runs)}
+                    rows.append(row)
+                    print(f"{name:9s} {version:9s} allocator {row['allocator']:8s} "
+                          f"{1000 * row['s_per_iteration']:8.1f} ms/iteration  ({row['iterations']} iterations, "
+                          f"peak {row['max_rss_mib']:.0f} MiB, rss {row['rss']:.6g})", flush=True)
+        end_to_end = [] if a.no_end_to_end else [
+            fit_command(base, "baseline", None), fit_command(ROOT, "current", "1"), fit_command(ROOT, "current", None)]
     speedup = {}
     for name in a.chains:
         pick = {(r["version"], r["allocator"]): r["s_per_iteration"] for r in rows if r["chain"] == name}

@@ -355,9 +355,9 @@ def identify(model, trial, joints=None, frames=None, precision: int | None = Non
 
 
 @_one_blas_thread
-def table(seed: int = 0, joints=None):
+def table(seed: int = 0, joints=None, progress=None):
     """The identifiability table: every joint type x markers (p on the parent, q on the child), p, q in 0..3,
-    with a certificate per row.
+    with a certificate per row (``progress``: called with a line of text before each joint type).
 
     Returns
     -------
@@ -365,13 +365,14 @@ def table(seed: int = 0, joints=None):
     """
     from identcheck.certify.table import table as make_table
 
-    return make_table(seed=seed, joints=joints)
+    return make_table(seed=seed, joints=joints, progress=progress)
 
 
 @_one_blas_thread
-def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0):
+def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0, progress=None):
     """Exact generic rank of the sampled M-matrix of a case over the rationals (``samples`` rows, default
-    the number of unknowns).
+    the number of unknowns; at most :func:`identcheck.certify.exact_rank.distinct_tangents`). ``progress``:
+    called with a line of text at most once a second on long runs.
 
     Returns
     -------
@@ -379,7 +380,7 @@ def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0):
     """
     from identcheck.certify.exact_rank import rank as exact_rank
 
-    return exact_rank(joint, p, q, n_samples=samples, seed=seed)
+    return exact_rank(joint, p, q, n_samples=samples, seed=seed, progress=progress)
 
 
 @_one_blas_thread

@@ -66,7 +66,7 @@ def _cmd_derive(a) -> int:
 
 
 def _cmd_rank(a) -> int:
-    cert = api.rank(a.joint, a.p, a.q, samples=a.samples, seed=a.seed)
+    cert = api.rank(a.joint, a.p, a.q, samples=a.samples, seed=a.seed, progress=_progress("rank"))
     if a.save:
         json_out.write(a.save, cert, indent=2)
         log.info("certificate saved to %s", a.save)
@@ -87,7 +87,7 @@ def _cmd_verify(a) -> int:
 
 
 def _cmd_table(a) -> int:
-    res = api.table(seed=a.seed, joints=tuple(a.joint) if a.joint else None)
+    res = api.table(seed=a.seed, joints=tuple(a.joint) if a.joint else None, progress=_progress("table"))
     if a.save:
         json_out.write(a.save, res, indent=1)
         log.info("table saved to %s", a.save)
@@ -343,8 +343,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=_seed, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
     s.add_argument("--max-seconds", type=float, default=None, metavar="S",
-                   help="time budget of the robustness and motion analyses together (default 30); what they leave "
-                        "unchecked is listed under 'unfinished'")
+                   help="time budget of the robustness and motion analyses together (default 30), and separately "
+                        "of the --witness searches (default 120); what they leave unchecked is listed under "
+                        "'unfinished'")
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.add_argument("--witness", action="store_true",
@@ -443,7 +444,7 @@ FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "trut
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
-MAX_RANK_SAMPLES = 10_000
+MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
 
@@ -492,8 +493,8 @@ def preflight(a) -> list:
         if path and os.path.abspath(path) in inputs:
             problems.append(f"--{opt.replace('_', '-')} {path}: is an input file; it would be overwritten")
     if a.verb == "rank" and a.samples is not None and not 1 <= a.samples <= MAX_RANK_SAMPLES:
-        problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the exact rank of a larger "
-                        "matrix would not end in reasonable time)")
+        problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the samples' half-angle tangents "
+                        "are distinct, drawn from that many rationals)")
     if a.verb == "identify":
         lo, hi = PRECISION_DIGITS
         if a.precision is not None and not lo <= a.precision <= hi:

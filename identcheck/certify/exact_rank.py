@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import json
 import random
+import time
 from dataclasses import asdict, dataclass, field
+from fractions import Fraction
 
 import numpy as np
 import sympy as sp
@@ -58,18 +60,32 @@ def draw_parameters(cs: Case, rng: random.Random) -> dict:
     return params
 
 
+TANGENT_NUMERATORS, TANGENT_DENOMINATORS = (-40, 40), (1, 13)
+
+
+def distinct_tangents() -> int:
+    """How many distinct half-angle tangents :func:`draw_angles` can draw: the most samples a case can have
+    (675)."""
+    (a0, a1), (b0, b1) = TANGENT_NUMERATORS, TANGENT_DENOMINATORS
+    return len({Fraction(a, b) for a in range(a0, a1 + 1) for b in range(b0, b1 + 1)})
+
+
 def draw_angles(cs: Case, rng: random.Random, n: int) -> list:
     """n samples of per-sample half-angle tangents, distinct in *every* variable.
 
     Distinct tuples are not enough: a row of M may depend on some variables only (for
     revolute (2,1) on β alone, since θ turns the sample about the z axis and M sees only
-    R² and z), so a repeated value of one variable can repeat a row.
+    R² and z), so a repeated value of one variable can repeat a row. The tangents come from a finite
+    set (:func:`distinct_tangents`), so n is at most its size: more would never finish.
     """
+    if n > distinct_tangents():
+        raise InputError(f"--samples {n}: at most {distinct_tangents()} (the samples' half-angle tangents are "
+                         f"distinct, drawn from that many rationals)")
     columns = []
     for _ in cs.variables:
         seen = []
         while len(seen) < n:
-            t = sp.Rational(rng.randint(-40, 40), rng.randint(1, 13))
+            t = sp.Rational(rng.randint(*TANGENT_NUMERATORS), rng.randint(*TANGENT_DENOMINATORS))
             if t not in seen:
                 seen.append(t)
         columns.append(seen)
@@ -92,12 +108,28 @@ def sample_point(cs: Case, params: dict, ts) -> tuple:
     return tuple(sp.Rational(e.xreplace(sub)) for e in forward)
 
 
-def m_rows(cs: Case, points) -> tuple:
+class _Ticker:
+    """Progress of a loop, at most one line a second (nothing for loops that end within the first second)."""
+
+    def __init__(self, what: str, n: int, progress=None):
+        self.what, self.n, self.progress = what, n, progress
+        self.start = self.said = time.monotonic()
+
+    def __call__(self, k: int) -> None:
+        now = time.monotonic()
+        if self.progress and now - self.said >= 1.0:
+            self.said = now
+            self.progress(f"{self.what}: {k} of {self.n} ({now - self.start:.0f} s)")
+
+
+def m_rows(cs: Case, points, progress=None) -> tuple:
     """The exact rational matrix M and vector K built from sample points."""
     dv = derive.for_case(cs, disk_cache=False)
     M, K, inv = dv.result("M"), dv.result("K"), dv.result("invariants")
     rows, rhs = [], []
-    for pt in points:
+    tick = _Ticker("rows of M", len(points), progress)
+    for k, pt in enumerate(points):
+        tick(k)
         sub = dict(zip(cs.sample, pt))
         sub_inv = {k: v.xreplace(sub) for k, v in inv.items()}
         rows.append([sp.Rational(m.xreplace(sub_inv).xreplace(sub)) for m in M])
@@ -149,7 +181,7 @@ class RankCertificate:
         return asdict(self)
 
 
-def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0) -> RankCertificate:
+def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0, progress=None) -> RankCertificate:
     """Exact rank of M built from ``n_samples`` random rational samples of the output set.
 
     Parameters
@@ -159,6 +191,8 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
         Number of samples (rows); defaults to the number of unknowns.
     seed : int
         Seed of the rational draws; the certificate records the points themselves too.
+    progress : callable, optional
+        Called with a line of text at most once a second while samples and rows are computed.
     """
     cs = get_case(joint, p, q)
     dv = derive.for_case(cs, disk_cache=False)
@@ -169,18 +203,22 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
     rng = random.Random(seed)
     params = draw_parameters(cs, rng)
     angles = draw_angles(cs, rng, n)
-    return certificate(cs, params, angles, seed)
+    return certificate(cs, params, angles, seed, progress)
 
 
-def certificate(cs: Case, params: dict, angles: list, seed: int) -> RankCertificate:
+def certificate(cs: Case, params: dict, angles: list, seed: int, progress=None) -> RankCertificate:
     """The rank certificate of case `cs` at constants `params` and per-sample half-angle tangents `angles`:
     every stored field follows from these (and `seed`, which records where they were drawn), so that
     :func:`verify` rebuilds the whole document from them and compares it field by field."""
     dv = derive.for_case(cs, disk_cache=False)
     n_unknowns = len(dv.result("Y"))
     n = len(angles)
-    points = [sample_point(cs, params, ts) for ts in angles]
-    rows, rhs = m_rows(cs, points)
+    tick = _Ticker("sample points", n, progress)
+    points = []
+    for k, ts in enumerate(angles):
+        tick(k)
+        points.append(sample_point(cs, params, ts))
+    rows, rhs = m_rows(cs, points, progress)
     rk, prow, pcol, det = exact_rank(rows)
     num = np.array([[float(v) for v in row] for row in rows])
     scale = np.abs(num).max(axis=0)

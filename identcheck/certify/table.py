@@ -157,14 +157,11 @@ def _engine_row(joint: str, p: int, q: int, seed: int) -> dict:
 
 
 @lru_cache(maxsize=None)
-def _table(seed: int, joints: tuple) -> tuple:
-    out = []
-    for j in joints:
-        if j in CERTIFIED:
-            out += [_with_engine(r, seed) for r in _certified_rows(j, seed)]
-        else:
-            out += [_engine_row(j, p, q, seed) for p in MARKERS for q in MARKERS]
-    return tuple(out)
+def _joint_rows(seed: int, joint: str) -> tuple:
+    """The rows of one joint type (computed once per seed)."""
+    if joint in CERTIFIED:
+        return tuple(_with_engine(r, seed) for r in _certified_rows(joint, seed))
+    return tuple(_engine_row(joint, p, q, seed) for p in MARKERS for q in MARKERS)
 
 
 @dataclass(frozen=True)
@@ -210,7 +207,7 @@ def content_hash(cases) -> str:
     return hashlib.sha256(json.dumps(cases, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
-def table(seed: int = 0, joints=None) -> TableResult:
+def table(seed: int = 0, joints=None, progress=None) -> TableResult:
     """Every case with its verdict and certificate (deterministic for a given ``seed``).
 
     Parameters
@@ -219,9 +216,17 @@ def table(seed: int = 0, joints=None) -> TableResult:
         Seed of the random rational points.
     joints : iterable of str, optional
         Only these joint types (default: all of :data:`identcheck.certify.joint_models.JOINTS`).
+    progress : callable, optional
+        Called with a line of text before each joint type (a few seconds each; the work is a fixed
+        set of cases, so it always ends).
     """
     joints = JOINTS if joints is None else tuple(j for j in JOINTS if j in joints)
-    return TableResult(cases=frozen(list(_table(int(seed), tuple(joints)))), seed=seed)
+    rows = []
+    for k, j in enumerate(joints):
+        if progress:
+            progress(f"{j} joints ({k + 1} of {len(joints)})")
+        rows += _joint_rows(int(seed), j)
+    return TableResult(cases=frozen(rows), seed=seed)
 
 
 def verify(doc: dict) -> list:

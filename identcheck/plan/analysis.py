@@ -600,8 +600,9 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     progress : callable, optional
         Called with a message per stage (at most one a second in the per-joint and per-marker analyses).
     max_seconds : float, optional
-        Budget of the motion and robustness analyses together (default :data:`ANALYSES_BUDGET_S`); what it
-        leaves unchecked is listed under ``unfinished``.
+        Budget of the motion and robustness analyses together (default :data:`ANALYSES_BUDGET_S`), and
+        separately of the witness searches (default :data:`identcheck.plan.witness.BUDGET_S`); what they
+        leave unchecked is listed under ``unfinished``.
 
     Returns
     -------
@@ -617,8 +618,10 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     if witness:
         from identcheck.plan import witness as plan_witness
 
-        for n, w in plan_witness.witnesses(model, spec, plan, seed, progress).items():
+        for n, w in plan_witness.witnesses(model, spec, plan, seed, progress, max_seconds).items():
             doc["joints"][n]["alternative"] = w
+            if w.get("method") == "not_searched":
+                doc.setdefault("unfinished", {}).setdefault("witness", []).append(n)
     if motion:
         needs = motion_needed(spec, plan, seed, budget)
         for n in doc["joints"]:
@@ -628,10 +631,15 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         doc.update(_suggestion_keys(fewest_markers(spec, rows, seed, base=plan)))
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed, budget)
+    reasons = []
     if budget.skipped:
-        doc["unfinished"] = dict(budget.skipped, reason=(
-            f"the motion and robustness analyses stopped at their budget of {budget.seconds:g} s (one whole-tree rank "
-            "per joint and per marker); `plan --max-seconds` raises it, `--fast` skips them"))
+        doc["unfinished"] = dict(doc.get("unfinished", {}), **budget.skipped)
+        reasons.append(f"the motion and robustness analyses stopped at their budget of {budget.seconds:g} s (one "
+                       "whole-tree rank per joint and per marker); `plan --max-seconds` raises it, `--fast` skips them")
+    if "witness" in doc.get("unfinished", {}):
+        reasons.append("the witness searches stopped at their budget; `plan --max-seconds` raises it")
+    if reasons:
+        doc["unfinished"]["reason"] = "; ".join(reasons)
     if fewest:
         doc["fewest_local"] = fewest_local(spec, rows, seed)
     undetermined = {n: list(plan.rank.joints[n].undetermined) for n, j in plan.joints.items() if not j["local"]}

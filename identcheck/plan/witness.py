@@ -9,6 +9,8 @@ marker beyond the one-point segment, :mod:`identcheck.certify.twin` gives the pr
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from identcheck.plan import tree_kinematics as K
@@ -16,6 +18,9 @@ from identcheck.plan import witness_search as W
 from identcheck.simulate.rigid import simulate
 
 MIN_FRAMES = 20
+BUDGET_S = 120.0
+"""Seconds the witness searches may take together by default (``plan --witness --max-seconds``); past it, the
+joints not yet searched say so instead of the search running on."""
 
 
 def simulated_truth(model, spec, n_frames: int, seed: int = 0) -> tuple:
@@ -28,9 +33,13 @@ def simulated_truth(model, spec, n_frames: int, seed: int = 0) -> tuple:
     return (np.concatenate([const, frames[0::2].ravel()]), np.concatenate([const, frames[1::2].ravel()]))
 
 
-def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
+def witnesses(model, spec, plan, seed: int = 0, progress=None, max_seconds: float | None = None) -> dict:
     """joint -> witness dict (``verified`` true) or a dict saying what the search found, for every joint the
-    plan does not identify."""
+    plan does not identify. A search starts only within ``max_seconds`` (default :data:`BUDGET_S`) of the
+    call (the simulated trial included); the joints left are answered ``"method": "not_searched"`` with the
+    budget named."""
+    budget = BUDGET_S if max_seconds is None else float(max_seconds)
+    start = time.monotonic()
     todo = [n for n, j in plan.joints.items() if not j["identifiable"]]
     if not todo:
         return {}
@@ -43,10 +52,16 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None) -> dict:
         return {n: {"joint": n, "method": None, "verified": False, "found": None,
                     "note": "the plan has no markers: there is no trial for a second skeleton to reproduce"}
                 for n in todo}
-    for name in todo:
+    for k, name in enumerate(todo):
         j = plan.joints[name]
+        if time.monotonic() - start > budget:
+            out[name] = {"joint": name, "method": "not_searched", "verified": False, "found": None,
+                         "note": f"not searched: the witness searches stopped at their budget of {budget:g} s "
+                                 f"(`plan --max-seconds` raises it)"}
+            continue
         if progress:
-            progress(f"searching for an alternative to {name}")
+            progress(f"searching for an alternative to {name} ({k + 1} of {len(todo)}, "
+                     f"{time.monotonic() - start:.0f} s of at most {budget:g} s)")
         method = "isolated" if j["local"] else "family"
         if not plan.rank.joints[name].quantities:
             out[name] = {"joint": name, "method": None, "verified": False, "found": None,

@@ -71,3 +71,19 @@ def test_rank_cli_bad_input_exits_2(tmp_path, capsys):
     assert cli.main(["rank", "revolute", "1", "1"]) == 2
     (tmp_path / "x.json").write_text("{not json")
     assert cli.main(["verify", str(tmp_path / "x.json")]) == 2
+
+
+def test_samples_beyond_the_distinct_tangents_are_refused_before_any_work(capsys):
+    """The samples' tangents are distinct and come from a finite set: asking for more used to loop for ever.
+    The command line's limit is that set's size, and the library refuses more with the reason."""
+    import pytest
+
+    from identcheck.errors import InputError
+
+    assert cli.MAX_RANK_SAMPLES == certify.distinct_tangents() == 675
+    with pytest.raises(InputError, match="at most 675"):
+        certify.rank("revolute", 2, 1, n_samples=676)
+    assert cli.main(["rank", "revolute", "2", "1", "--samples", "676"]) == 2
+    assert "--samples 676" in capsys.readouterr().err
+    draws = certify.draw_angles(case("revolute", 2, 1), __import__("random").Random(3), 675)
+    assert all(len(set(col)) == 675 for col in zip(*draws))

@@ -59,3 +59,20 @@ def test_a_budget_out_of_range_is_named(tmp_path, capsys, value):
     model = chain_model(tmp_path / "chain.toml", 2)
     assert cli.main(["plan", str(model), "--max-seconds", value]) == 2
     assert "--max-seconds" in capsys.readouterr().err
+
+
+def test_witness_searches_stop_at_their_budget_and_say_which_joints_they_left():
+    """`plan --witness` searches one joint after another; past its budget the joints left are answered
+    `not_searched` with the budget named, listed under `unfinished.witness`, and the verdicts do not move."""
+    from pathlib import Path
+
+    knee = Path(__file__).resolve().parents[2] / "examples" / "knee_21.toml"
+    res = api.plan(knee, witness=True, max_seconds=1e-9, motion=False, robust=False).to_dict()
+    left = [n for n, j in res["joints"].items() if not j["identifiable"]]
+    assert left and res["unfinished"]["witness"] == left
+    for n in left:
+        alt = res["joints"][n]["alternative"]
+        assert alt["method"] == "not_searched" and alt["verified"] is False and "budget" in alt["note"]
+    assert "witness" in res["unfinished"]["reason"]
+    plain = api.plan(knee, motion=False, robust=False).to_dict()
+    assert {n: j["identifiable"] for n, j in plain["joints"].items()} == {n: j["identifiable"] for n, j in res["joints"].items()}
