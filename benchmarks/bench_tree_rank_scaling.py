@@ -102,7 +102,8 @@ def main(argv=None) -> int:
             if a.full:
                 full = run_plan(ROOT, path, ["--max-seconds", "30"], 10 * a.cap)
                 row["current_full_s"] = full["wall_s"]
-                row["full_unfinished"] = {k: len(v) for k, v in (full["doc"] or {}).get("unfinished", {}).items()}
+                row["full_unfinished"] = {k: len(v) for k, v in (full["doc"] or {}).get("unfinished", {}).items()
+                                          if k != "reason"}
             rows.append(row)
             fmt = lambda t: f"{t:7.2f} s" if t is not None else f"> {a.cap:.0f} s"
             print(f"{name:8s} {segments:4d} segments  baseline {fmt(row['baseline_s'])}  current {fmt(row['current_s'])}"

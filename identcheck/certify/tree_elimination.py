@@ -24,6 +24,7 @@ Cost: a few eliminations of O(F)-sized matrices per segment, linear in the numbe
 """
 from __future__ import annotations
 
+import hashlib
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -38,6 +39,7 @@ class Summary:
 
     keys: list
     rows: list
+    cid: bytes | None = None          # content digest (:func:`digest`), computed once
 
     @property
     def n(self) -> int:
@@ -101,77 +103,102 @@ def pose_keys(segment: str, frames) -> list:
     return [(kind, segment, f, a) for f in frames for kind in ("w", "t") for a in range(3)]
 
 
-def _pools_excluding_each(F, summaries: list, keys: list) -> list:
-    """For each summary, the others' rows pooled on ``keys`` (their other columns eliminated), as a list of
-    at most two blocks: prefix and suffix pools, so n children cost O(n) eliminations, not O(n²)."""
-    n = len(summaries)
-    if n == 1:
-        return [[]]
-    reduced = [eliminate(F, [s], keys).summary for s in summaries]
-    if n == 2:
-        return [[reduced[1]], [reduced[0]]]
-    prefix = [None, reduced[0]]
-    for r in reduced[1:-1]:
-        prefix.append(eliminate(F, [prefix[-1], r], keys).summary)
-    suffix = [None, reduced[-1]]
-    for r in reversed(reduced[1:-1]):
-        suffix.append(eliminate(F, [suffix[-1], r], keys).summary)
-    suffix.reverse()
-    return [[b for b in (prefix[i], suffix[i]) if b is not None] for i in range(n)]
-
-
 class _Memo:
-    """Eliminations already done, by what they depend on (bounded: least recently used first out).
+    """Eliminations already done, by the content of what they eliminated (bounded: least recently used first
+    out).
 
     A plan's robustness and motion analyses rank many variants of one skeleton (a marker removed, a joint
-    held still); each variant shares most subtrees, and with them most eliminations, with the plan itself.
-    A key names everything an elimination's rows depend on — the random stream, the frames, the segments
-    and joints involved with their markers, types and frozen flags, and the joints on the path from the
-    root (world poses compose along it) — so a hit is the same exact result, not an approximation."""
+    held still). A variant shares most of its equations with the plan, and often most of its summaries too:
+    once a subtree's summary comes out the same, everything that depends on it is the same. So an
+    elimination is keyed by its inputs' contents — a block of equations by what determines it (the random
+    stream, the frames, the segment or joint with its markers, type and frozen flag, and the joints on its
+    path from the root, along which world poses compose), a summary by a 128-bit digest of its rows — and
+    the columns it keeps. A hit is the same exact result (up to a digest collision, ~2^-64 over any
+    realistic number of summaries). Eviction is a segmented LRU (:meth:`get`)."""
 
-    MAX_ENTRIES = 400_000             # stored non-zero entries (each a field element) across all results
+    MAX_ENTRIES = 600_000             # stored non-zero entries (each a field element) across all results
+    PROTECTED_SHARE = 0.8             # of which results used again may hold this share
 
     def __init__(self):
-        self._store: OrderedDict = OrderedDict()
-        self._size = 0
+        self._probation: OrderedDict = OrderedDict()     # stored, not used again yet
+        self._protected: OrderedDict = OrderedDict()     # used again at least once (a plan's own summaries)
+        self._sizes = {"probation": 0, "protected": 0}
         self._ids: dict = {}
         self._lock = threading.Lock()
+
+    @staticmethod
+    def _size_of(value: Eliminated) -> int:
+        return sum(len(r) for r in value.summary.rows) + 1
+
+    @property
+    def _size(self) -> int:
+        return self._sizes["probation"] + self._sizes["protected"]
 
     def intern(self, sig: tuple) -> int:
         """A small integer for a (nested) signature, so keys stay short however deep the tree."""
         with self._lock:
+            if len(self._ids) > 1_000_000:
+                self._ids.clear()
             return self._ids.setdefault(sig, len(self._ids))
 
     def get(self, key):
+        """The stored result, or None. A result used again moves to the protected part, which is evicted
+        last: the variants of a plan keep hitting the plan's own summaries, while most of a variant's new
+        summaries are never used again."""
         with self._lock:
-            hit = self._store.get(key)
+            hit = self._protected.get(key)
             if hit is not None:
-                self._store.move_to_end(key)
+                self._protected.move_to_end(key)
+                return hit
+            hit = self._probation.pop(key, None)
+            if hit is None:
+                return None
+            size = self._size_of(hit)
+            self._sizes["probation"] -= size
+            self._protected[key] = hit
+            self._sizes["protected"] += size
+            while self._sizes["protected"] > self.PROTECTED_SHARE * self.MAX_ENTRIES and len(self._protected) > 1:
+                old_key, old = self._protected.popitem(last=False)
+                self._sizes["protected"] -= self._size_of(old)
+                self._probation[old_key] = old
+                self._sizes["probation"] += self._size_of(old)
+            self._evict()
             return hit
 
     def put(self, key, value: Eliminated) -> None:
-        size = sum(len(r) for r in value.summary.rows) + 1
         with self._lock:
-            if key in self._store:
+            if key in self._probation or key in self._protected:
                 return
-            self._store[key] = value
-            self._size += size
-            while self._size > self.MAX_ENTRIES and self._store:
-                _, old = self._store.popitem(last=False)
-                self._size -= sum(len(r) for r in old.summary.rows) + 1
-            if len(self._ids) > 1_000_000:
-                self._ids.clear()
-                self._store.clear()
-                self._size = 0
+            self._probation[key] = value
+            self._sizes["probation"] += self._size_of(value)
+            self._evict()
+
+    def _evict(self) -> None:
+        while self._size > self.MAX_ENTRIES:
+            part = "probation" if self._probation else "protected"
+            store = self._probation if self._probation else self._protected
+            _, old = store.popitem(last=False)
+            self._sizes[part] -= self._size_of(old)
 
     def clear(self) -> None:
         with self._lock:
-            self._store.clear()
+            self._probation.clear()
+            self._protected.clear()
+            self._sizes = {"probation": 0, "protected": 0}
             self._ids.clear()
-            self._size = 0
 
 
 MEMO = _Memo()
+
+
+def digest(summary: Summary, exact_text: bool) -> bytes:
+    """A 128-bit digest of a summary's columns and rows (``exact_text``: rationals, written as text)."""
+    if summary.cid is None:
+        index = {key: i for i, key in enumerate(summary.keys)}
+        conv = str if exact_text else int
+        payload = repr((summary.keys, [[(index[key], conv(v)) for key, v in row.items()] for row in summary.rows]))
+        summary.cid = hashlib.blake2b(payload.encode(), digest_size=16).digest()
+    return summary.cid
 
 
 class TreeElimination:
@@ -188,37 +215,38 @@ class TreeElimination:
         self.F, self.spec, self.frames = F, spec, frames
         self.marker_rows, self.joint_rows = marker_rows, joint_rows
         self.marker_cols, self.centre_cols, self.joint_cols = marker_cols, centre_cols, joint_cols
-        self._up, self._inner, self._above, self._outer = {}, {}, {}, {}
+        self._up, self._inner, self._outer = {}, {}, {}
         self.rank_full = None
         self.downward_done = False
         self.stream = stream
+        self._ids: dict = {}               # id(list of equations) -> what determines it
         if stream is not None:
-            self._signatures()
+            self._equation_ids()
 
-    # -- what each elimination depends on ---------------------------------------------------------------
-    def _signatures(self) -> None:
-        spec = self.spec
+    # -- what each block of equations depends on --------------------------------------------------------
+    def _equation_ids(self) -> None:
+        spec, frames = self.spec, tuple(self.frames)
         desc = {n: (n, kind, n in spec.frozen) for n, kind, _, _ in spec.joints}
-        self._path = {spec.root: MEMO.intern(("root", spec.root))}
+        path = {spec.root: MEMO.intern(("root", spec.root))}
         for name, kind, par, chi in spec.joints:
-            self._path[chi] = MEMO.intern(("path", self._path[par], desc[name], chi))
-        self._sub = {}
-        for seg in [j[3] for j in reversed(spec.joints)] + [spec.root]:
-            self._sub[seg] = MEMO.intern(("sub", seg, tuple(spec.markers[seg]),
-                                          tuple((desc[j[0]], self._sub[j[3]]) for j in spec.children[seg])))
-        self._desc = desc
-        self._frames_key = tuple(self.frames)
+            path[chi] = MEMO.intern(("path", path[par], desc[name], chi))
+        for seg, rows in self.marker_rows.items():
+            self._ids[id(rows)] = ("markers", frames, path[seg], seg, tuple(spec.markers[seg]))
+        for name, kind, par, chi in spec.joints:
+            self._ids[id(self.joint_rows[name])] = ("joint", frames, path[par], desc[name])
 
-    def _key(self, *parts):
-        return None if self.stream is None else (self.stream, self._frames_key) + parts
-
-    def _cached(self, key, blocks, keep, drop_constants: bool = False) -> Eliminated:
-        """``eliminate(blocks(), keep)``, or its earlier result under ``key``."""
-        hit = MEMO.get(key) if key is not None else None
+    def _elim(self, blocks: list, keep: list, drop_constants: bool = False) -> Eliminated:
+        """:func:`eliminate`, or its earlier result for the same contents (:class:`_Memo`)."""
+        if self.stream is None:
+            return eliminate(self.F, blocks, keep, drop_constants)
+        exact_text = self.F.p is None
+        ids = tuple(("summary", digest(b, exact_text)) if isinstance(b, Summary) else self._ids[id(b)]
+                    for b in blocks)
+        key = (self.stream, drop_constants, tuple(keep), ids)
+        hit = MEMO.get(key)
         if hit is None:
-            hit = eliminate(self.F, blocks(), keep, drop_constants)
-            if key is not None:
-                MEMO.put(key, hit)
+            hit = eliminate(self.F, blocks, keep, drop_constants)
+            MEMO.put(key, hit)
         return hit
 
     # -- upward: subtrees summarised on their parent's poses ------------------------------------------
@@ -229,9 +257,8 @@ class TreeElimination:
         return [key for j in self.spec.children[seg] for key in self.centre_cols[j[0]]]
 
     def _inner_of(self, seg: str) -> Eliminated:
-        key = self._key("inner", self._path[seg], self._sub[seg]) if self.stream else None
-        return self._cached(key, lambda: [self.marker_rows[seg]] + [self._up[j[3]] for j in self.spec.children[seg]],
-                            pose_keys(seg, self.frames) + self.marker_cols[seg] + self._children_centres(seg))
+        return self._elim([self.marker_rows[seg]] + [self._up[j[3]] for j in self.spec.children[seg]],
+                          pose_keys(seg, self.frames) + self.marker_cols[seg] + self._children_centres(seg))
 
     def upward(self) -> None:
         """``inner`` and ``up`` of every segment, and rank [V | C] (all rows, every column)."""
@@ -239,11 +266,8 @@ class TreeElimination:
         total = 0
         for name, kind, par, chi in reversed(spec.joints):
             inner = self._inner_of(chi)
-            self._inner[chi] = inner.summary
-            key = self._key("up", self._path[chi], self._sub[chi]) if self.stream else None
-            up = self._cached(key, lambda: [inner.summary, self.joint_rows[name]],
-                              pose_keys(par, self.frames) + self.centre_cols[name])
-            self._up[chi] = up.summary
+            up = self._elim([inner.summary, self.joint_rows[name]], pose_keys(par, self.frames) + self.centre_cols[name])
+            self._inner[chi], self._up[chi] = inner.summary, up.summary
             total += inner.rank_eliminated + up.rank_eliminated
         inner = self._inner_of(spec.root)
         self._inner[spec.root] = inner.summary
@@ -255,54 +279,54 @@ class TreeElimination:
         spec = self.spec
         up, total = {}, 0
         for name, kind, par, chi in reversed(spec.joints):
-            key = self._key("upV", self._path[chi], self._sub[chi]) if self.stream else None
-            e = self._cached(key, lambda: [self.marker_rows[chi], self.joint_rows[name]]
-                             + [up[j[3]] for j in spec.children[chi]], pose_keys(par, self.frames), True)
+            e = self._elim([self.marker_rows[chi], self.joint_rows[name]] + [up[j[3]] for j in spec.children[chi]],
+                           pose_keys(par, self.frames), drop_constants=True)
             up[chi] = e.summary
             total += e.rank_eliminated
         root = spec.root
-        key = self._key("rootV", self._path[root], self._sub[root]) if self.stream else None
-        e = self._cached(key, lambda: [self.marker_rows[root]] + [up[j[3]] for j in spec.children[root]], [], True)
+        e = self._elim([self.marker_rows[root]] + [up[j[3]] for j in spec.children[root]], [], drop_constants=True)
         return total + e.rank_eliminated
 
     # -- downward: the rest of the tree summarised on each segment's poses -----------------------------
+    def _pools_excluding_each(self, summaries: list, keys: list) -> list:
+        """For each summary, the others' rows pooled on ``keys`` (their other columns eliminated), as a list
+        of at most two blocks: prefix and suffix pools, so n children cost O(n) eliminations, not O(n²)."""
+        n = len(summaries)
+        if n == 1:
+            return [[]]
+        reduced = [self._elim([s], keys).summary for s in summaries]
+        if n == 2:
+            return [[reduced[1]], [reduced[0]]]
+        prefix = [None, reduced[0]]
+        for r in reduced[1:-1]:
+            prefix.append(self._elim([prefix[-1], r], keys).summary)
+        suffix = [None, reduced[-1]]
+        for r in reversed(reduced[1:-1]):
+            suffix.append(self._elim([suffix[-1], r], keys).summary)
+        suffix.reverse()
+        return [[b for b in (prefix[i], suffix[i]) if b is not None] for i in range(n)]
+
     def downward(self) -> None:
         """``outer`` and ``above`` of every non-root segment (after :meth:`upward`)."""
-        spec, F = self.spec, self.F
+        spec = self.spec
         self.downward_done = True
         above = {spec.root: []}
-        above_sig = {spec.root: ("none",)}
-        self._outer_sig = {}
         for seg in [spec.root] + [j[3] for j in spec.joints]:
             kids = spec.children[seg]
             if not kids:
                 continue
             base = list(above[seg]) + [self.marker_rows[seg]]
             keep = pose_keys(seg, self.frames) + self.marker_cols[seg]
-            if self.stream:
+            if not spec.markers[seg]:                 # the children's centres are kept: no pooling
                 for j in kids:
-                    self._outer_sig[j[3]] = MEMO.intern((
-                        "outer", above_sig[seg], self._path[seg], tuple(spec.markers[seg]),
-                        tuple((self._desc[o[0]], self._sub[o[3]]) for o in kids if o is not j)))
-            keys = {j[3]: self._key("outer", self._outer_sig[j[3]]) if self.stream else None for j in kids}
-            hits = {c: MEMO.get(k) for c, k in keys.items() if k is not None}
-            if all(hits.get(j[3]) is not None for j in kids):
-                outer = hits
-            elif not spec.markers[seg]:               # the children's centres are kept: no pooling
-                outer = {j[3]: eliminate(F, base + [self._up[o[3]] for o in kids if o is not j],
-                                         keep + self._children_centres(seg)) for j in kids}
+                    self._outer[j[3]] = self._elim(base + [self._up[o[3]] for o in kids if o is not j],
+                                                   keep + self._children_centres(seg)).summary
             else:                                     # pooled on seg's poses, excluding one child at a time
-                pools = _pools_excluding_each(F, [self._up[j[3]] for j in kids], pose_keys(seg, self.frames))
-                outer = {j[3]: eliminate(F, base + pool, keep) for j, pool in zip(kids, pools)}
+                pools = self._pools_excluding_each([self._up[j[3]] for j in kids], pose_keys(seg, self.frames))
+                for j, pool in zip(kids, pools):
+                    self._outer[j[3]] = self._elim(base + pool, keep).summary
             for j in kids:
-                if keys[j[3]] is not None:
-                    MEMO.put(keys[j[3]], outer[j[3]])
-                self._outer[j[3]] = outer[j[3]].summary
-                key = self._key("above", self._outer_sig[j[3]], self._desc[j[0]]) if self.stream else None
-                above[j[3]] = [self._cached(key, lambda: [self._outer[j[3]], self.joint_rows[j[0]]],
-                                            pose_keys(j[3], self.frames)).summary]
-                if self.stream:
-                    above_sig[j[3]] = ("above", self._outer_sig[j[3]], self._desc[j[0]])
+                above[j[3]] = [self._elim([self._outer[j[3]], self.joint_rows[j[0]]], pose_keys(j[3], self.frames)).summary]
 
     def joint_subspace(self, joint: tuple) -> Summary:
         """W ∩ span(L_j) for joint (name, kind, parent, child), as echelon rows over L_j."""
@@ -310,5 +334,4 @@ class TreeElimination:
         keep = (self.marker_cols[par] + self.marker_cols[chi] + self.joint_cols[name]
                 + [key for key in self._children_centres(par) if key not in self.centre_cols[name]]
                 + self._children_centres(chi))
-        key = self._key("joint", self._outer_sig[chi], self._desc[name], self._sub[chi]) if self.stream else None
-        return self._cached(key, lambda: [self._outer[chi], self.joint_rows[name], self._inner[chi]], keep).summary
+        return self._elim([self._outer[chi], self.joint_rows[name], self._inner[chi]], keep).summary

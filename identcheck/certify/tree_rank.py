@@ -590,7 +590,8 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     at fewer frames, from the stop downwards, while some joint is still local there.
 
     ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
-    plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count)."""
+    plan's count is known, for the variants a plan's analyses rank; the verdicts are the same, but
+    ``min_frames`` is then not searched for: a local joint's is given as the scan's stop, an upper bound)."""
     tj = TreeJacobian(spec, field_kind, seed)
     asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     dims = {}
@@ -609,7 +610,7 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     if stable and frames >= start:            # same W one frame earlier: same verdicts
         first = {n: frames for n in local}
         frames -= 1
-    while frames >= start and any(first[n] == frames + 1 for n in local):
+    while not warm_frames and frames >= start and any(first[n] == frames + 1 for n in local):
         still = _local(*_judge(tj.at(frames), asked)[1:])
         for n in local:
             if first[n] == frames + 1 and n in still:
