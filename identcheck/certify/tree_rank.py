@@ -155,6 +155,23 @@ class _Columns:
         return self.n - k
 
 
+def constant_columns(spec: TreeSpec) -> _Columns:
+    """The constants' column indices, the layout the gradients of :func:`quantities` are written in: each
+    marker's position (3), each joint's centre (3), each hinge's two axis tangents, each frozen joint's
+    angle(s)."""
+    cols = _Columns()
+    for s, ms in spec.markers.items():
+        for m in ms:
+            cols.marker[m] = cols.take(3)
+    for name, kind, _, _ in spec.joints:
+        cols.centre[name] = cols.take(3)
+        if kind == "revolute":
+            cols.tangent[name] = cols.take(2)
+        if name in spec.frozen:
+            cols.frozen[name] = cols.take(VARS_PER_JOINT[kind])
+    return cols
+
+
 @dataclass
 class _Constants:
     m: dict            # marker -> local position
@@ -171,17 +188,7 @@ class TreeJacobian:
         self.spec = spec
         self._stream = f"identcheck.tree_rank/{seed}/{field_kind}"
         self.F = Field(field_kind, random.Random(self._stream))
-        cols = _Columns()
-        for s, ms in spec.markers.items():
-            for m in ms:
-                cols.marker[m] = cols.take(3)
-        for name, kind, _, _ in spec.joints:
-            cols.centre[name] = cols.take(3)
-            if kind == "revolute":
-                cols.tangent[name] = cols.take(2)
-            if name in spec.frozen:
-                cols.frozen[name] = cols.take(VARS_PER_JOINT[kind])
-        self.cols = cols
+        self.cols = cols = constant_columns(spec)
         self.col_key = [None] * cols.n          # constant column index -> its key in the equations
         for m, i in cols.marker.items():
             self.col_key[i:i + 3] = marker_keys(m)

@@ -25,17 +25,7 @@ class DenseTree:
         rng = random.Random(f"reference/{seed}/{field_kind}")
         self.F = Field(field_kind, rng)
         self.draw = tree_rank._Draw(self.F, rng)
-        cols = tree_rank._Columns()
-        for s, ms in spec.markers.items():
-            for m in ms:
-                cols.marker[m] = cols.take(3)
-        for name, kind, _, _ in spec.joints:
-            cols.centre[name] = cols.take(3)
-            if kind == "revolute":
-                cols.tangent[name] = cols.take(2)
-            if name in spec.frozen:
-                cols.frozen[name] = cols.take(tree_rank.VARS_PER_JOINT[kind])
-        self.cols = cols
+        self.cols = tree_rank.constant_columns(spec)     # the layout the gradients are written in
         axes = {}
         for name, kind, _, _ in spec.joints:
             if kind == "revolute":
