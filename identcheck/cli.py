@@ -339,7 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "the fewest markers to add")
     s.add_argument("model")
     s.add_argument("--json", action="store_true")
-    s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG/SVG)")
+    s.add_argument("--figure", metavar="FILE", help="also draw the tree, joints coloured by verdict (PNG, SVG or PDF)")
     s.add_argument("--seed", type=_seed, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
     s.add_argument("--max-seconds", type=float, default=None, metavar="S",
@@ -444,6 +444,7 @@ FILE_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("out", "trut
 DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
+FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
@@ -476,6 +477,10 @@ def preflight(a) -> list:
     out = getattr(a, "export_markers", None)
     if out and not str(out).lower().endswith(TRIAL_SUFFIXES):
         problems.append(f"--export-markers {out}: give a .trc or .c3d file name")
+    figure = getattr(a, "figure", None)
+    if figure and not str(figure).lower().endswith(FIGURE_SUFFIXES):
+        kinds = [suffix.lstrip(".").upper() for suffix in FIGURE_SUFFIXES]
+        problems.append(f"--figure {figure}: give a {', '.join(kinds[:-1])} or {kinds[-1]} file name")
     page = getattr(a, "report", None)
     if page and not str(page).lower().endswith((".html", ".htm")):
         problems.append(f"--report {page}: give an .html file name")
@@ -488,7 +493,7 @@ def preflight(a) -> list:
         if opensim_missing():
             problems.append(f"--export-osim {osim}: {opensim_missing()}")
     inputs = {os.path.abspath(p) for p in (model, trial) if p}
-    for opt in ("export_markers", "report", "export_osim"):
+    for opt in FILE_OUTPUTS.get(a.verb, ()):
         path = getattr(a, opt, None)
         if path and os.path.abspath(path) in inputs:
             problems.append(f"--{opt.replace('_', '-')} {path}: is an input file; it would be overwritten")

@@ -121,3 +121,29 @@ def test_an_output_folder_that_cannot_be_made_is_refused_first(run, no_work, cor
     for target in (a_file, a_file / "sub"):
         res = run([str(a).format(target, corpus=corpus) for a in argv])
         assert res.code == 2 and res.names(option, target), res.err
+
+
+@pytest.mark.parametrize("name", ["out.docx", "figure.toml", "plot"])
+def test_a_figure_in_a_format_that_cannot_be_drawn_is_refused_first(run, no_work, tmp_path, name):
+    """`plan --figure` with a suffix matplotlib cannot write used to end in a traceback (exit 3) after the
+    work; now exit 2 before it, naming the option, the path and the formats."""
+    res = run(["plan", LEG, "--fast", "--figure", str(tmp_path / name)])
+    assert res.code == 2 and res.names("--figure", tmp_path / name, "PNG"), res.err
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["plan", "{model}", "--figure", "{model}"], "--figure"),
+    (["simulate", "{model}", "--out", "{model}"], "--out"),
+])
+def test_an_output_that_is_the_input_is_refused_first(run, no_work, tmp_path, argv, option):
+    """Every output option, not only the trial exports, refuses to overwrite the verb's own input."""
+    import hashlib
+    import shutil
+
+    model = tmp_path / "model.png" if option == "--figure" else tmp_path / "model.trc"
+    shutil.copy(LEG, model)
+    before = hashlib.sha256(model.read_bytes()).hexdigest()
+    res = run([str(a).format(model=model) for a in argv])
+    assert res.code == 2 and res.names(option, model), res.err
+    assert hashlib.sha256(model.read_bytes()).hexdigest() == before
