@@ -445,6 +445,7 @@ DIR_OUTPUTS = {"derive": ("out",), "diagnose": ("plots",), "batch": ("out",)}
 NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
+JSON_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("truth",)}
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
@@ -477,6 +478,16 @@ def preflight(a) -> list:
     out = getattr(a, "export_markers", None)
     if out and not str(out).lower().endswith(TRIAL_SUFFIXES):
         problems.append(f"--export-markers {out}: give a .trc or .c3d file name")
+    for opt in JSON_OUTPUTS.get(a.verb, ()):
+        path = getattr(a, opt, None)
+        if path and not str(path).lower().endswith(".json"):
+            problems.append(f"--{opt} {path}: give a .json file name (it is written as JSON)")
+    written = [(opt, os.path.abspath(getattr(a, opt))) for opt in FILE_OUTPUTS.get(a.verb, ()) if getattr(a, opt, None)]
+    for i, (opt, path) in enumerate(written):
+        for other, path2 in written[i + 1:]:
+            if path == path2:
+                problems.append(f"--{opt.replace('_', '-')} and --{other.replace('_', '-')} are the same file "
+                                f"({getattr(a, opt)}): one would overwrite the other")
     figure = getattr(a, "figure", None)
     if figure and not str(figure).lower().endswith(FIGURE_SUFFIXES):
         kinds = [suffix.lstrip(".").upper() for suffix in FIGURE_SUFFIXES]

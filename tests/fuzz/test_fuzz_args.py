@@ -147,3 +147,22 @@ def test_an_output_that_is_the_input_is_refused_first(run, no_work, tmp_path, ar
     res = run([str(a).format(model=model) for a in argv])
     assert res.code == 2 and res.names(option, model), res.err
     assert hashlib.sha256(model.read_bytes()).hexdigest() == before
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["simulate", "{model}", "--out", "{tmp}/t.trc", "--truth", "{model}"], "--truth"),
+    (["simulate", LEG, "--out", "{tmp}/same.trc", "--truth", "{tmp}/same.trc"], "--truth"),
+    (["rank", "revolute", "2", "1", "--save", "{tmp}/trial.trc"], "--save"),
+    (["table", "--save", "{tmp}/out.csv"], "--save"),
+])
+def test_json_outputs_must_be_json_files_and_never_an_input_or_another_output(run, no_work, tmp_path, argv, option):
+    """`simulate --truth` used to overwrite the model (or the trial it had just written) with JSON, and `--save`
+    wrote JSON into a .trc: refused first, naming the option and the path."""
+    import shutil
+
+    model = tmp_path / "model.toml"
+    shutil.copy(LEG, model)
+    before = model.read_bytes()
+    res = run([str(a).format(model=model, tmp=tmp_path) for a in argv])
+    assert res.code == 2 and option in res.err and ".json" in res.err, res.err
+    assert model.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["model.toml"]
