@@ -384,8 +384,9 @@ def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0, 
 
 
 @_one_blas_thread
-def verify(certificate):
-    """Re-check a saved certificate or table (a path, or its JSON object) from its own data.
+def verify(certificate, progress=None):
+    """Re-check a saved certificate or table (a path, or its JSON object) from its own data (``progress``:
+    called with a line of text as the checks go).
 
     Returns
     -------
@@ -394,7 +395,7 @@ def verify(certificate):
     """
     from identcheck.certify.verify import verify as verify_certificate
 
-    return verify_certificate(certificate)
+    return verify_certificate(certificate, progress=progress)
 
 
 @_one_blas_thread

@@ -78,7 +78,7 @@ def _cmd_rank(a) -> int:
 
 
 def _cmd_verify(a) -> int:
-    res = api.verify(a.certificate)
+    res = api.verify(a.certificate, progress=_progress("verify"))
     if a.json:
         _print_json(res)
     else:

@@ -18,6 +18,8 @@ uniqueness is not decided (``identifiable`` false with ``identifiable_decided`` 
 """
 from __future__ import annotations
 
+import json
+
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
@@ -202,7 +204,6 @@ class TableResult:
 def content_hash(cases) -> str:
     """SHA-256 of the rows in canonical JSON (sorted keys, no spaces): what a saved table certifies."""
     import hashlib
-    import json
 
     return hashlib.sha256(json.dumps(cases, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
@@ -229,21 +230,30 @@ def table(seed: int = 0, joints=None, progress=None) -> TableResult:
     return TableResult(cases=frozen(rows), seed=seed)
 
 
-def verify(doc: dict) -> list:
+def verify(doc: dict, progress=None) -> list:
     """Re-check every certificate a saved table holds; returns the problems found (empty: verified).
 
     Rank certificates are rebuilt from their sample points, counterexamples re-verified at 50 digits
     from their stored poses, local certificates replayed at their recorded points, enumerations and
-    uniqueness proofs recomputed from their seeds and compared.
+    uniqueness proofs recomputed from their seeds and compared. Then every row is recomputed whole from
+    the table's seed (the table is deterministic) and compared field by field, so that no displayed
+    number or statement — a counterexample's summary, a "min N", a candidate's value, a local
+    certificate's rank or bound — can be edited unnoticed; each difference names the row and the field.
+    ``progress``: called with a line of text per joint type (this takes seconds).
     """
     if doc.get("format") != FORMAT:
         return [f"unknown table format {doc.get('format')!r}; expected {FORMAT}"]
     problems = _schema(doc)
     if problems:
         return problems
-    if "sha256" in doc and doc["sha256"] != content_hash(doc["cases"]):
+    if "sha256" not in doc:
+        problems.append("sha256: missing (a saved table carries the digest of its rows)")
+    elif doc["sha256"] != content_hash(doc["cases"]):
         problems.append("sha256: the rows are not the ones the table was saved with (edited since); every row "
                         "is re-checked below")
+    seed = doc.get("seed")
+    if type(seed) is not int:
+        problems.append(f"seed: {seed!r} is not an integer")
     recompute = {"revolute(2,1)": candidates.revolute21, "revolute(2,2)": candidates.revolute22,
                  "revolute(3,1)": candidates.revolute31}
     for row in doc.get("cases", []):
@@ -273,7 +283,54 @@ def verify(doc: dict) -> list:
             found += meaning(row)
         problems += [f"{key}: {f}" for f in found]
     problems += _symmetry(doc.get("cases", []))
+    if type(seed) is int:
+        problems += _recomputed(doc["cases"], seed, progress)
     return problems
+
+
+def _differences(saved, fresh, path: str) -> list:
+    """Field paths where ``saved`` (JSON) differs from ``fresh`` (plain), with both values."""
+    if isinstance(fresh, dict) and isinstance(saved, dict):
+        out = []
+        for k in sorted(set(fresh) | set(saved), key=str):
+            if k not in saved:
+                out.append(f"{path}{k}: missing")
+            elif k not in fresh:
+                out.append(f"{path}{k}: not a field of the recomputed row")
+            else:
+                out += _differences(saved[k], fresh[k], f"{path}{k}.")
+        return out
+    if isinstance(fresh, list) and isinstance(saved, list) and len(fresh) == len(saved):
+        return [d for i, (a, b) in enumerate(zip(saved, fresh)) for d in _differences(a, b, f"{path}{i}.")]
+    a, b = json.dumps(saved, sort_keys=True), json.dumps(fresh, sort_keys=True)
+    if a != b:
+        at = next((i for i, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
+        lo = max(0, at - 25)
+
+        def clip(t):
+            return ("..." if lo else "") + t[lo:at + 35] + ("..." if len(t) > at + 35 else "")
+        return [f"{path.rstrip('.')}: {clip(a)} differs from the recomputed {clip(b)}"]
+    return []
+
+
+def _recomputed(cases: list, seed: int, progress=None) -> list:
+    """Each saved row against the same row recomputed from ``seed``: the differing fields, named."""
+    out = []
+    joints = [j for j in JOINTS if any(r["joint"] == j for r in cases)]
+    for k, j in enumerate(joints):
+        if progress:
+            progress(f"recomputing the {j} rows from seed {seed} ({k + 1} of {len(joints)})")
+        fresh = {(r["joint"], r["p"], r["q"]): plain(r) for r in _joint_rows(seed, j)}
+        for row in cases:
+            if row["joint"] != j or (j, row["p"], row["q"]) not in fresh:
+                continue
+            diffs = _differences(row, fresh[(j, row["p"], row["q"])], "")
+            out += [f"{_key(j, row['p'], row['q'])}: field {d}" for d in diffs[:5]]
+            if len(diffs) > 5:
+                out.append(f"{_key(j, row['p'], row['q'])}: and {len(diffs) - 5} more fields differ")
+    unknown = sorted({r["joint"] for r in cases} - set(JOINTS))
+    out += [f"joint {j!r}: not a joint type of this table" for j in unknown]
+    return out
 
 
 ROW_TYPES = {"joint": (str,), "p": (int,), "q": (int,), "identifiable": (bool,), "local": (bool,),

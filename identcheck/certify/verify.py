@@ -72,7 +72,7 @@ def read(path) -> dict:
     return doc
 
 
-def verify(certificate, source: str | None = None) -> VerifyResult:
+def verify(certificate, source: str | None = None, progress=None) -> VerifyResult:
     """Re-check ``certificate`` (a path to a saved certificate or table, or its JSON object).
 
     Parameters
@@ -80,6 +80,8 @@ def verify(certificate, source: str | None = None) -> VerifyResult:
     certificate : str, os.PathLike or dict
     source : str, optional
         Name reported for a dict (default ``"<dict>"``); a path names itself.
+    progress : callable, optional
+        Called with a line of text as the checks go (a table takes tens of seconds).
 
     Raises
     ------
@@ -94,8 +96,10 @@ def verify(certificate, source: str | None = None) -> VerifyResult:
     if not isinstance(fmt, str) or fmt not in CHECKS:
         raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(CHECKS))})"],
                          source=source)
+    if progress:
+        progress(f"re-checking {source} ({fmt}) from its own data")
     try:
-        problems = CHECKS[fmt](doc)
+        problems = CHECKS[fmt](doc, progress=progress) if fmt == table.FORMAT else CHECKS[fmt](doc)
     except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
         # a field missing or of the wrong type: the file is not a certificate of its stated format; that is a
         # rejection (exit 1), with what was missing, never a traceback

@@ -233,10 +233,21 @@ def _header_problems(raw: bytes, records: list, first_data_block: int, order: st
             problems.append(f"{where} is block {block}, outside the file's data (blocks {first_data_block} to "
                             f"{blocks}): no frame can be read")
     layout = _header_layout(raw)
-    if not problems and layout is not None and n_points and _frames_in_file(raw, layout, n_points, data_start) == 0:
+    in_file = _frames_in_file(raw, layout, n_points, data_start) if layout is not None and n_points else None
+    if not problems and in_file == 0:
         problems.append(f"the file ends at byte {len(raw)}, before the end of its first frame (data from byte "
                         f"{(data_start - 1) * 512}, {_frame_bytes(layout, n_points)} bytes a frame): the file is "
                         "cut short")
+    announced = _header_frames(raw)
+    frames = value.get(("POINT", "FRAMES"))
+    if not problems and frames is not None and announced is not None and frames > announced:
+        problems.append(f"POINT:FRAMES says {frames:g} frames but the header's frame range (words 4-5) says "
+                        f"{announced}: the two disagree on how many frames the file holds")
+    if not problems and in_file and layout["scale"] > 0 and announced and in_file >= 2 * announced:
+        problems.append(f"the header's scale ({layout['scale']:g}) and POINT:SCALE say the coordinates are 2-byte "
+                        f"integers, but the data section holds {in_file} such frames where the header announces "
+                        f"{announced}: twice the bytes, as 4-byte floating-point data would take (is the sign of "
+                        "the scale flipped?)")
     return problems
 
 

@@ -83,14 +83,28 @@ def test_engine_agrees_with_the_certificates(rows):
             assert r["identifiable_decided"] == (not r["local"])
 
 
+def at_key(doc, joint, p, q) -> int:
+    return next(i for i, r in enumerate(doc["cases"]) if (r["joint"], r["p"], r["q"]) == (joint, p, q))
+
+
 def test_deterministic_and_verifiable(doc):
     again = [r for j in ("revolute", "spherical") for r in T._joint_rows.__wrapped__(0, j)]
     assert json.dumps([r for r in doc["cases"] if r["joint"] in ("revolute", "spherical")], sort_keys=True) == \
         json.dumps(list(again), sort_keys=True)
-    small = {"format": T.FORMAT, "cases": [r for r in doc["cases"] if (r["joint"], r["p"], r["q"]) in
-                                           {("revolute", 2, 1), ("spherical", 2, 1), ("spherical", 1, 2),
-                                            ("revolute", 3, 1), ("universal", 2, 2)}]}
+    small = {"format": T.FORMAT, "seed": 0, "cases": [r for r in doc["cases"] if (r["joint"], r["p"], r["q"]) in
+                                                      {("revolute", 2, 1), ("spherical", 2, 1), ("spherical", 1, 2),
+                                                       ("revolute", 3, 1), ("universal", 2, 2)}]}
+    small["sha256"] = T.content_hash(small["cases"])
     assert T.verify(small) == []
+    assert T.verify({k: v for k, v in small.items() if k != "sha256"}) == [
+        "sha256: missing (a saved table carries the digest of its rows)"]
+    reseeded = dict(small, seed=5)                  # another seed draws other points: every row differs
+    assert all(p.split(":")[0] in {"revolute(2,1)", "spherical(2,1)", "spherical(1,2)", "revolute(3,1)",
+                                   "universal(2,2)"} for p in T.verify(reseeded)) and T.verify(reseeded)
+    shown = json.loads(json.dumps(small))            # a displayed number, the hash recomputed: still caught
+    shown["cases"][at_key(shown, "revolute", 3, 1)]["min_samples"] = 2
+    shown["sha256"] = T.content_hash(shown["cases"])
+    assert "revolute(3,1): field min_samples: 2 differs from the recomputed 3" in T.verify(shown)
     at = {(r["joint"], r["p"], r["q"]): i for i, r in enumerate(small["cases"])}
     bad = json.loads(json.dumps(small))
     bad["cases"][at[("spherical", 2, 1)]]["certificate"]["counterexample"]["poses"][0]["child"]["t"][0] = "0"

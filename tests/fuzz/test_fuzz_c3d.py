@@ -140,10 +140,16 @@ def _patched(raw: bytes, param, value: bytes) -> bytes:
     return raw[:at] + value + raw[at + len(value):]
 
 
+def _header_count(raw: bytes) -> int:
+    first, last = struct.unpack("<HH", raw[6:10])
+    return last - first + 1
+
+
 def test_header_and_parameters_that_disagree_are_named(corpus, tmp_path):
     """POINT:USED against the header's point count, the header's data start past the file, POINT:RATE not a
     number, an unknown POINT:UNITS or one (m) that puts the markers kilometres apart, POINT:DATA_START negative,
-    POINT:SCALE of the other sign than the header's: exit 2 naming the field (and never ezc3d's own words)."""
+    POINT:SCALE of the other sign than the header's, both scales saying integers over float data, POINT:FRAMES
+    past the header's frame range: exit 2 naming the field (and never ezc3d's own words)."""
     raw = (corpus / "leg.c3d").read_bytes()
     cases = {
         "used.c3d": (_patched(raw, ("POINT", "USED"), struct.pack("<h", 11)), ["POINT:USED", "header"]),
@@ -153,6 +159,12 @@ def test_header_and_parameters_that_disagree_are_named(corpus, tmp_path):
         "metres.c3d": (_patched(raw, ("POINT", "UNITS"), b"m "), ["POINT:UNITS says m", "coordinates are in mm"]),
         "dstart.c3d": (_patched(raw, ("POINT", "DATA_START"), struct.pack("<h", -3)), ["POINT:DATA_START"]),
         "scale.c3d": (raw[:12] + struct.pack("<f", 0.1) + raw[16:], ["POINT:SCALE", "header"]),
+        # float data declared as integers in both places: the data section holds twice the bytes
+        "both_scales.c3d": (_patched(raw[:12] + struct.pack("<f", 0.1) + raw[16:], ("POINT", "SCALE"),
+                                     struct.pack("<f", 0.1)), ["POINT:SCALE", "integers", "floating-point"]),
+        # POINT:FRAMES beyond the header's frame range (ezc3d reads the header's and says nothing)
+        "frames.c3d": (_patched(raw, ("POINT", "FRAMES"), struct.pack("<h", _header_count(raw) + 1)),
+                       ["POINT:FRAMES", "header"]),
     }
     paths = {name: _variant(tmp_path, data, name) for name, (data, _) in cases.items()}
     results = read_in_child(list(paths.values()), tmp_path)
