@@ -312,10 +312,12 @@ def verify(cert: dict) -> Verification:
         rng = random.Random(seed)
         if not problems and (draw_parameters(cs, rng) != params or draw_angles(cs, rng, len(angles)) != angles):
             problems.append(f"seed {seed} does not draw the stored parameters and angles")
-    except (KeyError, TypeError, ValueError) as exc:
+    except KeyError as exc:
+        return Verification(False, [f"malformed certificate: field {exc.args[0]!r} missing"])
+    except (TypeError, ValueError) as exc:
         return Verification(False, [f"malformed certificate: {exc}"])
-    if rk != cert["rank"]:
-        problems.append(f"rank recomputed as {rk}, certificate says {cert['rank']}")
+    if rk != cert["rank"] or type(cert["rank"]) is not int:
+        problems.append(f"rank recomputed as {rk}, certificate says {cert['rank']!r}")
     if str(det) != cert["minor_determinant"] or pcol != cert["pivot_columns"] or prow != cert["pivot_rows"]:
         problems.append(f"minor recomputed as {det} on rows {prow}, columns {pcol}; certificate differs")
     if bool(cert["full_rank"]) != (rk == len(cert["unknowns"])):
