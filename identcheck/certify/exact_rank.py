@@ -195,6 +195,8 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
         Called with a line of text at most once a second while samples and rows are computed.
     """
     cs = get_case(joint, p, q)
+    if progress:
+        progress(f"{joint} ({p},{q}): the derivation of M, then exact samples and the exact rank")
     dv = derive.for_case(cs, disk_cache=False)
     n_unknowns = len(dv.result("Y"))
     n = n_unknowns if n_samples is None else int(n_samples)

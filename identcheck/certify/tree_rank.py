@@ -182,7 +182,7 @@ class _Constants:
 class TreeJacobian:
     """The whole-tree equations at one random point over the frames drawn so far, and what they determine
     about each joint's constants (see the module docstring; the equations are
-    :mod:`identcheck.certify.tree_equations`', eliminated by :mod:`identcheck.certify.tree_elimination`)."""
+    :mod:`identcheck.certify.tree_equations`, eliminated by :mod:`identcheck.certify.tree_elimination`)."""
 
     def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0):
         self.spec = spec
