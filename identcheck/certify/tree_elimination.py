@@ -206,12 +206,14 @@ class TreeElimination:
 
     ``marker_rows``: segment -> its markers' rows (all frames); ``joint_rows``: joint -> its rows (all
     frames); ``marker_cols``: segment -> its markers' constant keys; ``centre_cols``: joint -> its centre's
-    keys; ``joint_cols``: joint -> the keys of its own constants (centre, axis tangents). ``stream``: what
+    keys; ``joint_cols``: joint -> the keys of its own constants (centre, axis tangents); the three column maps
+    are needed by :meth:`upward`, :meth:`downward` and :meth:`joint_subspace`, not by
+    :meth:`rank_per_frame`. ``stream``: what
     the random point was drawn from (eliminations are shared, through :data:`MEMO`, only within one
     stream; None shares nothing)."""
 
-    def __init__(self, F, spec, frames, marker_rows, joint_rows, marker_cols, centre_cols, joint_cols,
-                 stream: str | None = None):
+    def __init__(self, F, spec, frames, marker_rows, joint_rows, marker_cols=None, centre_cols=None,
+                 joint_cols=None, stream: str | None = None):
         self.F, self.spec, self.frames = F, spec, frames
         self.marker_rows, self.joint_rows = marker_rows, joint_rows
         self.marker_cols, self.centre_cols, self.joint_cols = marker_cols, centre_cols, joint_cols

@@ -242,8 +242,7 @@ class TreeJacobian:
                      for s, ms in spec.markers.items()}
             jrows = {j[0]: joint_rows(j, f, pose[j[2]][0], turns[j[0]], self.k, j[0] in spec.frozen)
                      for j in spec.joints}
-            rank_v = TreeElimination(self.F, spec, [f], mrows, jrows, None, None, None,
-                                     stream=self._stream).rank_per_frame()
+            rank_v = TreeElimination(self.F, spec, [f], mrows, jrows, stream=self._stream).rank_per_frame()
             self._frames.append((mrows, jrows, rank_v))
             self.frames += 1
 
@@ -583,7 +582,7 @@ def _local(judged: dict, verdict: dict) -> set:
 
 
 def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
-            warm_frames: int = 0) -> TreeRank:
+            warm_frames: int = 0, search_min_frames: bool = True) -> TreeRank:
     """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
 
     A joint is locally identifiable when every quantity it is judged by is in W: its distances to the
@@ -597,8 +596,10 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     at fewer frames, from the stop downwards, while some joint is still local there.
 
     ``warm_frames``: take that many frames at once before scanning one by one (faster when a similar
-    plan's count is known, for the variants a plan's analyses rank; the verdicts are the same, but
-    ``min_frames`` is then not searched for: a local joint's is given as the scan's stop, an upper bound)."""
+    plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count).
+    ``search_min_frames=False``: do not judge again below the stop (the variants a plan's analyses rank
+    use only the verdicts); a local joint's ``min_frames`` is then an upper bound: the fewest frames seen to
+    give the final W (the stop, or one less when the last frame changed nothing)."""
     tj = TreeJacobian(spec, field_kind, seed)
     asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     dims = {}
@@ -617,7 +618,7 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     if stable and frames >= start:            # same W one frame earlier: same verdicts
         first = {n: frames for n in local}
         frames -= 1
-    while not warm_frames and frames >= start and any(first[n] == frames + 1 for n in local):
+    while search_min_frames and frames >= start and any(first[n] == frames + 1 for n in local):
         still = _local(*_judge(tj.at(frames), asked)[1:])
         for n in local:
             if first[n] == frames + 1 and n in still:

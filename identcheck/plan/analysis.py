@@ -284,11 +284,12 @@ def _explain(spec, name, kind, par, chi, jr, st) -> str:
 
 
 def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0,
-            warm_frames: int = 0) -> Plan:
-    """Whole-tree verdict plus propagation explanation for one marker plan (``warm_frames``: see
-    :func:`identcheck.certify.tree_rank.analyse`; only for plans whose ``min_samples`` are not reported)."""
+            warm_frames: int = 0, search_min_frames: bool = True) -> Plan:
+    """Whole-tree verdict plus propagation explanation for one marker plan (``warm_frames``,
+    ``search_min_frames``: see :func:`identcheck.certify.tree_rank.analyse`; a variant ranked only for its
+    verdicts passes ``search_min_frames=False``, and its ``min_samples`` are then not reported)."""
     rows = rows or table_summary()
-    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames)
+    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames, search_min_frames=search_min_frames)
     settled = propagate(spec, rows)
     plan = Plan(spec, rank, settled)
     for name, kind, par, chi in spec.joints:
@@ -359,7 +360,8 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: B
             budget.skipped["motion_needed"] = names[k:]
             break
         budget.tick("motion each joint needs", k + 1, len(names))
-        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1)
+        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1,
+                                   search_min_frames=False)
         for other, jr in frozen.joints.items():
             if plan.joints[other]["local"] and not jr.local:
                 need[other].append(name)
@@ -377,7 +379,7 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, 
             budget.skipped["robustness"] = [mk for _, mk in every[k:]]
             break
         budget.tick("markers the plan cannot lose", k + 1, len(every))
-        alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1)
+        alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1, search_min_frames=False)
         lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
         lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
         out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
@@ -451,7 +453,8 @@ def fewest_markers(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_mark
             if checked + level_checked >= budget:
                 return Fix(unique, unique, checked + level_checked, bare + level_bare, False, fail)
             extra = _count_segments(combo)
-            cand = analyse(_with_extra(spec, extra), rows, seed=seed, warm_frames=base.rank.frames - 1)
+            cand = analyse(_with_extra(spec, extra), rows, seed=seed, warm_frames=base.rank.frames - 1,
+                           search_min_frames=False)
             if cand.passes:
                 return Fix(extra, unique, checked, bare, True, fail)
             level_checked += 1

@@ -121,3 +121,20 @@ def test_work_grows_linearly_with_the_chain():
             tree_elimination.eliminate = real
         return calls[0]
     assert eliminations(24) <= 2.2 * eliminations(12)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(trees(max_joints=4))
+def test_warm_starts_keep_the_verdicts_and_say_what_min_frames_means(spec):
+    """A warm start changes no verdict; its min_frames is the cold scan's, floored at the warm count; a
+    variant ranked only for its verdicts (no min_frames search) reports an upper bound: the fewest frames
+    seen to give the final W."""
+    cold = tree_rank.analyse(spec, seed=9)
+    warm = tree_rank.analyse(spec, seed=9, warm_frames=2)
+    quick = tree_rank.analyse(spec, seed=9, warm_frames=max(1, cold.frames - 1), search_min_frames=False)
+    for r in (warm, quick):
+        assert {n: j.local for n, j in r.joints.items()} == {n: j.local for n, j in cold.joints.items()}
+    for n, j in cold.joints.items():
+        if j.local:
+            assert warm.joints[n].min_frames == max(2, j.min_frames)
+            assert j.min_frames <= quick.joints[n].min_frames == quick.frames - 1      # the scan stopped: stable
