@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import random
-import time
 from dataclasses import asdict, dataclass, field
 from fractions import Fraction
 
@@ -23,6 +22,7 @@ from identcheck import derive
 from identcheck.errors import InputError
 from identcheck.exact.algebra import half_angle as exact_half_angle
 from identcheck.exact.linalg import maximal_minor
+from identcheck.progress import Progress
 from identcheck.symbols import Case, case as get_case
 
 FORMAT = "identcheck.rank-certificate/1"
@@ -108,28 +108,14 @@ def sample_point(cs: Case, params: dict, ts) -> tuple:
     return tuple(sp.Rational(e.xreplace(sub)) for e in forward)
 
 
-class _Ticker:
-    """Progress of a loop, at most one line a second (nothing for loops that end within the first second)."""
-
-    def __init__(self, what: str, n: int, progress=None):
-        self.what, self.n, self.progress = what, n, progress
-        self.start = self.said = time.monotonic()
-
-    def __call__(self, k: int) -> None:
-        now = time.monotonic()
-        if self.progress and now - self.said >= 1.0:
-            self.said = now
-            self.progress(f"{self.what}: {k} of {self.n} ({now - self.start:.0f} s)")
-
-
 def m_rows(cs: Case, points, progress=None) -> tuple:
     """The exact rational matrix M and vector K built from sample points."""
     dv = derive.for_case(cs, disk_cache=False)
     M, K, inv = dv.result("M"), dv.result("K"), dv.result("invariants")
     rows, rhs = [], []
-    tick = _Ticker("rows of M", len(points), progress)
+    line = Progress(progress, first_after_s=1.0)
     for k, pt in enumerate(points):
-        tick(k)
+        line(lambda: f"rows of M: {k} of {len(points)} ({line.elapsed:.0f} s)")
         sub = dict(zip(cs.sample, pt))
         sub_inv = {k: v.xreplace(sub) for k, v in inv.items()}
         rows.append([sp.Rational(m.xreplace(sub_inv).xreplace(sub)) for m in M])
@@ -215,10 +201,10 @@ def certificate(cs: Case, params: dict, angles: list, seed: int, progress=None) 
     dv = derive.for_case(cs, disk_cache=False)
     n_unknowns = len(dv.result("Y"))
     n = len(angles)
-    tick = _Ticker("sample points", n, progress)
+    line = Progress(progress, first_after_s=1.0)
     points = []
     for k, ts in enumerate(angles):
-        tick(k)
+        line(lambda: f"sample points: {k} of {n} ({line.elapsed:.0f} s)")
         points.append(sample_point(cs, params, ts))
     rows, rhs = m_rows(cs, points, progress)
     rk, prow, pcol, det = exact_rank(rows)

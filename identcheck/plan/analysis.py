@@ -34,11 +34,11 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import time
 from dataclasses import dataclass, field
 from importlib import resources
 
 from identcheck.certify import tree_rank
+from identcheck.progress import Progress
 from identcheck.certify import twin as twin_certificate
 from identcheck.plan.result import PlanResult
 
@@ -333,19 +333,15 @@ class Budget:
 
     def __init__(self, seconds: float | None, progress=None):
         self.seconds = ANALYSES_BUDGET_S if seconds is None else float(seconds)
-        self.start = time.monotonic()
-        self.progress = progress
-        self._said = -1.0
+        self._line = Progress(progress)
         self.skipped: dict = {}
 
     def spent(self) -> bool:
-        return time.monotonic() - self.start > self.seconds
+        return self._line.elapsed > self.seconds
 
     def tick(self, what: str, k: int, n: int) -> None:
-        now = time.monotonic() - self.start
-        if self.progress and (now - self._said >= 1.0 or k == n):
-            self._said = now
-            self.progress(f"{what}: {k} of {n} ({now:.0f} s of at most {self.seconds:g} s)")
+        self._line(lambda: f"{what}: {k} of {n} ({self._line.elapsed:.0f} s of at most {self.seconds:g} s)",
+                   force=k == n)
 
 
 def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: Budget | None = None) -> dict:
