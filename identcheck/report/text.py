@@ -1,12 +1,38 @@
 """Results as text for a terminal: what the ``identcheck`` verbs print without ``--json``.
 
 Each function takes a verb's result (or its JSON document) and returns the lines to print, joined by
-newlines; nothing here computes a number, it only lays out what the result holds. Plain fixed-width
-formatting: no table library is needed for these few columns.
+newlines; nothing here computes a number, it only lays out what the result holds. Every table (columns with
+a header) is laid out by ``tabulate`` through :func:`table`, so that columns align whatever the widths of
+the names and numbers in them.
 """
 from __future__ import annotations
 
+from tabulate import tabulate
+
 from identcheck.report.json_out import document
+
+MISSING = "-"       # what a table shows for a value the result does not have (None)
+
+
+def _cell(value, floatfmt: str) -> str:
+    if value is None:
+        return MISSING
+    if isinstance(value, float):
+        return format(value, floatfmt)
+    return str(value)
+
+
+def table(rows, headers, indent: str = "", floatfmt: str = ".2f") -> list:
+    """The lines of a table of `rows` under `headers` (a rule under the header), each line prefixed by
+    `indent`. Floats are written with `floatfmt` and None as ``-``; a column whose values are all numbers is
+    right-aligned. Text is never read as a number (a marker named ``1e3`` stays ``1e3``)."""
+    rows = [list(r) for r in rows]
+    numeric = [all(r[k] is None or (isinstance(r[k], (int, float)) and not isinstance(r[k], bool)) for r in rows)
+               for k in range(len(headers))]
+    cells = [[_cell(v, floatfmt) for v in r] for r in rows]
+    text = tabulate(cells, headers=headers, tablefmt="simple", disable_numparse=True,
+                    colalign=["right" if n else "left" for n in numeric])
+    return [indent + line for line in text.splitlines()]
 
 
 def derive_text(result) -> str:
@@ -16,9 +42,9 @@ def derive_text(result) -> str:
     lines = []
     for d in rep["derivations"]:
         lines.append(f"{d['title']}: {'ok' if d['ok'] else 'MISMATCH'}")
-        for c in d["checks"]:
-            flag = "agrees" if c["agrees"] else (f"erratum {c['erratum']}" if c["ok"] else "DISAGREES (unrecorded)")
-            lines.append(f"  {c['name']:<24} {c['where']:<16} {flag}")
+        rows = [[c["name"], c["where"], "agrees" if c["agrees"] else
+                 (f"erratum {c['erratum']}" if c["ok"] else "DISAGREES (unrecorded)")] for c in d["checks"]]
+        lines += table(rows, ["check", "where in the paper", "against the print"], indent="  ")
     for g in rep.get("generated", []):
         state = ("rewritten" if g["written"] else "up to date" if g["up_to_date"]
                  else "STALE: run identcheck derive --regenerate")
@@ -44,16 +70,14 @@ def verify_text(result) -> str:
 
 def table_text(result) -> str:
     """``identcheck table``: one line per case with its verdict and the kind of certificate."""
-    lines = [f"{'joint':<10} {'p,q':<4} {'identifiable':<13} {'local':<6} {'candidates':<11} {'min N':<6} "
-             f"{'local N':<8} certificate"]
+    rows = []
     for r in document(result)["cases"]:
         c = r["certificate"]
         how = c["kind"] + (f" <- {c['follows_from']} ({c['rule']})" if c["kind"] == "remark1" else "")
         ident = ("yes" if r["identifiable"] else "no") if r["identifiable_decided"] else "undecided"
-        lines.append(f"{r['joint']:<10} {r['p']},{r['q']:<2} {ident:<13} {'yes' if r['local'] else 'no':<6} "
-                     f"{'-' if r['candidates'] is None else r['candidates']!s:<11} "
-                     f"{'-' if r['min_samples'] is None else r['min_samples']!s:<6} "
-                     f"{'-' if r['local_min_samples'] is None else r['local_min_samples']!s:<8} {how}")
+        rows.append([r["joint"], f"{r['p']},{r['q']}", ident, "yes" if r["local"] else "no", r["candidates"],
+                     r["min_samples"], r["local_min_samples"], how])
+    lines = table(rows, ["joint", "p,q", "identifiable", "local", "candidates", "min N", "local N", "certificate"])
     lines.append("identifiable: generic data give one joint; local: finitely many (candidates, mirror images "
                  "counted); min N: samples for the stated verdict; local N: samples for local identifiability "
                  "(Jacobian engine).")
@@ -68,13 +92,17 @@ def identify_text(result) -> str:
         lines.append(f"{name}: {j['case']}, {j['n_samples']} samples -> {j['candidates']} joint(s)"
                      + (f" ({j['parameter_sets']} parameter sets x mirror images)" if hinge else "")
                      + f"; unique: {j['unique']}; largest sample residual {j['rms_residual']:.3g} mm")
-        rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
-        markers = list(rows[0])
-        what = "distances to the hinge axis (mm): " if hinge else "distances to the centre (mm):     "
-        lines.append("   " + what + "  ".join(f"{m:>8}" for m in markers))
-        for i, row in enumerate(rows):
-            lines.append(f"   joint {i}:" + " " * 26 + "  ".join(f"{row[m]:8.2f}" for m in markers))
+        lines.append("   distances to the " + ("hinge axis" if hinge else "centre") + " (mm), one row per joint:")
+        lines += _candidate_table(j)
     return "\n".join(lines)
+
+
+def _candidate_table(j: dict) -> list:
+    """A joint's candidates (its best first, then its alternatives) by marker: each one's marker distances."""
+    rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
+    markers = list(rows[0])
+    return table([[f"joint {i}"] + [row.get(m) for m in markers] for i, row in enumerate(rows)],
+                 ["candidate"] + markers, indent="   ")
 
 
 def fit_text(result) -> str:
@@ -90,12 +118,9 @@ def fit_text(result) -> str:
         rms = "-" if j["rms_residual"] is None else f"{j['rms_residual']:.3g}"
         lines.append(f"{head}; {j['practical']['verdict']}; unique: {j['unique']}; rms residual {rms} mm; "
                      f"uncertainty {unc} mm (largest standard error of a marker distance)")
-        what = "distance to the centre" if j["type"] == "spherical" else "distance to the hinge axis"
-        rows = [j["marker_distances"]] + [alt["marker_distances"] for alt in j["alternatives"]]
-        lines.append(f"   {what} (mm): " + "  ".join(f"{m:>8}" for m in rows[0]))
-        for i, row in enumerate(rows):
-            lines.append(f"   joint {i}:{' ' * (len(what) - 2)}" + "  ".join(
-                "       -" if row[m] is None else f"{row[m]:8.2f}" for m in rows[0]))
+        what = "centre" if j["type"] == "spherical" else "hinge axis"
+        lines.append(f"   distances to the {what} (mm), one row per joint the data admit:")
+        lines += _candidate_table(j)
         how = j.get("interval_method", {})
         for m, (lo, hi) in j.get("marker_distances_ci95", {}).items():
             if hi is None and how.get(m) == "not_profiled":
@@ -120,18 +145,20 @@ def diagnose_text(diag) -> str:
         lines.append("no effect found: the rigid-joint model plus noise explains the trial"
                      if rep["consistent_before"]["consistent"]
                      else "no named effect earns its parameters; the gap stays unexplained")
-    for k, e in enumerate(rep["effects"], 1):
-        where = ", ".join(f"{key}={val}" for key, val in e["where"].items() if key != "frames" or len(val) <= 4)
-        lines.append(f"{k}. {e['name']:<18} {where}: gap {e['gap_before']:.3g} -> {e['gap_after']:.3g} mm")
+    rows = [[k, e["name"], ", ".join(f"{key}={val}" for key, val in e["where"].items()
+                                     if key != "frames" or len(val) <= 4), e["gap_before"], e["gap_after"]]
+            for k, e in enumerate(rep["effects"], 1)]
+    if rows:
+        lines += table(rows, ["step", "effect", "where", "gap before (mm)", "gap after (mm)"], floatfmt=".3g")
     test = rep["consistent_after"]
     lines.append(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
                  f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "
                  f"(gap²/floor² = {test['ratio']:.3g}, limit {test['limit']:.3g})")
-    for name, j in rep["joints"].items():
-        unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.2g}"
-        kind = j["type"] if j["type"] == j["declared_type"] else f"{j['type']} (declared {j['declared_type']})"
-        lines.append(f"   {name}: {kind}; rms residual {j['rms_residual']:.3g} mm; uncertainty {unc} mm; "
-                     + ", ".join(f"{m} {d:.1f}" for m, d in j["marker_distances"].items()))
+    rows = [[name, j["type"] if j["type"] == j["declared_type"] else f"{j['type']} (declared {j['declared_type']})",
+             j["rms_residual"], j["uncertainty_mm"], ", ".join(f"{m} {d:.1f}" for m, d in j["marker_distances"].items())]
+            for name, j in rep["joints"].items()]
+    lines += table(rows, ["joint", "type", "rms residual (mm)", "uncertainty (mm)", "marker distances (mm)"],
+                   indent="   ", floatfmt=".3g")
     return "\n".join(lines)
 
 
@@ -164,29 +191,31 @@ def _witness_text(w: dict) -> str:
 def plan_text(result) -> str:
     """``identcheck plan``: a table of the joints' verdicts, then the plan's summary lines."""
     doc = document(result)
-    head = f"{'joint':<12} {'verdict':<13} {'case':<16} {'cand.':>5} {'samples':>7}  uses / reason"
-    lines = [head, "-" * len(head)]
+    rows = [[name, "identifiable" if j["identifiable"] else ("local" if j["local"] else "NOT"), j["case"],
+             j["candidates"], j["min_samples"], ", ".join(j["uses_virtual_markers"])]
+            for name, j in doc["joints"].items()]
+    lines = table(rows, ["joint", "verdict", "case", "candidates", "samples", "uses"])
+    notes = []
     for name, j in doc["joints"].items():
-        verdict = "identifiable" if j["identifiable"] else ("local" if j["local"] else "NOT")
-        cand = "-" if j["candidates"] is None else str(j["candidates"])
-        ms = "-" if j["min_samples"] is None else str(j["min_samples"])
-        uses = ", ".join(j["uses_virtual_markers"]) or ""
-        lines.append(f"{name:<12} {verdict:<13} {j['case']:<16} {cand:>5} {ms:>7}  {uses}")
+        said = []
         if not j["identifiable"]:
-            lines.append(f"{'':<12} {j['reason']}")
+            said.append(j["reason"])
         elif j.get("rejected_by"):
             r = j["rejected_by"]
-            lines.append(f"{'':<12} {j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
-                         "(exact certificate)")
+            said.append(f"{j['case']}'s other candidates rejected by {r['marker']} beyond {r['joint']} "
+                        "(exact certificate)")
         if "alternative" in j:
-            lines.append(f"{'':<12} alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
-                         + _witness_text(j["alternative"]))
+            said.append("alternative: " + ("VERIFIED — " if j["alternative"]["verified"] else "")
+                        + _witness_text(j["alternative"]))
         if j.get("motion_needed"):
-            lines.append(f"{'':<12} needs motion of: {', '.join(j['motion_needed'])}")
+            said.append(f"needs motion of: {', '.join(j['motion_needed'])}")
         if j.get("practical"):
             p = j["practical"]
-            lines.append(f"{'':<12} in practice ({p.get('motion', '')}, {p.get('noise_mm', '?')} mm noise): "
-                         f"{p['verdict']}: {p['reason']}")
+            said.append(f"in practice ({p.get('motion', '')}, {p.get('noise_mm', '?')} mm noise): "
+                        f"{p['verdict']}: {p['reason']}")
+        notes += [f"{name}: {s}" for s in said]
+    if notes:
+        lines += ["", *notes]
     lines.append("")
     lines += _plan_summary(doc)
     if doc.get("shared_motion"):

@@ -120,7 +120,9 @@ def test_cli_table_json_and_text(capsys):
     assert [(r["p"], r["q"]) for r in out["cases"]] == [(p, q) for p in range(4) for q in range(4)]
     assert cli.main(["table", "--joint", "revolute"]) == 0
     text = capsys.readouterr().out
-    assert "revolute   2,1  no            yes    4" in text
+    rows = {tuple(line.split()[:2]): line.split()[2:] for line in text.splitlines() if line.startswith("revolute")}
+    assert rows[("revolute", "2,1")][:3] == ["no", "yes", "4"]             # identifiable, local, candidates
+    assert text.splitlines()[1].startswith("---")                           # a rule under the header
 
 
 def _world(data, i, parent=True):
