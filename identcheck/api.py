@@ -186,12 +186,23 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     return res
 
 
-def _write_report(path, kind: str, doc: dict, scene, title: str) -> None:
+def _write_report(path, kind: str, doc: dict, scene, title: str, figures: list | None = None) -> None:
     """The run's HTML page (:mod:`identcheck.report.html`)."""
     import identcheck
     from identcheck.report.html import write_html
 
-    write_html(path, kind, doc, scene, title, identcheck.__version__)
+    write_html(path, kind, doc, scene, title, identcheck.__version__, figures)
+
+
+def _evidence_svgs(diag) -> list | None:
+    """The diagnosis' evidence figures as SVG for its page, or None when matplotlib is not installed."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return None
+    from identcheck.report.diagnose_figures import evidence_svgs
+
+    return evidence_svgs(diag)
 
 
 @_one_blas_thread
@@ -240,7 +251,8 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
         rows = data.frame_number(range(data.n_frames))
         scene = fit_scene(diag.after.fit, diag.after.data, rows, diag.offset)
-        _write_report(report, "diagnose", diag.to_dict(), scene, f"{data.source} (model {diag.ctx.model.source})")
+        _write_report(report, "diagnose", diag.to_dict(), scene, f"{data.source} (model {diag.ctx.model.source})",
+                      _evidence_svgs(diag))
     return diag
 
 

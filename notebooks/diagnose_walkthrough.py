@@ -166,7 +166,7 @@ show(figures.gap_steps(diag, FIGS / "gap_per_step.png"))
 # %%
 for k, step in enumerate(diag.steps, 1):
     print(f"{k}. {step.name} {step.where}: gap {step.gap_before:.3f} -> {step.gap_after:.3f} mm")
-    show(figures.evidence(step, FIGS / f"evidence_{k}.png"))
+    show(figures.evidence(step, FIGS / f"evidence_{k}.png", diag.first_frame, diag.numbered(step.where)))
 
 # %% [markdown]
 # ## 7. Did modelling the effect move the joints back to the truth?

@@ -104,7 +104,7 @@ class Diagnosis:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     first_frame: int = 0
 
-    def _numbered(self, where: dict) -> dict:
+    def numbered(self, where: dict) -> dict:
         """`where` with its row indices also in the file's numbering."""
         out = dict(where)
         if "frame" in where:
@@ -139,9 +139,9 @@ class Diagnosis:
             "gap_before": round(self.gap_before, 4),
             "gap_after": round(self.gap_after, 4),
             "consistent_before": plain(self.test_before), "consistent_after": plain(self.test_after),
-            "effects": [{"name": s.name, "where": plain(self._numbered(s.where)), "gap_before": round(s.gap_before, 4),
+            "effects": [{"name": s.name, "where": plain(self.numbered(s.where)), "gap_before": round(s.gap_before, 4),
                          "gap_after": round(s.gap_after, 4), "score": round(s.score, 1),
-                         "indistinguishable_from": [{"name": n, "where": plain(self._numbered(w))}
+                         "indistinguishable_from": [{"name": n, "where": plain(self.numbered(w))}
                                                     for n, w in s.equivalents()]}
                         for s in self.steps],
             "joints": joint_report(self.ctx, self.after),

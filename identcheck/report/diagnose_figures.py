@@ -6,16 +6,21 @@ from pathlib import Path
 
 import numpy as np
 
-from identcheck.report.figure_io import figure, save
+from identcheck.report.figure_io import figure, save, svg_text
+
+FRAME_LABEL = "frame (as numbered in the file)"
 
 
 def where_text(where: dict) -> str:
     """An effect's ``where`` as a reader writes it: ``markers RANK, RTIB; segment shank; joint knee`` (frames and
-    long lists shortened), not Python's repr."""
+    long lists shortened), not Python's repr. A frame is given in the file's numbering when `where` has it
+    (``file_frame``, as :meth:`identcheck.diagnose.workflow.Diagnosis.numbered` adds it)."""
     parts = []
     for k, v in where.items():
-        if k == "frames":
+        if k in ("frames", "file_frames") or (k == "frame" and "file_frame" in where):
             continue
+        if k == "file_frame":
+            k = "frame"
         if isinstance(v, (list, tuple)):
             shown = ", ".join(str(x) for x in v[:6]) + (f" ... ({len(v)})" if len(v) > 6 else "")
         elif isinstance(v, float):
@@ -53,11 +58,12 @@ def residual_map(diag, path) -> Path:
     axes = fig.subplots(3, 1, gridspec_kw={"height_ratios": [2, 2, 1.4]})
     for ax, m, what in zip(axes[:2], maps, ("rigid-joint model", "with the named effects")):
         ax.set_facecolor("0.8")                       # missing samples: grey, never black (a perfect fit)
-        im = ax.imshow(m.T, aspect="auto", interpolation="nearest", cmap="magma", vmin=0, vmax=top)
+        im = ax.imshow(m.T, aspect="auto", interpolation="nearest", cmap="magma", vmin=0, vmax=top,
+                       extent=(diag.first_frame - 0.5, diag.first_frame + m.shape[0] - 0.5, len(ctx.labels) - 0.5, -0.5))
         ax.set_yticks(range(len(ctx.labels)), ctx.labels, fontsize=7)
         ax.set_title(f"residual |measured − model| (mm), {what}; gap {np.sqrt(np.nanmean(m ** 2)):.3g} mm", fontsize=9)
         fig.colorbar(im, ax=ax, pad=0.01)
-    axes[1].set_xlabel("frame")
+    axes[1].set_xlabel(FRAME_LABEL)
     x = np.arange(len(ctx.labels))
     for k, (m, what) in enumerate(zip(maps, ("before", "after"))):
         axes[2].bar(x + (k - 0.5) * 0.4, np.sqrt(np.nanmean(m ** 2, axis=0)), 0.4, label=what)
@@ -94,17 +100,34 @@ def _short_where(where: dict) -> str:
     return ""
 
 
-def evidence(step, path) -> Path:
-    """One effect's evidence, drawn by the kind its evidence dictionary names."""
+def evidence(step, path, first_frame: int = 0, where: dict | None = None) -> Path:
+    """One effect's evidence (:func:`evidence_figure`) written to `path`."""
+    return save(evidence_figure(step, first_frame, where), path)
+
+
+def evidence_svgs(diag) -> list:
+    """(caption, SVG text) of each adopted effect's evidence figure, in the order adopted: what the HTML page
+    of ``diagnose --report`` shows under its effects."""
+    return [(f"{k}. {step.name}: {where_text(diag.numbered(step.where))}",
+             svg_text(evidence_figure(step, diag.first_frame, diag.numbered(step.where))))
+            for k, step in enumerate(diag.steps, 1) if step.evidence]
+
+
+def evidence_figure(step, first_frame: int = 0, where: dict | None = None):
+    """One effect's evidence, drawn by the kind its evidence dictionary names: a Figure. An axis of frames
+    (row indices in the evidence) is drawn in the file's numbering, its first row numbered `first_frame`;
+    `where` (default the step's) is what the title names."""
     ev = step.evidence
     fig = figure(figsize=(7, 3.6))
     ax = fig.subplots()
     kind = ev.get("kind", "series")
-    x, y, after = np.asarray(ev.get("x")), ev.get("y"), ev.get("y_after")
+    by_frame = ev.get("x_label") == "frame"
+    shift = first_frame if by_frame else 0
+    x, y, after = np.asarray(ev.get("x")) + shift, ev.get("y"), ev.get("y_after")
     if kind == "scatter":
         ax.plot(x, np.asarray(y), ".", ms=2, alpha=0.5, label="before")
         if after is not None:
-            ax.plot(x if np.size(after) == np.size(x) else np.arange(np.size(after)), np.asarray(after), ".",
+            ax.plot(x if np.size(after) == np.size(x) else shift + np.arange(np.size(after)), np.asarray(after), ".",
                     ms=2, alpha=0.5, label="after")
     elif kind == "series3":
         y = np.asarray(y)
@@ -117,15 +140,15 @@ def evidence(step, path) -> Path:
         if after is not None:
             ax.plot(x, np.asarray(after), lw=0.8, label="after / alternative")
     for f in ev.get("mark", [])[:200]:
-        ax.axvline(f, color="C3", lw=0.6, alpha=0.6)
+        ax.axvline(f + shift, color="C3", lw=0.6, alpha=0.6)
     if "span" in ev:
-        ax.axvspan(ev["span"][0], ev["span"][1], color="C3", alpha=0.15, label="span")
-    ax.set_xlabel(ev.get("x_label", ""))
+        ax.axvspan(ev["span"][0] + shift, ev["span"][1] + shift, color="C3", alpha=0.15, label="span")
+    ax.set_xlabel(FRAME_LABEL if by_frame else ev.get("x_label", ""))
     ax.set_ylabel(ev.get("y_label", ""), fontsize=8)
-    ax.set_title(f"{step.name}: {where_text(step.where)}\ngap {step.gap_before:.3g} → {step.gap_after:.3g} mm",
+    ax.set_title(f"{step.name}: {where_text(step.where if where is None else where)}\ngap {step.gap_before:.3g} → {step.gap_after:.3g} mm",
                  fontsize=9)
     ax.legend(fontsize=7)
-    return save(fig, path)
+    return fig
 
 
 def write_all(diag, directory) -> list:
@@ -135,5 +158,6 @@ def write_all(diag, directory) -> list:
     paths = [residual_map(diag, out / "residuals.png"), gap_steps(diag, out / "gap_per_step.png")]
     for k, step in enumerate(diag.steps, 1):
         if step.evidence:
-            paths.append(evidence(step, out / f"evidence_{k}_{step.name}.png"))
+            paths.append(evidence(step, out / f"evidence_{k}_{step.name}.png", diag.first_frame,
+                                  diag.numbered(step.where)))
     return paths

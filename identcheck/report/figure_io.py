@@ -23,3 +23,18 @@ def save(fig, path, dpi: int = 110, rect=None) -> Path:
     fig.tight_layout(rect=rect)
     fig.savefig(path, dpi=dpi)
     return Path(path)
+
+
+def svg_text(fig, rect=None) -> str:
+    """``fig`` laid out (as :func:`save`) and drawn as SVG text with no date stamp and fixed element ids, so that
+    the same figure gives the same text: what an HTML page inlines."""
+    import io
+
+    from matplotlib import rc_context
+
+    fig.tight_layout(rect=rect)
+    buf = io.StringIO()
+    with rc_context({"svg.hashsalt": "identcheck", "svg.fonttype": "none"}):
+        fig.savefig(buf, format="svg", metadata={"Date": None})
+    text = buf.getvalue()
+    return text[text.index("<svg"):]          # the element alone, without the XML prolog and DOCTYPE

@@ -1,7 +1,7 @@
 """One self-contained HTML page per run (``fit --report OUT.html``, ``diagnose --report OUT.html``): the skeleton
 with its fitted joints in 3-D (drag to turn it, a slider and a play button to go through the trial), each
 marker's residual against the noise, every joint's verdict, intervals and geometry, and (diagnose) the effects
-with the gap each one closed.
+with the gap each one closed and the evidence that named each one (the figures ``--plots`` writes, inline SVG).
 
 The page loads nothing: its style, its data (a JSON block) and its small drawing script are inline, so it
 opens offline and can be mailed as one file. Nothing here computes a result; it lays out the verb's JSON
@@ -32,6 +32,8 @@ th{background:#f4f4f4}.num{text-align:right;font-variant-numeric:tabular-nums}
 #viewer{display:flex;gap:16px;align-items:flex-start;flex-wrap:wrap}
 canvas{border:1px solid #ccc;background:#fcfcfc;cursor:grab}
 .controls{margin-top:6px}.legend span{display:inline-block;margin-right:12px}
+figure.evidence{margin:12px 0}figure.evidence svg{max-width:100%;height:auto}
+figcaption{font-size:.9em;color:#444}
 .dot{display:inline-block;width:10px;height:10px;border-radius:50%;margin-right:4px;vertical-align:middle}
 """
 
@@ -205,26 +207,43 @@ def effects_section(doc: dict) -> str:
 
 
 def anatomical_section(anatomical: dict | None) -> str:
-    """The fitted hip centres beside Harrington's regression, in the ISB pelvis frame (``fit``'s ``anatomical``)."""
+    """The fitted hip centres beside Harrington's and (given the leg length) Davis's regressions, in the ISB pelvis
+    frame (``fit``'s ``anatomical``)."""
     if not anatomical or not anatomical.get("hips"):
         return ""
     pelvis = anatomical["pelvis"]
-    rows = [f"<h2>Hip centres against Harrington (2007)</h2><p>{_e(pelvis['frame'])}. Pelvis width "
+    rows = [f"<h2>Hip centres against Harrington (2007) and Davis (1991)</h2><p>{_e(pelvis['frame'])}. Pelvis width "
             f"{_num(pelvis['width_mm'])} mm, depth {_num(pelvis['depth_mm'])} mm.</p><table><tr><th>joint</th>"
             "<th>side</th><th>functional centre (x, y, z)</th><th>Harrington 2007 (x, y, z)</th><th>distance (mm)</th>"
-            "</tr>"]
+            "<th>Davis 1991 (x, y, z)</th><th>distance (mm)</th></tr>"]
     for name, h in anatomical["hips"].items():
+        davis = h.get("davis_1991")
         rows.append(f"<tr><td>{_e(name)}</td><td>{_e(h['side'])}</td><td>"
                     + ", ".join(f"{v:.1f}" for v in h["functional_centre"]) + "</td><td>"
                     + ", ".join(f"{v:.1f}" for v in h["harrington_2007"])
-                    + f"</td><td class='num'>{h['distance_mm']:.1f}</td></tr>")
+                    + f"</td><td class='num'>{h['distance_mm']:.1f}</td><td>"
+                    + (", ".join(f"{v:.1f}" for v in davis) if davis else "needs the leg length ([subject] in the model)")
+                    + f"</td><td class='num'>{_num(h.get('davis_distance_mm'))}</td></tr>")
     rows.append("</table>")
     return "".join(rows)
 
 
-def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = "") -> str:
+def evidence_section(figures: list | None) -> str:
+    """Diagnose: each adopted effect's evidence figure, (caption, SVG text) as drawn by
+    :func:`identcheck.report.diagnose_figures.evidence_svgs`; None when matplotlib, which draws them, is missing."""
+    if figures is None:
+        return ("<p>The evidence figures are drawn with matplotlib, which is not installed: "
+                "<code>pip install 'identcheck[plots]'</code>.</p>")
+    if not figures:
+        return ""
+    return "<h3>Evidence for each effect</h3>" + "".join(
+        f"<figure class='evidence'>{svg}<figcaption>{_e(caption)}</figcaption></figure>" for caption, svg in figures)
+
+
+def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = "", figures: list | None = None) -> str:
     """The page's HTML text. `kind`: ``fit`` or ``diagnose``; `doc`: that verb's JSON document; `scene`:
-    :func:`identcheck.fit.scene.fit_scene` output, or None (no 3-D view, e.g. no whole-tree fit)."""
+    :func:`identcheck.fit.scene.fit_scene` output, or None (no 3-D view, e.g. no whole-tree fit); `figures`
+    (diagnose): the effects' evidence as (caption, SVG text), None when they could not be drawn."""
     joints = doc.get("joints") or {}
     noise = doc.get("noise") or {}
     sigma = noise.get("sigma_mm") if isinstance(noise, dict) else None
@@ -263,7 +282,7 @@ def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = 
         payload = json.dumps(data, allow_nan=False).replace("</", "<\\/")
         parts.append(f"<script type='application/json' id='scene-data'>{payload}</script>")
     if kind == "diagnose":
-        parts.append("<h2>Effects</h2>" + effects_section(doc))
+        parts.append("<h2>Effects</h2>" + effects_section(doc) + evidence_section(figures))
     parts.append("<h2>Joints</h2>" + joints_table(joints))
     parts.append(anatomical_section(doc.get("anatomical")))
     if kind == "fit":
@@ -279,8 +298,9 @@ def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = 
     return "".join(parts)
 
 
-def write_html(path, kind: str, doc: dict, scene: dict | None, title: str, version: str = "") -> Path:
+def write_html(path, kind: str, doc: dict, scene: dict | None, title: str, version: str = "",
+               figures: list | None = None) -> Path:
     """Write the page to `path` (see :func:`render`); returns the path."""
     path = Path(path)
-    path.write_text(render(kind, doc, scene, title, version), encoding="utf-8")
+    path.write_text(render(kind, doc, scene, title, version, figures), encoding="utf-8")
     return path

@@ -94,6 +94,21 @@ def test_a_diagnose_page_shows_each_effect_and_the_gap(tmp_path, capsys):
     assert doc["effects"]                                          # the slip is found, and shown
     for e in doc["effects"]:
         assert e["name"] in text
+    # each effect's evidence figure, inline: an <svg> in a <figure> captioned by the effect, its axes labelled
+    source = page.read_text(encoding="utf-8")
+    figures = re.findall(r"<figure class='evidence'>(.*?)</figure>", source, flags=re.S)
+    assert len(figures) == len(doc["effects"])
+    for e, fig in zip(doc["effects"], figures):
+        assert fig.lstrip().startswith("<svg") and "</svg>" in fig
+        caption = re.search(r"<figcaption>(.*?)</figcaption>", fig).group(1)
+        assert e["name"] in caption
+    assert "frame" in figures[0]                                   # a slip's evidence is drawn against frames
+
+
+def test_without_matplotlib_the_page_says_which_extra_draws_the_evidence():
+    from identcheck.report.html import evidence_section
+
+    assert "identcheck[plots]" in evidence_section(None) and evidence_section([]) == ""
 
 
 @pytest.mark.parametrize("name", ["out.txt", "SAME_AS_TRIAL"])
