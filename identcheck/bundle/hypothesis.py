@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.skeleton import Skeleton
+from identcheck.bundle.anatomical_angles import anatomical_angles
 from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.model import Fit, State, Terms, forward
 from identcheck.estimate.noise import NoiseFloor
@@ -161,20 +162,16 @@ def joint_angles(h) -> dict:
 
 
 def main_angle(h, joint: str) -> tuple[np.ndarray, str]:
-    """The angle a figure puts on its axis for `joint` (F,) in degrees, and its label: a hinge's own angle; for a
-    ball joint, the rotation along the direction it turned most (the first principal direction of its rotation
-    vectors about the median pose, named by its components in the parent's technical frame), not one
+    """The angle a figure puts on its axis for `joint` (F,) in degrees, and its label: a hinge's own angle (its
+    flexion); a ball joint's flexion–extension in its joint frames (:mod:`identcheck.bundle.anatomical_angles`:
+    about the medio-lateral axis a hinge below it gives, in the ISB pelvis frame below a pelvis), not one
     component of a rotation vector."""
-    ang = joint_angles(h)[joint]
-    if ang.shape[1] == 1:
-        return np.rad2deg(ang[:, 0]), f"{joint} hinge angle (deg)"
-    centred = ang - ang.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    axis = vt[0] * np.sign(vt[0][np.argmax(np.abs(vt[0]))])
-    share = sv[0] ** 2 / max(float(np.sum(sv ** 2)), 1e-300)
-    return (np.rad2deg(centred @ axis),
-            f"{joint} rotation about ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f}) in the parent's frame "
-            f"(deg from the median pose; {100 * share:.0f} % of its motion)")
+    fit = getattr(h, "fit", h)
+    if fit.chain.types[joint] == "revolute":
+        return np.rad2deg(fit.state.theta[joint]), f"{joint} flexion–extension: its hinge angle (deg)"
+    angles, frames = anatomical_angles(fit, joint)
+    return (np.rad2deg(angles[:, 0]),
+            f"{joint} flexion–extension (deg)\nabout {frames.medio_lateral}; 0 at {frames.zero}")
 
 
 def rescale(values: np.ndarray, low: float = -1.0) -> np.ndarray:

@@ -1,45 +1,17 @@
-"""The diagnose figures say what they show: a ball joint's axis is the angle it turned most (not one component of
-a rotation vector), samples that cannot show a misfit are missing (not a perfect fit), titles and bars name the
-effect's markers in words."""
+"""The diagnose figures say what they show: samples that cannot show a misfit are missing (not a perfect fit),
+titles and bars name the effect's markers in words. (The joint angle on their axes: test_anatomical_angles.)"""
 from __future__ import annotations
 
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
-from scipy.spatial.transform import Rotation
 
-from identcheck.bundle.hypothesis import main_angle
 from identcheck.io.model import Model
 from identcheck.report.diagnose_figures import seen_alone, where_text
 from identcheck.skeleton import Skeleton
 
 MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
-
-
-def _ball(rel_R):
-    chain = SimpleNamespace(joints=["hip"], types={"hip": "spherical"})
-    return SimpleNamespace(fit=SimpleNamespace(state=SimpleNamespace(rel_R={"hip": rel_R}, theta={}), chain=chain))
-
-
-@settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), amp=st.floats(10, 60), wobble=st.floats(0, 3))
-def test_a_ball_joints_axis_is_its_main_rotation(seed, amp, wobble):
-    """A ball joint turning by ±amp degrees about a random axis (plus a few degrees about the others): the figure's
-    angle spans 2·amp within the wobble, and the label names that axis in the parent's frame."""
-    rng = np.random.default_rng(seed)
-    axis = rng.standard_normal(3)
-    axis /= np.linalg.norm(axis)
-    base = Rotation.random(random_state=rng)
-    t = np.linspace(0, 4 * np.pi, 800)
-    rv = np.outer(np.deg2rad(amp) * np.sin(t), axis) + np.deg2rad(wobble) * rng.standard_normal((800, 3)) / 3
-    rel = (Rotation.from_rotvec(rv) * base).as_matrix()
-    x, label = main_angle(_ball(rel), "hip")
-    assert abs(np.ptp(x) - 2 * amp) <= 0.1 * amp + 4 * wobble
-    shown = np.array([float(v) for v in label.split("(")[1].split(")")[0].split(",")])
-    assert abs(abs(shown @ axis) - 1) < 0.05 + 0.1 * wobble / amp
-    assert "parent's frame" in label
 
 
 def test_samples_that_cannot_misfit_are_not_shown():
@@ -64,3 +36,31 @@ def test_where_reads_as_words():
                        "amplitude_mm": 3.14159})
     assert text == "markers RANK, RTIB; segment shank; joint knee; amplitude mm 3.14"
     assert "[" not in text and "'" not in text
+
+
+def test_an_evidence_figures_labels_lie_inside_it():
+    """A two-line joint-angle label, a long y label and title: once laid out, the axis labels, the title and the
+    legend are inside the canvas (nothing clipped)."""
+    from types import SimpleNamespace
+
+    from identcheck.report.diagnose_figures import evidence_figure
+
+    x = np.linspace(-5, 40, 300)
+    step = SimpleNamespace(name="soft_tissue", where={"markers": ["RTH3"], "segment": "thigh_r", "joint": "hip_r"},
+                           gap_before=3.79, gap_after=3.62, evidence={
+                               "x": x, "x_label": "hip_r flexion–extension (deg)\nabout knee_r's hinge axis; 0 at the "
+                                                  "ISB pelvis neutral",
+                               "y": np.abs(np.sin(x / 10)) * 5, "y_after": np.ones(300),
+                               "y_label": "RTH3 residual on thigh_r (mm)", "kind": "scatter"})
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = evidence_figure(step)
+    canvas = FigureCanvasAgg(fig)
+    fig.tight_layout()
+    canvas.draw()
+    box = fig.bbox
+    ax = fig.axes[0]
+    for text in [ax.xaxis.label, ax.yaxis.label, ax.title, *ax.get_legend().get_texts()]:
+        ext = text.get_window_extent(renderer=canvas.get_renderer())
+        assert ext.x0 >= box.x0 - 1 and ext.x1 <= box.x1 + 1 and ext.y0 >= box.y0 - 1 and ext.y1 <= box.y1 + 1, \
+            text.get_text()
