@@ -285,7 +285,8 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     rep["anatomical"] = None
     if tree.best is not None:
         chain = tree.best.fit.chain
-        rep["anatomical"] = anatomical_report(screened.select(chain.labels).as_array(), chain.labels, tree.best.fit)
+        rep["anatomical"] = anatomical_report(screened.select(chain.labels).as_array(), chain.labels, tree.best.fit,
+                                              getattr(model, "subject", None))
     if export is not None:
         if tree.best is None:
             raise InputError([f"--export-markers {export}: no whole-tree fit to export ({tree.problem})"],

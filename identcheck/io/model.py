@@ -21,6 +21,12 @@ deterministic (all coordinates in the file's ``units``, converted to mm on load)
 - ``joints.NAME.centre_parent`` / ``centre_child``: joint centre (revolute: a point on the
   hinge axis) in the parent / child segment frame.
 
+and, for ``fit``'s comparison with Davis et al.'s (1991) hip-centre regression (:mod:`identcheck.fit.anatomy`),
+the subject's measurements, always in mm:
+
+- ``[subject]`` ``leg_length_mm`` (both legs) or ``right_leg_length_mm`` / ``left_leg_length_mm``, and
+  ``marker_diameter_mm`` (default 14, Plug-in Gait's).
+
 Every problem in a file is collected and reported at once in a single :class:`InputError`
 that names the file and the TOML key.
 """
@@ -40,7 +46,10 @@ JOINT_TYPES = ("revolute", "spherical")
 MODEL_UNITS = {"mm": 1.0, "m": 1000.0}
 """Allowed ``units`` values and their factor to millimetres."""
 
-TOP_KEYS = ("units", "segments", "joints")
+TOP_KEYS = ("units", "segments", "joints", "subject")
+SUBJECT_KEYS = {"leg_length_mm": (300.0, 1500.0), "right_leg_length_mm": (300.0, 1500.0),
+                "left_leg_length_mm": (300.0, 1500.0), "marker_diameter_mm": (2.0, 40.0)}
+"""The ``[subject]`` keys and the range (mm) a value must lie in: a leg of 0.9 written as metres is an error."""
 SEGMENT_KEYS = ("markers", "positions", "length_mm")
 JOINT_KEYS = ("type", "parent", "child", "axis", "centre_parent", "centre_child")
 
@@ -109,6 +118,8 @@ class Model:
         The ``units`` key of the file ("mm" or "m"); positions are stored in mm regardless.
     source : str
         Where the model came from, used in error messages.
+    subject : dict of str to float
+        The ``[subject]`` measurements (mm), those the file gives.
     root : str
         The one segment that is no joint's child.
     joint_order : tuple of str
@@ -121,6 +132,7 @@ class Model:
     joints: dict[str, Joint] = field(default_factory=dict)
     units: str = "mm"
     source: str = "<dict>"
+    subject: dict = field(default_factory=dict)
     root: str = field(init=False)
     joint_order: tuple[str, ...] = field(init=False)
     markers: tuple[str, ...] = field(init=False)
@@ -201,9 +213,10 @@ class Model:
         segments = _parse_segments(d.get("segments"), scale, problems)
         joints, dropped = _parse_joints(d.get("joints", {}), segments, scale, problems)
         problems += _check_tree(segments, joints, check_roots=not dropped) + _reserved_markers(segments, joints)
+        subject = _parse_subject(d.get("subject", {}), problems)
         if problems:
             raise InputError(problems, source=source)
-        return cls(segments=segments, joints=joints, units=units, source=source)
+        return cls(segments=segments, joints=joints, units=units, source=source, subject=subject)
 
     # ------------------------------------------------------------------ queries
     def marker_segment(self, name: str) -> str:
@@ -249,10 +262,34 @@ class Model:
                 if getattr(j, key) is not None:
                     entry[key] = list(getattr(j, key))
             joints[j.name] = entry
-        return {"units": "mm", "segments": segs, "joints": joints}
+        out = {"units": "mm", "segments": segs, "joints": joints}
+        if self.subject:
+            out["subject"] = dict(self.subject)
+        return out
 
 
 # ---------------------------------------------------------------------- parsing helpers
+def _parse_subject(raw, problems: list[str]) -> dict:
+    """The ``[subject]`` table: each key known, each value a number of mm within its plausible range."""
+    if not isinstance(raw, Mapping):
+        problems.append(f"subject: expected a table ([subject]), got {type(raw).__name__}")
+        return {}
+    _unknown_keys(raw, tuple(SUBJECT_KEYS), "subject.", problems)
+    out = {}
+    for key, (lo, hi) in SUBJECT_KEYS.items():
+        if key not in raw:
+            continue
+        v = raw[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            problems.append(f"subject.{key}: expected a number of mm, got {v!r}")
+        elif not lo <= v <= hi:
+            problems.append(f"subject.{key}: {v} mm is outside {lo:g}..{hi:g} mm (the value is always in mm)")
+        else:
+            out[key] = float(v)
+    if "leg_length_mm" in out and ("right_leg_length_mm" in out or "left_leg_length_mm" in out):
+        problems.append("subject: give leg_length_mm (both legs) or right_/left_leg_length_mm, not both")
+    return out
+
 def _unknown(kind: str, name: str, known) -> str:
     known = list(known)
     close = difflib.get_close_matches(str(name), known, n=1)

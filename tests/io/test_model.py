@@ -362,3 +362,30 @@ def test_random_trees_order_parents_before_children(tree):
     for seg, table in segments.items():
         for m in table["markers"]:
             assert model.marker_segment(m) == seg
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from(["leg_length_mm", "right_leg_length_mm", "left_leg_length_mm", "marker_diameter_mm"]),
+       st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**6, 10**6), st.text(max_size=5),
+                 st.booleans()))
+def test_subject_values_are_plausible_mm_or_an_error_naming_the_key(key, value):
+    """[subject]: a value inside its range (mm) is kept as a float and survives to_dict/from_dict; anything else
+    (a leg length in metres, a negative, NaN, text, a boolean) is an error naming ``subject.KEY``."""
+    lo, hi = {"marker_diameter_mm": (2, 40)}.get(key, (300, 1500))
+    d = {"segments": {"a": {"markers": ["x"]}}, "subject": {key: value}}
+    ok = not isinstance(value, (bool, str)) and value == value and lo <= value <= hi
+    if ok:
+        m = Model.from_dict(d)
+        assert m.subject == {key: float(value)} and Model.from_dict(m.to_dict()).subject == m.subject
+    else:
+        with pytest.raises(InputError) as e:
+            Model.from_dict(d)
+        assert f"subject.{key}" in str(e.value)
+
+
+def test_subject_unknown_key_and_both_leg_spellings_are_errors():
+    with pytest.raises(InputError) as e:
+        Model.from_dict({"segments": {"a": {"markers": ["x"]}},
+                         "subject": {"leg_lenght_mm": 900, "leg_length_mm": 900, "right_leg_length_mm": 880}})
+    text = str(e.value)
+    assert "subject.leg_lenght_mm: unknown key" in text and "leg_length_mm" in text and "not both" in text
