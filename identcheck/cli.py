@@ -68,10 +68,10 @@ def _cmd_derive(a) -> int:
 def _cmd_rank(a) -> int:
     cert = api.rank(a.joint, a.p, a.q, samples=a.samples, seed=a.seed, progress=_progress("rank"))
     if a.save:
-        json_out.write(a.save, cert, indent=2)
+        json_out.write(a.save, cert.sealed(), indent=2)
         log.info("certificate saved to %s", a.save)
     if a.json:
-        _print_json(cert)
+        _print_json(cert.sealed())
     else:
         print(text.rank_text(cert))
     return 0 if cert.full_rank else 1
@@ -517,11 +517,15 @@ def preflight(a) -> list:
             problems.append(f"--precision {a.precision}: decimal digits between {lo} and {hi}")
         if a.frames:
             try:
-                bad = [f for f in a.frames.split(",") if int(f) < 0]
+                listed = [int(f) for f in a.frames.split(",")]
             except ValueError:
-                bad = ["(not integers)"]
-            if bad:
+                listed = None
+            if listed is None or any(f < 0 for f in listed):
                 problems.append(f"--frames {a.frames}: comma-separated frame indices, 0 or more")
+            elif len(set(listed)) < len(listed):
+                again = sorted({f for f in listed if listed.count(f) > 1})
+                problems.append(f"--frames {a.frames}: frame(s) {', '.join(map(str, again))} listed twice; a frame "
+                                "repeated adds no sample (each frame is one sample of the joint)")
     if a.verb == "plan" and a.max_seconds is not None and not 0 < a.max_seconds <= 86400:
         problems.append(f"--max-seconds {a.max_seconds}: a positive number of seconds, at most a day")
     if a.verb == "plan" and a.noise_mm is not None:

@@ -36,6 +36,8 @@ from dataclasses import dataclass, field, replace
 import mpmath
 from mpmath import mpf
 
+from identcheck.certify.seal import seal
+
 DPS = 50
 GUARD = 15
 
@@ -238,8 +240,14 @@ class Counterexample:
                   and change > scale * mpf(10) ** (-(dps // 3)))
             return Check(rep, terr, jerr, change, tol, bool(ok))
 
+    def sealed(self, digits: int = 60) -> dict:
+        """The standalone counterexample: :meth:`to_dict` under format ``/2`` with its content hash
+        (:func:`identcheck.certify.seal.seal`), which ``identcheck verify`` checks before re-verifying it."""
+        return seal(self.to_dict(digits))
+
     def to_dict(self, digits: int = 60) -> dict:
-        """JSON form: everything :func:`from_dict` needs to re-check it (``digits`` significant digits)."""
+        """JSON form (format ``/1``, what a table embeds): everything :func:`from_dict` needs to re-check it
+        (``digits`` significant digits)."""
         s = lambda v: mpmath.nstr(v, digits)  # noqa: E731
         vecs = lambda vs: [[s(x) for x in v] for v in vs]  # noqa: E731
         chk = self.check()

@@ -19,6 +19,7 @@ import numpy as np
 import sympy as sp
 
 from identcheck import derive
+from identcheck.certify.seal import seal
 from identcheck.errors import InputError
 from identcheck.exact.algebra import half_angle as exact_half_angle
 from identcheck.exact.linalg import maximal_minor
@@ -163,8 +164,13 @@ class RankCertificate:
     expansion: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """The certificate as a JSON document (what ``identcheck rank --json`` prints and ``--save`` writes)."""
+        """The certificate's body as a JSON document (format ``/1``: what a table embeds)."""
         return asdict(self)
+
+    def sealed(self) -> dict:
+        """The standalone certificate: the body under format ``/2`` with its content hash
+        (:func:`identcheck.certify.seal.seal`); what ``identcheck rank --json`` prints and ``--save`` writes."""
+        return seal(self.to_dict())
 
 
 def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0, progress=None) -> RankCertificate:

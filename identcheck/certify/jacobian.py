@@ -46,6 +46,7 @@ from functools import lru_cache
 import sympy as sp
 from sympy.polys.domains import QQ
 
+from identcheck.certify.seal import seal
 from identcheck.certify import exact_rank as certify
 from identcheck.certify.joint_models import JOINTS, MARKERS, JointModel, model as get_model
 from identcheck.exact import linalg
@@ -359,7 +360,13 @@ class LocalCertificate:
     format: str = FORMAT
 
     def to_dict(self) -> dict:
+        """The certificate's body (format ``/1``: what a table embeds)."""
         return asdict(self)
+
+    def sealed(self) -> dict:
+        """The standalone certificate: the body under format ``/2`` with its content hash
+        (:func:`identcheck.certify.seal.seal`), which ``identcheck verify`` checks before replaying it."""
+        return seal(self.to_dict())
 
     def to_json(self, **kw) -> str:
         return json.dumps(self.to_dict(), **kw)

@@ -29,6 +29,7 @@ from identcheck.certify import exact_rank as certify
 from identcheck.certify import counterexamples
 from identcheck.certify import jacobian
 from identcheck.certify.joint_models import JOINTS, MARKERS
+from identcheck.certify.seal import digest
 from identcheck.io.jsonable import frozen, plain
 
 CERTIFIED = ("revolute", "spherical")
@@ -202,10 +203,9 @@ class TableResult:
 
 
 def content_hash(cases) -> str:
-    """SHA-256 of the rows in canonical JSON (sorted keys, no spaces): what a saved table certifies."""
-    import hashlib
-
-    return hashlib.sha256(json.dumps(cases, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    """SHA-256 of the rows in canonical JSON (:func:`identcheck.certify.seal.digest`): what a saved table
+    certifies."""
+    return digest(cases)
 
 
 def table(seed: int = 0, joints=None, progress=None) -> TableResult:

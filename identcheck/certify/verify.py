@@ -12,12 +12,16 @@ from pathlib import Path
 
 from identcheck.certify import counterexamples, jacobian
 from identcheck.certify import exact_rank
-from identcheck.certify import table
+from identcheck.certify import seal, table
 from identcheck.errors import InputError
 
 CHECKS = {exact_rank.FORMAT: lambda c: exact_rank.verify(c).problems, jacobian.FORMAT: jacobian.replay,
           counterexamples.FORMAT: counterexamples.verify_dict, table.FORMAT: table.verify}
-"""format name -> function(document) -> list of problems (empty: verified)."""
+"""format name -> function(document) -> list of problems (empty: verified). A sealed (``/2``) certificate is
+checked as its ``/1`` body after its hash (:mod:`identcheck.certify.seal`)."""
+
+FORMATS = sorted(set(CHECKS) | set(seal.SEALED))
+"""Every format ``verify`` reads."""
 
 
 @dataclass(frozen=True)
@@ -93,16 +97,21 @@ def verify(certificate, source: str | None = None, progress=None) -> VerifyResul
     else:
         doc, source = read(certificate), source or str(certificate)
     fmt = doc.get("format")
-    if not isinstance(fmt, str) or fmt not in CHECKS:
-        raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(sorted(CHECKS))})"],
+    if not isinstance(fmt, str) or fmt not in FORMATS:
+        raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(FORMATS)})"],
                          source=source)
     if progress:
         progress(f"re-checking {source} ({fmt}) from its own data")
+    problems = []
     try:
-        problems = CHECKS[fmt](doc, progress=progress) if fmt == table.FORMAT else CHECKS[fmt](doc)
+        body = doc
+        if fmt in seal.SEALED:
+            body, problems = seal.unseal(doc)
+        kind = body["format"]
+        problems += CHECKS[kind](body, progress=progress) if kind == table.FORMAT else CHECKS[kind](body)
     except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
         # a field missing or of the wrong type: the file is not a certificate of its stated format; that is a
         # rejection (exit 1), with what was missing, never a traceback
         what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
-        problems = [f"malformed {fmt} document ({what})"]
+        problems = problems + [f"malformed {fmt} document ({what})"]
     return VerifyResult(ok=not problems, problems=tuple(problems), certificate=source, format=fmt)

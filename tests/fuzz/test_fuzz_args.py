@@ -79,6 +79,17 @@ def test_identify_frames_that_are_not_indices(run, no_work, corpus, frames):
 
 
 @FUZZ
+@given(frames=st.lists(st.integers(0, 40), min_size=2, max_size=8).filter(lambda f: len(set(f)) < len(f)))
+def test_identify_frames_listed_twice_are_named(run, no_work, corpus, frames):
+    """A frame listed twice (``5,5,5,5,5``) is no new sample: exit 2 naming --frames and the repeated frame, not
+    exit 1 "degenerate data" after the work."""
+    spec = ",".join(map(str, frames))
+    res = run(["identify", KNEE, corpus / "knee.trc", "--frames", spec])
+    again = next(f for f in frames if frames.count(f) > 1)
+    assert res.code == 2 and res.names("--frames", "listed twice", str(again)), res.err
+
+
+@FUZZ
 @given(spec=st.sampled_from(["a:b", "1:2:3", "x", "500:900", "9:3", "1.5:8", ":-5"]))
 def test_fit_frames_that_hold_no_frame_are_named(run, corpus, spec):
     """--frames START:END that is not a range or holds no frame of the trial: exit 2 naming --frames, the file
