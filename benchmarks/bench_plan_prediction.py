@@ -212,6 +212,7 @@ def main(argv=None):
     ap.add_argument("--motion", default="functional")
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--plans", nargs="*", default=list(PLANS))
+    ap.add_argument("--rival-plans", nargs="*", default=list(RIVAL_PLANS))
     ap.add_argument("--rivals", action="store_true",
                     help="instead: the rivals' rejection, predicted against Monte Carlo (key plan_prediction_rivals_N_frames)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results.json"))
@@ -220,8 +221,8 @@ def main(argv=None):
     if a.rivals:
         out = []
         with threadpool_limits(1):
-            for name, spec in RIVAL_PLANS.items():
-                res = run_rivals(name, _model(spec), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
+            for name in a.rival_plans:
+                res = run_rivals(name, _model(RIVAL_PLANS[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
                 out.append(res)
                 print(tabulate([[name, r["predicted_delta_chi2"], r["monte_carlo_mean_delta_chi2"], r["predicted_rejection"],
                                  f"{r['monte_carlo_rejection']} ± {r['binomial_se']}"] for r in res["rivals"]],
