@@ -37,31 +37,17 @@ from identcheck.fit.whole_tree import converged_fit  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from results_io import machine_info, write_json  # noqa: E402
 
-KNEE_22 = """
-[segments.pelvis]
-markers = ["LASI", "RASI", "SACR"]
-[segments.thigh_r]
-markers = ["RTH1", "RTH2"]
-length_mm = 420
-[segments.shank_r]
-markers = ["RTB1", "RTB2"]
-length_mm = 400
-[joints.hip_r]
-type = "spherical"
-parent = "pelvis"
-child = "thigh_r"
-[joints.knee_r]
-type = "revolute"
-parent = "thigh_r"
-child = "shank_r"
-"""
+SPARSE_LEG = (ROOT / "examples" / "sparse_leg.toml").read_text()
+KNEE_22 = SPARSE_LEG.replace('markers = ["RTHI"]', 'markers = ["RTH1", "RTH2"]').replace(
+    'markers = ["RTIB"]', 'markers = ["RTB1", "RTB2"]')
+"""The bundled minimal leg with two thigh and two shank markers: a 2+2 knee below a 3-marker pelvis."""
 PLANS = {"2+2 knee": KNEE_22, "minimal leg": "examples/sparse_leg.toml",
          "Plug-in Gait lower limb": "examples/pig_lower_limb.toml", "body16": "examples/body16.toml"}
 BAND = 0.25
 
 
 def _model(spec: str) -> Model:
-    if spec.lstrip().startswith("["):
+    if "\n" in spec:                                 # the model's TOML text itself
         import tomllib
 
         return Model.from_dict(tomllib.loads(spec), source="inline plan")
@@ -110,26 +96,10 @@ def run_plan(name: str, model: Model, trials: int, frames: int, noise_mm: float,
             "verdicts": {j: pred[j]["verdict"] for j in pred}, "rows": rows}
 
 
-E8_LEG = """
-[segments.pelvis]
-markers = ["LASI", "RASI", "SACR"]
-[segments.thigh_r]
-markers = ["RTHI"]
-length_mm = 420
-[segments.shank_r]
-markers = ["RTIB"]
-length_mm = 400
+E8_LEG = SPARSE_LEG + """
 [segments.foot_r]
 markers = ["RTOE"]
 length_mm = 150
-[joints.hip_r]
-type = "spherical"
-parent = "pelvis"
-child = "thigh_r"
-[joints.knee_r]
-type = "revolute"
-parent = "thigh_r"
-child = "shank_r"
 [joints.ankle_r]
 type = "spherical"
 parent = "shank_r"
