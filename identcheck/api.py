@@ -186,7 +186,7 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     return res
 
 
-def _write_report(path, kind: str, doc: dict, scene, title: str, figures: list | None = None) -> None:
+def _write_report(path, kind: str, doc: dict, scene, title: str, figures: list | None = ()) -> None:
     """The run's HTML page (:mod:`identcheck.report.html`)."""
     import identcheck
     from identcheck.report.html import write_html

@@ -21,8 +21,8 @@ from scipy.special import chndtr
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.errors import InputError
-from identcheck.fit.whole_tree import REJECT_CHI2, _same, fit_tree, posed_by_itself
-from identcheck.fit.workflow import fit_model
+from identcheck.fit.whole_tree import REJECT_CHI2, _same, posed_by_itself
+from identcheck.fit.workflow import fit_closed_then_tree
 from identcheck.simulate.rigid import simulate
 
 MOTIONS = {"functional": {"rom_deg": 60.0, "n_axes": None}, "flexion": {"rom_deg": 60.0, "n_axes": 1},
@@ -47,9 +47,7 @@ def noise_free_fit(model, motion: str = "functional", n_frames: int = 1000, seed
     sim = simulate(model, n_frames=n_frames, noise_mm=0.0, seed=seed, **MOTIONS[motion])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        closed, _ = fit_model(model, sim.trial)
-        tree = fit_tree(model, sim.trial, closed,     # as fit does: joints started below an ambiguous one too
-                        restart=lambda fixed: fit_model(model, sim.trial, fixed=fixed)[0])
+        _, _, tree = fit_closed_then_tree(model, sim.trial)
     return sim, tree
 
 

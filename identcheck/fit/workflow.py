@@ -236,6 +236,19 @@ def report(model, fitted: dict, points: dict) -> dict:
     return {"joints": out}
 
 
+def fit_closed_then_tree(model, trial, progress=None):
+    """(closed-form estimates, their virtual points, the whole-tree fit): every joint started from the closed
+    forms, and the joints whose closed form needs a candidate of an ambiguous joint above them started again
+    from each of its candidates (the restart). What ``fit`` runs after its label screen, and what ``plan
+    --noise-mm`` linearises at."""
+    from identcheck.fit.whole_tree import fit_tree      # imported when used, as fit_trial's own imports
+
+    fitted, points = fit_model(model, trial, progress=progress)
+    tree = fit_tree(model, trial, fitted, progress=progress,
+                    restart=lambda fixed: fit_model(model, trial, fixed=fixed)[0])
+    return fitted, points, tree
+
+
 def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
@@ -251,7 +264,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     from identcheck.estimate.labels import screen
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
-    from identcheck.fit.whole_tree import fit_tree, merge_report, misfit_warnings
+    from identcheck.fit.whole_tree import merge_report, misfit_warnings
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
     reserved = reserved_names(model.joints)
@@ -264,9 +277,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     screened, swaps = screen(model, centred)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
-        fitted, points = fit_model(model, screened, progress=progress)
-        tree = fit_tree(model, screened, fitted, progress=progress,
-                        restart=lambda fixed: fit_model(model, screened, fixed=fixed)[0])
+        fitted, points, tree = fit_closed_then_tree(model, screened, progress)
     rep = merge_report(report(model, fitted, points), tree, model, screened)
     notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught

@@ -108,9 +108,12 @@ def evidence(step, path, first_frame: int = 0, where: dict | None = None) -> Pat
 def evidence_svgs(diag) -> list:
     """(caption, SVG text) of each adopted effect's evidence figure, in the order adopted: what the HTML page
     of ``diagnose --report`` shows under its effects."""
-    return [(f"{k}. {step.name}: {where_text(diag.numbered(step.where))}",
-             svg_text(evidence_figure(step, diag.first_frame, diag.numbered(step.where))))
-            for k, step in enumerate(diag.steps, 1) if step.evidence]
+    out = []
+    for k, step in enumerate(diag.steps, 1):
+        if step.evidence:
+            where = diag.numbered(step.where)
+            out.append((f"{k}. {step.name}: {where_text(where)}", svg_text(evidence_figure(step, diag.first_frame, where))))
+    return out
 
 
 def evidence_figure(step, first_frame: int = 0, where: dict | None = None):

@@ -240,10 +240,10 @@ def evidence_section(figures: list | None) -> str:
         f"<figure class='evidence'>{svg}<figcaption>{_e(caption)}</figcaption></figure>" for caption, svg in figures)
 
 
-def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = "", figures: list | None = None) -> str:
+def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = "", figures: list | None = ()) -> str:
     """The page's HTML text. `kind`: ``fit`` or ``diagnose``; `doc`: that verb's JSON document; `scene`:
     :func:`identcheck.fit.scene.fit_scene` output, or None (no 3-D view, e.g. no whole-tree fit); `figures`
-    (diagnose): the effects' evidence as (caption, SVG text), None when they could not be drawn."""
+    (diagnose): the effects' evidence as (caption, SVG text), none by default, None when matplotlib is missing."""
     joints = doc.get("joints") or {}
     noise = doc.get("noise") or {}
     sigma = noise.get("sigma_mm") if isinstance(noise, dict) else None
@@ -299,7 +299,7 @@ def render(kind: str, doc: dict, scene: dict | None, title: str, version: str = 
 
 
 def write_html(path, kind: str, doc: dict, scene: dict | None, title: str, version: str = "",
-               figures: list | None = None) -> Path:
+               figures: list | None = ()) -> Path:
     """Write the page to `path` (see :func:`render`); returns the path."""
     path = Path(path)
     path.write_text(render(kind, doc, scene, title, version, figures), encoding="utf-8")

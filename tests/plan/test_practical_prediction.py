@@ -62,9 +62,10 @@ def test_the_prediction_starts_joints_below_an_ambiguous_one_as_fit_does(example
     fit the prediction linearises at is given that restart (without it body16 got no whole-tree fit at all,
     "no closed-form start for wrist_l"), and the restart re-runs the closed form with the candidates fixed."""
     from identcheck.fit import predict as P
+    from identcheck.fit import whole_tree, workflow
 
     seen = {}
-    real_fit_tree, real_fit_model = P.fit_tree, P.fit_model
+    real_fit_tree, real_fit_model = whole_tree.fit_tree, workflow.fit_model
 
     def spy_tree(model, trial, closed, **kw):
         seen["restart"] = kw.get("restart")
@@ -76,8 +77,8 @@ def test_the_prediction_starts_joints_below_an_ambiguous_one_as_fit_does(example
         calls.append(kw)
         return real_fit_model(model, trial, **kw)
 
-    monkeypatch.setattr(P, "fit_tree", spy_tree)
-    monkeypatch.setattr(P, "fit_model", spy_model)
+    monkeypatch.setattr(whole_tree, "fit_tree", spy_tree)
+    monkeypatch.setattr(workflow, "fit_model", spy_model)
     model = Model.from_toml(examples / "sparse_leg.toml")
     P.noise_free_fit(model, "functional", 100, 0)
     assert callable(seen["restart"])
