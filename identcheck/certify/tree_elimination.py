@@ -232,10 +232,11 @@ class TreeElimination:
         path = {spec.root: MEMO.intern(("root", spec.root))}
         for name, kind, par, chi in spec.joints:
             path[chi] = MEMO.intern(("path", path[par], desc[name], chi))
+        known = spec.known
         for seg, rows in self.marker_rows.items():
-            self._ids[id(rows)] = ("markers", frames, path[seg], seg, tuple(spec.markers[seg]))
+            self._ids[id(rows)] = ("markers", frames, path[seg], seg, tuple(spec.markers[seg]), seg in known)
         for name, kind, par, chi in spec.joints:
-            self._ids[id(self.joint_rows[name])] = ("joint", frames, path[par], desc[name])
+            self._ids[id(self.joint_rows[name])] = ("joint", frames, path[par], desc[name], par in known, chi in known)
 
     def _elim(self, blocks: list, keep: list, drop_constants: bool = False) -> Eliminated:
         """:func:`eliminate`, or its earlier result for the same contents (:class:`_Memo`)."""

@@ -108,6 +108,8 @@ class TreeSpec:
     markers: dict                  # segment -> tuple of marker names
     joints: tuple                  # ((name, type, parent, child), ...) parents before children
     frozen: frozenset = frozenset()   # joints held at one fixed angle in every frame (motion not exercised)
+    known: frozenset = frozenset()    # segments whose pose in every frame is given, not unknown (a window of a
+    #                                   larger tree told everything beyond it: identcheck.plan.windows)
 
     @classmethod
     def from_model(cls, model) -> "TreeSpec":
@@ -123,10 +125,10 @@ class TreeSpec:
 
     def without(self, marker: str) -> "TreeSpec":
         return TreeSpec(self.root, {s: tuple(m for m in ms if m != marker) for s, ms in self.markers.items()},
-                        self.joints, self.frozen)
+                        self.joints, self.frozen, self.known)
 
     def freezing(self, names) -> "TreeSpec":
-        return TreeSpec(self.root, self.markers, self.joints, frozenset(names))
+        return TreeSpec(self.root, self.markers, self.joints, frozenset(names), self.known)
 
     @cached_property
     def children(self) -> dict:
@@ -184,9 +186,10 @@ class TreeJacobian:
     about each joint's constants (see the module docstring; the equations are
     :mod:`identcheck.certify.tree_equations`, eliminated by :mod:`identcheck.certify.tree_elimination`)."""
 
-    def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0):
+    def __init__(self, spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, share: bool = True):
         self.spec = spec
         self._stream = f"identcheck.tree_rank/{seed}/{field_kind}"
+        self._shared = self._stream if share else None     # eliminations shared through the memo under this key
         self.F = Field(field_kind, random.Random(self._stream))
         self.cols = cols = constant_columns(spec)
         self.col_key = [None] * cols.n          # constant column index -> its key in the equations
@@ -229,7 +232,7 @@ class TreeJacobian:
     def n_frame_unknowns(self) -> int:
         """Per-frame unknowns of the equations: each segment's pose (6) and each moving hinge's angle."""
         hinges = sum(1 for n, kind, _, _ in self.spec.joints if kind == "revolute" and n not in self.spec.frozen)
-        return 6 * len(self.spec.markers) + hinges
+        return 6 * (len(self.spec.markers) - len(self.spec.known)) + hinges
 
     def add_frame(self, count: int = 1) -> None:
         """Add ``count`` generic frames: their equations, marker by marker and joint by joint, and the rank
@@ -242,7 +245,10 @@ class TreeJacobian:
                      for s, ms in spec.markers.items()}
             jrows = {j[0]: joint_rows(j, f, pose[j[2]][0], turns[j[0]], self.k, j[0] in spec.frozen)
                      for j in spec.joints}
-            rank_v = TreeElimination(self.F, spec, [f], mrows, jrows, stream=self._stream).rank_per_frame()
+            if spec.known:
+                mrows = {s: _given_poses(rows, spec.known) for s, rows in mrows.items()}
+                jrows = {n: _given_poses(rows, spec.known) for n, rows in jrows.items()}
+            rank_v = TreeElimination(self.F, spec, [f], mrows, jrows, stream=self._shared).rank_per_frame()
             self._frames.append((mrows, jrows, rank_v))
             self.frames += 1
 
@@ -251,6 +257,11 @@ class TreeJacobian:
         if frames not in self._states:
             self._states[frames] = FrameState(self, frames)
         return self._states[frames]
+
+
+def _given_poses(rows: list, known: frozenset) -> list:
+    """``rows`` with the pose columns of the segments in ``known`` left out: those poses are given, not unknown."""
+    return [{key: v for key, v in row.items() if not (key[0] in ("w", "t") and key[1] in known)} for row in rows]
 
 
 class FrameState:
@@ -274,7 +285,7 @@ class FrameState:
             joint_cols = {n: centre_cols[n] + (tangent_keys(n) if kind == "revolute" else [])
                           for n, kind, _, _ in spec.joints}
             e = TreeElimination(tj.F, spec, range(self.frames), marker_rows_, joint_rows_,
-                                marker_cols, centre_cols, joint_cols, stream=tj._stream)
+                                marker_cols, centre_cols, joint_cols, stream=tj._shared)
             e.upward()
             self._elimination = e
         return self._elimination
@@ -582,7 +593,7 @@ def _local(judged: dict, verdict: dict) -> set:
 
 
 def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
-            warm_frames: int = 0, search_min_frames: bool = True) -> TreeRank:
+            warm_frames: int = 0, search_min_frames: bool = True, share: bool = True) -> TreeRank:
     """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
 
     A joint is locally identifiable when every quantity it is judged by is in W: its distances to the
@@ -599,8 +610,10 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     plan's count is known; the verdicts are the same, but ``min_frames`` is then at least that count).
     ``search_min_frames=False``: do not judge again below the stop (the variants a plan's analyses rank
     use only the verdicts); a local joint's ``min_frames`` is then an upper bound: the fewest frames seen to
-    give the final W (the stop, or one less when the last frame changed nothing)."""
-    tj = TreeJacobian(spec, field_kind, seed)
+    give the final W (the stop, or one less when the last frame changed nothing). ``share=False``: keep
+    this rank's eliminations out of the memo other ranks of the same skeleton's variants reuse (a small
+    window's are cheaper to redo than to look up)."""
+    tj = TreeJacobian(spec, field_kind, seed, share)
     asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     dims = {}
     stable = False

@@ -31,6 +31,7 @@ joint unique are reported beside them (``suggestions_unique``) when they differ.
 """
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 import math
@@ -40,6 +41,7 @@ from importlib import resources
 from identcheck.certify import tree_rank
 from identcheck.progress import Progress
 from identcheck.certify import twin as twin_certificate
+from identcheck.plan import windows as plan_windows
 from identcheck.plan.result import PlanResult
 
 MAX_SUGGESTED = 6          # extra markers searched exhaustively (fewest first)
@@ -100,14 +102,26 @@ def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str, one_points=()
     other candidates (:mod:`identcheck.certify.twin`). Not when the case's own point on ``one_side``
     is k's centre or on k's axis (``one_points``): the far marker then keeps its distance in every
     candidate's frame."""
-    for k, kind, par, chi in spec.joints:
+    attached = ([spec.parent_joint[one_side]] if one_side in spec.parent_joint else []) + spec.children[one_side]
+    for k, kind, par, chi in attached:             # in the spec's order: a segment's parent joint comes first
         if any(str(pt).startswith(k + ".") for pt in one_points):
             continue
-        if k != name and one_side in (par, chi):
+        if k != name:
             far = chi if one_side == par else par
             if spec.markers[far]:
                 return {"marker": spec.markers[far][0], "segment": far, "joint": k, "joint_type": kind}
     return None
+
+
+@functools.lru_cache(maxsize=None)
+def _twin_certificate_once(far_joint: str) -> str:
+    return json.dumps(twin_certificate.certify(0, far_joint))
+
+
+def _twin_certificate(far_joint: str) -> dict:
+    """The twin certificate for a far marker beyond a ``far_joint`` (:func:`identcheck.certify.twin.certify`,
+    seed 0): exact and deterministic, so proved once per process and handed out as a fresh copy."""
+    return json.loads(_twin_certificate_once(far_joint))
 
 
 def _count(points: list) -> int:
@@ -142,7 +156,7 @@ def propagate(spec: tree_rank.TreeSpec, rows: dict) -> dict:
         if kind == "revolute" and own > 1 and (p, q) in ((2, 1), (1, 2)):
             rejected = far_marker(spec, name, chi if (p, q) == (2, 1) else par, C if (p, q) == (2, 1) else P)
             if rejected is not None:
-                cert = twin_certificate.certify(0, rejected["joint_type"])
+                cert = _twin_certificate(rejected["joint_type"])
                 if cert["certified"]:
                     own, rejected = 1, dict(rejected, certificate=cert)
                 else:
@@ -165,10 +179,12 @@ def propagate(spec: tree_rank.TreeSpec, rows: dict) -> dict:
         changed = False
         for unique_only in (True, False):
             for name, kind, par, chi in spec.joints:
+                old = settled.get(name)
+                if old is not None and old.candidates == 1:      # cannot improve
+                    continue
                 st = best(name, kind, par, chi)
                 if st is None or (unique_only and st.candidates > 1):
                     continue
-                old = settled.get(name)
                 if old is None or st.candidates < old.candidates:
                     settle(name, kind, par, chi, st)
                     changed = True
@@ -187,6 +203,11 @@ class Plan:
     rank: tree_rank.TreeRank
     settled: dict
     joints: dict = field(default_factory=dict)     # name -> contract dict
+
+    @property
+    def local_joints(self) -> list:
+        """The joints the whole tree leaves locally identifiable."""
+        return [n for n, j in self.joints.items() if j["local"]]
 
     @property
     def all_identifiable(self) -> bool:
@@ -344,11 +365,14 @@ class Budget:
                    force=k == n)
 
 
-def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: Budget | None = None) -> dict:
+def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: Budget | None = None,
+                  windows: plan_windows.Windows | None = None) -> dict:
     """For each locally identifiable joint, the joints whose motion must be exercised: held at one angle in
-    every frame, they would leave it undetermined (whole-tree rank with that joint frozen). Joints whose
-    freezing the budget left unchecked are listed in ``budget.skipped["motion_needed"]``."""
+    every frame, they would leave it undetermined (whole-tree verdicts with that joint frozen, from the
+    smallest windows that decide them: :mod:`identcheck.plan.windows`). Joints whose freezing the budget left
+    unchecked are listed in ``budget.skipped["motion_needed"]``."""
     budget = budget or Budget(float("inf"))
+    windows = windows or plan_windows.Windows(spec, plan.local_joints, plan.rank.frames, seed)
     need = {n: [] for n in plan.joints}
     names = [j[0] for j in spec.joints]
     for k, name in enumerate(names):
@@ -356,18 +380,21 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: B
             budget.skipped["motion_needed"] = names[k:]
             break
         budget.tick("motion each joint needs", k + 1, len(names))
-        frozen = tree_rank.analyse(spec.freezing([name]), "GFp", seed, warm_frames=plan.rank.frames - 1,
-                                   search_min_frames=False)
-        for other, jr in frozen.joints.items():
-            if plan.joints[other]["local"] and not jr.local:
+        frozen = windows.variant_local(spec.freezing([name]), plan_windows.Change(joints=frozenset([name])))
+        for other, local in frozen.items():
+            if not local:
                 need[other].append(name)
-    return need
+    return {n: sorted(v, key=names.index) for n, v in need.items()}
 
 
-def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, budget: Budget | None = None) -> dict:
-    """For each marker: does the plan stay all-identifiable without it, and which joints would it lose. Markers
-    the budget left unchecked are listed in ``budget.skipped["robustness"]`` (and absent here)."""
+def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, budget: Budget | None = None,
+               windows: plan_windows.Windows | None = None) -> dict:
+    """For each marker: does the plan stay all-identifiable without it, and which joints would it lose (the
+    propagation for ``joints_lost``; the whole-tree verdicts, from the smallest windows that decide them, for
+    ``joints_no_longer_local``). Markers the budget left unchecked are listed in ``budget.skipped["robustness"]``
+    (and absent here)."""
     budget = budget or Budget(float("inf"))
+    windows = windows or plan_windows.Windows(spec, plan.local_joints, plan.rank.frames, seed)
     out = {}
     every = [(seg, m) for seg, ms in spec.markers.items() for m in ms]
     for k, (seg, m) in enumerate(every):
@@ -375,9 +402,12 @@ def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, 
             budget.skipped["robustness"] = [mk for _, mk in every[k:]]
             break
         budget.tick("markers the plan cannot lose", k + 1, len(every))
-        alt = analyse(spec.without(m), rows, seed=seed, warm_frames=plan.rank.frames - 1, search_min_frames=False)
-        lost = [n for n, j in plan.joints.items() if j["identifiable"] and not alt.joints[n]["identifiable"]]
-        lost_local = [n for n, j in plan.joints.items() if j["local"] and not alt.joints[n]["local"]]
+        variant = spec.without(m)
+        settled = propagate(variant, rows)
+        local = windows.variant_local(variant, plan_windows.Change(segments=frozenset([seg])), known_local=settled)
+        lost = [n for n, j in plan.joints.items()
+                if j["identifiable"] and not (n in settled and settled[n].candidates == 1)]
+        lost_local = [n for n, j in plan.joints.items() if j["local"] and not local[n]]
         out[m] = {"segment": seg, "plan_survives": not lost and not lost_local,
                   "joints_lost": lost, "joints_no_longer_local": lost_local}
     return out
@@ -538,7 +568,7 @@ def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None)
 
 def _with_extra(spec: tree_rank.TreeSpec, extra: dict) -> tree_rank.TreeSpec:
     markers = {s: ms + tuple(f"+{s}.{i + 1}" for i in range(extra.get(s, 0))) for s, ms in spec.markers.items()}
-    return tree_rank.TreeSpec(spec.root, markers, spec.joints, spec.frozen)
+    return tree_rank.TreeSpec(spec.root, markers, spec.joints, spec.frozen, spec.known)
 
 
 def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
@@ -621,15 +651,18 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
             doc["joints"][n]["alternative"] = w
             if w.get("method") == "not_searched":
                 doc.setdefault("unfinished", {}).setdefault("witness", []).append(n)
+    windows = None
+    if motion or robust:
+        windows = plan_windows.Windows(spec, plan.local_joints, plan.rank.frames, seed)
     if motion:
-        needs = motion_needed(spec, plan, seed, budget)
+        needs = motion_needed(spec, plan, seed, budget, windows)
         for n in doc["joints"]:
             doc["joints"][n]["motion_needed"] = None if "motion_needed" in budget.skipped else needs[n]
     doc["suggestions"] = []
     if suggest and not plan.all_identifiable:
         doc.update(_suggestion_keys(fewest_markers(spec, rows, seed, base=plan)))
     if robust:
-        doc["robustness"] = robustness(spec, plan, rows, seed, budget)
+        doc["robustness"] = robustness(spec, plan, rows, seed, budget, windows)
     reasons = []
     if budget.skipped:
         doc["unfinished"] = dict(doc.get("unfinished", {}), **budget.skipped)
