@@ -17,6 +17,7 @@ predicted against Monte-Carlo. Writes key ``plan_prediction`` of benchmarks/resu
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 import warnings
@@ -174,6 +175,16 @@ def figure(results: list, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
+def earlier_results(path: Path, plans) -> list:
+    """The stored results of the plans not run this time (``--plans`` a subset: the others are kept, each with its
+    own trials, frames, noise and motion)."""
+    try:
+        stored = json.loads(path.read_text()).get("plan_prediction", {})
+    except (OSError, json.JSONDecodeError):
+        return []
+    return [r for r in stored.get("results", []) if r.get("plan") not in plans]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=100)
@@ -200,11 +211,12 @@ def main(argv=None):
                                         "MC rejection rate"]), flush=True)
         write_json(Path(a.out), f"plan_prediction_rivals_{a.frames}_frames", {"machine": machine_info(), "results": out})
         return
-    results = []
+    results = earlier_results(Path(a.out), a.plans)
     with threadpool_limits(1):
         for name in a.plans:
             res = run_plan(name, _model(PLANS[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
             results.append(res)
+            results.sort(key=lambda r: list(PLANS).index(r["plan"]) if r["plan"] in PLANS else len(PLANS))
             write_json(Path(a.out), "plan_prediction", {"machine": machine_info(), "results": results})
             print(f"{name}: {res['distances']} distances, predicted/MC median {res['ratio_median']} "
                   f"[{res['ratio_min']}, {res['ratio_max']}], {res['within_25pct']} within 25 %, {res['seconds']} s",

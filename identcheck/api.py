@@ -30,11 +30,12 @@ def _one_blas_thread(verb, with_scipy: bool = True):
 
     threadpoolctl limits the libraries loaded when the call starts, so SciPy (whose wheels bring their own
     BLAS) is imported first. ``with_scipy=False`` is for a verb that runs on NumPy alone (``identify``): it
-    spares that import, a third of such a verb's time.
+    spares that import, a third of such a verb's time; a callable decides from the call's arguments (``plan``
+    needs SciPy only for its numerical parts).
     """
     @functools.wraps(verb)
     def run(*args, **kwargs):
-        if with_scipy:
+        if with_scipy(*args, **kwargs) if callable(with_scipy) else with_scipy:
             import scipy.linalg  # noqa: F401  (SciPy's own BLAS is loaded here: limit it too)
         from threadpoolctl import threadpool_limits
 
@@ -301,7 +302,13 @@ def skeleton(trial, out=None, segments=None, root: str | None = None, frames: st
                           export=export_markers, progress=progress)
 
 
-@_one_blas_thread
+def _plan_is_numerical(*args, **kwargs) -> bool:
+    """Might this ``plan`` call fit or simulate (practical verdicts, witness searches)? Its verdicts alone are exact
+    arithmetic, without SciPy. Options passed by position are not inspected: SciPy is then loaded."""
+    return kwargs.get("noise_mm") is not None or bool(kwargs.get("witness")) or len(args) > 1
+
+
+@functools.partial(_one_blas_thread, with_scipy=_plan_is_numerical)
 def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
          fewest: bool = False, witness: bool = False, progress=None, noise_mm: float | None = None,
          practical_motion: str = "functional", frames: int = 1000, max_seconds: float | None = None):

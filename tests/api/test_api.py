@@ -208,6 +208,21 @@ assert not heavy, heavy
     subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)
 
 
+def test_a_plan_without_noise_loads_no_scipy():
+    """``plan``'s verdicts, motion and robustness analyses are exact arithmetic: SciPy stays unloaded (its import
+    was a third of the call); with ``noise_mm`` the practical verdicts fit, and SciPy is loaded under the BLAS limit."""
+    script = """
+import sys
+import identcheck as ic
+res = ic.plan("examples/body16.toml").to_dict()
+assert res["robustness"] and "scipy" not in sys.modules, sorted(m for m in sys.modules if m.startswith("scipy"))
+from identcheck import api
+assert api._plan_is_numerical(noise_mm=1.0) and api._plan_is_numerical(witness=True)
+assert not api._plan_is_numerical("m.toml", motion=False)
+"""
+    subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)
+
+
 def test_errors_are_the_public_ones(tmp_path):
     with pytest.raises(ic.InputError, match="missing.toml"):
         ic.load_model(tmp_path / "missing.toml")
