@@ -2,7 +2,6 @@
 the whole-tree rank's verdicts of those variants: random trees in, every variant compared."""
 from __future__ import annotations
 
-import json
 import time
 
 from hypothesis import given, settings, strategies as st
@@ -10,6 +9,7 @@ from hypothesis import given, settings, strategies as st
 from identcheck import api
 from identcheck.certify import tree_rank
 from identcheck.plan import windows as plan_windows
+from test_plan_budget import chain_model
 
 
 @st.composite
@@ -73,25 +73,12 @@ def test_isomorphic_windows_share_a_shape_and_renamed_ones_only():
     assert plan_windows.shape(a) != plan_windows.shape(a.freezing(["k"]))
 
 
-def _chain(path, n):
-    """A chain of n joints, ball and hinge in turn, three markers on every third segment and one elsewhere."""
-    lines = ['units = "mm"']
-    for i in range(n + 1):
-        names = [f"m{i}{c}" for c in "abc"] if i % 3 == 0 else [f"m{i}a"]
-        lines += [f"[segments.s{i}]", "markers = [" + ", ".join(json.dumps(m) for m in names) + "]"]
-    for i in range(n):
-        lines += [f"[joints.j{i}]", f'type = "{"spherical" if i % 2 else "revolute"}"', f'parent = "s{i}"',
-                  f'child = "s{i + 1}"']
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def test_a_200_segment_chain_is_planned_whole_with_every_analysis(tmp_path):
     """The default plan of a 200-joint chain analyses every joint's motion and every marker (nothing left
     unfinished under the default budget): a hinge or ball of a chain needs its own motion, and a lone marker's
     loss is named where it costs a joint."""
     t0 = time.process_time()
-    res = api.plan(_chain(tmp_path / "chain.toml", 200)).to_dict()
+    res = api.plan(chain_model(tmp_path / "chain.toml", 200)).to_dict()
     assert "unfinished" not in res, res.get("unfinished")
     assert time.process_time() - t0 < 120          # far inside: the analyses no longer grow as the square
     assert all(n in j["motion_needed"] for n, j in res["joints"].items())
