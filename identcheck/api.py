@@ -317,7 +317,9 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
 
     With ``noise_mm``, each joint also gets ``practical``: what a capture of ``frames`` frames of
     ``practical_motion`` (a name of :data:`identcheck.fit.predict.MOTIONS`, or a recorded TRC/C3D trial whose
-    motion to judge) with that noise would determine (:mod:`identcheck.fit.predict`).
+    motion to judge) with that noise would determine (:mod:`identcheck.fit.predict`); and, for a named motion,
+    ``practical_suggestions`` ranks one added marker on each segment by the millimetres it would save
+    (:mod:`identcheck.fit.marker_value`).
 
     ``max_seconds`` bounds the motion and robustness analyses together (default
     :data:`identcheck.plan.analysis.ANALYSES_BUDGET_S`); what they leave unchecked is listed in ``unfinished``.
@@ -341,14 +343,22 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
 
         fitted = fit_trial(m, read_trial(practical_motion), progress=progress)["joints"]
         practical = {j: dict(v["practical"], predicted=True, motion=str(practical_motion)) for j, v in fitted.items()}
+        extra = {"practical_suggestions_note": "one more marker is valued on a named motion only (a recorded trial's "
+                                               "fit is not kept)"}
     else:
-        from identcheck.fit.predict import predict
+        from identcheck.fit.marker_value import marker_value
+        from identcheck.fit.predict import noise_free_fit, predict
 
-        practical = predict(m, noise_mm, practical_motion, frames, seed)
+        fitted = noise_free_fit(m, practical_motion, frames, seed)
+        practical = predict(m, noise_mm, practical_motion, frames, seed, fitted=fitted)
+        best = fitted[1].best
+        extra = ({"practical_suggestions": marker_value(m, best.fit, noise_mm, progress)} if best is not None else
+                 {"practical_suggestions_note": "no whole-tree fit of the simulated capture to value markers on"})
     doc = res.to_dict()
     for j, p in practical.items():
         if j in doc["joints"]:
             doc["joints"][j]["practical"] = p
+    doc.update(extra)
     return PlanResult.from_dict(doc, m.root, {s: seg.markers for s, seg in m.segments.items()})
 
 

@@ -69,10 +69,7 @@ class Covariance:
     def free(self, grad: np.ndarray, tol: float = 1e-3) -> bool:
         """Whether a functional with this gradient moves along a direction the data leave free (then its
         standard error, which the pseudo-inverse computes without those directions, means nothing)."""
-        if self.null.size == 0 or self.undetermined == 0:      # only the gauge is free: distances do not move
-            return False
-        n = np.linalg.norm(grad)
-        return bool(n > 0 and np.max(np.abs(grad @ self.null)) > tol * n)
+        return moves_along_free(grad, self.null, self.undetermined, tol)
 
     def inflation(self, grad: np.ndarray) -> float:
         """Variance ratio sandwich / naive along a functional's gradient (≥ 0; 1 for white noise)."""
@@ -85,6 +82,16 @@ class Covariance:
         white-noise one by chance; a smaller one would not be honest)."""
         v = max(float(grad @ self.sandwich @ grad), float(grad @ self.naive @ grad), 0.0)
         return float(np.sqrt(v))
+
+
+def moves_along_free(grad: np.ndarray, null: np.ndarray, undetermined: int, tol: float = 1e-3) -> bool:
+    """Whether a functional with this gradient moves along one of the directions ``null`` the information leaves
+    free (:func:`gauge_free_inverse`); never when only the gauge is free (``undetermined`` 0: distances do not
+    move along it)."""
+    if null.size == 0 or undetermined == 0:
+        return False
+    n = np.linalg.norm(grad)
+    return bool(n > 0 and np.max(np.abs(grad @ null)) > tol * n)
 
 
 def gauge_free_inverse(S: np.ndarray, gauge: int | None = None) -> tuple[np.ndarray, int, np.ndarray]:

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from identcheck.io.jsonable import frozen, plain
 
 OPTIONAL = ("suggestions_note", "suggestions_check", "suggestions_unique", "suggestions_unique_note", "undetermined",
-            "robustness", "fewest_local", "shared_motion", "unfinished")
+            "robustness", "fewest_local", "shared_motion", "unfinished", "practical_suggestions",
+            "practical_suggestions_note")
 """Top-level keys present only when the analysis ran (or had something to say)."""
 
 
@@ -44,6 +45,10 @@ class PlanResult:
     undetermined : Mapping
         Joint -> the quantities of that joint the whole tree leaves undetermined, for every joint that is
         not locally identifiable.
+    practical_suggestions : tuple of Mapping
+        With ``noise_mm`` and a named motion: one added marker on each segment, best first, with the
+        millimetres it would save (:func:`identcheck.fit.marker_value.marker_value`); otherwise
+        ``practical_suggestions_note`` says why not.
     root : str
         The model's root segment (for drawing the tree).
     markers : Mapping
@@ -66,6 +71,8 @@ class PlanResult:
     fewest_local: Mapping | None = None
     shared_motion: str | None = None
     unfinished: Mapping | None = None
+    practical_suggestions: tuple | None = None
+    practical_suggestions_note: str | None = None
 
     @classmethod
     def from_dict(cls, doc: dict, root: str, markers: dict) -> "PlanResult":

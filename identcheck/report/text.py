@@ -224,6 +224,10 @@ def plan_text(result) -> str:
         f = doc["fewest_local"]
         lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
                      f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
+    if doc.get("practical_suggestions"):
+        lines.append("one more marker, by predicted gain: " + _practical_suggestions_text(doc["practical_suggestions"]))
+    elif doc.get("practical_suggestions_note"):
+        lines.append("one more marker: " + doc["practical_suggestions_note"])
     if "robustness" in doc:
         weak = [m for m, r in doc["robustness"].items() if not r["plan_survives"]]
         partial = bool((doc.get("unfinished") or {}).get("robustness"))
@@ -237,6 +241,24 @@ def plan_text(result) -> str:
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")
     return "\n".join(lines)
+
+
+def _half_width(mm: float) -> str:
+    """A predicted 95 % half-width; at the cap, a distance the motion leaves free or wider than the cap."""
+    from identcheck.fit.marker_value import CAP_MM
+
+    return f"±{mm:g}" if mm < CAP_MM else f"≥ ±{CAP_MM:g}"
+
+
+def _practical_suggestions_text(sugg, shown: int = 3) -> str:
+    """The best ``shown`` one-marker additions: segment, mm saved, and each joint's 95 % interval before → after."""
+    parts = []
+    for s in sugg[:shown]:
+        joints = ", ".join(f"{j} {_half_width(v['before_mm'])} → {_half_width(v['after_mm'])} mm"
+                           for j, v in s["joints"].items())
+        done = f"; determined: {', '.join(s['determined_after'])}" if s["determined_after"] else ""
+        parts.append(f"{s['segment']} saves {s['mm_saved']:g} mm ({joints or 'no joint narrows'}{done})")
+    return "; ".join(parts)
 
 
 def _markers_text(sugg) -> str:

@@ -127,8 +127,10 @@ def runs(tmp_path_factory) -> dict:
         add("simulate", simulate_summary(slip, tmp / "slip.trc"))
         # fit: determined; revolute (2,1) alone; a label swap; skin motion; a joint without markers; Vicon prefixes
         add("fit", api.fit(EX / "leg.toml", tmp / "leg.trc"))
-        api.simulate(EX / "knee_21.toml", tmp / "knee.trc", seed=1, noise_mm=0.3, n_frames=300)
-        add("fit", api.fit(EX / "knee_21.toml", tmp / "knee.trc"))
+        for seed in (1, 6):         # which of the (2,1) knee's candidates the fit keeps as alternatives depends on
+            #                         the last bits of the BLAS kernels (seed 1 keeps none on some CPUs): two trials
+            api.simulate(EX / "knee_21.toml", tmp / "knee.trc", seed=seed, noise_mm=0.3, n_frames=300)
+            add("fit", api.fit(EX / "knee_21.toml", tmp / "knee.trc"))
         api.simulate(EX / "diagnose_leg.toml", tmp / "swap.trc", seed=3, noise_mm=0.5, n_frames=400,
                      effect="marker_swap")
         add("fit", api.fit(EX / "diagnose_leg.toml", tmp / "swap.trc"))
