@@ -7,8 +7,6 @@ the names and numbers in them.
 """
 from __future__ import annotations
 
-from tabulate import tabulate
-
 from identcheck.report.json_out import document
 
 MISSING = "-"       # what a table shows for a value the result does not have (None)
@@ -30,6 +28,8 @@ def table(rows, headers, indent: str = "", floatfmt: str = ".2f") -> list:
     numeric = [all(r[k] is None or (isinstance(r[k], (int, float)) and not isinstance(r[k], bool)) for r in rows)
                for k in range(len(headers))]
     cells = [[_cell(v, floatfmt) for v in r] for r in rows]
+    from tabulate import tabulate          # imported when a table is printed: ``--json`` runs never need it
+
     text = tabulate(cells, headers=headers, tablefmt="simple", disable_numparse=True,
                     colalign=["right" if n else "left" for n in numeric])
     return [indent + line for line in text.splitlines()]
