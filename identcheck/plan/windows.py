@@ -21,10 +21,10 @@ both sides:
 
 Windows are unions of *regions*: the tree cut at its *anchors*, segments with three or more markers, whose
 poses their own markers fix — so both bounds usually agree on a region (a long stretch without anchors is
-cut into pieces of a few joints). The plan's own regions certify
-its joints once (:class:`Windows`); a variant keeps a joint's certificate when it changes nothing inside
-the joint's window, and every other joint is judged on its window in the variant (below, then above),
-on a window one region wider, and on the whole tree as the last resort. The verdicts are therefore those
+cut into pieces of a few joints). The plan's own regions certify its joints once (:class:`Windows`); a
+variant keeps a joint's certificate when it changes nothing inside the joint's window, and every other
+joint is judged on its window in the variant (below, then above), on a window one region wider, and on
+the whole tree as the last resort. The verdicts are therefore those
 of the whole-tree rank (each rank with the probability bound of :mod:`identcheck.certify.tree_rank`), at
 the cost of a few small ranks per variant.
 """
