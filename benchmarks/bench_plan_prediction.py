@@ -97,6 +97,46 @@ def run_plan(name: str, model: Model, trials: int, frames: int, noise_mm: float,
             "verdicts": {j: pred[j]["verdict"] for j in pred}, "rows": rows}
 
 
+def run_marker_value(name: str, model: Model, trials: int, frames: int, noise_mm: float, motion: str,
+                     seed: int) -> dict:
+    """``plan``'s one-more-marker predictions (:mod:`identcheck.fit.marker_value`) against Monte Carlo: for every
+    segment, the plan with the added marker is captured ``trials`` times with fresh noise (the enlarged truth's
+    trajectories, the added marker's included) and fitted to convergence from that truth; every distance's
+    predicted standard error against the fits' spread, and each joint's predicted widest 95 % half-width against
+    1.96 × the widest measured spread."""
+    from identcheck.fit.marker_value import enlarged_information, marker_value, standard_errors
+
+    t0 = time.perf_counter()
+    _, tree = noise_free_fit(model, motion, frames, seed)
+    fit = tree.best.fit
+    ranked = marker_value(model, fit, noise_mm)
+    rng = np.random.default_rng(seed + 2)
+    out = []
+    for sugg in ranked:
+        chain, state, clean, S = enlarged_information(model, fit, sugg["segment"])
+        se = standard_errors(chain, state, S, noise_mm)
+        truth = distances(chain, state, len(S))
+        draws = {k: [] for k in truth}
+        for _ in range(trials):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                fitted = converged_fit(chain, clean + rng.normal(0.0, noise_mm, clean.shape), state)
+            for k, d in distances(chain, fitted.state, len(S)).items():
+                draws[k].append(d)
+        rows = [{"joint": j, "marker": m, "predicted_se_mm": round(se[j][m], 4),
+                 "monte_carlo_sd_mm": round(float(np.std(v, ddof=1)), 4),
+                 "ratio": round(se[j][m] / float(np.std(v, ddof=1)), 3)} for (j, m), v in draws.items()]
+        widest = {j: max(r["monte_carlo_sd_mm"] for r in rows if r["joint"] == j) for j in se}
+        out.append({"segment": sugg["segment"], "mm_saved": sugg["mm_saved"],
+                    "joints": {j: {"predicted_after_mm": v["after_mm"], "before_mm": v["before_mm"],
+                                   "monte_carlo_after_mm": round(1.96 * widest[j], 2)}
+                               for j, v in sugg["joints"].items()},
+                    "within_25pct": sum(abs(r["ratio"] - 1) <= BAND for r in rows if np.isfinite(r["ratio"])),
+                    "distances": len(rows), "rows": rows})
+    return {"plan": name, "trials": trials, "frames": frames, "noise_mm": noise_mm, "motion": motion,
+            "seconds": round(time.perf_counter() - t0, 1), "suggestions": out}
+
+
 E8_LEG = SPARSE_LEG + """
 [segments.foot_r]
 markers = ["RTOE"]
@@ -196,9 +236,25 @@ def main(argv=None):
     ap.add_argument("--rival-plans", nargs="*", default=list(RIVAL_PLANS))
     ap.add_argument("--rivals", action="store_true",
                     help="instead: the rivals' rejection, predicted against Monte Carlo (key plan_prediction_rivals_N_frames)")
+    ap.add_argument("--marker-value", action="store_true",
+                    help="instead: one more marker on each segment, predicted against Monte Carlo (key "
+                         "plan_prediction_marker_value)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results.json"))
     ap.add_argument("--figure", default=str(ROOT / "benchmarks" / "plan_prediction.png"))
     a = ap.parse_args(argv)
+    if a.marker_value:
+        out = []
+        with threadpool_limits(1):
+            for name in a.plans:
+                res = run_marker_value(name, _model(PLANS[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
+                out.append(res)
+                print(tabulate([[name, s["segment"], s["mm_saved"], j, v["before_mm"], v["predicted_after_mm"],
+                                 v["monte_carlo_after_mm"], f"{s['within_25pct']}/{s['distances']}"]
+                                for s in res["suggestions"] for j, v in s["joints"].items()],
+                               headers=["plan", "added on", "mm saved", "joint", "before ±mm", "predicted after ±mm",
+                                        "MC after ±mm", "SE within 25 %"]), flush=True)
+                write_json(Path(a.out), "plan_prediction_marker_value", {"machine": machine_info(), "results": out})
+        return
     if a.rivals:
         out = []
         with threadpool_limits(1):

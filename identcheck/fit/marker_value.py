@@ -43,15 +43,27 @@ def added_point(chain: Skeleton, state, segment: str) -> np.ndarray:
     return centre + OFFSET_MM * normal
 
 
-def half_widths(chain: Skeleton, state, S: np.ndarray, noise_mm: float) -> dict:
-    """joint -> its widest marker distance's predicted 95 % half-width, mm (:data:`CAP_MM` when one is free)."""
+def standard_errors(chain: Skeleton, state, S: np.ndarray, noise_mm: float) -> dict:
+    """joint -> marker -> predicted standard error of its distance, mm, from the information ``S`` (per unit noise
+    variance); ``inf`` for a distance the information leaves free."""
     Sinv, undetermined, null = gauge_free_inverse(S, chain.gauge())
-    out = {}
-    for j, by in distance_gradients(chain, state, len(S)).items():
-        widths = [CAP_MM if moves_along_free(g, null, undetermined)
-                  else Z95 * noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0))) for _, g in by.values()]
-        out[j] = min(max(widths, default=0.0), CAP_MM)
-    return out
+    return {j: {m: (np.inf if moves_along_free(g, null, undetermined)
+                    else noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0)))) for m, (_, g) in by.items()}
+            for j, by in distance_gradients(chain, state, len(S)).items()}
+
+
+def half_widths(chain: Skeleton, state, S: np.ndarray, noise_mm: float) -> dict:
+    """joint -> its widest marker distance's predicted 95 % half-width, mm, capped at :data:`CAP_MM` (a free
+    distance counts as the cap)."""
+    return {j: min(Z95 * max(se.values(), default=0.0), CAP_MM)
+            for j, se in standard_errors(chain, state, S, noise_mm).items()}
+
+
+def enlarged_information(model, fit: Fit, segment: str) -> tuple:
+    """(enlarged chain, its state, its noise-free predictions, its information): :func:`with_added_marker` and
+    the information of the enlarged plan at that truth."""
+    chain, state, pred = with_added_marker(model, fit, segment)
+    return chain, state, pred, information(replace(fit, chain=chain, state=state, pred=pred), pred)
 
 
 def with_added_marker(model, fit: Fit, segment: str) -> tuple:
@@ -79,9 +91,8 @@ def marker_value(model, fit: Fit, noise_mm: float, progress=None) -> list:
     for k, segment in enumerate(fit.chain.segments):
         if progress:
             progress(f"one more marker: {segment} ({k + 1} of {len(fit.chain.segments)})")
-        chain, state, pred2 = with_added_marker(model, fit, segment)
-        bigger = replace(fit, chain=chain, state=state, pred=pred2)
-        after = half_widths(chain, state, information(bigger, pred2), noise_mm)
+        chain, state, _, S = enlarged_information(model, fit, segment)
+        after = half_widths(chain, state, S, noise_mm)
         point = state.local[chain.labels.index(ADDED.format(segment=segment))]
         out.append({"segment": segment, "marker_at_mm": [round(float(x), 1) for x in point],
                     "mm_saved": round(sum(before[j] - after[j] for j in before), 2),

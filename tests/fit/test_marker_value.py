@@ -13,7 +13,6 @@ from hypothesis import given, settings, strategies as st
 from identcheck import api
 from identcheck.bundle.chain import information
 from identcheck.bundle.model import forward
-from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.fit import marker_value as mv
 from identcheck.fit.predict import noise_free_fit
 
@@ -27,13 +26,6 @@ def leg():
     return model, tree.best.fit
 
 
-def _se(chain, state, S):
-    """(joint, marker) -> predicted SE per unit noise of every marker distance."""
-    Sinv = gauge_free_inverse(S, chain.gauge())[0]
-    return {(j, m): float(np.sqrt(max(g @ Sinv @ g, 0.0)))
-            for j, by in distance_gradients(chain, state, len(S)).items() for m, (_, g) in by.items()}
-
-
 @settings(max_examples=8, deadline=None)
 @given(st.data())
 def test_an_added_marker_changes_nothing_else_and_never_widens_an_interval(leg, data):
@@ -45,10 +37,11 @@ def test_an_added_marker_changes_nothing_else_and_never_widens_an_interval(leg, 
     assert np.allclose(pred[:, cols], before, atol=1e-9)               # the old markers move exactly as before
     new = chain.labels.index(mv.ADDED.format(segment=segment))
     assert chain.marker_seg[new] == segment
-    old_se = _se(fit.chain, fit.state, information(fit, before))
-    new_se = _se(chain, state, information(replace(fit, chain=chain, state=state, pred=pred), pred))
-    for key, se in old_se.items():                                     # information only grows: Loewner order
-        assert new_se[key] <= se * (1 + 1e-6) + 1e-9, (segment, key, se, new_se[key])
+    old_se = mv.standard_errors(fit.chain, fit.state, information(fit, before), 1.0)
+    new_se = mv.standard_errors(chain, state, information(replace(fit, chain=chain, state=state, pred=pred), pred), 1.0)
+    for j, by in old_se.items():                                       # information only grows: Loewner order
+        for m, se in by.items():
+            assert new_se[j][m] <= se * (1 + 1e-6) + 1e-9, (segment, j, m, se, new_se[j][m])
 
 
 @settings(max_examples=5, deadline=None)
