@@ -225,6 +225,17 @@ def earlier_results(path: Path, plans) -> list:
     return [r for r in stored.get("results", []) if r.get("plan") not in plans]
 
 
+def _run_each(a, names, plans: dict, runner, key: str, rows_of, headers) -> None:
+    """``runner`` on each named plan with one BLAS thread: its table printed, the results so far written under ``key``."""
+    out = []
+    with threadpool_limits(1):
+        for name in names:
+            res = runner(name, _model(plans[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
+            out.append(res)
+            print(tabulate(rows_of(name, res), headers=headers), flush=True)
+            write_json(Path(a.out), key, {"machine": machine_info(), "results": out})
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=100)
@@ -243,29 +254,19 @@ def main(argv=None):
     ap.add_argument("--figure", default=str(ROOT / "benchmarks" / "plan_prediction.png"))
     a = ap.parse_args(argv)
     if a.marker_value:
-        out = []
-        with threadpool_limits(1):
-            for name in a.plans:
-                res = run_marker_value(name, _model(PLANS[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
-                out.append(res)
-                print(tabulate([[name, s["segment"], s["mm_saved"], j, v["before_mm"], v["predicted_after_mm"],
-                                 v["monte_carlo_after_mm"], f"{s['within_25pct']}/{s['distances']}"]
-                                for s in res["suggestions"] for j, v in s["joints"].items()],
-                               headers=["plan", "added on", "mm saved", "joint", "before ±mm", "predicted after ±mm",
-                                        "MC after ±mm", "SE within 25 %"]), flush=True)
-                write_json(Path(a.out), "plan_prediction_marker_value", {"machine": machine_info(), "results": out})
+        _run_each(a, a.plans, PLANS, run_marker_value, "plan_prediction_marker_value",
+                  lambda name, res: [[name, s["segment"], s["mm_saved"], j, v["before_mm"], v["predicted_after_mm"],
+                                      v["monte_carlo_after_mm"], f"{s['within_25pct']}/{s['distances']}"]
+                                     for s in res["suggestions"] for j, v in s["joints"].items()],
+                  ["plan", "added on", "mm saved", "joint", "before ±mm", "predicted after ±mm", "MC after ±mm",
+                   "SE within 25 %"])
         return
     if a.rivals:
-        out = []
-        with threadpool_limits(1):
-            for name in a.rival_plans:
-                res = run_rivals(name, _model(RIVAL_PLANS[name]), a.trials, a.frames, a.noise_mm, a.motion, a.seed)
-                out.append(res)
-                print(tabulate([[name, r["predicted_delta_chi2"], r["monte_carlo_mean_delta_chi2"], r["predicted_rejection"],
-                                 f"{r['monte_carlo_rejection']} ± {r['binomial_se']}"] for r in res["rivals"]],
-                               headers=["plan", "predicted Δχ²", "MC mean Δχ²", "predicted P(reject)",
-                                        "MC rejection rate"]), flush=True)
-        write_json(Path(a.out), f"plan_prediction_rivals_{a.frames}_frames", {"machine": machine_info(), "results": out})
+        _run_each(a, a.rival_plans, RIVAL_PLANS, run_rivals, f"plan_prediction_rivals_{a.frames}_frames",
+                  lambda name, res: [[name, r["predicted_delta_chi2"], r["monte_carlo_mean_delta_chi2"],
+                                      r["predicted_rejection"], f"{r['monte_carlo_rejection']} ± {r['binomial_se']}"]
+                                     for r in res["rivals"]],
+                  ["plan", "predicted Δχ²", "MC mean Δχ²", "predicted P(reject)", "MC rejection rate"])
         return
     results = earlier_results(Path(a.out), a.plans)
     with threadpool_limits(1):
