@@ -56,6 +56,7 @@ from fractions import Fraction
 from functools import cached_property
 
 from identcheck.errors import InputError
+from identcheck.progress import Progress
 from identcheck.exact.linalg import PRIME_BITS, Field
 from identcheck.certify.tree_elimination import TreeElimination
 from identcheck.certify.tree_equations import (centre_keys, frame_pose, frozen_keys, joint_rows, marker_keys, marker_rows,
@@ -593,7 +594,7 @@ def _local(judged: dict, verdict: dict) -> set:
 
 
 def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: int = MAX_FRAMES,
-            warm_frames: int = 0, search_min_frames: bool = True, share: bool = True) -> TreeRank:
+            warm_frames: int = 0, search_min_frames: bool = True, share: bool = True, progress=None) -> TreeRank:
     """Scan frames until one more generic frame changes neither dim W nor any joint's verdict.
 
     A joint is locally identifiable when every quantity it is judged by is in W: its distances to the
@@ -612,7 +613,8 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     use only the verdicts); a local joint's ``min_frames`` is then an upper bound: the fewest frames seen to
     give the final W (the stop, or one less when the last frame changed nothing). ``share=False``: keep
     this rank's eliminations out of the memo other ranks of the same skeleton's variants reuse (a small
-    window's are cheaper to redo than to look up)."""
+    window's are cheaper to redo than to look up). ``progress``: called with a line at most once a second."""
+    line = Progress(progress, first_after_s=1.0)
     tj = TreeJacobian(spec, field_kind, seed, share)
     asked = {j[0]: quantities(tj, j[0]) for j in spec.joints}
     dims = {}
@@ -620,6 +622,7 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
     while tj.frames < max_frames:
         tj.add_frame(max(1, warm_frames - tj.frames))
         dims[tj.frames] = tj.at(tj.frames).dim_w()
+        line(lambda: f"whole-tree rank: {tj.frames} frames, {dims[tj.frames]} combinations of constants determined")
         if dims.get(tj.frames - 1) == dims[tj.frames]:
             stable = True
             break
@@ -632,6 +635,7 @@ def analyse(spec: TreeSpec, field_kind: str = "GFp", seed: int = 0, max_frames: 
         first = {n: frames for n in local}
         frames -= 1
     while search_min_frames and frames >= start and any(first[n] == frames + 1 for n in local):
+        line(lambda: f"whole-tree rank: the fewest frames each joint needs, judging at {frames}")
         still = _local(*_judge(tj.at(frames), asked)[1:])
         for n in local:
             if first[n] == frames + 1 and n in still:

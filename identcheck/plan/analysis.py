@@ -305,12 +305,13 @@ def _explain(spec, name, kind, par, chi, jr, st) -> str:
 
 
 def analyse(spec: tree_rank.TreeSpec, rows: dict | None = None, field_kind: str = "GFp", seed: int = 0,
-            warm_frames: int = 0, search_min_frames: bool = True) -> Plan:
+            warm_frames: int = 0, search_min_frames: bool = True, progress=None) -> Plan:
     """Whole-tree verdict plus propagation explanation for one marker plan (``warm_frames``,
     ``search_min_frames``: see :func:`identcheck.certify.tree_rank.analyse`; a variant ranked only for its
     verdicts passes ``search_min_frames=False``, and its ``min_samples`` are then not reported)."""
     rows = rows or table_summary()
-    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames, search_min_frames=search_min_frames)
+    rank = tree_rank.analyse(spec, field_kind, seed, warm_frames=warm_frames, search_min_frames=search_min_frames,
+                             progress=progress)
     settled = propagate(spec, rows)
     plan = Plan(spec, rank, settled)
     for name, kind, par, chi in spec.joints:
@@ -641,7 +642,7 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     rows = table_summary()
     if progress:
         progress(f"whole-tree rank of {len(spec.joints)} joints")
-    plan = analyse(spec, rows, seed=seed)
+    plan = analyse(spec, rows, seed=seed, progress=progress)
     budget = Budget(max_seconds, progress)
     doc = {"all_identifiable": plan.all_identifiable, "all_local": plan.all_local, "joints": plan.joints}
     if witness:
@@ -653,7 +654,7 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
                 doc.setdefault("unfinished", {}).setdefault("witness", []).append(n)
     windows = None
     if motion or robust:
-        windows = plan_windows.Windows(spec, plan.local_joints, plan.rank.frames, seed)
+        windows = plan_windows.Windows(spec, plan.local_joints, plan.rank.frames, seed, tick=budget.tick)
     if motion:
         needs = motion_needed(spec, plan, seed, budget, windows)
         for n in doc["joints"]:

@@ -191,9 +191,10 @@ class Windows:
 
     ``local``: the plan's locally identifiable joints (its whole-tree verdicts); ``frames``: the frames its
     whole-tree rank used (a variant ranked on the whole tree starts from one fewer); ``chunk``: see
-    :func:`regions`."""
+    :func:`regions`; ``tick(what, k, n)``: called per region certified (progress)."""
 
-    def __init__(self, spec: tree_rank.TreeSpec, local, frames: int, seed: int = 0, chunk: int = CHUNK_JOINTS):
+    def __init__(self, spec: tree_rank.TreeSpec, local, frames: int, seed: int = 0, chunk: int = CHUNK_JOINTS,
+                 tick=None):
         self.spec, self.seed, self.frames = spec, seed, frames
         self.local = set(local)
         self.regions = regions(spec, chunk)
@@ -201,7 +202,9 @@ class Windows:
         self.certificate: dict = {}       # joint -> window that certifies it, None: only the whole tree
         self._frames: dict = {}           # window -> frames its rank used (where a variant's scan starts)
         everything = frozenset(j[0] for j in spec.joints)
-        for region in self.regions:
+        for k, region in enumerate(self.regions):
+            if tick:
+                tick("windows of the tree", k + 1, len(self.regions))
             todo = [n for n in region if n in self.local]
             window = region
             for _ in range(MAX_WIDENING + 1):
