@@ -29,7 +29,7 @@ from identcheck.skeleton import Skeleton
 OFFSET_MM = 60.0
 CAP_MM = 100.0
 ADDED = "+{segment}"
-"""Name of the marker added to a segment (a ``+`` no real marker name starts with in the bundled models)."""
+"""Name of the marker added to a segment (with more ``+`` in front while a marker of the model has that name)."""
 
 
 def added_point(chain: Skeleton, state, segment: str) -> np.ndarray:
@@ -66,10 +66,18 @@ def enlarged_information(model, fit: Fit, segment: str) -> tuple:
     return chain, state, pred, information(replace(fit, chain=chain, state=state, pred=pred), pred)
 
 
+def added_name(model, segment: str) -> str:
+    """The added marker's name on ``segment``: :data:`ADDED`, never one of the model's own markers."""
+    name = ADDED.format(segment=segment)
+    while name in model.markers:
+        name = "+" + name
+    return name
+
+
 def with_added_marker(model, fit: Fit, segment: str) -> tuple:
     """(enlarged chain, its state, its noise-free predictions): ``fit``'s skeleton with one marker added to
     ``segment`` at :func:`added_point`."""
-    name = ADDED.format(segment=segment)
+    name = added_name(model, segment)
     seg = model.segments[segment]
     bigger = replace(model, segments={**model.segments, segment: replace(seg, markers=seg.markers + (name,))})
     chain = Skeleton.from_model(bigger, types=dict(fit.chain.types), markers=set(fit.chain.labels) | {name})
@@ -93,7 +101,7 @@ def marker_value(model, fit: Fit, noise_mm: float, progress=None) -> list:
             progress(f"one more marker: {segment} ({k + 1} of {len(fit.chain.segments)})")
         chain, state, _, S = enlarged_information(model, fit, segment)
         after = half_widths(chain, state, S, noise_mm)
-        point = state.local[chain.labels.index(ADDED.format(segment=segment))]
+        point = state.local[chain.labels.index(added_name(model, segment))]
         out.append({"segment": segment, "marker_at_mm": [round(float(x), 1) for x in point],
                     "mm_saved": round(sum(before[j] - after[j] for j in before), 2),
                     "joints": {j: {"before_mm": round(before[j], 2), "after_mm": round(after[j], 2)}

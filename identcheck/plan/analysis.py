@@ -31,6 +31,7 @@ joint unique are reported beside them (``suggestions_unique``) when they differ.
 """
 from __future__ import annotations
 
+import copy
 import functools
 import itertools
 import json
@@ -114,14 +115,14 @@ def far_marker(spec: tree_rank.TreeSpec, name: str, one_side: str, one_points=()
 
 
 @functools.lru_cache(maxsize=None)
-def _twin_certificate_once(far_joint: str) -> str:
-    return json.dumps(twin_certificate.certify(0, far_joint))
+def _twin_certificate_once(far_joint: str) -> dict:
+    return twin_certificate.certify(0, far_joint)
 
 
 def _twin_certificate(far_joint: str) -> dict:
     """The twin certificate for a far marker beyond a ``far_joint`` (:func:`identcheck.certify.twin.certify`,
     seed 0): exact and deterministic, so proved once per process and handed out as a fresh copy."""
-    return json.loads(_twin_certificate_once(far_joint))
+    return copy.deepcopy(_twin_certificate_once(far_joint))
 
 
 def _count(points: list) -> int:
@@ -385,7 +386,7 @@ def motion_needed(spec: tree_rank.TreeSpec, plan: Plan, seed: int = 0, budget: B
         for other, local in frozen.items():
             if not local:
                 need[other].append(name)
-    return {n: sorted(v, key=names.index) for n, v in need.items()}
+    return need
 
 
 def robustness(spec: tree_rank.TreeSpec, plan: Plan, rows: dict, seed: int = 0, budget: Budget | None = None,

@@ -46,11 +46,9 @@ class Change:
     segments: frozenset = frozenset()
     joints: frozenset = frozenset()
 
-    def inside(self, spec: tree_rank.TreeSpec, window: frozenset) -> bool:
-        """Does the variant change the equations of ``window`` (joint names)?"""
-        if self.joints & window:
-            return True
-        return any(j[2] in self.segments or j[3] in self.segments for j in spec.joints if j[0] in window)
+    def inside(self, window: frozenset, segments: frozenset) -> bool:
+        """Does the variant change the equations of ``window`` (joint names), whose segments are ``segments``?"""
+        return bool(self.joints & window or self.segments & segments)
 
 
 def regions(spec: tree_rank.TreeSpec, chunk: int = CHUNK_JOINTS) -> list:
@@ -198,9 +196,9 @@ class Windows:
         self.spec, self.seed, self.frames = spec, seed, frames
         self.local = set(local)
         self.regions = regions(spec, chunk)
-        self.region_of = {n: r for r in self.regions for n in r}
         self.certificate: dict = {}       # joint -> window that certifies it, None: only the whole tree
         self._frames: dict = {}           # window -> frames its rank used (where a variant's scan starts)
+        self._segments: dict = {}         # window -> its segments
         everything = frozenset(j[0] for j in spec.joints)
         for k, region in enumerate(self.regions):
             if tick:
@@ -219,6 +217,12 @@ class Windows:
             for n in todo:
                 self.certificate[n] = None
 
+    def _segments_of(self, window: frozenset) -> frozenset:
+        """The segments a window's joints join (computed once per window)."""
+        if window not in self._segments:
+            self._segments[window] = frozenset(s for j in self.spec.joints if j[0] in window for s in (j[2], j[3]))
+        return self._segments[window]
+
     def variant_local(self, variant: tree_rank.TreeSpec, change: Change, known_local=()) -> dict:
         """For each of the plan's locally identifiable joints: is it still locally identifiable in ``variant``
         (the plan with ``change``)? ``known_local``: joints already known to be (settled by the variant's
@@ -233,7 +237,8 @@ class Windows:
         todo = {}
         for n in self.local:
             cert = self.certificate[n]
-            if n in known_local or n in change.joints or (cert is not None and not change.inside(self.spec, cert)):
+            if n in known_local or n in change.joints or (cert is not None and
+                                                           not change.inside(cert, self._segments_of(cert))):
                 continue
             todo.setdefault(cert, []).append(n)
         whole = []

@@ -35,7 +35,7 @@ def test_an_added_marker_changes_nothing_else_and_never_widens_an_interval(leg, 
     _, _, _, before = forward(fit.chain, fit.terms, fit.state)
     cols = [chain.labels.index(m) for m in fit.chain.labels]
     assert np.allclose(pred[:, cols], before, atol=1e-9)               # the old markers move exactly as before
-    new = chain.labels.index(mv.ADDED.format(segment=segment))
+    new = chain.labels.index(mv.added_name(model, segment))
     assert chain.marker_seg[new] == segment
     old_se = mv.standard_errors(fit.chain, fit.state, information(fit, before), 1.0)
     new_se = mv.standard_errors(chain, state, information(replace(fit, chain=chain, state=state, pred=pred), pred), 1.0)
@@ -86,3 +86,13 @@ def test_plan_with_noise_ranks_one_more_marker_in_json_and_text(capsys):
     assert cli.main(["plan", leg, "--fast", "--noise-mm", "1", "--frames", "150"]) == 0
     out = capsys.readouterr().out
     assert f"one more marker, by predicted gain: {sugg[0]['segment']} saves" in out
+
+
+def test_the_added_marker_never_takes_a_name_the_model_uses(leg):
+    """A model that already has a marker called like the added one: the added marker gets another name, and the
+    model's own marker keeps its column."""
+    model, fit = leg
+    seg = model.segments["thigh_r"]
+    named = replace(model, segments={**model.segments, "thigh_r": replace(seg, markers=seg.markers + ("+thigh_r",))})
+    assert mv.added_name(named, "thigh_r") not in named.markers
+    assert mv.added_name(model, "thigh_r") == "+thigh_r"
