@@ -146,16 +146,18 @@ type = "spherical"
 parent = "shank_r"
 child = "foot_r"
 """
-RIVAL_PLANS = {"minimal leg": "examples/sparse_leg.toml", "E8 leg (one foot marker)": E8_LEG}
-"""Plans whose knee has twins: alone (the minimal leg: ERRATA E1, they tie) and with one marker beyond them
-(ERRATA E8: the foot marker rejects them, given enough frames and little enough noise)."""
+RIVAL_PLANS = {"minimal leg": "examples/sparse_leg.toml", "E8 leg (one foot marker)": E8_LEG,
+               "body16": "examples/body16.toml"}
+"""Plans whose hinges have twins: alone (the minimal leg: ERRATA E1, they tie), with one marker beyond them
+(ERRATA E8: the foot marker rejects them, given enough frames and little enough noise), and Pham's body, whose
+knees and elbows are each decided by one foot or hand marker."""
 
 
 def run_rivals(name: str, model: Model, trials: int, frames: int, noise_mm: float, motion: str, seed: int) -> dict:
     """plan's rejection probability of every other minimum of the noise-free fit against the rejection rate over
     `trials` noisy captures: each capture fitted from the truth and from the rival, to convergence, and the
     rival rejected when its likelihood-ratio statistic (ΔRSS / σ²) exceeds χ²₁(0.95) = 3.84."""
-    from identcheck.fit.whole_tree import REJECT_CHI2
+    from identcheck.fit.whole_tree import REJECT_CHI2, _same
 
     t0 = time.perf_counter()
     fitted = noise_free_fit(model, motion, frames, seed)
@@ -182,7 +184,8 @@ def run_rivals(name: str, model: Model, trials: int, frames: int, noise_mm: floa
     for (m, said), st in zip(rivals, stats):
         st = np.array(st)
         rate = float(np.mean(st > REJECT_CHI2))
-        rows.append({"predicted_delta_chi2": said["expected_delta_chi2"],
+        rows.append({"joints": [j for j in chain.joints if not _same(m, tree.best, [j])],
+                     "predicted_delta_chi2": said["expected_delta_chi2"],
                      "predicted_rejection": said["rejection_probability"],
                      "monte_carlo_rejection": round(rate, 3),
                      "monte_carlo_mean_delta_chi2": round(float(np.mean(st)), 3),
@@ -263,10 +266,10 @@ def main(argv=None):
         return
     if a.rivals:
         _run_each(a, a.rival_plans, RIVAL_PLANS, run_rivals, f"plan_prediction_rivals_{a.frames}_frames",
-                  lambda name, res: [[name, r["predicted_delta_chi2"], r["monte_carlo_mean_delta_chi2"],
+                  lambda name, res: [[name, ", ".join(r["joints"]), r["predicted_delta_chi2"], r["monte_carlo_mean_delta_chi2"],
                                       r["predicted_rejection"], f"{r['monte_carlo_rejection']} ± {r['binomial_se']}"]
                                      for r in res["rivals"]],
-                  ["plan", "predicted Δχ²", "MC mean Δχ²", "predicted P(reject)", "MC rejection rate"])
+                  ["plan", "differs in", "predicted Δχ²", "MC mean Δχ²", "predicted P(reject)", "MC rejection rate"])
         return
     results = earlier_results(Path(a.out), a.plans)
     with threadpool_limits(1):

@@ -27,6 +27,7 @@ that would help.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -43,7 +44,7 @@ from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import Poses, refine_local, segment_poses
 from identcheck.skeleton import Skeleton
 
-MAX_STARTS = 16          # candidate combinations started (the first ones in order of the closed-form ranking)
+MAX_STARTS = 16          # candidate combinations started (more when the one-joint changes alone exceed it)
 STARTS_BUDGET_S = 90.0   # no new start after this many seconds (the ones left out are counted and reported)
 RADIAL_FACTORS = (0.6, 1.7, 2.5)
 """A centre seen by at most two markers on one side also starts fits at these multiples of its distance from
@@ -153,20 +154,37 @@ def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
             for k, c in zip(RADIAL_FACTORS, moved) if np.isfinite(c).all(axis=1).sum() >= 3]
 
 
+def _by_changes(cands: dict, names: list, cap: int) -> tuple[list, int]:
+    """(index tuples into ``cands`` (joint -> candidates), how many more combinations exist): the first
+    combination, then those that change one joint, then (up to ``cap`` in all) those that change several."""
+    sizes = [len(cands[n]) for n in names]
+    first = (0,) * len(names)
+    head = [first] + [first[:k] + (i,) + first[k + 1:] for k, size in enumerate(sizes) for i in range(1, size)]
+    several = (idx for idx in itertools.product(*map(range, sizes)) if sum(i > 0 for i in idx) > 1)
+    rest = list(itertools.islice(several, max(cap - len(head), 0)))
+    return head + rest, math.prod(sizes) - len(head) - len(rest)
+
+
 def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, str]:
     """Start assignments (joint -> JointEstimate), how many were left out, and why none could be made.
-    Every combination of the candidates of the ambiguous joints; joints the closed form left without a
-    start because a joint above them was ambiguous are started from each of that joint's candidates in
-    turn (``restart(fixed)`` reruns the closed form with those candidates taken as the joints). With `data`, the
-    first combination is followed by its copies with one weak centre moved (:func:`radial_variants`)."""
+    Every combination of the candidates of the ambiguous joints, those that change one joint of the first
+    combination first (each joint's every candidate is tried, whatever the number of ambiguous joints: on
+    a body with four hinges of four candidates each, their twins come before the 243 combinations that
+    change several hinges at once); joints the closed form left without a start because a joint above them
+    was ambiguous are started from each of that joint's candidates in turn (``restart(fixed)`` reruns the
+    closed form with those candidates taken as the joints). With `data`, the combinations that change one
+    joint are followed by the first's copies with one weak centre moved (:func:`radial_variants`). The cap
+    :data:`MAX_STARTS` never leaves out a one-joint change."""
     cands = candidates(closed_form)
     names = list(cands)
-    combos = [dict(zip(names, (cands[n][i] for n, i in zip(names, idx))))
-              for idx in itertools.product(*[range(len(cands[n])) for n in names])]
+    singles = sum(len(cands[n]) - 1 for n in names)
+    cap = max(MAX_STARTS, 1 + singles)
+    chosen, unlisted = _by_changes(cands, names, cap)
+    combos = [dict(zip(names, (cands[n][i] for n, i in zip(names, idx)))) for idx in chosen]
     missing = [j for j in chain.joints if j not in cands]
     if not missing and combos and data is not None:     # the first combination with one weak centre moved
         moved = [{**combos[0], n: v} for n in names for v in radial_variants(chain, data, n, combos[0][n])]
-        combos = combos[:1] + moved + combos[1:]
+        combos = combos[:1 + singles] + moved + combos[1 + singles:]
     if missing:
         ambiguous = [n for n in names if len(cands[n]) > 1]
         if not ambiguous or restart is None:
@@ -181,7 +199,8 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
                 combos.append({j: again[j][0] for j in chain.joints})
         if not combos:
             return [], 0, f"no closed-form start for {', '.join(missing)}, from any candidate of {', '.join(ambiguous)}"
-    return combos[:MAX_STARTS], max(len(combos) - MAX_STARTS, 0), ""
+        cap, unlisted = MAX_STARTS, 0
+    return combos[:cap], max(len(combos) - cap, 0) + unlisted, ""
 
 
 def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> TreeFit:

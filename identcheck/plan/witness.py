@@ -18,6 +18,9 @@ from identcheck.plan import witness_search as W
 from identcheck.simulate.rigid import simulate
 
 MIN_FRAMES = 20
+RANDOM_STARTS = 6
+"""Random whole-tree skeletons a joint identifiable only together with others is also searched from
+(:func:`identcheck.plan.witness_search.random_starts`), beside the twins of every hinge it shares motion with."""
 BUDGET_S = 120.0
 """Seconds the witness searches may take together by default (``plan --witness --max-seconds``); past it, the
 joints not yet searched say so instead of the search running on."""
@@ -47,7 +50,7 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None, max_seconds: floa
     truth, held = simulated_truth(model, spec, F, seed)
     case_points = {n: (st.parent_points, st.child_points) for n, st in plan.settled.items()}
     judged = tuple((n, jr.points) for n, jr in plan.rank.joints.items())
-    out = {}
+    out, memo = {}, {}
     if not any(spec.markers.values()):
         return {n: {"joint": n, "method": None, "verified": False, "found": None,
                     "note": "the plan has no markers: there is no trial for a second skeleton to reproduce"}
@@ -63,13 +66,18 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None, max_seconds: floa
             progress(f"searching for an alternative to {name} ({k + 1} of {len(todo)}, "
                      f"{time.monotonic() - start:.0f} s of at most {budget:g} s)")
         method = "isolated" if j["local"] else "family"
+        together = j.get("jointly_only", False)
+        via = tuple(j["depends_on"])
+        if together:             # its unknown motion is shared: any of those hinges' twins may carry its alternative
+            via += tuple(n for n, o in plan.joints.items() if o.get("jointly_only") and n != name
+                         and o["type"] == "revolute")
         if not plan.rank.joints[name].quantities:
             out[name] = {"joint": name, "method": None, "verified": False, "found": None,
                          "note": "no marker measures this joint: there is no quantity a second skeleton could change"}
             continue
         search = W.construct(spec, truth, F, name, method, undetermined=plan.rank.joints[name].undetermined,
-                             held_out_truth=held, n_held_out=F, via=tuple(j["depends_on"]),
-                             case_points=case_points, judged=judged)
+                             held_out_truth=held, n_held_out=F, via=via, case_points=case_points, judged=judged,
+                             n_random=RANDOM_STARTS if together else 0, seed=seed, memo=memo)
         w = search.witness
         if w is not None and w.verified:
             out[name] = w.to_dict()
@@ -79,6 +87,10 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None, max_seconds: floa
                     "candidate to start from; how many skeletons generic data admit is not known")
         elif method == "isolated":
             parts = []
+            if together:
+                twins = search.attempts - RANDOM_STARTS
+                parts.append(f"{RANDOM_STARTS} random skeletons" + (f" and {twins} twins of the hinges sharing its "
+                                                                    "motion" if twins > 0 else ""))
             if search.back_to_truth:
                 parts.append(f"{search.back_to_truth} led back to the true joint")
             if search.closest_miss_mm is not None:
@@ -86,8 +98,14 @@ def witnesses(model, spec, plan, seed: int = 0, progress=None, max_seconds: floa
             if w is not None:
                 parts.append(f"one fitted the construction frames but missed held-out frames by "
                              f"{w.held_out_residual_mm:.2g} mm")
-            note = (f"no whole-tree alternative found from {search.attempts} start(s) at the table case's other "
-                    f"candidates: {'; '.join(parts)} (evidence from one simulated trial, not a proof of uniqueness)")
+            where = "" if together else " at the table case's other candidates"
+            note = (f"no whole-tree alternative found from {search.attempts} start(s){where}: {'; '.join(parts)} "
+                    "(evidence from one simulated trial, not a proof of uniqueness)")
+            if together:
+                note += (". Its candidates cannot be counted exactly: no table case settles it, so neither the "
+                         "case's count nor the twin certificate (a hinge with two points on one side and a marker "
+                         "beyond) applies, and the whole tree's equations over enough frames to pin it are too "
+                         "many for exact elimination")
         else:
             note = "the search along the undetermined family failed (the verdict rests on the exact rank alone)"
         out[name] = {"joint": name, "method": method, "verified": False, "attempts": search.attempts,

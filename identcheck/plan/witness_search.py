@@ -327,17 +327,41 @@ def _reexpress(Rw, tw, R2, t2, seg, v):
     return np.linalg.solve(R2[seg][0], Rw[seg][0] @ v + tw[seg][0] - t2[seg][0])
 
 
+RANDOM_SPREAD = 0.3
+"""A random start moves every constant of the true skeleton by this fraction of the skeleton's size (the RMS of
+its marker and centre offsets), in a random direction, the poses kept: a start far from the truth but still
+inside the motion's range."""
+
+
+def random_starts(L: K.Layout, x0: np.ndarray, n: int, seed: int = 0) -> list:
+    """``n`` skeletons with every constant of ``x0`` moved at random by :data:`RANDOM_SPREAD` of its size
+    (quaternions and hinge directions too, renormalised when used), each frame's poses and angles kept."""
+    rng = np.random.default_rng(seed)
+    const = x0[:L.n_const]
+    size = float(np.sqrt(np.mean(const ** 2))) if L.n_const else 1.0
+    out = []
+    for _ in range(n):
+        x = x0.copy()
+        x[:L.n_const] += RANDOM_SPREAD * size * rng.standard_normal(L.n_const)
+        out.append(x)
+    return out
+
+
 def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, method: str,
               undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
               change: float = 0.05, via: tuple = (),
-              case_points: dict | None = None, judged: tuple = ()) -> "Search":
+              case_points: dict | None = None, judged: tuple = (), n_random: int = 0, seed: int = 0,
+              memo: dict | None = None) -> "Search":
     """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
     the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
     truth's markers evaluated at 50 digits (the truth's float parameters taken as exact), so truth and
     alternative are held to the same data. The truth's vector over ``n_held_out`` further frames,
     ``held_out_truth``, gives frames the alternative's constants must also reproduce. ``via``: for an
     ``"isolated"`` search, further joints whose other candidates may carry this one's (a joint that uses
-    their virtual markers inherits them); ``case_points``: the points the propagation settled each with;
+    their virtual markers inherits them, or that share its unknown motion); ``n_random``: an ``"isolated"``
+    search also starts from this many random skeletons (:func:`random_starts`, ``seed``), for a joint no table
+    case settles; ``memo``: a dict shared by searches on the same trial, ``judged`` and ``case_points``, so each
+    start is descended once; ``case_points``: the points the propagation settled each with;
     ``judged``: the points the whole-tree verdict judged each joint against (:class:`~identcheck.plan.
     tree_kinematics.Layout`), so an alternative counts as different only by the joint's own quantities.
 
@@ -348,7 +372,8 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     data = trial(L, truth_x, F)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
     best, misses, back = None, [], 0
-    for cand, err in _candidates(L, truth_x, F, data, joint, method, undetermined, change, via, case_points):
+    for cand, err in _candidates(L, truth_x, F, data, joint, method, undetermined, change, via, case_points,
+                                 n_random, seed, memo):
         if err is None:
             back += 1
             continue
@@ -375,7 +400,8 @@ class Search:
     closest_miss_mm: float | None
 
 
-def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=(), case_points=None):
+def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=(), case_points=None, n_random=0,
+                seed=0, memo=None):
     """(skeleton, max marker error) after Gauss-Newton from each start, most promising first (a generator):
     an error below ``TOL_FLOAT`` is a candidate alternative, None a start that led back to the truth."""
     def done(cand, err):        # err None: it converged back to the truth
@@ -388,8 +414,19 @@ def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=()
         return
     if method != "isolated":
         raise ValueError(f"unknown method {method!r}")
-    for start in (x for j in (joint, *via) for x in _twin_starts(L, truth_x, F, j, case_points)):
-        yield done(*gauss_newton(L, start, F, data))
+    def descend(key, make):         # Gauss-Newton from each start once, whichever joint's search asks first
+        if memo is None or key not in memo:
+            runs = [gauss_newton(L, start, F, data) for start in make()]
+            if memo is None:
+                return runs
+            memo[key] = runs
+        return memo[key]
+
+    for j in (joint, *via):
+        for cand, err in descend(("twins", j), lambda: _twin_starts(L, truth_x, F, j, case_points)):
+            yield done(cand, err)
+    for cand, err in descend(("random", n_random, seed), lambda: random_starts(L, truth_x, n_random, seed)):
+        yield done(cand, err)
 
 
 def _verify(L, x, truth_x, F, data, joint, method, held_out, held_out_truth, H) -> Witness:

@@ -273,9 +273,21 @@ def _plan_summary(doc: dict) -> list:
     check = doc.get("suggestions_check") or {}
     uncounted = [n for n, j in doc["joints"].items() if j["local"] and j["candidates"] is None]
     if doc["all_local"] and not doc["suggestions"] and check.get("markers") == 0:
-        lines = [f"all joints identifiable: not shown; every joint is locally identifiable (whole-tree rank), but "
-                 f"{len(uncounted)} only together ({', '.join(uncounted)}), and their candidates are not counted; "
-                 "no marker is needed for the rank"]
+        alt = {n: doc["joints"][n]["alternative"] for n in uncounted if "alternative" in doc["joints"][n]}
+        twice = [n for n, w in alt.items() if w["verified"]]
+        if twice:
+            head = (f"all joints identifiable: no; every joint is locally identifiable (whole-tree rank), but a second "
+                    f"skeleton verified at 50 digits changes {', '.join(twice)}")
+        else:
+            head = (f"all joints identifiable: not shown; every joint is locally identifiable (whole-tree rank), but "
+                    f"{len(uncounted)} only together ({', '.join(uncounted)}), and their candidates cannot be counted "
+                    "exactly (no table case settles them)")
+            if alt:
+                head += (f"; a search from {max(w.get('attempts', 0) for w in alt.values())} starts found no second "
+                         "skeleton (evidence, not a proof)")
+            else:
+                head += "; `plan --witness` searches for a second skeleton"
+        lines = [head + "; no marker is needed for the rank"]
     else:
         lines = ["all joints identifiable: no; fewest markers to add: " + (_markers_text(doc["suggestions"])
                                                                            or "none found")]

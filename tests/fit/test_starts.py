@@ -90,3 +90,25 @@ def test_occluded_frames_do_not_move_the_line():
     for v in variants:
         assert np.isfinite(v.centre).all()
         assert np.ptp(_in_frame(v.centre, parent_pose), axis=0).max() < 1e-6
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.integers(1, 5), min_size=0, max_size=7), st.integers(1, 40))
+def test_every_one_joint_change_is_started_before_any_combination(sizes, cap):
+    """The start combinations: the first candidate of every joint, then every combination that changes exactly
+    one joint (all of them, whatever the cap), then those that change several, up to the cap; the count of
+    those left out makes up the product of the candidate counts."""
+    import math
+
+    from identcheck.fit.whole_tree import _by_changes
+
+    names = [f"j{k}" for k in range(len(sizes))]
+    cands = {n: list(range(s)) for n, s in zip(names, sizes)}
+    singles = sum(s - 1 for s in sizes)
+    chosen, unlisted = _by_changes(cands, names, max(cap, 1 + singles))
+    changes = [sum(i > 0 for i in idx) for idx in chosen]
+    assert chosen[0] == (0,) * len(sizes)
+    assert changes[1:1 + singles] == [1] * singles and all(c > 1 for c in changes[1 + singles:])
+    assert len(set(chosen)) == len(chosen) <= max(cap, 1 + singles)
+    assert len(chosen) + unlisted == math.prod(sizes)
+    assert all(0 <= i < s for idx in chosen for i, s in zip(idx, sizes))

@@ -214,3 +214,39 @@ def test_no_plan_with_one_marker_fewer_passes(tree):
     assert plan.analyse(plan._with_extra(spec, extra), rows).passes
     for combo in itertools.combinations_with_replacement(list(spec.markers), sum(extra.values()) - 1):
         assert not plan.analyse(plan._with_extra(spec, plan._count_segments(combo)), rows).passes, combo
+
+
+def test_random_starts_move_the_constants_only():
+    """A random start keeps every frame's poses and moves every constant, by a size-relative amount."""
+    from identcheck.plan import witness_search as W
+
+    spec = spec_of(star(2, 3, 1))
+    L = K.Layout(spec)
+    x0 = np.linspace(-50.0, 50.0, L.size(4))
+    starts = W.random_starts(L, x0, 3, seed=5)
+    assert len(starts) == 3
+    for x in starts:
+        assert np.array_equal(x[L.n_const:], x0[L.n_const:])
+        assert np.all(x[:L.n_const] != x0[:L.n_const])
+    assert all(np.array_equal(a, b) for a, b in zip(starts, W.random_starts(L, x0, 3, seed=5)))
+
+
+def test_joints_identifiable_only_together_are_searched_and_said_uncounted():
+    """A bare trunk with three two-marker limbs and a one-marker head: every joint is locally identifiable only
+    together. The witness search starts from random whole-tree skeletons (each descended once for the whole
+    group), and a joint without a verified alternative says its candidates cannot be counted exactly, and why."""
+    from identcheck.plan import witness
+
+    model = star(2, 3, 1)
+    spec = spec_of(model)
+    p = plan.analyse(spec)
+    assert all(j["jointly_only"] for j in p.joints.values())
+    found = witness.witnesses(model, spec, p)
+    assert set(found) == set(p.joints)
+    for n, w in found.items():
+        if w["verified"]:             # a second skeleton would be a counterexample: it must change this joint
+            assert w["relative_change"] >= 1e-3, n
+            continue
+        assert w["attempts"] >= witness.RANDOM_STARTS, n
+        assert "cannot be counted exactly" in w["note"] and "no table case settles it" in w["note"], n
+    assert len({(w.get("attempts"), w.get("back_to_truth")) for w in found.values() if not w["verified"]}) == 1
