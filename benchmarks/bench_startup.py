@@ -15,7 +15,13 @@ Rows:
   300-frame exact trial of the bundled example (revolute (2,1), resp. spherical (2,2));
 * ``fit sparse_leg``: ``identcheck.fit("examples/sparse_leg.toml", TRIAL)`` on a 1500-frame simulated
   trial (noise 0.5 mm); its closed-form starts use the revolute (2,1) and spherical solvers. Also given:
-  the CPU seconds of the ``fit`` call alone (``call_cpu_s``).
+  the CPU seconds of the ``fit`` call alone (``call_cpu_s``);
+* ``table``: ``python -m identcheck table --json``, every case with its exact certificates. Warm, the
+  derivations (their values and the printed forms the certificates record), the joint models and their
+  compiled Jacobians come from the disk cache (:mod:`identcheck.derive.cache`); cold, SymPy computes them.
+
+``--baseline REV`` also runs every selected row with the code of commit ``REV`` (a temporary worktree), in
+the same run, rows named ``NAME @REV``.
 
 Each row is run with the derivation disk cache warm (``$IDENTCHECK_CACHE`` as the user has it, filled
 by a first run) and cold (an empty ``$IDENTCHECK_CACHE`` for every run): before the generated modules,
@@ -33,6 +39,7 @@ Results go to ``benchmarks/results.json`` under ``"startup"``, sub-key ``--label
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import json
 import os
@@ -86,13 +93,13 @@ print("BENCH " + json.dumps({"sympy": "sympy" in sys.modules, "call_cpu_s": call
 """
 
 
-def run_once(code: str, args: list, cold: bool) -> dict:
-    """One fresh process: its CPU seconds (user + system) and what it reported."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
+def run_once(code: str, args: list, cold: bool, root: Path = ROOT) -> dict:
+    """One fresh process running the code under ``root``: its CPU seconds (user + system) and what it reported."""
+    env = dict(os.environ, PYTHONPATH=str(root))
     with tempfile.TemporaryDirectory() as cache:
         if cold:
             env["IDENTCHECK_CACHE"] = cache
-        proc = subprocess.Popen([sys.executable, "-c", code, *args], cwd=ROOT, env=env,
+        proc = subprocess.Popen([sys.executable, "-c", code, *args], cwd=root, env=env,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         err = proc.stderr.read()
         _, status, usage = os.wait4(proc.pid, 0)
@@ -103,11 +110,11 @@ def run_once(code: str, args: list, cold: bool) -> dict:
     return {"cpu_s": usage.ru_utime + usage.ru_stime, **json.loads(lines[-1][len("BENCH "):])}
 
 
-def row(name: str, code: str, args: list, cold: bool, repeats: int) -> dict:
+def row(name: str, code: str, args: list, cold: bool, repeats: int, root: Path = ROOT) -> dict:
     """The median of ``repeats`` runs of one process (a warm row is run once first to fill the cache)."""
     if not cold:
-        run_once(code, args, cold=False)
-    runs = [run_once(code, args, cold) for _ in range(repeats)]
+        run_once(code, args, cold=False, root=root)
+    runs = [run_once(code, args, cold, root) for _ in range(repeats)]
     out = {"name": name, "cache": "cold" if cold else "warm", "repeats": repeats,
            "cpu_s": statistics.median(r["cpu_s"] for r in runs), "all_cpu_s": [r["cpu_s"] for r in runs],
            "sympy_loaded": any(r["sympy"] for r in runs)}
@@ -134,23 +141,31 @@ def main() -> None:
                     help="the sub-key of results.json['startup'] the rows go to (e.g. 'before' for a baseline)")
     ap.add_argument("--only", default=None, help="run only the rows whose name contains this (e.g. 'identify')")
     ap.add_argument("--out", type=Path, default=None, help="JSON to update (default benchmarks/results.json)")
+    ap.add_argument("--baseline", default=None, help="also run the rows with this commit's code, side by side")
     a = ap.parse_args()
     repeats = 1 if a.quick else a.repeats
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
+        roots = [("", ROOT)]
+        if a.baseline:
+            from worktree import checkout
+
+            roots.append((f" @{a.baseline}", stack.enter_context(checkout(a.baseline))))
         t = trials(Path(tmp))
         runs = [("solvers ready", SOLVERS, [])]
         runs += [(f"identify {ex}", CLI, [json.dumps(["identify", str(ROOT / f"examples/{ex}.toml"), str(t[ex]),
                                                       "--json"])]) for ex in ("knee_21", "hip_22")]
         runs += [("fit sparse_leg", FIT, [str(ROOT / "examples/sparse_leg.toml"), str(t["sparse_leg"])])]
+        runs += [("table", CLI, [json.dumps(["table", "--json"])])]
         for cold in (False, True):
             for name, code, args in runs:
                 if a.only is None or a.only in name:
-                    rows.append(row(name, code, args, cold, repeats))
-    print(f"{'row':<20} {'cache':<6} {'CPU s (median)':>14} {'call CPU s':>11}  SymPy loaded")
+                    for tag, root in roots:
+                        rows.append(row(name + tag, code, args, cold, repeats, root))
+    print(f"{'row':<28} {'cache':<6} {'CPU s (median)':>14} {'call CPU s':>11}  SymPy loaded")
     for r in rows:
         call = f"{r['call_cpu_s']:.2f}" if "call_cpu_s" in r else ""
-        print(f"{r['name']:<20} {r['cache']:<6} {r['cpu_s']:>14.2f} {call:>11}  {'yes' if r['sympy_loaded'] else 'no'}")
+        print(f"{r['name']:<28} {r['cache']:<6} {r['cpu_s']:>14.2f} {call:>11}  {'yes' if r['sympy_loaded'] else 'no'}")
     if a.quick and a.out is None:
         return
     write_json(a.out or ROOT / "benchmarks/results.json", KEY,

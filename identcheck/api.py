@@ -383,7 +383,7 @@ def identify(model, trial, joints=None, frames=None, precision: int | None = Non
     return identify_joints(load_model(model), read_trial(trial), joints=joints, frames=frames, precision=precision)
 
 
-@_one_blas_thread
+@functools.partial(_one_blas_thread, with_scipy=False)  # exact arithmetic and mpmath: no SciPy
 def table(seed: int = 0, joints=None, progress=None):
     """The identifiability table: every joint type x markers (p on the parent, q on the child), p, q in 0..3,
     with a certificate per row (``progress``: called with a line of text before each joint type).

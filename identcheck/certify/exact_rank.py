@@ -102,16 +102,37 @@ def _substitution(cs: Case, params: dict, ts) -> dict:
     return sub
 
 
+def _derivation(cs: Case):
+    """The case's derivation for computing: its expressions' values (kept on disk between processes by
+    :mod:`identcheck.derive.cache`, keyed by the derivation's sources, so the table does not run SymPy's
+    derivation on every call). What a certificate prints of it comes from :func:`_printed`."""
+    return derive.for_case(cs)
+
+
+def _printed(cs: Case) -> dict:
+    """The printed forms a certificate records — the unknowns' expressions and, when the raw expansion had
+    dependent columns, its monomials and relations — from a fresh derivation (a pickle round trip can change
+    how an expression prints), kept on disk beside the derivation."""
+    def render(dv) -> dict:
+        exp = dv.results.get("expansion")
+        return {"Y": [str(e) for e in dv.result("Y")],
+                "expansion": None if not exp else {
+                    "unknowns": [str(u) for u in exp["unknowns"]],
+                    "relations": [[str(c) for c in rel] for rel in exp["relations"]],
+                    "meaning": exp["meaning"]}}
+    return derive.printed_forms(derive.CASE_DERIVATION[cs.key], render)
+
+
 def sample_point(cs: Case, params: dict, ts) -> tuple:
     """The exact rational output (x, y, z) for constants ``params`` and sample angles ``ts``."""
-    forward = derive.for_case(cs, disk_cache=False).result("forward")
+    forward = _derivation(cs).result("forward")
     sub = _substitution(cs, params, ts)
     return tuple(sp.Rational(e.xreplace(sub)) for e in forward)
 
 
 def m_rows(cs: Case, points, progress=None) -> tuple:
     """The exact rational matrix M and vector K built from sample points."""
-    dv = derive.for_case(cs, disk_cache=False)
+    dv = _derivation(cs)
     M, K, inv = dv.result("M"), dv.result("K"), dv.result("invariants")
     rows, rhs = [], []
     line = Progress(progress, first_after_s=1.0)
@@ -189,8 +210,7 @@ def rank(joint: str, p: int, q: int, n_samples: int | None = None, seed: int = 0
     cs = get_case(joint, p, q)
     if progress:
         progress(f"{joint} ({p},{q}): the derivation of M, then exact samples and the exact rank")
-    dv = derive.for_case(cs, disk_cache=False)
-    n_unknowns = len(dv.result("Y"))
+    n_unknowns = len(_printed(cs)["Y"])
     n = n_unknowns if n_samples is None else int(n_samples)
     if n < 1:
         raise InputError(f"--samples must be at least 1, got {n}")
@@ -204,8 +224,8 @@ def certificate(cs: Case, params: dict, angles: list, seed: int, progress=None) 
     """The rank certificate of case `cs` at constants `params` and per-sample half-angle tangents `angles`:
     every stored field follows from these (and `seed`, which records where they were drawn), so that
     :func:`verify` rebuilds the whole document from them and compares it field by field."""
-    dv = derive.for_case(cs, disk_cache=False)
-    n_unknowns = len(dv.result("Y"))
+    shown = _printed(cs)
+    n_unknowns = len(shown["Y"])
     n = len(angles)
     line = Progress(progress, first_after_s=1.0)
     points = []
@@ -227,9 +247,9 @@ def certificate(cs: Case, params: dict, angles: list, seed: int, progress=None) 
     )
     names = [f"Y{i}" for i in range(1, n_unknowns + 1)]
     return RankCertificate(
-        min_samples=n_unknowns if full else None, expansion=_expansion(dv, rk if full else None),
+        min_samples=n_unknowns if full else None, expansion=_expansion(shown["expansion"], rk if full else None),
         joint=cs.joint, p=cs.p, q=cs.q, unknowns=names,
-        unknown_exprs=[str(e) for e in dv.result("Y")], rank=rk, full_rank=full, exact=True,
+        unknown_exprs=list(shown["Y"]), rank=rk, full_rank=full, exact=True,
         deterministic=full, seed=seed, n_samples=n,
         parameters={k: rational_text(v) for k, v in params.items()},
         samples=[{"t": [rational_text(t) for t in ts], "xyz": [rational_text(c) for c in pt]} for ts, pt in zip(angles, points)],
@@ -238,20 +258,19 @@ def certificate(cs: Case, params: dict, angles: list, seed: int, progress=None) 
     )
 
 
-def _expansion(dv, rank_reduced) -> dict:
+def _expansion(exp: dict | None, rank_reduced) -> dict:
     """When the derivation's raw expansion had dependent columns, how the unknowns were reduced.
 
     The rank of the raw columns on the output set is at most (#columns − #relations), the
     relations being proved identities, and at least the certified rank of the reduced system,
     whose columns are a subset: when the two bounds meet, the rank is exact.
     """
-    exp = dv.results.get("expansion")
     if not exp:
         return {}
     upper = len(exp["unknowns"]) - len(exp["relations"])
     return {
-        "unknowns": [str(u) for u in exp["unknowns"]],
-        "relations": [[str(c) for c in rel] for rel in exp["relations"]],
+        "unknowns": list(exp["unknowns"]),
+        "relations": [list(rel) for rel in exp["relations"]],
         "relation_meaning": exp["meaning"],
         "rank_upper_bound": upper,
         "rank": upper if rank_reduced == upper else None,

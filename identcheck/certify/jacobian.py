@@ -42,7 +42,9 @@ import random
 from dataclasses import asdict, dataclass, field
 from fractions import Fraction
 from functools import lru_cache
+from pathlib import Path
 
+import flint
 import sympy as sp
 from sympy.polys.domains import QQ
 
@@ -62,17 +64,20 @@ MAX_SAMPLES = 40
 
 # -- compiled exact polynomials ------------------------------------------------------------------
 class _Compiled:
-    """A polynomial over QQ evaluated exactly at Fraction values (sparse terms)."""
+    """A polynomial over QQ evaluated exactly at FLINT rationals (``flint.fmpq``; sparse terms): the same
+    exact values as Python's ``Fraction`` at a small part of the cost (the table's Jacobians are evaluated
+    at tens of thousands of entries)."""
 
     __slots__ = ("terms",)
 
     def __init__(self, poly: sp.Poly):
         self.terms = tuple(
-            (tuple((i, e) for i, e in enumerate(mon) if e), Fraction(int(c.p), int(c.q)))
+            (tuple((i, e) for i, e in enumerate(mon) if e), flint.fmpq(int(c.p), int(c.q)))
             for mon, c in poly.terms() if c != 0)
 
-    def __call__(self, vals) -> Fraction:
-        out = Fraction(0)
+    def __call__(self, vals) -> flint.fmpq:
+        """The value at ``vals`` (a list of ``flint.fmpq``, one per generator)."""
+        out = flint.fmpq(0)
         for mon, c in self.terms:
             term = c
             for i, e in mon:
@@ -123,13 +128,38 @@ class _Symbolic:
     grad_degree: int   # max over interest of Σ_v w_v deg_v(f)
 
 
-@lru_cache(maxsize=None)
-def symbolic(m: JointModel) -> _Symbolic:
-    """Differentiate a model once (cached): columns are constants then one sample's variables."""
+@lru_cache(maxsize=1)
+def _symbolic_key() -> str:
+    """What the compiled Jacobians depend on: this module (the differentiation and compilation), the joint
+    models and the symbols, with SymPy's version (:func:`identcheck.derive.cache.files_key`)."""
+    from identcheck.derive.cache import files_key
+
+    here = Path(__file__).resolve()
+    return files_key([here, here.parent / "joint_models.py", here.parents[1] / "symbols.py"])
+
+
+def _gens(m: JointModel) -> tuple:
     c_len, c_ang = list(m.constants), list(m.constant_angles)
     v_len, v_ang = list(m.per_sample_lengths), list(m.variables)
-    gens = tuple(c_len + [x for a in c_ang for x in (a.cos, a.sin)]
+    return tuple(c_len + [x for a in c_ang for x in (a.cos, a.sin)]
                  + v_len + [x for a in v_ang for x in (a.cos, a.sin)])
+
+
+@lru_cache(maxsize=None)
+def symbolic(m: JointModel) -> _Symbolic:
+    """Differentiate a model once: columns are constants then one sample's variables. Cached in memory and,
+    keyed by :func:`_symbolic_key` and the case, on disk between processes (:func:`identcheck.derive.cache.
+    entry`): the compiled entries are exact rational data, the same whichever process differentiated them."""
+    from identcheck.derive.cache import entry
+
+    return entry("jacobians", _symbolic_key(), m.key, lambda: _differentiate(m))
+
+
+def _differentiate(m: JointModel) -> _Symbolic:
+    """:func:`symbolic`'s work: SymPy differentiates each output by each column, and compiles the results."""
+    c_len, c_ang = list(m.constants), list(m.constant_angles)
+    v_len, v_ang = list(m.per_sample_lengths), list(m.variables)
+    gens = _gens(m)
     lengths, angles = c_len + v_len, c_ang + v_ang
     columns = c_len + c_ang + v_len + v_ang      # constants, then one sample's variables
     poly = lambda e: sp.Poly(e, *gens, domain=QQ)
@@ -193,6 +223,13 @@ class _Point:
         pt._base = base
         return pt
 
+    def sample_qq(self, i: int) -> list:
+        """:meth:`sample` as ``flint.fmpq`` (what the compiled entries take), converted once per sample."""
+        cache = self.__dict__.setdefault("_qq", {})
+        if i not in cache:
+            cache[i] = [linalg.qq(v) for v in self.sample(i)]
+        return cache[i]
+
     def sample(self, i: int) -> list:
         while len(self.samples) <= i:
             if self.seed is None:
@@ -217,8 +254,8 @@ class _Point:
 
 # -- exact linear algebra: identcheck.exact.linalg ------------------------------------------------
 def _rowspace(rows, ncols) -> list:
-    """An echelon basis (list of Fraction rows) of the span of ``rows``."""
-    return linalg.rref(rows, ncols)[0]
+    """An echelon basis (list of ``flint.fmpq`` rows) of the span of ``rows``."""
+    return linalg.rowspace(rows, ncols)
 
 
 def _rank(rows, ncols) -> int:
@@ -265,7 +302,7 @@ class _Scan:
         return self.records[n - 1]
 
     def sample_block(self, i: int) -> list:
-        vals = self.pt.sample(i)
+        vals = self.pt.sample_qq(i)
         return [[e(vals) for e in row] for row in self.sym.J1]
 
     def add(self, i: int) -> None:
@@ -276,11 +313,11 @@ class _Scan:
         rv = _rank(V, nv)
         self.rank_var += rv
         self.var_full_row = self.var_full_row and rv == len(V)
-        L = _left_null(V, nv)
-        P = [[sum((lam[k] * C[k][j] for k in range(len(C))), Fraction(0)) for j in range(nc)] for lam in L]
+        L = [[linalg.qq(x) for x in lam] for lam in _left_null(V, nv)]
+        P = [[sum((lam[k] * C[k][j] for k in range(len(C))), flint.fmpq(0)) for j in range(nc)] for lam in L]
         if i == 0:
             self.block0 = block
-            vals = self.pt.sample(0)
+            vals = self.pt.sample_qq(0)
             self.grad_vals = [[e(vals) for e in g] for g in self.sym.grads]
         else:
             self.Wrest = _rowspace(self.Wrest + P, nc)
@@ -298,7 +335,7 @@ class _Scan:
         for f, g in zip(self.m.interest, self.grad_vals):
             if f.per_sample:
                 if basis is None:
-                    basis = [list(r) for r in self.block0] + [w + [Fraction(0)] * nv for w in self.Wrest]
+                    basis = [list(r) for r in self.block0] + [list(w) + [0] * nv for w in self.Wrest]
                     basis_rank = _rank(basis, nc + nv)
                 out.append(_in_span(basis, g, nc + nv, basis_rank))
             else:
@@ -313,16 +350,19 @@ def point(m: JointModel, seed: int = 0, index: int = 0) -> _Point:
     return _Point(m, seed, index)
 
 
-def full_jacobian(m: JointModel, pt: _Point, n: int) -> list:
-    """The full exact Jacobian (3qN rows × (n_const + N·n_var) columns) at the point ``pt``."""
+def full_jacobian(m: JointModel, pt: _Point, n: int, exact=Fraction) -> list:
+    """The full exact Jacobian (3qN rows × (n_const + N·n_var) columns) at the point ``pt``; entries
+    ``Fraction`` (or ``flint.fmpq`` with ``exact=flint.fmpq``)."""
     sym = symbolic(m)
     nc, nv = sym.n_const, sym.n_var
+    convert = linalg.to_fraction if exact is Fraction else (lambda v: v)
+    zero = exact(0)
     rows = []
     for i in range(n):
-        vals = pt.sample(i)
+        vals = pt.sample_qq(i)
         for r_ in sym.J1:
-            ent = [e(vals) for e in r_]
-            row = ent[:nc] + [Fraction(0)] * (nv * i) + ent[nc:] + [Fraction(0)] * (nv * (n - 1 - i))
+            ent = [convert(e(vals)) for e in r_]
+            row = ent[:nc] + [zero] * (nv * i) + ent[nc:] + [zero] * (nv * (n - 1 - i))
             rows.append(row)
     return rows
 
@@ -459,8 +499,7 @@ def _assemble(m: JointModel, sym: _Symbolic, scans: list, history: list, stable:
     pt0 = scans[0].pt
     cols = sym.n_const + n * sym.n_var
     if rows and cols:
-        J = full_jacobian(m, pt0, n)
-        rk, prow, pcol, det = certify.exact_rank([[sp.Rational(v.numerator, v.denominator) for v in row] for row in J])
+        rk, prow, pcol, det = certify.exact_rank(full_jacobian(m, pt0, n, exact=flint.fmpq))
     else:
         rk, prow, pcol, det = 0, [], [], sp.Integer(1)
     rank_var0, kappa0, _, var_full_row0, W0 = scans[0].records[n - 1]

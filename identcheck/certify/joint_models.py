@@ -475,9 +475,28 @@ def model(joint: str, p: int, q: int) -> JointModel:
     p, q = int(p), int(q)
     if p not in MARKERS or q not in MARKERS:
         raise InputError(f"marker counts must be in 0..3, got ({p},{q})")
+    from identcheck.derive.cache import entry
+
+    return entry("joint_models", _models_key(), (joint, p, q), lambda: _build(joint, p, q))
+
+
+def _build(joint: str, p: int, q: int) -> JointModel:
+    """:func:`model`'s work: SymPy builds and expands the outputs (a tenth of a second per case; kept on disk
+    between processes, keyed by :func:`_models_key`)."""
     b = _Builder(joint, p, q)
     outs = _BUILD[joint](b)
     return b.build(outs)
+
+
+@lru_cache(maxsize=1)
+def _models_key() -> str:
+    """What a model depends on: this module and the symbols, with SymPy's version."""
+    from pathlib import Path
+
+    from identcheck.derive.cache import files_key
+
+    here = Path(__file__).resolve()
+    return files_key([here, here.parents[1] / "symbols.py"])
 
 
 def all_models() -> list:

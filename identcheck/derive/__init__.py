@@ -37,9 +37,19 @@ def for_case(case, disk_cache: bool = True) -> Derivation:
         raise RuntimeError(f"no derivation of the linear form for {case.key} yet") from None
 
 
+def printed_forms(name: str, render) -> object:
+    """``render(derivation)`` of a fresh derivation ``name`` — the printed text of some of its expressions, as
+    a certificate records them — kept on disk between processes beside :func:`get`'s results, under the same
+    key. The pickled expressions are the same mathematics but may print differently, so what a certificate
+    prints comes from here and what it computes from :func:`get`."""
+    from identcheck.derive.cache import printed as cached_printed
+
+    return cached_printed(name, lambda: render(get(name, disk_cache=False)))
+
+
 def derive_all() -> list:
     """Every derivation, in canonical order."""
     return [get(n, disk_cache=False) for n in sorted(DERIVATIONS)]
 
 
-__all__ = ["Check", "Derivation", "Step", "DERIVATIONS", "get", "for_case", "derive_all"]
+__all__ = ["Check", "Derivation", "Step", "DERIVATIONS", "get", "for_case", "printed_forms", "derive_all"]

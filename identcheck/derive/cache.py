@@ -12,6 +12,7 @@ before); a file that fails to load is derived again and replaced. ``identcheck d
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import pickle
 import sys
@@ -66,3 +67,66 @@ def cached(name: str, derive):
             pass
     _MEMO[name] = result
     return result
+
+
+def printed(name: str, render):
+    """``render()`` (a JSON-able value: the printed forms of a derivation's expressions, which must come from a
+    fresh derivation, see :func:`identcheck.derive.printed_forms`) from memory, else from disk, else computed and
+    saved, under the same key as :func:`cached`. A file that cannot be read is computed again."""
+    memo_key = ("printed", name)
+    if memo_key in _MEMO:
+        return _MEMO[memo_key]
+    path = cache_dir() / f"{name}-{source_key()}.printed.json"
+    try:
+        value = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        value = render()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp",
+                                             encoding="utf-8") as tmp:
+                json.dump(value, tmp)
+            os.replace(tmp.name, path)
+        except OSError:
+            pass
+    _MEMO[memo_key] = value
+    return value
+
+
+def files_key(paths) -> str:
+    """Hash of these files' contents (line endings normalised) and the SymPy and Python versions: the key of a
+    value computed with SymPy from what they define."""
+    import sympy
+
+    h = hashlib.sha256()
+    for f in sorted(Path(p) for p in paths):
+        h.update(f.name.encode() + b"\0" + f.read_bytes().replace(b"\r\n", b"\n") + b"\0")
+    h.update(f"sympy {sympy.__version__} python {sys.version_info[:3]}".encode())
+    return h.hexdigest()[:20]
+
+
+def entry(name: str, key: str, item, compute):
+    """``compute()`` for ``item`` of the dict kept on disk as ``name-key.pickle``: from memory, else from that
+    file, else computed and the file rewritten with it (atomically; a file that cannot be read or written is
+    skipped, the value computed as before)."""
+    store = _MEMO.get(("entries", name, key))
+    path = cache_dir() / f"{name}-{key}.pickle"
+    if store is None:
+        try:
+            with open(path, "rb") as fh:
+                store = pickle.load(fh)
+            if not isinstance(store, dict):
+                store = {}
+        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, TypeError, ValueError):
+            store = {}
+        _MEMO[("entries", name, key)] = store
+    if item not in store:
+        store[item] = compute()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as tmp:
+                pickle.dump(store, tmp)
+            os.replace(tmp.name, path)
+        except OSError:
+            pass
+    return store[item]

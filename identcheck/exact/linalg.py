@@ -20,10 +20,13 @@ PRIME_BITS = 61
 
 def qq(x) -> flint.fmpq:
     """An exact rational from an int, a ``Fraction`` or anything with ``p``/``q`` or ``numerator``/``denominator``."""
-    if isinstance(x, flint.fmpq):
+    kind = type(x)
+    if kind is flint.fmpq:
         return x
-    if isinstance(x, int):
+    if kind is int:
         return flint.fmpq(x)
+    if kind is Fraction:
+        return flint.fmpq(x.numerator, x.denominator)
     num = getattr(x, "numerator", None)
     if num is None:
         num, den = x.p, x.q                     # SymPy Rational
@@ -50,6 +53,16 @@ def rref(rows, ncols: int) -> tuple[list, list]:
     out = [[to_fraction(flat[i * ncols + j]) for j in range(ncols)] for i in range(rank)]
     pivots = [next(j for j in range(ncols) if out[i][j] != 0) for i in range(rank)]
     return out, pivots
+
+
+def rowspace(rows, ncols: int) -> list:
+    """The non-zero rows of the reduced row echelon form, as ``flint.fmpq`` (for callers that go on computing
+    with them: :func:`rref` converts to ``Fraction``)."""
+    if not rows or ncols == 0:
+        return []
+    R, rank = qq_matrix(rows, ncols).rref()
+    flat = R.entries()
+    return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
 
 
 def rank(rows, ncols: int) -> int:
@@ -83,12 +96,23 @@ def left_nullspace(rows, ncols: int) -> list:
     return nullspace(transposed, n)
 
 
+def _pivots(M: flint.fmpq_mat) -> list:
+    """The pivot columns of ``M``'s reduced row echelon form."""
+    R, rank = M.rref()
+    flat, n = R.entries(), M.ncols()
+    out, j = [], 0
+    for i in range(rank):
+        while flat[i * n + j] == 0:
+            j += 1
+        out.append(j)
+    return out
+
+
 def maximal_minor(rows) -> tuple[int, list, list, Fraction]:
     """Rank over QQ, the pivot rows and columns of a non-zero maximal minor, and that minor's value."""
     ncols = len(rows[0])
     M = qq_matrix(rows, ncols)
-    _, col_piv = rref(rows, ncols)
-    _, row_piv = rref([[rows[i][j] for i in range(len(rows))] for j in range(ncols)], len(rows))
+    col_piv, row_piv = _pivots(M), _pivots(M.transpose())
     r = len(col_piv)
     if not r:
         return 0, [], [], Fraction(1)

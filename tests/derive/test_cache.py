@@ -44,3 +44,63 @@ def test_key_follows_the_sources():
     """The key is a hash of the derive package and the symbols: stable within a run, 20 hex digits."""
     k = cache.source_key()
     assert k == cache.source_key() and len(k) == 20 and int(k, 16) >= 0
+
+
+def test_entries_round_trip_corruption_and_unwritable(tmp_path, monkeypatch):
+    """One dict per name and key on disk: an entry is computed once, loaded by a later process, computed
+    again when the file is unreadable, and still computed when the directory cannot be written."""
+    monkeypatch.setenv("IDENTCHECK_CACHE", str(tmp_path / "c"))
+    monkeypatch.setattr(cache, "_MEMO", {})
+    calls = []
+
+    def compute(v):
+        calls.append(v)
+        return {"value": v}
+
+    assert cache.entry("things", "k1", "a", lambda: compute(1)) == {"value": 1}
+    assert cache.entry("things", "k1", "b", lambda: compute(2)) == {"value": 2}
+    monkeypatch.setattr(cache, "_MEMO", {})
+    assert cache.entry("things", "k1", "a", lambda: compute(9)) == {"value": 1} and calls == [1, 2]
+    assert cache.entry("things", "k2", "a", lambda: compute(3)) == {"value": 3}     # another key: computed
+    (tmp_path / "c" / "things-k1.pickle").write_bytes(b"garbage")
+    monkeypatch.setattr(cache, "_MEMO", {})
+    assert cache.entry("things", "k1", "a", lambda: compute(4)) == {"value": 4}
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    monkeypatch.setenv("IDENTCHECK_CACHE", str(blocker / "sub"))
+    monkeypatch.setattr(cache, "_MEMO", {})
+    assert cache.entry("things", "k1", "a", lambda: compute(5)) == {"value": 5}
+
+
+def test_the_table_from_the_disk_caches_equals_the_fresh_one(tmp_path, monkeypatch):
+    """What ``identcheck table`` keeps on disk — the derivations' values and printed forms, the joint models
+    and their compiled Jacobians — gives the same certificates as computing everything afresh: a rank
+    certificate and a local certificate, computed in a cold cache, then again from the files alone."""
+    from identcheck.certify import exact_rank, jacobian, joint_models
+    from identcheck.derive import CASE_DERIVATION
+    from identcheck.symbols import case as get_case
+
+    def clear():
+        monkeypatch.setattr(cache, "_MEMO", {})
+        joint_models.model.cache_clear()
+        jacobian.symbolic.cache_clear()
+        jacobian._cached.cache_clear()
+
+    monkeypatch.setenv("IDENTCHECK_CACHE", str(tmp_path / "c"))
+    clear()
+    cold = (exact_rank.rank("spherical", 2, 2, seed=3).to_dict(), jacobian.verdict("revolute", 2, 1, seed=3).to_dict(),
+            jacobian.verdict("universal", 2, 3, seed=3).to_dict())
+    assert {f.name.split("-")[0] for f in (tmp_path / "c").iterdir()} >= {"jacobians", "joint_models", "spherical22"}
+    clear()
+    warm = (exact_rank.rank("spherical", 2, 2, seed=3).to_dict(), jacobian.verdict("revolute", 2, 1, seed=3).to_dict(),
+            jacobian.verdict("universal", 2, 3, seed=3).to_dict())
+    assert warm == cold
+    fresh = __import__("identcheck.derive", fromlist=["get"]).get(CASE_DERIVATION["spherical(2,2)"], disk_cache=False)
+    assert cold[0]["unknown_exprs"] == [str(e) for e in fresh.result("Y")]
+    assert exact_rank._printed(get_case("spherical", 2, 2))["Y"] == cold[0]["unknown_exprs"]
+    for key in (("revolute", 2, 1), ("universal", 2, 3)):
+        m = joint_models.model(*key)
+        assert m == joint_models._build(*key)
+        stored, computed = jacobian.symbolic(m), jacobian._differentiate(m)
+        assert [[e.terms for e in row] for row in stored.J1] == [[e.terms for e in row] for row in computed.J1]
+        assert [[e.terms for e in g] for g in stored.grads] == [[e.terms for e in g] for g in computed.grads]
