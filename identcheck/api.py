@@ -350,7 +350,8 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
         from identcheck.fit.predict import noise_free_fit, predict
 
         fitted = noise_free_fit(m, practical_motion, frames, seed)
-        practical = predict(m, noise_mm, practical_motion, frames, seed, fitted=fitted)
+        practical = predict(m, noise_mm, practical_motion, frames, seed, fitted=fitted,
+                            exact_candidates={j: v["candidates"] for j, v in res.to_dict()["joints"].items()})
         best = fitted[1].best
         extra = ({"practical_suggestions": marker_value(m, best.fit, noise_mm, progress)} if best is not None else
                  {"practical_suggestions_note": "no whole-tree fit of the simulated capture to value markers on"})

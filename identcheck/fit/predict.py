@@ -6,7 +6,9 @@ it from every closed-form candidate. At the truth the fit's information ``S`` (p
 per-frame unknowns profiled out) gives each marker distance's predicted standard error ``σ √(gᵀ S⁺ g)``, and
 each other minimum the fit finds (an ERRATA E1 twin, a mirror image) gives the expected likelihood-ratio
 statistic against the truth, its noncentrality ``λ = ΔRSS / σ²``: with real noise it is rejected at the 95 %
-level with probability ``P(χ²₁(λ) > 3.84)``, and never when it ties exactly (:data:`TIE_RSS_MM2`). The
+level with probability ``P(χ²₁(λ) > 3.84)``, and never when it ties exactly (:data:`TIE_RSS_MM2`, or when the
+exact structural verdict proves that the joint has that many candidates for any rigid data, ``exact_candidates``:
+then its ``c − 1`` closest rivals are those twins, whatever the noise-free fit's convergence left). The
 verdicts follow ``fit``'s rules: ``undetermined`` when a direction is free or a predicted interval is wider than
 ±10 mm; ``ambiguous`` when another joint would be rejected with probability below 95 %; ``determined``
 otherwise. White noise is assumed: serially correlated noise and skin motion widen real intervals beyond these.
@@ -52,9 +54,14 @@ def noise_free_fit(model, motion: str = "functional", n_frames: int = 1000, seed
 
 
 def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 1000, seed: int = 0,
-            fitted=None) -> dict:
+            fitted=None, exact_candidates: dict | None = None) -> dict:
     """joint -> predicted ``practical`` dict (see the module docstring) for `model` under `motion`; `fitted`:
-    :func:`noise_free_fit`'s output for the same arguments when the caller has it already."""
+    :func:`noise_free_fit`'s output for the same arguments when the caller has it already; `exact_candidates`:
+    joint -> the number of joints that explain any rigid data of the plan equally well, by the exact structural
+    verdict (``plan``'s ``candidates``: ERRATA E1's four for a revolute (2,1) with nothing beyond it). A
+    joint's closest rivals, that many minus one, tie exactly: on 200 noise-free frames of the minimal leg two of
+    the knee's three twins were still 1.4 mm² above the truth after 2000 iterations, crawling along the roll of a
+    thigh posed by two points, and would have been called rejected 22 % of the time."""
     if not (noise_mm > 0):
         raise InputError([f"--noise-mm {noise_mm}: a positive noise level (mm per coordinate)"])
     sim, tree = fitted if fitted is not None else noise_free_fit(model, motion, n_frames, seed)
@@ -72,15 +79,16 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
         se = {m: noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0))) for m, (_, g) in grads[j].items()}
         free = [m for m, (_, g) in grads[j].items() if best.cov.free(g)]
         rivals = []
-        for m, _, _ in tree.others:
-            if not _same(m, best, [j]):
-                gap = max(m.fit.rss - best.fit.rss, 0.0)
-                lam = gap / noise_mm ** 2
-                tie = gap <= TIE_RSS_MM2
-                rivals.append({"marker_distances": {k: round(v[0], 2) for k, v in m.distances[j].items()},
-                               "expected_delta_chi2": round(lam, 3), "ties_exactly": tie,
-                               "rejection_probability": 0.0 if tie else
-                               round(1.0 - float(chndtr(REJECT_CHI2, 1, max(lam, 1e-12))), 3)})
+        twins = max(int((exact_candidates or {}).get(j) or 1) - 1, 0)
+        differing = sorted((m for m, _, _ in tree.others if not _same(m, best, [j])), key=lambda m: m.fit.rss)
+        for k, m in enumerate(differing):
+            gap = max(m.fit.rss - best.fit.rss, 0.0)
+            lam = gap / noise_mm ** 2
+            tie = gap <= TIE_RSS_MM2 or k < twins
+            rivals.append({"marker_distances": {k_: round(v[0], 2) for k_, v in m.distances[j].items()},
+                           "expected_delta_chi2": round(lam, 3), "ties_exactly": tie,
+                           "rejection_probability": 0.0 if tie else
+                           round(1.0 - float(chndtr(REJECT_CHI2, 1, max(lam, 1e-12))), 3)})
         worst = max(se.items(), key=lambda kv: kv[1]) if se else (None, 0.0)
         if free:
             verdict, why = "undetermined", f"the motion leaves {', '.join(free)}'s distances free"

@@ -84,3 +84,24 @@ def test_the_prediction_starts_joints_below_an_ambiguous_one_as_fit_does(example
     assert callable(seen["restart"])
     seen["restart"]({})
     assert calls[-1] == {"fixed": {}}
+
+
+def test_the_structural_count_makes_the_closest_rivals_exact_twins(examples):
+    """With the exact verdict's count c (``plan``'s ``candidates``), a joint's c − 1 closest rivals tie exactly
+    (rejection probability 0) however far the noise-free fit left them; farther rivals keep the noncentral χ²
+    law; without a count, only a fit within TIE_RSS_MM2 ties."""
+    from identcheck.fit.predict import TIE_RSS_MM2, noise_free_fit
+
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    fitted = noise_free_fit(model, "functional", 120, 2)
+    plain = predict(model, 1.0, "functional", 120, 2, fitted=fitted)["knee_r"]["rivals"]
+    assert plain
+    for c in (1, 2, 4):
+        told = predict(model, 1.0, "functional", 120, 2, fitted=fitted, exact_candidates={"knee_r": c})["knee_r"]
+        rivals = told["rivals"]
+        gaps = [r["expected_delta_chi2"] for r in rivals]
+        assert gaps == sorted(gaps)
+        for k, (r, p) in enumerate(zip(rivals, sorted(plain, key=lambda r: r["expected_delta_chi2"]))):
+            twin = k < c - 1 or r["expected_delta_chi2"] <= TIE_RSS_MM2
+            assert r["ties_exactly"] == twin and (r["rejection_probability"] == 0.0 if twin else
+                                                  r["rejection_probability"] == p["rejection_probability"])
