@@ -45,26 +45,36 @@ def source_key() -> str:
     return h.hexdigest()[:20]
 
 
+def _load(path: Path):
+    """The pickled value at `path`, or None when it cannot be read or unpickled."""
+    try:
+        with open(path, "rb") as fh:
+            return pickle.load(fh)
+    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, TypeError, ValueError):
+        return None
+
+
+def _save(path: Path, value) -> None:
+    """Pickle `value` to `path` atomically (a temporary file replaced into place); skipped when it cannot be
+    written."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as tmp:
+            pickle.dump(value, tmp)
+        os.replace(tmp.name, path)
+    except OSError:
+        pass
+
+
 def cached(name: str, derive):
     """The derivation `name` from memory, else from disk, else from ``derive()`` (then saved)."""
     if name in _MEMO:
         return _MEMO[name]
     path = cache_dir() / f"{name}-{source_key()}.pickle"
-    result = None
-    try:
-        with open(path, "rb") as fh:
-            result = pickle.load(fh)
-    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, TypeError, ValueError):
-        result = None
+    result = _load(path)
     if result is None:
         result = derive()
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as tmp:
-                pickle.dump(result, tmp)
-            os.replace(tmp.name, path)
-        except OSError:
-            pass
+        _save(path, result)
     _MEMO[name] = result
     return result
 
@@ -112,21 +122,10 @@ def entry(name: str, key: str, item, compute):
     store = _MEMO.get(("entries", name, key))
     path = cache_dir() / f"{name}-{key}.pickle"
     if store is None:
-        try:
-            with open(path, "rb") as fh:
-                store = pickle.load(fh)
-            if not isinstance(store, dict):
-                store = {}
-        except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, TypeError, ValueError):
-            store = {}
+        store = _load(path)
+        store = store if isinstance(store, dict) else {}
         _MEMO[("entries", name, key)] = store
     if item not in store:
         store[item] = compute()
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as tmp:
-                pickle.dump(store, tmp)
-            os.replace(tmp.name, path)
-        except OSError:
-            pass
+        _save(path, store)
     return store[item]
