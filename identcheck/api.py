@@ -349,7 +349,7 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
         from identcheck.fit.marker_value import marker_value
         from identcheck.fit.predict import noise_free_fit, predict
 
-        fitted = noise_free_fit(m, practical_motion, frames, seed)
+        fitted = noise_free_fit(m, practical_motion, frames, seed, progress=progress)
         practical = predict(m, noise_mm, practical_motion, frames, seed, fitted=fitted,
                             exact_candidates={j: v["candidates"] for j, v in res.to_dict()["joints"].items()})
         best = fitted[1].best

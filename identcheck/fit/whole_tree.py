@@ -203,8 +203,10 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
     return combos[:cap], max(len(combos) - cap, 0) + unlisted, ""
 
 
-def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> TreeFit:
-    """Whole-tree maximum likelihood from every combination of closed-form candidates (see module doc)."""
+def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
+             starts_budget_s: float = STARTS_BUDGET_S) -> TreeFit:
+    """Whole-tree maximum likelihood from every combination of closed-form candidates (see module doc); no new
+    start after ``starts_budget_s`` seconds (those left out are counted in ``starts_left_out``)."""
     chain = skeleton_of(model, trial)
     data = trial.select(chain.labels).as_array()
     combos, left_out, why = _starts(chain, closed_form, restart, data)
@@ -213,7 +215,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None) -> Tr
     minima, problems, tried = [], [], 0
     t0 = time.monotonic()
     for k, combo in enumerate(combos):
-        if minima and time.monotonic() - t0 > STARTS_BUDGET_S:
+        if minima and time.monotonic() - t0 > starts_budget_s:
             left_out += len(combos) - k          # said in the report: fewer candidates were tried
             break
         tried += 1

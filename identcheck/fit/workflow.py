@@ -236,16 +236,18 @@ def report(model, fitted: dict, points: dict) -> dict:
     return {"joints": out}
 
 
-def fit_closed_then_tree(model, trial, progress=None):
+def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | None = None):
     """(closed-form estimates, their virtual points, the whole-tree fit): every joint started from the closed
     forms, and the joints whose closed form needs a candidate of an ambiguous joint above them started again
     from each of its candidates (the restart). What ``fit`` runs after its label screen, and what ``plan
-    --noise-mm`` linearises at."""
-    from identcheck.fit.whole_tree import fit_tree      # imported when used, as fit_trial's own imports
+    --noise-mm`` linearises at (``starts_budget_s``: seconds after which no new start is fitted, default
+    :data:`identcheck.fit.whole_tree.STARTS_BUDGET_S`)."""
+    from identcheck.fit.whole_tree import STARTS_BUDGET_S, fit_tree  # imported when used, as fit_trial's own imports
 
     fitted, points = fit_model(model, trial, progress=progress)
     tree = fit_tree(model, trial, fitted, progress=progress,
-                    restart=lambda fixed: fit_model(model, trial, fixed=fixed)[0])
+                    restart=lambda fixed: fit_model(model, trial, fixed=fixed)[0],
+                    starts_budget_s=STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s)
     return fitted, points, tree
 
 

@@ -68,7 +68,7 @@ def test_the_prediction_starts_joints_below_an_ambiguous_one_as_fit_does(example
     real_fit_tree, real_fit_model = whole_tree.fit_tree, workflow.fit_model
 
     def spy_tree(model, trial, closed, **kw):
-        seen["restart"] = kw.get("restart")
+        seen["restart"], seen["budget"] = kw.get("restart"), kw.get("starts_budget_s")
         return real_fit_tree(model, trial, closed, **kw)
 
     calls = []
@@ -81,6 +81,7 @@ def test_the_prediction_starts_joints_below_an_ambiguous_one_as_fit_does(example
     monkeypatch.setattr(workflow, "fit_model", spy_model)
     model = Model.from_toml(examples / "sparse_leg.toml")
     P.noise_free_fit(model, "functional", 100, 0)
+    assert seen["budget"] == P.STARTS_BUDGET_S > whole_tree.STARTS_BUDGET_S   # every one-joint change gets fitted
     assert callable(seen["restart"])
     seen["restart"]({})
     assert calls[-1] == {"fixed": {}}
@@ -96,6 +97,13 @@ def test_the_structural_count_makes_the_closest_rivals_exact_twins(examples):
     fitted = noise_free_fit(model, "functional", 120, 2)
     plain = predict(model, 1.0, "functional", 120, 2, fitted=fitted)["knee_r"]["rivals"]
     assert plain
+    sim, tree = fitted
+    assert not tree.starts_left_out and "rivals_note" not in predict(model, 1.0, "functional", 120, 2,
+                                                                     fitted=fitted)["knee_r"]
+    from dataclasses import replace
+
+    cut = predict(model, 1.0, "functional", 120, 2, fitted=(sim, replace(tree, starts_left_out=3)))["knee_r"]
+    assert cut["rivals_note"].startswith(f"3 of {tree.n_starts + 3} combinations")
     for c in (1, 2, 4):
         told = predict(model, 1.0, "functional", 120, 2, fitted=fitted, exact_candidates={"knee_r": c})["knee_r"]
         rivals = told["rivals"]
