@@ -46,7 +46,7 @@ STARTS_BUDGET_S = 600.0
 reports are the minima those starts reach, so each one-joint change of the candidates should be fitted. Pham's
 body at 1000 frames tried 6 of its 16 first starts in 90 s, and the twins of its right knee and of its elbows
 went unreported. The number of starts stays capped (:data:`identcheck.fit.whole_tree.MAX_STARTS`, or one per
-one-joint change), each one bounded in time; the starts left out are said (``rivals_note``)."""
+one-joint change), each one bounded in time; the one-joint changes left out are said (``rivals_note``)."""
 
 
 def noise_free_fit(model, motion: str = "functional", n_frames: int = 1000, seed: int = 0, progress=None):
@@ -114,8 +114,8 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
         out[j] = {"verdict": verdict, "reason": why, "predicted": True, "noise_mm": noise_mm, "motion": motion,
                   "frames": n_frames, "predicted_se_mm": {m: round(v, 4) for m, v in se.items()},
                   "rivals": rivals}
-        if tree.starts_left_out:
-            out[j]["rivals_note"] = (f"{tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations "
-                                     "of candidate starts were not fitted (a cap on their number or time): rivals "
-                                     "reached only from those are not listed")
+        if tree.one_joint_left_out:
+            out[j]["rivals_note"] = (f"{tree.one_joint_left_out} of the {tree.one_joint_starts} starts at one joint's "
+                                     f"other candidates were not fitted within {STARTS_BUDGET_S:g} s: rivals reached "
+                                     "only from those are not listed (fewer --frames fit faster)")
     return out

@@ -67,6 +67,8 @@ class TreeFit:
     problem: str = ""                               # why no whole-tree fit could be made ('' when one was)
     n_starts: int = 0
     starts_left_out: int = 0
+    one_joint_starts: int = 0       # the first combination's one-joint changes (each joint's other candidates)
+    one_joint_left_out: int = 0     # of which the time budget left this many unfitted
 
 
 def skeleton_of(model, trial) -> Skeleton:
@@ -165,8 +167,9 @@ def _by_changes(cands: dict, names: list, cap: int) -> tuple[list, int]:
     return head + rest, math.prod(sizes) - len(head) - len(rest)
 
 
-def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, str]:
-    """Start assignments (joint -> JointEstimate), how many were left out, and why none could be made.
+def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, str, int]:
+    """Start assignments (joint -> JointEstimate), how many were left out, why none could be made, and how many
+    of the assignments (after the first) change one joint's candidate.
     Every combination of the candidates of the ambiguous joints, those that change one joint of the first
     combination first (each joint's every candidate is tried, whatever the number of ambiguous joints: on
     a body with four hinges of four candidates each, their twins come before the 243 combinations that
@@ -188,7 +191,7 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
     if missing:
         ambiguous = [n for n in names if len(cands[n]) > 1]
         if not ambiguous or restart is None:
-            return [], 0, f"no closed-form start for {', '.join(missing)}"
+            return [], 0, f"no closed-form start for {', '.join(missing)}", 0
         combos = []
         for idx in itertools.product(*[range(len(cands[n])) for n in ambiguous]):
             if len(combos) >= MAX_STARTS:
@@ -198,9 +201,9 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
             if all(again.get(j, (None,))[0] is not None for j in chain.joints):
                 combos.append({j: again[j][0] for j in chain.joints})
         if not combos:
-            return [], 0, f"no closed-form start for {', '.join(missing)}, from any candidate of {', '.join(ambiguous)}"
-        cap, unlisted = MAX_STARTS, 0
-    return combos[:cap], max(len(combos) - cap, 0) + unlisted, ""
+            return [], 0, f"no closed-form start for {', '.join(missing)}, from any candidate of {', '.join(ambiguous)}", 0
+        cap, unlisted, singles = MAX_STARTS, 0, 0
+    return combos[:cap], max(len(combos) - cap, 0) + unlisted, "", singles
 
 
 def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
@@ -209,14 +212,15 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
     start after ``starts_budget_s`` seconds (those left out are counted in ``starts_left_out``)."""
     chain = skeleton_of(model, trial)
     data = trial.select(chain.labels).as_array()
-    combos, left_out, why = _starts(chain, closed_form, restart, data)
+    combos, left_out, why, singles = _starts(chain, closed_form, restart, data)
     if not combos:
         return TreeFit(None, problem=why)
-    minima, problems, tried = [], [], 0
+    minima, problems, tried, singles_cut = [], [], 0, 0
     t0 = time.monotonic()
     for k, combo in enumerate(combos):
         if minima and time.monotonic() - t0 > starts_budget_s:
             left_out += len(combos) - k          # said in the report: fewer candidates were tried
+            singles_cut = max(1 + singles - k, 0)
             break
         tried += 1
         if progress and len(combos) > 1:
@@ -235,7 +239,8 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
         fit = converged_fit(chain, data, state, progress)
         minima.append(minimum(fit, data, start=tuple(id(e) for e in combo.values())))
     if not minima:
-        return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out)
+        return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out,
+                       one_joint_starts=singles, one_joint_left_out=singles_cut)
     minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
     best = minima[0]
     scale = likelihood_scale(best)
@@ -248,7 +253,8 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
     others = [(with_model_error(m, model_error), delta, p) for m, delta, p in others]
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     best = _without_incidental_rolls(best, others, data, model_error, scale)
-    return TreeFit(best, others, n_starts=tried, starts_left_out=left_out)
+    return TreeFit(best, others, n_starts=tried, starts_left_out=left_out, one_joint_starts=singles,
+                   one_joint_left_out=singles_cut)
 
 
 def converged_fit(chain: Skeleton, data, state, progress=None, weights=None):

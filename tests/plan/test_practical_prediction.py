@@ -98,12 +98,12 @@ def test_the_structural_count_makes_the_closest_rivals_exact_twins(examples):
     plain = predict(model, 1.0, "functional", 120, 2, fitted=fitted)["knee_r"]["rivals"]
     assert plain
     sim, tree = fitted
-    assert not tree.starts_left_out and "rivals_note" not in predict(model, 1.0, "functional", 120, 2,
-                                                                     fitted=fitted)["knee_r"]
+    assert tree.one_joint_starts == 3 and not tree.one_joint_left_out      # the knee's three other candidates
+    assert "rivals_note" not in predict(model, 1.0, "functional", 120, 2, fitted=fitted)["knee_r"]
     from dataclasses import replace
 
-    cut = predict(model, 1.0, "functional", 120, 2, fitted=(sim, replace(tree, starts_left_out=3)))["knee_r"]
-    assert cut["rivals_note"].startswith(f"3 of {tree.n_starts + 3} combinations")
+    cut = predict(model, 1.0, "functional", 120, 2, fitted=(sim, replace(tree, one_joint_left_out=2)))["knee_r"]
+    assert cut["rivals_note"].startswith("2 of the 3 starts at one joint's other candidates were not fitted")
     for c in (1, 2, 4):
         told = predict(model, 1.0, "functional", 120, 2, fitted=fitted, exact_candidates={"knee_r": c})["knee_r"]
         rivals = told["rivals"]
