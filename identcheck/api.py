@@ -351,7 +351,7 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
 
         fitted = noise_free_fit(m, practical_motion, frames, seed, progress=progress)
         practical = predict(m, noise_mm, practical_motion, frames, seed, fitted=fitted,
-                            exact_candidates={j: v["candidates"] for j, v in res.to_dict()["joints"].items()})
+                            exact_candidates={j: v["candidates"] for j, v in res.joints.items()})
         best = fitted[1].best
         extra = ({"practical_suggestions": marker_value(m, best.fit, noise_mm, progress)} if best is not None else
                  {"practical_suggestions_note": "no whole-tree fit of the simulated capture to value markers on"})

@@ -138,13 +138,6 @@ def _symbolic_key() -> str:
     return files_key([here, here.parent / "joint_models.py", here.parents[1] / "symbols.py"])
 
 
-def _gens(m: JointModel) -> tuple:
-    c_len, c_ang = list(m.constants), list(m.constant_angles)
-    v_len, v_ang = list(m.per_sample_lengths), list(m.variables)
-    return tuple(c_len + [x for a in c_ang for x in (a.cos, a.sin)]
-                 + v_len + [x for a in v_ang for x in (a.cos, a.sin)])
-
-
 @lru_cache(maxsize=None)
 def symbolic(m: JointModel) -> _Symbolic:
     """Differentiate a model once: columns are constants then one sample's variables. Cached in memory and,
@@ -159,7 +152,8 @@ def _differentiate(m: JointModel) -> _Symbolic:
     """:func:`symbolic`'s work: SymPy differentiates each output by each column, and compiles the results."""
     c_len, c_ang = list(m.constants), list(m.constant_angles)
     v_len, v_ang = list(m.per_sample_lengths), list(m.variables)
-    gens = _gens(m)
+    gens = tuple(c_len + [x for a in c_ang for x in (a.cos, a.sin)]
+                 + v_len + [x for a in v_ang for x in (a.cos, a.sin)])
     lengths, angles = c_len + v_len, c_ang + v_ang
     columns = c_len + c_ang + v_len + v_ang      # constants, then one sample's variables
     poly = lambda e: sp.Poly(e, *gens, domain=QQ)

@@ -44,25 +44,25 @@ def qq_matrix(rows, ncols: int) -> flint.fmpq_mat:
     return flint.fmpq_mat(len(rows), ncols, [qq(v) for r in rows for v in r])
 
 
-def rref(rows, ncols: int) -> tuple[list, list]:
-    """(the non-zero rows of the reduced row echelon form as Fractions, the pivot columns) over QQ."""
-    if not rows or ncols == 0:
-        return [], []
-    R, rank = qq_matrix(rows, ncols).rref()
-    flat = R.entries()
-    out = [[to_fraction(flat[i * ncols + j]) for j in range(ncols)] for i in range(rank)]
-    pivots = [next(j for j in range(ncols) if out[i][j] != 0) for i in range(rank)]
-    return out, pivots
-
-
 def rowspace(rows, ncols: int) -> list:
-    """The non-zero rows of the reduced row echelon form, as ``flint.fmpq`` (for callers that go on computing
-    with them: :func:`rref` converts to ``Fraction``)."""
+    """The non-zero rows of the reduced row echelon form over QQ, as ``flint.fmpq`` (for callers that go on
+    computing with them; :func:`rref` gives them as ``Fraction`` with their pivots)."""
     if not rows or ncols == 0:
         return []
     R, rank = qq_matrix(rows, ncols).rref()
     flat = R.entries()
     return [flat[i * ncols:(i + 1) * ncols] for i in range(rank)]
+
+
+def _pivots(echelon: list) -> list:
+    """The pivot column of each non-zero row of a reduced row echelon form."""
+    return [next(j for j, v in enumerate(row) if v != 0) for row in echelon]
+
+
+def rref(rows, ncols: int) -> tuple[list, list]:
+    """(the non-zero rows of the reduced row echelon form as Fractions, the pivot columns) over QQ."""
+    echelon = rowspace(rows, ncols)
+    return [[to_fraction(v) for v in row] for row in echelon], _pivots(echelon)
 
 
 def rank(rows, ncols: int) -> int:
@@ -96,23 +96,12 @@ def left_nullspace(rows, ncols: int) -> list:
     return nullspace(transposed, n)
 
 
-def _pivots(M: flint.fmpq_mat) -> list:
-    """The pivot columns of ``M``'s reduced row echelon form."""
-    R, rank = M.rref()
-    flat, n = R.entries(), M.ncols()
-    out, j = [], 0
-    for i in range(rank):
-        while flat[i * n + j] == 0:
-            j += 1
-        out.append(j)
-    return out
-
-
 def maximal_minor(rows) -> tuple[int, list, list, Fraction]:
     """Rank over QQ, the pivot rows and columns of a non-zero maximal minor, and that minor's value."""
     ncols = len(rows[0])
     M = qq_matrix(rows, ncols)
-    col_piv, row_piv = _pivots(M), _pivots(M.transpose())
+    col_piv = _pivots(rowspace(rows, ncols))
+    row_piv = _pivots(rowspace([[rows[i][j] for i in range(len(rows))] for j in range(ncols)], len(rows)))
     r = len(col_piv)
     if not r:
         return 0, [], [], Fraction(1)
