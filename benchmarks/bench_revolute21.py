@@ -2,7 +2,9 @@
 
 Draws random true joints (seeded), five exact samples each, and times side by side:
 
-(a)  ``solve_batch(xyz, angles=False)``: batched, joint constants only;
+(a)  ``solve_batch(xyz, angles=False, compiled=False)``: batched NumPy, joint constants only;
+(a') the same through the compiled kernel (``compiled=True``, numba), on one thread and on every core, and
+     the verdicts of both on ``--identity-problems`` other problems (a million by default);
 (b)  ``solve_batch(xyz, angles=True)``: batched, plus per-sample θ, β and the check that each
      candidate rebuilds every sample;
 (c)  a Python loop calling ``identify(xyz)`` per problem (subset, rate extrapolated);
@@ -41,12 +43,13 @@ if str(ROOT) not in sys.path:  # allow running without PYTHONPATH
 
 from results_io import machine_info, write_json  # noqa: E402  (benchmarks/ is on sys.path)
 from identcheck.errors import DegenerateError  # noqa: E402
-from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, cos_and_l, is_real,  # noqa: E402
-                                         generated, identify, solve_batch)
+from identcheck.solve.revolute21 import (IMAG_TOL, N_UNKNOWNS, REAL_TOL, compiled_available, cos_and_l,  # noqa: E402
+                                         generated, identify, is_real, solve_batch)
 
 KEY = "revolute21"
 TARGET_RATE = 1e6       # five-sample identifications per second, batched
 TARGET_SPEEDUP = 100.0  # batched vs the per-problem loop
+TARGET_COMPILED = 5e6   # the compiled kernel, every core
 HIT_TOL = 1e-8          # truth "found": closest valid candidate within this (see scaled_error)
 
 
@@ -215,7 +218,7 @@ def run(args) -> dict:
     load_before = os.getloadavg()
 
     # warm-up: every path once on a few problems
-    solve_batch(xyz[:2000], angles=False)
+    solve_batch(xyz[:2000], angles=False, compiled=False)
     solve_batch(xyz[:2000], angles=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -230,7 +233,7 @@ def run(args) -> dict:
         rows.append({"key": key, "label": label, "n_timed": int(n_timed), "seconds": seconds,
                      "rate_per_s": n_timed / seconds, **(extra or {})})
 
-    t, ts, res_a = best_of(lambda: solve_batch(xyz, angles=False))
+    t, ts, res_a = best_of(lambda: solve_batch(xyz, angles=False, compiled=False))
     row("a", "solve_batch(angles=False), batched", n, t, {"all_times_s": ts})
     t, ts, res_b = best_of(lambda: solve_batch(xyz, angles=True))
     row("b", "solve_batch(angles=True), batched + θ, β, reproduction", n, t, {"all_times_s": ts})
@@ -290,6 +293,10 @@ def run(args) -> dict:
         row("e", "sympy.nsolve, 15 unknowns, started near the truth", args.nsolve, t_total,
             {"runs": e_rows})
 
+    compiled = compiled_rows(xyz, args) if compiled_available() else {"available": False}
+    for rw in compiled.get("rows", []):
+        row(rw.pop("key"), rw.pop("label"), n, rw.pop("seconds"), rw)
+
     load_after = os.getloadavg()
     rate_a = rows[0]["rate_per_s"]
     for rw in rows:
@@ -336,6 +343,11 @@ def run(args) -> dict:
         "speedup_target": TARGET_SPEEDUP,
     }
     targets["speedup_met"] = met(targets["speedup_a_over_d1"], TARGET_SPEEDUP)
+    if "a_compiled" in by:
+        targets.update({"rate_compiled_per_s": by["a_compiled"]["rate_per_s"], "rate_compiled_target_per_s": TARGET_COMPILED,
+                        "rate_compiled_met": met(by["a_compiled"]["rate_per_s"], TARGET_COMPILED),
+                        "speedup_compiled_over_a": by["a_compiled"]["rate_per_s"] / by["a"]["rate_per_s"],
+                        "compiled_verdicts_identical": compiled["identity"]["verdict_mismatches"] == 0})
     return {
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "config": {"problems": n, "samples_per_problem": int(xyz.shape[1]), "loop_subset": m,
@@ -343,8 +355,36 @@ def run(args) -> dict:
                    "draws": "d,l ~ U(-200,200) mm; r,rho ~ U(30,200) mm; alpha ~ U(0.3, pi-0.3); theta,beta ~ U(-pi,pi)",
                    "timing": "time.perf_counter, best of 3 after warm-up (batched and loops); nsolve: sum of single runs", "forward_vs_explicit_dh_mm": fwd_gap},
         "machine": machine_info(loadavg_before=list(load_before), loadavg_after=list(load_after)),
-        "rows": rows, "accuracy": acc, "targets": targets,
+        "rows": rows, "accuracy": acc, "targets": targets, "compiled": {k: v for k, v in compiled.items() if k != "rows"},
     }
+
+
+def compiled_rows(xyz, args) -> dict:
+    """The compiled kernel (numba) beside the NumPy path: rates with one thread and with every core on the same
+    problems as (a), and the verdicts of both paths on ``args.identity_problems`` other random problems."""
+    import numba
+
+    solve_batch(xyz[:2000], angles=False, compiled=True)            # compile, or load numba's cache
+    rows, threads = [], numba.get_num_threads()
+    for nt in sorted({1, threads}):
+        numba.set_num_threads(nt)
+        t, ts, _ = best_of(lambda: solve_batch(xyz, angles=False, compiled=True))
+        rows.append({"key": "a_compiled_1" if nt == 1 and threads > 1 else "a_compiled",
+                     "label": f"solve_batch(angles=False, compiled=True), {nt} thread(s)", "seconds": t,
+                     "all_times_s": ts, "threads": nt})
+    numba.set_num_threads(threads)
+    big = draw_problems(args.identity_problems, args.seed + 7)["xyz"]
+    mismatch, gap, chunk = 0, 0.0, 200_000
+    for i in range(0, len(big), chunk):
+        ref = solve_batch(big[i:i + chunk], angles=False, compiled=False)
+        got = solve_batch(big[i:i + chunk], angles=False, compiled=True)
+        mismatch += int(np.sum(np.any(ref.valid != got.valid, axis=1)))
+        both = ref.valid & got.valid
+        if both.any():
+            gap = max(gap, float(np.max(scaled_error(got.params[both][:, None], ref.params[both], big[i:i + chunk][np.nonzero(both)[0]]))))
+    return {"available": True, "rows": rows,
+            "identity": {"problems": len(big), "verdict_mismatches": mismatch, "max_scaled_param_gap": gap,
+                         "seed": args.seed + 7}}
 
 
 def classify_misses(res, best, prob, g, limit=12) -> dict:
@@ -392,6 +432,15 @@ def table(result: dict) -> str:
                      f"(missed {a['truth_missed']}, no valid candidate {a['no_valid_candidate']}); "
                      f"error median {a['median_error']:.2e}, max (finite) {a['max_error_finite']:.2e}; "
                      f"valid candidates {a['n_valid_distribution']}; misses by cause {a['misses']['by_cause']}")
+    if "rate_compiled_per_s" in tg:
+        ident = result["compiled"]["identity"]
+        lines.append(f"target >= {tg['rate_compiled_target_per_s']:.0e}/s compiled: {tg['rate_compiled_per_s']:,.0f}/s -> "
+                     + ("MET" if tg["rate_compiled_met"] else "NOT MET")
+                     + f" ({tg['speedup_compiled_over_a']:.1f}x (a) in this run); verdicts on {ident['problems']:,} "
+                     f"other problems: {ident['verdict_mismatches']} differ, constants within "
+                     f"{ident['max_scaled_param_gap']:.1e} (scaled)")
+    else:
+        lines.append("compiled kernel: numba not installed (pip install identcheck[fast])")
     b = result["accuracy"]["b"]
     lines.append(f"(b) max θ/β error when found {b['max_angle_error_rad_when_found']:.2e} rad; "
                  f"max reproduction residual {b['max_reproduction_residual_mm']:.2e} mm")
@@ -429,12 +478,16 @@ def main(argv=None) -> int:
     ap.add_argument("--loop", type=int, default=2000, help="problems for the per-problem loops (c), (d) (default 2000)")
     ap.add_argument("--nsolve", type=int, default=3, help="problems for sympy.nsolve (e) (default 3; 0 skips)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--identity-problems", type=int, default=1_000_000,
+                    help="other random problems on which the compiled kernel's verdicts are compared with NumPy's "
+                         "(default 1000000)")
     ap.add_argument("--quick", action="store_true",
                     help="small run (20000 / 200 / 1) stored under 'revolute21_quick'")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     args = ap.parse_args(argv)
     if args.quick:
         args.problems, args.loop, args.nsolve = min(args.problems, 20_000), min(args.loop, 200), min(args.nsolve, 1)
+        args.identity_problems = min(args.identity_problems, 20_000)
     if args.problems < 2000 or args.loop < 1:
         ap.error("--problems must be at least 2000 and --loop at least 1")
     result = finite(run(args))

@@ -78,7 +78,7 @@ class NumericFunction:
 
 
 def source(exprs, groups, backend="numpy", name="f") -> str:
-    """The text of a Python function ``name(*symbols)`` returning the list of ``exprs``.
+    """The text of a Python function ``name(*symbols)`` returning the tuple of ``exprs``.
 
     SymPy's printer for ``backend`` with common subexpressions eliminated (``lambdify``'s code, with
     fully qualified names: ``numpy.sqrt``, ``mpmath.mpf``), so the text needs only ``import numpy``
@@ -109,7 +109,10 @@ def source(exprs, groups, backend="numpy", name="f") -> str:
     if not modules <= {backend}:
         raise ValueError(f"{name}: the printed code needs modules {sorted(modules)}, not only {backend}")
     text, n = re.subn(r"\Adef _lambdifygenerated\(", f"def {name}(", inspect.getsource(f).strip() + "\n")
-    if n != 1:
+    # a tuple, not lambdify's list: the same values, and a compiler (numba) keeps a tuple in registers where a
+    # list would be allocated on every call
+    text, m = re.subn(r"^(\s*)return \[(.*)\]$", r"\1return (\2,)", text, flags=re.M)
+    if n != 1 or m != 1:
         raise RuntimeError(f"unexpected lambdify output for {name}:\n{text}")
     return text
 

@@ -32,6 +32,7 @@ SLOTS = 6  # 3 roots of (13) × 2 signs of cos α
 CHUNK = 16384        # problems per block, constants only
 CHUNK_ANGLES = 4096  # problems per block with per-sample angles (arrays × samples × slots)
 REAL_TOL = 1e-9      # scaled units: r², sin²α, ρ² must exceed it (ρ²: −it) for a real joint
+COMPILED_MIN_PROBLEMS = 200_000  # solve_batch's default: the compiled kernel from this many problems on
 IMAG_TOL = 1e-5      # a root of (13) with |Im| <= IMAG_TOL·(1 + |Re|) counts as real
 ROUND = 1e4 * np.finfo(float).eps  # rounding slack per unit of conditioning (_cos2_slack)
 ROUNDING_RESIDUAL = 1e-9  # float64 reproduction residuals below this × scale are rounding (_relabel)
@@ -124,8 +125,17 @@ def _check_samples(xyz, n_min=N_UNKNOWNS):
     return xyz
 
 
-def solve_batch(xyz, *, angles=True, rel_tol=1e-6) -> BatchResult:
-    """Identify many problems at once (NumPy float64).
+def compiled_available() -> bool:
+    """Whether the compiled kernel (:mod:`identcheck.solve.revolute21_compiled`, numba) can be used here."""
+    try:
+        from identcheck.solve import revolute21_compiled  # noqa: F401
+    except ImportError:             # numba not installed, or the generated code stale
+        return False
+    return True
+
+
+def solve_batch(xyz, *, angles=True, rel_tol=1e-6, compiled: bool | None = None) -> BatchResult:
+    """Identify many problems at once (float64).
 
     Parameters
     ----------
@@ -137,11 +147,23 @@ def solve_batch(xyz, *, angles=True, rel_tol=1e-6) -> BatchResult:
         Without it, ``valid`` only says that the constants are real.
     rel_tol : float
         Tolerance relative to the sample scale for the reproduction check.
+    compiled : bool, optional
+        Run the constants (``angles=False``, five samples) through the compiled kernel
+        (:mod:`identcheck.solve.revolute21_compiled`, needs numba: ``pip install identcheck[fast]``): the same
+        verdicts, several times the rate. True requires it (an error when numba is missing); False never uses
+        it; None (default) uses it when it is installed and the batch has at least :data:`COMPILED_MIN_PROBLEMS`
+        problems, where the rate repays loading the compiled code (about half a second once per process).
     """
     xyz = _check_samples(xyz)
     lead, N = xyz.shape[:-2], xyz.shape[-2]
     flat = xyz.reshape(-1, N, 3)
     n = len(flat)
+    if compiled and not compiled_available():
+        raise InputError("solve_batch(compiled=True) needs numba (pip install identcheck[fast])")
+    if compiled is None:
+        compiled = n >= COMPILED_MIN_PROBLEMS and compiled_available()
+    if compiled and not angles and N == N_UNKNOWNS:
+        return _solve_compiled(flat, lead)
     out = {"params": np.empty((n, SLOTS, 5)), "valid": np.empty((n, SLOTS), dtype=bool),
            "residual": np.full((n, SLOTS), np.nan), "Z": np.empty((n, N_UNKNOWNS)), "pivot_ratio": np.empty(n),
            "theta": np.full((n, SLOTS, N), np.nan) if angles else None,
@@ -151,6 +173,22 @@ def solve_batch(xyz, *, angles=True, rel_tol=1e-6) -> BatchResult:
         block = {k: None if a is None else a[i:i + step] for k, a in out.items()}
         _solve_chunk(flat[i:i + step], angles, rel_tol, block)
     return BatchResult(**{k: None if a is None else a.reshape(lead + a.shape[1:]) for k, a in out.items()})
+
+
+def _solve_compiled(flat, lead) -> BatchResult:
+    """:func:`solve_batch` without angles through the compiled kernel; the problems it leaves (a cubic with one
+    real root by its computed discriminant) go through the NumPy path."""
+    from identcheck.solve.revolute21_compiled import solve_constants
+
+    params, valid, Z, ratio, handled = solve_constants(flat, IMAG_TOL, REAL_TOL, ROUND)
+    left = np.flatnonzero(~handled)
+    if left.size:
+        rest = solve_batch(flat[left], angles=False, compiled=False)
+        params[left], valid[left], Z[left], ratio[left] = rest.params, rest.valid, rest.Z, rest.pivot_ratio
+    residual = np.full(valid.shape, np.nan)
+    return BatchResult(**{k: None if a is None else a.reshape(lead + a.shape[1:]) for k, a in
+                          dict(params=params, valid=valid, residual=residual, theta=None, beta=None, Z=Z,
+                               pivot_ratio=ratio).items()})
 
 
 def _solve_chunk(xyz, angles, rel_tol, out):

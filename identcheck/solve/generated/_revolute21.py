@@ -7,7 +7,7 @@ backend and name to (function, argument groups, number of values).
 import mpmath
 import numpy
 
-KEY = 'f981ccd08d89d7a3dba4'  # identcheck.solve.generated.derivation_key() of the sources this was printed from
+KEY = 'bd2ae46bda6f8c45c3a2'  # identcheck.solve.generated.derivation_key() of the sources this was printed from
 SYMPY = '1.14.0'  # the SymPy that printed it (not part of the key)
 FACTS = {'constant_column': 3}
 
@@ -18,23 +18,23 @@ def numpy_m_row(x, y, z):
     x2 = z**2
     x3 = x0 + x1 + x2
     x4 = 4*z
-    return [-x3*x4, 2*x0 + 2*x1 + 2*x2, -x4, 1, 4*x2, -x3**2]
+    return (-x3*x4, 2*x0 + 2*x1 + 2*x2, -x4, 1, 4*x2, -x3**2,)
 
 
 def numpy_cubic(Z1, Z2, Z3, Z4, Z5):
     x0 = 2*Z5
-    return [-1, Z2 + x0, -4*Z1*Z3 + Z4, 2*Z1**2*Z4 - Z2*Z4 + 2*Z3**2 - Z4*x0]
+    return (-1, Z2 + x0, -4*Z1*Z3 + Z4, 2*Z1**2*Z4 - Z2*Z4 + 2*Z3**2 - Z4*x0,)
 
 
 def numpy_back(Q, Z1, Z2, Z3, Z4, Z5):
     x0 = Q - Z2
     x1 = (Z1**2 - Z5)**(-1.0)
     x2 = (1/2)*x1
-    return [(1/2)*x0, -x0*x2, x2*(Q*Z1 - Z3), (1/4)*x1*(Q**2 - Z4)]
+    return ((1/2)*x0, -x0*x2, x2*(Q*Z1 - Z3), (1/4)*x1*(Q**2 - Z4),)
 
 
 def numpy_rho2(Q, Z1, Z2, Z3, Z4, Z5, l):
-    return [-Q + Z1**2 - l**2 + (1/2)*(Q - Z2)]
+    return (-Q + Z1**2 - l**2 + (1/2)*(Q - Z2),)
 
 
 def numpy_theta(x, y, z, d, r, l, rho, c_alpha, s_alpha):
@@ -43,7 +43,7 @@ def numpy_theta(x, y, z, d, r, l, rho, c_alpha, s_alpha):
     x2 = (c_alpha*d - c_alpha*z + l)/s_alpha
     x3 = r**(-1.0)
     x4 = d**2 - 2*d*z - l**2 + r**2 - rho**2 + x0 + z**2
-    return [x1*((1/2)*x*x3*x4 - x2*y), x1*(x*x2 + (1/2)*x3*x4*y)]
+    return (x1*((1/2)*x*x3*x4 - x2*y), x1*(x*x2 + (1/2)*x3*x4*y),)
 
 
 def numpy_local(x, y, z, d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta):
@@ -52,7 +52,7 @@ def numpy_local(x, y, z, d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta):
     x2 = -d + z
     x3 = c_theta*x1
     x4 = s_theta*x0
-    return [c_theta*x0 + s_theta*x1, c_alpha*x3 - c_alpha*x4 + s_alpha*x2, c_alpha*x2 - s_alpha*x3 + s_alpha*x4]
+    return (c_theta*x0 + s_theta*x1, c_alpha*x3 - c_alpha*x4 + s_alpha*x2, c_alpha*x2 - s_alpha*x3 + s_alpha*x4,)
 
 
 def numpy_forward(d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta, c_beta, s_beta):
@@ -60,7 +60,7 @@ def numpy_forward(d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta, c_beta, s_be
     x1 = l*s_alpha
     x2 = rho*s_beta
     x3 = c_alpha*x2
-    return [c_theta*r + c_theta*x0 + s_theta*x1 - s_theta*x3, -c_theta*x1 + c_theta*x3 + r*s_theta + s_theta*x0, c_alpha*l + d + s_alpha*x2]
+    return (c_theta*r + c_theta*x0 + s_theta*x1 - s_theta*x3, -c_theta*x1 + c_theta*x3 + r*s_theta + s_theta*x0, c_alpha*l + d + s_alpha*x2,)
 
 
 def numpy_dist2(h, d, r, l, rho, c_alpha, s_alpha):
@@ -68,7 +68,7 @@ def numpy_dist2(h, d, r, l, rho, c_alpha, s_alpha):
     x1 = h**2
     x2 = 2*d*h
     x3 = c_alpha**2
-    return [r**2 - x0*x3 + x0 - x1*x3 + x1 + x2*x3 - x2]
+    return (r**2 - x0*x3 + x0 - x1*x3 + x1 + x2*x3 - x2,)
 
 
 def mpmath_m_row(x, y, z):
@@ -77,23 +77,23 @@ def mpmath_m_row(x, y, z):
     x2 = z**2
     x3 = x0 + x1 + x2
     x4 = 4*z
-    return [-x3*x4, 2*x0 + 2*x1 + 2*x2, -x4, 1, 4*x2, -x3**2]
+    return (-x3*x4, 2*x0 + 2*x1 + 2*x2, -x4, 1, 4*x2, -x3**2,)
 
 
 def mpmath_cubic(Z1, Z2, Z3, Z4, Z5):
     x0 = 2*Z5
-    return [-1, Z2 + x0, -4*Z1*Z3 + Z4, 2*Z1**2*Z4 - Z2*Z4 + 2*Z3**2 - Z4*x0]
+    return (-1, Z2 + x0, -4*Z1*Z3 + Z4, 2*Z1**2*Z4 - Z2*Z4 + 2*Z3**2 - Z4*x0,)
 
 
 def mpmath_back(Q, Z1, Z2, Z3, Z4, Z5):
     x0 = Q - Z2
     x1 = 1/(Z1**2 - Z5)
     x2 = (mpmath.mpf(1)/mpmath.mpf(2))*x1
-    return [(mpmath.mpf(1)/mpmath.mpf(2))*x0, -x0*x2, x2*(Q*Z1 - Z3), (mpmath.mpf(1)/mpmath.mpf(4))*x1*(Q**2 - Z4)]
+    return ((mpmath.mpf(1)/mpmath.mpf(2))*x0, -x0*x2, x2*(Q*Z1 - Z3), (mpmath.mpf(1)/mpmath.mpf(4))*x1*(Q**2 - Z4),)
 
 
 def mpmath_rho2(Q, Z1, Z2, Z3, Z4, Z5, l):
-    return [-Q + Z1**2 - l**2 + (mpmath.mpf(1)/mpmath.mpf(2))*(Q - Z2)]
+    return (-Q + Z1**2 - l**2 + (mpmath.mpf(1)/mpmath.mpf(2))*(Q - Z2),)
 
 
 def mpmath_theta(x, y, z, d, r, l, rho, c_alpha, s_alpha):
@@ -102,7 +102,7 @@ def mpmath_theta(x, y, z, d, r, l, rho, c_alpha, s_alpha):
     x2 = (c_alpha*d - c_alpha*z + l)/s_alpha
     x3 = 1/r
     x4 = d**2 - 2*d*z - l**2 + r**2 - rho**2 + x0 + z**2
-    return [x1*((mpmath.mpf(1)/mpmath.mpf(2))*x*x3*x4 - x2*y), x1*(x*x2 + (mpmath.mpf(1)/mpmath.mpf(2))*x3*x4*y)]
+    return (x1*((mpmath.mpf(1)/mpmath.mpf(2))*x*x3*x4 - x2*y), x1*(x*x2 + (mpmath.mpf(1)/mpmath.mpf(2))*x3*x4*y),)
 
 
 def mpmath_local(x, y, z, d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta):
@@ -111,7 +111,7 @@ def mpmath_local(x, y, z, d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta):
     x2 = -d + z
     x3 = c_theta*x1
     x4 = s_theta*x0
-    return [c_theta*x0 + s_theta*x1, c_alpha*x3 - c_alpha*x4 + s_alpha*x2, c_alpha*x2 - s_alpha*x3 + s_alpha*x4]
+    return (c_theta*x0 + s_theta*x1, c_alpha*x3 - c_alpha*x4 + s_alpha*x2, c_alpha*x2 - s_alpha*x3 + s_alpha*x4,)
 
 
 def mpmath_forward(d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta, c_beta, s_beta):
@@ -119,7 +119,7 @@ def mpmath_forward(d, r, l, rho, c_alpha, s_alpha, c_theta, s_theta, c_beta, s_b
     x1 = l*s_alpha
     x2 = rho*s_beta
     x3 = c_alpha*x2
-    return [c_theta*r + c_theta*x0 + s_theta*x1 - s_theta*x3, -c_theta*x1 + c_theta*x3 + r*s_theta + s_theta*x0, c_alpha*l + d + s_alpha*x2]
+    return (c_theta*r + c_theta*x0 + s_theta*x1 - s_theta*x3, -c_theta*x1 + c_theta*x3 + r*s_theta + s_theta*x0, c_alpha*l + d + s_alpha*x2,)
 
 
 def mpmath_dist2(h, d, r, l, rho, c_alpha, s_alpha):
@@ -127,7 +127,7 @@ def mpmath_dist2(h, d, r, l, rho, c_alpha, s_alpha):
     x1 = h**2
     x2 = 2*d*h
     x3 = c_alpha**2
-    return [r**2 - x0*x3 + x0 - x1*x3 + x1 + x2*x3 - x2]
+    return (r**2 - x0*x3 + x0 - x1*x3 + x1 + x2*x3 - x2,)
 
 
 FUNCTIONS = {

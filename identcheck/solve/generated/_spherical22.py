@@ -7,7 +7,7 @@ backend and name to (function, argument groups, number of values).
 import mpmath
 import numpy
 
-KEY = 'f981ccd08d89d7a3dba4'  # identcheck.solve.generated.derivation_key() of the sources this was printed from
+KEY = 'bd2ae46bda6f8c45c3a2'  # identcheck.solve.generated.derivation_key() of the sources this was printed from
 SYMPY = '1.14.0'  # the SymPy that printed it (not part of the key)
 FACTS = {'n_unknowns': 9}
 
@@ -62,12 +62,12 @@ def numpy_m_row(x1, y1, z1, x2, y2, z2):
     x48 = (1/2)*x4
     x49 = (1/2)*x5
     x50 = (1/2)*x15
-    return [-x11*x9 + x17 + x4 + x6 - x8*x9, x11 - x18 - x19 + x8, x1*x2*z1 - x20 - x21 + y1*y2*z1, -x0*x18 - x0*x19 - x0*x30 + x10*x18 + x10*x20 + x10*x3*z1 + x11*x13 - x12*x20 - x12*x21 - x12*x31 + x13*x8 - x15*x20 - x15*x21 - x15*x31 - x18*x5 - x19*x5 + x19*x7 + x21*x7 + x23*z1 + x25*z2 + x27*z1 + x29*z2 + x3*x7*z1 - x30*x5, (1/4)*x12 + (1/4)*x15, -1/2*x10 - 1/2*x7, -1/2*x10*x12 - 1/2*x10*x3 - 1/2*x15*x7 + (1/2)*x17 - 1/2*x23 - 1/2*x27 - 1/2*x3*x7 + (1/2)*x32 + (1/2)*x33 + (1/2)*x34 + (1/2)*x35, (1/4)*x0 + (1/4)*x5, -1/2*x0*x10 - 1/2*x10*x13 - 1/2*x13*x7 - 1/2*x25 - 1/2*x29 + (1/2)*x32 + (1/2)*x33 + (1/2)*x34 + (1/2)*x35 + (1/2)*x4 - 1/2*x5*x7 + (1/2)*x6, (1/2)*x0*x12*y1*y2 + (1/2)*x0*x26*y1 + (1/2)*x0*x3*y1*y2 + (1/2)*x1*x13*x15*x2 + (1/2)*x1*x13*x2*x3 + (1/2)*x1*x13*x22 + (1/2)*x1*x15*x2*x5 + (1/2)*x1*x2*x3*x5 + (1/2)*x1*x22*x5 + (1/2)*x12*x13*y1*y2 + (1/2)*x12*x28*y2 - x12*x40 - x12*x48 - 1/2*x12*x6 + (1/2)*x13*x26*y1 + (1/2)*x13*x3*y1*y2 - x14*x47 - x14*x49 + (1/2)*x15*x2*x24 - x15*x40 - x15*x46 - x15*x48 - x16*x47 - x16*x49 + (1/2)*x2*x24*x3 + (1/2)*x22*x24 + (1/2)*x26*x28 + (1/2)*x28*x3*y2 - x33*x49 - x34*x50 - x36*x37 - x36*x44 - x37*x38 - x37*x39 - x38*x44 - x39*x44 - x41*x42 - x41*x45 - x42*x43 - x43*x45 - x46*x5 - x50*x6]
+    return (-x11*x9 + x17 + x4 + x6 - x8*x9, x11 - x18 - x19 + x8, x1*x2*z1 - x20 - x21 + y1*y2*z1, -x0*x18 - x0*x19 - x0*x30 + x10*x18 + x10*x20 + x10*x3*z1 + x11*x13 - x12*x20 - x12*x21 - x12*x31 + x13*x8 - x15*x20 - x15*x21 - x15*x31 - x18*x5 - x19*x5 + x19*x7 + x21*x7 + x23*z1 + x25*z2 + x27*z1 + x29*z2 + x3*x7*z1 - x30*x5, (1/4)*x12 + (1/4)*x15, -1/2*x10 - 1/2*x7, -1/2*x10*x12 - 1/2*x10*x3 - 1/2*x15*x7 + (1/2)*x17 - 1/2*x23 - 1/2*x27 - 1/2*x3*x7 + (1/2)*x32 + (1/2)*x33 + (1/2)*x34 + (1/2)*x35, (1/4)*x0 + (1/4)*x5, -1/2*x0*x10 - 1/2*x10*x13 - 1/2*x13*x7 - 1/2*x25 - 1/2*x29 + (1/2)*x32 + (1/2)*x33 + (1/2)*x34 + (1/2)*x35 + (1/2)*x4 - 1/2*x5*x7 + (1/2)*x6, (1/2)*x0*x12*y1*y2 + (1/2)*x0*x26*y1 + (1/2)*x0*x3*y1*y2 + (1/2)*x1*x13*x15*x2 + (1/2)*x1*x13*x2*x3 + (1/2)*x1*x13*x22 + (1/2)*x1*x15*x2*x5 + (1/2)*x1*x2*x3*x5 + (1/2)*x1*x22*x5 + (1/2)*x12*x13*y1*y2 + (1/2)*x12*x28*y2 - x12*x40 - x12*x48 - 1/2*x12*x6 + (1/2)*x13*x26*y1 + (1/2)*x13*x3*y1*y2 - x14*x47 - x14*x49 + (1/2)*x15*x2*x24 - x15*x40 - x15*x46 - x15*x48 - x16*x47 - x16*x49 + (1/2)*x2*x24*x3 + (1/2)*x22*x24 + (1/2)*x26*x28 + (1/2)*x28*x3*y2 - x33*x49 - x34*x50 - x36*x37 - x36*x44 - x37*x38 - x37*x39 - x38*x44 - x39*x44 - x41*x42 - x41*x45 - x42*x43 - x43*x45 - x46*x5 - x50*x6,)
 
 
 def numpy_back(Z1, Z2, Z3, Z4, Z5, Z6, Z7, Z8, Z9):
     x0 = Z4**2
-    return [Z4, 2*Z1 - 2*x0, -Z7 + x0, -Z9 + x0]
+    return (Z4, 2*Z1 - 2*x0, -Z7 + x0, -Z9 + x0,)
 
 
 def numpy_theta(x1, y1, z1, x2, y2, z2, d, r, rho1, rho2):
@@ -75,7 +75,7 @@ def numpy_theta(x1, y1, z1, x2, y2, z2, d, r, rho1, rho2):
     x3 = -d*z2 - 1/2*rho2**2 + x0 + (1/2)*x2**2 + (1/2)*y2**2 + (1/2)*z2**2
     x4 = -d*z1 - 1/2*rho1**2 + x0 + (1/2)*x1**2 + (1/2)*y1**2 + (1/2)*z1**2
     x5 = 1/(r*(x1*y2 - x2*y1))
-    return [x5*(-x3*y1 + x4*y2), x5*(x1*x3 - x2*x4)]
+    return (x5*(-x3*y1 + x4*y2), x5*(x1*x3 - x2*x4),)
 
 
 def numpy_forward(d, r, rho1, rho2, c_gamma, s_gamma, c_theta, s_theta, c_phi, s_phi, c_psi, s_psi, c_xi, s_xi):
@@ -88,7 +88,7 @@ def numpy_forward(d, r, rho1, rho2, c_gamma, s_gamma, c_theta, s_theta, c_phi, s
     x6 = c_xi*s_phi
     x7 = c_psi*x6 + x5
     x8 = c_xi*s_psi
-    return [rho1*x3 + x0, rho1*x7 + x4, d - rho1*x8, rho2*(c_gamma*x3 + s_gamma*(-c_psi*x5 - x6)) + x0, rho2*(c_gamma*x7 + s_gamma*(-c_psi*x1 + x2)) + x4, d + rho2*(-c_gamma*x8 + s_gamma*s_psi*s_xi)]
+    return (rho1*x3 + x0, rho1*x7 + x4, d - rho1*x8, rho2*(c_gamma*x3 + s_gamma*(-c_psi*x5 - x6)) + x0, rho2*(c_gamma*x7 + s_gamma*(-c_psi*x1 + x2)) + x4, d + rho2*(-c_gamma*x8 + s_gamma*s_psi*s_xi),)
 
 
 def mpmath_m_row(x1, y1, z1, x2, y2, z2):
@@ -141,12 +141,12 @@ def mpmath_m_row(x1, y1, z1, x2, y2, z2):
     x48 = (mpmath.mpf(1)/mpmath.mpf(2))*x4
     x49 = (mpmath.mpf(1)/mpmath.mpf(2))*x5
     x50 = (mpmath.mpf(1)/mpmath.mpf(2))*x15
-    return [-x11*x9 + x17 + x4 + x6 - x8*x9, x11 - x18 - x19 + x8, x1*x2*z1 - x20 - x21 + y1*y2*z1, -x0*x18 - x0*x19 - x0*x30 + x10*x18 + x10*x20 + x10*x3*z1 + x11*x13 - x12*x20 - x12*x21 - x12*x31 + x13*x8 - x15*x20 - x15*x21 - x15*x31 - x18*x5 - x19*x5 + x19*x7 + x21*x7 + x23*z1 + x25*z2 + x27*z1 + x29*z2 + x3*x7*z1 - x30*x5, (mpmath.mpf(1)/mpmath.mpf(4))*x12 + (mpmath.mpf(1)/mpmath.mpf(4))*x15, -mpmath.mpf(1)/mpmath.mpf(2)*x10 - mpmath.mpf(1)/mpmath.mpf(2)*x7, -mpmath.mpf(1)/mpmath.mpf(2)*x10*x12 - mpmath.mpf(1)/mpmath.mpf(2)*x10*x3 - mpmath.mpf(1)/mpmath.mpf(2)*x15*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x17 - mpmath.mpf(1)/mpmath.mpf(2)*x23 - mpmath.mpf(1)/mpmath.mpf(2)*x27 - mpmath.mpf(1)/mpmath.mpf(2)*x3*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x32 + (mpmath.mpf(1)/mpmath.mpf(2))*x33 + (mpmath.mpf(1)/mpmath.mpf(2))*x34 + (mpmath.mpf(1)/mpmath.mpf(2))*x35, (mpmath.mpf(1)/mpmath.mpf(4))*x0 + (mpmath.mpf(1)/mpmath.mpf(4))*x5, -mpmath.mpf(1)/mpmath.mpf(2)*x0*x10 - mpmath.mpf(1)/mpmath.mpf(2)*x10*x13 - mpmath.mpf(1)/mpmath.mpf(2)*x13*x7 - mpmath.mpf(1)/mpmath.mpf(2)*x25 - mpmath.mpf(1)/mpmath.mpf(2)*x29 + (mpmath.mpf(1)/mpmath.mpf(2))*x32 + (mpmath.mpf(1)/mpmath.mpf(2))*x33 + (mpmath.mpf(1)/mpmath.mpf(2))*x34 + (mpmath.mpf(1)/mpmath.mpf(2))*x35 + (mpmath.mpf(1)/mpmath.mpf(2))*x4 - mpmath.mpf(1)/mpmath.mpf(2)*x5*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x6, (mpmath.mpf(1)/mpmath.mpf(2))*x0*x12*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x0*x26*y1 + (mpmath.mpf(1)/mpmath.mpf(2))*x0*x3*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x15*x2 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x2*x3 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x22 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x15*x2*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x2*x3*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x22*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x12*x13*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x12*x28*y2 - x12*x40 - x12*x48 - mpmath.mpf(1)/mpmath.mpf(2)*x12*x6 + (mpmath.mpf(1)/mpmath.mpf(2))*x13*x26*y1 + (mpmath.mpf(1)/mpmath.mpf(2))*x13*x3*y1*y2 - x14*x47 - x14*x49 + (mpmath.mpf(1)/mpmath.mpf(2))*x15*x2*x24 - x15*x40 - x15*x46 - x15*x48 - x16*x47 - x16*x49 + (mpmath.mpf(1)/mpmath.mpf(2))*x2*x24*x3 + (mpmath.mpf(1)/mpmath.mpf(2))*x22*x24 + (mpmath.mpf(1)/mpmath.mpf(2))*x26*x28 + (mpmath.mpf(1)/mpmath.mpf(2))*x28*x3*y2 - x33*x49 - x34*x50 - x36*x37 - x36*x44 - x37*x38 - x37*x39 - x38*x44 - x39*x44 - x41*x42 - x41*x45 - x42*x43 - x43*x45 - x46*x5 - x50*x6]
+    return (-x11*x9 + x17 + x4 + x6 - x8*x9, x11 - x18 - x19 + x8, x1*x2*z1 - x20 - x21 + y1*y2*z1, -x0*x18 - x0*x19 - x0*x30 + x10*x18 + x10*x20 + x10*x3*z1 + x11*x13 - x12*x20 - x12*x21 - x12*x31 + x13*x8 - x15*x20 - x15*x21 - x15*x31 - x18*x5 - x19*x5 + x19*x7 + x21*x7 + x23*z1 + x25*z2 + x27*z1 + x29*z2 + x3*x7*z1 - x30*x5, (mpmath.mpf(1)/mpmath.mpf(4))*x12 + (mpmath.mpf(1)/mpmath.mpf(4))*x15, -mpmath.mpf(1)/mpmath.mpf(2)*x10 - mpmath.mpf(1)/mpmath.mpf(2)*x7, -mpmath.mpf(1)/mpmath.mpf(2)*x10*x12 - mpmath.mpf(1)/mpmath.mpf(2)*x10*x3 - mpmath.mpf(1)/mpmath.mpf(2)*x15*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x17 - mpmath.mpf(1)/mpmath.mpf(2)*x23 - mpmath.mpf(1)/mpmath.mpf(2)*x27 - mpmath.mpf(1)/mpmath.mpf(2)*x3*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x32 + (mpmath.mpf(1)/mpmath.mpf(2))*x33 + (mpmath.mpf(1)/mpmath.mpf(2))*x34 + (mpmath.mpf(1)/mpmath.mpf(2))*x35, (mpmath.mpf(1)/mpmath.mpf(4))*x0 + (mpmath.mpf(1)/mpmath.mpf(4))*x5, -mpmath.mpf(1)/mpmath.mpf(2)*x0*x10 - mpmath.mpf(1)/mpmath.mpf(2)*x10*x13 - mpmath.mpf(1)/mpmath.mpf(2)*x13*x7 - mpmath.mpf(1)/mpmath.mpf(2)*x25 - mpmath.mpf(1)/mpmath.mpf(2)*x29 + (mpmath.mpf(1)/mpmath.mpf(2))*x32 + (mpmath.mpf(1)/mpmath.mpf(2))*x33 + (mpmath.mpf(1)/mpmath.mpf(2))*x34 + (mpmath.mpf(1)/mpmath.mpf(2))*x35 + (mpmath.mpf(1)/mpmath.mpf(2))*x4 - mpmath.mpf(1)/mpmath.mpf(2)*x5*x7 + (mpmath.mpf(1)/mpmath.mpf(2))*x6, (mpmath.mpf(1)/mpmath.mpf(2))*x0*x12*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x0*x26*y1 + (mpmath.mpf(1)/mpmath.mpf(2))*x0*x3*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x15*x2 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x2*x3 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x13*x22 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x15*x2*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x2*x3*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x1*x22*x5 + (mpmath.mpf(1)/mpmath.mpf(2))*x12*x13*y1*y2 + (mpmath.mpf(1)/mpmath.mpf(2))*x12*x28*y2 - x12*x40 - x12*x48 - mpmath.mpf(1)/mpmath.mpf(2)*x12*x6 + (mpmath.mpf(1)/mpmath.mpf(2))*x13*x26*y1 + (mpmath.mpf(1)/mpmath.mpf(2))*x13*x3*y1*y2 - x14*x47 - x14*x49 + (mpmath.mpf(1)/mpmath.mpf(2))*x15*x2*x24 - x15*x40 - x15*x46 - x15*x48 - x16*x47 - x16*x49 + (mpmath.mpf(1)/mpmath.mpf(2))*x2*x24*x3 + (mpmath.mpf(1)/mpmath.mpf(2))*x22*x24 + (mpmath.mpf(1)/mpmath.mpf(2))*x26*x28 + (mpmath.mpf(1)/mpmath.mpf(2))*x28*x3*y2 - x33*x49 - x34*x50 - x36*x37 - x36*x44 - x37*x38 - x37*x39 - x38*x44 - x39*x44 - x41*x42 - x41*x45 - x42*x43 - x43*x45 - x46*x5 - x50*x6,)
 
 
 def mpmath_back(Z1, Z2, Z3, Z4, Z5, Z6, Z7, Z8, Z9):
     x0 = Z4**2
-    return [Z4, 2*Z1 - 2*x0, -Z7 + x0, -Z9 + x0]
+    return (Z4, 2*Z1 - 2*x0, -Z7 + x0, -Z9 + x0,)
 
 
 def mpmath_theta(x1, y1, z1, x2, y2, z2, d, r, rho1, rho2):
@@ -154,7 +154,7 @@ def mpmath_theta(x1, y1, z1, x2, y2, z2, d, r, rho1, rho2):
     x3 = -d*z2 - mpmath.mpf(1)/mpmath.mpf(2)*rho2**2 + x0 + (mpmath.mpf(1)/mpmath.mpf(2))*x2**2 + (mpmath.mpf(1)/mpmath.mpf(2))*y2**2 + (mpmath.mpf(1)/mpmath.mpf(2))*z2**2
     x4 = -d*z1 - mpmath.mpf(1)/mpmath.mpf(2)*rho1**2 + x0 + (mpmath.mpf(1)/mpmath.mpf(2))*x1**2 + (mpmath.mpf(1)/mpmath.mpf(2))*y1**2 + (mpmath.mpf(1)/mpmath.mpf(2))*z1**2
     x5 = 1/(r*(x1*y2 - x2*y1))
-    return [x5*(-x3*y1 + x4*y2), x5*(x1*x3 - x2*x4)]
+    return (x5*(-x3*y1 + x4*y2), x5*(x1*x3 - x2*x4),)
 
 
 def mpmath_forward(d, r, rho1, rho2, c_gamma, s_gamma, c_theta, s_theta, c_phi, s_phi, c_psi, s_psi, c_xi, s_xi):
@@ -167,7 +167,7 @@ def mpmath_forward(d, r, rho1, rho2, c_gamma, s_gamma, c_theta, s_theta, c_phi, 
     x6 = c_xi*s_phi
     x7 = c_psi*x6 + x5
     x8 = c_xi*s_psi
-    return [rho1*x3 + x0, rho1*x7 + x4, d - rho1*x8, rho2*(c_gamma*x3 + s_gamma*(-c_psi*x5 - x6)) + x0, rho2*(c_gamma*x7 + s_gamma*(-c_psi*x1 + x2)) + x4, d + rho2*(-c_gamma*x8 + s_gamma*s_psi*s_xi)]
+    return (rho1*x3 + x0, rho1*x7 + x4, d - rho1*x8, rho2*(c_gamma*x3 + s_gamma*(-c_psi*x5 - x6)) + x0, rho2*(c_gamma*x7 + s_gamma*(-c_psi*x1 + x2)) + x4, d + rho2*(-c_gamma*x8 + s_gamma*s_psi*s_xi),)
 
 
 FUNCTIONS = {
