@@ -3,7 +3,9 @@
 Detector (needs no joint model): markers on one segment keep their distances apart, so for every pair
 of labels and every frame the distances to each one's segment partners are compared with their
 medians as labelled and as exchanged; the longest run of frames that fits clearly better exchanged
-is the span. Augmentation: the two columns are exchanged back over the span (the pair and the two
+is the span. Two markers whose distances to the rest are alike (a near-isosceles triangle, a rectangular
+cluster's diagonal) exchange without changing any distance: the segment then turns by a half turn at both
+ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Augmentation: the two columns are exchanged back over the span (the pair and the two
 ends count as three parameters).
 """
 from __future__ import annotations
@@ -15,7 +17,17 @@ import numpy as np
 from identcheck.bundle.chain import initial_state
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, draw_frame
-from identcheck.estimate.labels import detect
+from identcheck.estimate.labels import detect, flips
+
+
+def _unexplained(ctx, hyp, span) -> float:
+    """A flip's strength (:func:`identcheck.estimate.labels.flips`, which reads no distances): the criterion's
+    gain if the exchange explained every residual of the span beyond the noise, for its three parameters."""
+    a, b = span
+    w = hyp.weights[a:b + 1] > 0
+    r = np.where(w[..., None], hyp.residuals()[a:b + 1], 0.0)
+    excess = float(np.sum(r ** 2)) - 3 * int(w.sum()) * ctx.noise.sigma_mm ** 2
+    return ctx.bic_gain(max(excess, 0.0), 3)
 
 
 class MarkerSwap(Effect):
@@ -46,10 +58,16 @@ class MarkerSwap(Effect):
 
     def propose(self, ctx, hyp) -> list:
         ch = hyp.chain
-        return [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
-                                     "frames": list(d["span"])},
-                         d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"]})
-                for d in detect(hyp.data, ch, ctx.noise.sigma_mm, ctx.n_obs)]
+        found = detect(hyp.data, ch, ctx.noise.sigma_mm, ctx.n_obs)
+        seen = {(d["cols"], d["span"]) for d in found}
+        for d in flips(hyp.data, ch):
+            if (d["cols"], d["span"]) not in seen:
+                found.append({**d, "gain": _unexplained(ctx, hyp, d["span"])})
+        out = [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
+                                    "frames": list(d["span"])},
+                        d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"]})
+               for d in found]
+        return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
         (i, j), (a, b) = proposal.payload["cols"], proposal.payload["span"]

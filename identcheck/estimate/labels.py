@@ -9,6 +9,9 @@ the two markers, so the fit sees only the frames labelled like the rest of the t
 The noise scale is the distances' whole-trial scatter (skin motion included), so only exchanges far
 beyond the segment's own deformation count. A wrong pair corrupts the distances of its partners too, so its span is exchanged back before the
 next search (the strongest detection first), which keeps those echoes from being reported.
+Two markers whose distances to the rest of their segment are alike (a near-isosceles triangle, a rectangular
+cluster's diagonal) exchange without changing a distance; the segment's pose then turns by a half turn at both
+ends of the span, and :func:`flips` finds them from that.
 The input file is not touched.
 """
 from __future__ import annotations
@@ -111,6 +114,90 @@ def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
     return sorted(out, key=lambda d: -d["gain"])
 
 
+FLIP_DEG = 90.0
+"""A segment that turns by more than this between two consecutive frames with a pose has been flipped by its
+labels, not moved: 90 deg per frame is 9000 deg/s at 100 Hz (and still 2700 deg/s at 30 Hz)."""
+
+
+SHAPE_TOL = 4.0
+"""An exchange that removes a flip must leave the segment's markers fitting its shape within this many times
+their median misfit over the trial; otherwise it only trades one distortion for another (a marker swapped with
+another segment's leaves its own segment distorted, and exchanging two of that segment's markers does not fix it)."""
+
+
+def _turns(poses_R: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(frames with a pose (n,), the angle turned from the previous such frame (n,), deg; the first gets 0)."""
+    idx = np.flatnonzero(valid)
+    R = poses_R[idx]
+    rel = np.einsum("fji,fjk->fik", R[:-1], R[1:])                       # R_prevᵀ R
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    return idx, np.concatenate([[0.0], np.degrees(np.arccos(cos))])
+
+
+def _turn(Ra: np.ndarray, Rb: np.ndarray) -> float:
+    """The angle between two rotations (deg); NaN rotations give NaN (compares False)."""
+    return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1.0, 1.0))))
+
+
+def flips(data: np.ndarray, chain) -> list:
+    """Label swaps that the segment's pose shows and its distances do not: two markers whose distances to the
+    rest of their segment are alike (a near-isosceles triangle, the diagonal of a rectangular cluster) exchanged
+    over a span turn the segment by about a half turn at both ends of the span, and the within-segment distances
+    barely change (:func:`detect` cannot see it). Per segment with three markers or more: the frames where its pose
+    jumps by more than :data:`FLIP_DEG`; every span between two jumps, or with a single jump the shorter side of
+    it (the majority labelling is kept), is a candidate, with the pair of the segment's markers whose exchange there
+    makes both of its ends turn less than that and fits the segment's shape best (within :data:`SHAPE_TOL`). Dicts like :func:`detect`'s, without ``gain``: (``cols``, ``span``,
+    ``keep``, ``swap``)."""
+    from identcheck.geometry.poses import reference_shape, segment_poses
+
+    F, out = data.shape[0], []
+    for seg in chain.segments:
+        idx = list(chain.seg_markers[seg])
+        if len(idx) < 3:
+            continue
+        pts = data[:, idx]
+        try:
+            local = reference_shape(pts)
+        except ValueError:
+            continue
+        poses = segment_poses(pts, local)
+        frames, turn = _turns(poses.R, poses.valid)
+        jumps = frames[turn > FLIP_DEG]
+        if not len(jumps) or len(jumps) > 20:            # none, or a segment too ill-posed to read
+            continue
+        before = {int(q): int(frames[k - 1]) for k, q in zip(np.flatnonzero(turn > FLIP_DEG), jumps)}
+        # an exchange must leave the markers fitting the segment's shape as well as its frames usually do
+        shape_tol = SHAPE_TOL * float(np.nanmedian(poses.rms)) + 1e-9
+        edges = [0] + [int(f) for f in jumps] + [F]
+        spans = [(edges[k], edges[k + 1] - 1) for k in range(len(edges) - 1)]
+        if len(jumps) == 1:                              # one jump: the shorter side is the odd one out
+            spans = [min(spans, key=lambda ab: ab[1] - ab[0])]
+        else:                                            # between two jumps (labelled as at both ends of the trial)
+            spans = spans[1:-1]
+        for a, b in spans:
+            # the pairs of frames across the span's ends (the frame before a jump: the last one with a pose)
+            ends = [(before[a], a)] if a in before else []
+            ends += [(before[b + 1], b + 1)] if b + 1 in before else []
+            rows = sorted({f for pair in ends for f in pair})
+            at = {f: k for k, f in enumerate(rows)}
+            inside = (np.array(rows) >= a) & (np.array(rows) <= b)
+            best = None
+            for ii in range(len(idx)):
+                for jj in range(ii + 1, len(idx)):
+                    swapped = pts[rows].copy()
+                    swapped[np.ix_(inside, [ii, jj])] = swapped[np.ix_(inside, [jj, ii])]
+                    near = segment_poses(swapped, local)
+                    misfit = float(np.max(near.rms))        # NaN (no pose) compares False below
+                    if (all(_turn(near.R[at[p]], near.R[at[q]]) <= FLIP_DEG for p, q in ends)
+                            and misfit <= shape_tol and (best is None or misfit < best[0])):
+                        best = (misfit, idx[ii], idx[jj])
+            if best is not None:                    # the exchange that leaves the segment's own shape intact
+                _, i, j = best
+                keep, swap = swap_costs(data, chain, i, j)
+                out.append({"cols": (min(i, j), max(i, j)), "span": (int(a), int(b)), "keep": keep, "swap": swap})
+    return out
+
+
 MAX_SWAPS = 5            # swaps looked for, strongest first, each exchanged back before the next search
 
 
@@ -158,6 +245,20 @@ def screen(model, trial) -> tuple:
                                     f"as labelled in the rest of the trial); those frames are left out for these two "
                                     f"markers. Which labelling is right, only a reference (static) trial can tell: check "
                                     f"the labels."})
+    for d in flips(data, chain):               # exchanges the distances cannot see: the segment's pose flips
+        (i, j), (a, b) = d["cols"], d["span"]
+        if any({chain.labels[i], chain.labels[j]} <= set(w["markers"]) for w in warnings):
+            continue
+        mi, mj = chain.labels[i], chain.labels[j]
+        xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
+        fa, fb = trial.frame_number(a), trial.frame_number(b)
+        warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
+                         "file_frames": [fa, fb],
+                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of the file "
+                                    f"(rows {a}-{b}; their segment turns by more than {FLIP_DEG:g} deg from one frame "
+                                    f"to the next at both ends of that span, and no longer does with the two exchanged; "
+                                    f"their distances to the rest of the segment are too alike to show it); those "
+                                    f"frames are left out for these two markers. Check the labels."})
     if not warnings:
         return trial, []
     return trial.replace(xyz=xyz), warnings
