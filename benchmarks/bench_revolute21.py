@@ -355,7 +355,8 @@ def run(args) -> dict:
                    "draws": "d,l ~ U(-200,200) mm; r,rho ~ U(30,200) mm; alpha ~ U(0.3, pi-0.3); theta,beta ~ U(-pi,pi)",
                    "timing": "time.perf_counter, best of 3 after warm-up (batched and loops); nsolve: sum of single runs", "forward_vs_explicit_dh_mm": fwd_gap},
         "machine": machine_info(loadavg_before=list(load_before), loadavg_after=list(load_after)),
-        "rows": rows, "accuracy": acc, "targets": targets, "compiled": {k: v for k, v in compiled.items() if k != "rows"},
+        "rows": rows, "accuracy": acc, "targets": targets,
+        "compiled": {k: v for k, v in compiled.items() if k != "rows"},
     }
 
 
@@ -381,7 +382,9 @@ def compiled_rows(xyz, args) -> dict:
         mismatch += int(np.sum(np.any(ref.valid != got.valid, axis=1)))
         both = ref.valid & got.valid
         if both.any():
-            gap = max(gap, float(np.max(scaled_error(got.params[both][:, None], ref.params[both], big[i:i + chunk][np.nonzero(both)[0]]))))
+            rows_both = np.nonzero(both)[0]
+            gap = max(gap, float(np.max(scaled_error(got.params[both][:, None], ref.params[both],
+                                                     big[i:i + chunk][rows_both]))))
     return {"available": True, "rows": rows,
             "identity": {"problems": len(big), "verdict_mismatches": mismatch, "max_scaled_param_gap": gap,
                          "seed": args.seed + 7}}

@@ -3,10 +3,10 @@
 Detector (needs no joint model): markers on one segment keep their distances apart, so for every pair
 of labels and every frame the distances to each one's segment partners are compared with their
 medians as labelled and as exchanged; the longest run of frames that fits clearly better exchanged
-is the span. Two markers whose distances to the rest are alike (a near-isosceles triangle, a rectangular
-cluster's diagonal) exchange without changing any distance: the segment then turns by a half turn at both
-ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Augmentation: the two columns are exchanged back over the span (the pair and the two
-ends count as three parameters).
+is the span. Two markers whose distances to the rest are alike (the base of an isosceles triangle, a
+mirror-symmetric pair) exchange without changing any distance: the segment then turns by a half turn at both
+ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Augmentation: the two
+columns are exchanged back over the span (the pair and the two ends count as three parameters).
 """
 from __future__ import annotations
 

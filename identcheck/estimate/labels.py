@@ -9,9 +9,9 @@ the two markers, so the fit sees only the frames labelled like the rest of the t
 The noise scale is the distances' whole-trial scatter (skin motion included), so only exchanges far
 beyond the segment's own deformation count. A wrong pair corrupts the distances of its partners too, so its span is exchanged back before the
 next search (the strongest detection first), which keeps those echoes from being reported.
-Two markers whose distances to the rest of their segment are alike (a near-isosceles triangle, a rectangular
-cluster's diagonal) exchange without changing a distance; the segment's pose then turns by a half turn at both
-ends of the span, and :func:`flips` finds them from that.
+Two markers whose distances to the rest of their segment are alike (the base of a near-isosceles triangle, a pair
+mirror-symmetric about the plane of the others) exchange without changing a distance; the segment's pose then
+turns by a half turn at both ends of the span, and :func:`flips` finds them from that.
 The input file is not touched.
 """
 from __future__ import annotations
@@ -20,6 +20,7 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.estimate.noise import noise_floor
+from identcheck.geometry.poses import reference_shape, segment_poses
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
 
@@ -140,16 +141,16 @@ def _turn(Ra: np.ndarray, Rb: np.ndarray) -> float:
 
 
 def flips(data: np.ndarray, chain) -> list:
-    """Label swaps that the segment's pose shows and its distances do not: two markers whose distances to the
-    rest of their segment are alike (a near-isosceles triangle, the diagonal of a rectangular cluster) exchanged
-    over a span turn the segment by about a half turn at both ends of the span, and the within-segment distances
-    barely change (:func:`detect` cannot see it). Per segment with three markers or more: the frames where its pose
-    jumps by more than :data:`FLIP_DEG`; every span between two jumps, or with a single jump the shorter side of
-    it (the majority labelling is kept), is a candidate, with the pair of the segment's markers whose exchange there
-    makes both of its ends turn less than that and fits the segment's shape best (within :data:`SHAPE_TOL`). Dicts like :func:`detect`'s, without ``gain``: (``cols``, ``span``,
-    ``keep``, ``swap``)."""
-    from identcheck.geometry.poses import reference_shape, segment_poses
+    """Label swaps that the segment's pose shows and its distances do not.
 
+    Two markers whose distances to the rest of their segment are alike (the base of a near-isosceles triangle, a
+    pair mirror-symmetric about the plane of the others) exchanged over a span turn the segment by about a half
+    turn at both ends of the span, while the within-segment distances barely change (:func:`detect` cannot see
+    it). Per segment with three markers or more: the frames where its pose jumps by more than :data:`FLIP_DEG`.
+    Every span between two jumps, or with a single jump the shorter side of it (the majority labelling is kept),
+    is a candidate, with the pair of the segment's markers whose exchange there makes both of its ends turn less
+    than that and fits the segment's shape best (within :data:`SHAPE_TOL`). Returns dicts like :func:`detect`'s
+    without ``gain``: ``cols``, ``span``, ``keep``, ``swap``."""
     F, out = data.shape[0], []
     for seg in chain.segments:
         idx = list(chain.seg_markers[seg])
@@ -254,11 +255,11 @@ def screen(model, trial) -> tuple:
         fa, fb = trial.frame_number(a), trial.frame_number(b)
         warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
                          "file_frames": [fa, fb],
-                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of the file "
-                                    f"(rows {a}-{b}; their segment turns by more than {FLIP_DEG:g} deg from one frame "
-                                    f"to the next at both ends of that span, and no longer does with the two exchanged; "
-                                    f"their distances to the rest of the segment are too alike to show it); those "
-                                    f"frames are left out for these two markers. Check the labels."})
+                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of "
+                                    f"the file (rows {a}-{b}; their segment turns by more than {FLIP_DEG:g} deg from "
+                                    f"one frame to the next at both ends of that span, and no longer does with the "
+                                    f"two exchanged; their distances to the rest of the segment are too alike to "
+                                    f"show it); those frames are left out for these two markers. Check the labels."})
     if not warnings:
         return trial, []
     return trial.replace(xyz=xyz), warnings

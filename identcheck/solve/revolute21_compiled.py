@@ -137,7 +137,8 @@ def _one(x, params, valid, Zs, ratio, handled, i, imag_tol, real_tol, round_, MK
             slope = (3 * c0 * q + 2 * c1) * q + c2
             bracket = size / abs(slope) + aq + abs(Z2) + 2 * abs(S) * (Z1s + abs(Z5))
             slack = round_ / ratio[i] * bracket / abs(2 * (Z1s - Z5))
-        ok = ok and (r2 > real_tol) and (S > real_tol) and (C >= -slack) and (np.maximum(C, v) > 0) and (rho2 > -real_tol)
+        ok = (ok and (r2 > real_tol) and (S > real_tol) and (C >= -slack) and (np.maximum(C, v) > 0)
+              and (rho2 > -real_tol))
         sa = math.sqrt(np.minimum(np.maximum(S, 0.0), 1.0))
         r, rho = math.sqrt(np.maximum(r2, 0.0)), math.sqrt(np.maximum(rho2, 0.0))
         alpha = math.atan2(sa, ca)
