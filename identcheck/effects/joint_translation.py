@@ -2,14 +2,18 @@
 
 Detector: the residuals of every marker below the joint, seen from the parent segment, regressed on
 smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
-``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree.
+``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree, plus the part of a
+translation linear in the angles that a rigid joint cannot absorb.
 
-The basis has the angles' products and cubes, no linear terms: a translation linear in a hinge's angle,
-perpendicular to the axis, is to first order a rigid hinge about a shifted axis (and for a ball joint
-the skew part of a linear translation is a shifted centre), so linear terms would trade off against
-the joint's own parameters (their standard errors grow to several mm) rather than add information. A
-knee rolling back (A sin θ, odd) is therefore seen through its cubic part, sin θ − θ, and its even
-companions; the report says which part is modelled (``where["modelled"]``).
+A translation linear in the angles, ``M ω`` (ω the joint's rotation from its median pose), is to first order a
+rigid joint about a shifted centre when M is skew-symmetric: moving the centre by δ in both segments adds
+``(I − Rot ω) δ ≈ δ × ω``. So linear terms in every direction would trade off against the joint's own
+parameters (their standard errors grow to several mm) rather than add information; the symmetric part of M
+cannot be absorbed and is modelled: six fields ``S_p ω`` for a ball joint (a hip pistoning along its
+abduction axis with abduction), one for a hinge (``θ a``: a screw along its axis; the part perpendicular to the
+axis is a shifted axis). The centre's motion quadratic and cubic in the angles is modelled in every direction:
+a knee rolling back (A sin θ, odd) shows through its cubic part, sin θ − θ, and its even companions. The report
+says which parts are modelled (``where["modelled"]``).
 """
 from __future__ import annotations
 
@@ -24,8 +28,43 @@ from identcheck.effects.injection import Change, cannot, normalised_angle, pick,
 from identcheck.effects.soft_tissue import explained
 
 
-MODELLED = ("the centre's motion quadratic and cubic in the joint angles; a part linear in them cannot be told "
-            "from a shifted centre or axis and stays in the joint's fitted position")
+MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
+            "shifted centre or axis absorbs (along a hinge's axis; a ball joint's symmetric part); the rest of the "
+            "linear part cannot be told from a shifted centre or axis and stays in the joint's fitted position")
+_SYMMETRIC = [np.outer(np.eye(3)[i], np.eye(3)[k]) + np.outer(np.eye(3)[k], np.eye(3)[i])
+              for i in range(3) for k in range(i, 3)]      # the six symmetric 3 x 3 matrices (up to scale)
+
+
+def linear_fields(hyp, joint: str, angles: np.ndarray) -> list:
+    """The translations linear in a joint's angles that a shifted centre cannot absorb, each (F, 3) in the parent
+    frame, centred over frames: ``S ω`` for the six symmetric S (ball joint, ω its rotation vector from the median
+    pose, :func:`identcheck.bundle.hypothesis.joint_angles`), ``θ a`` along a hinge's axis a."""
+    a = angles - np.nanmean(angles, axis=0)
+    if hyp.chain.types[joint] == "revolute":
+        out = [a[:, :1] * hyp.fit.state.axis[joint][None, :]]
+    else:
+        out = [a @ S.T for S in _SYMMETRIC]
+    return [f - np.nanmean(f, axis=0) for f in out]
+
+
+def explained_with(resid: np.ndarray, basis: np.ndarray, fields: list) -> float:
+    """Sum of squares of `resid` (F, 3) explained by `basis` (F, K) times free 3-vectors and the (F, 3) `fields`
+    times free scalars, beyond a constant 3-vector, over the rows where all are finite (:func:`explained` with
+    fields)."""
+    ok = np.all(np.isfinite(resid), axis=1)
+    for f in fields:
+        ok &= np.all(np.isfinite(f), axis=1)
+    n, K = int(ok.sum()), basis.shape[1]
+    if n <= K + len(fields) + 2:
+        return 0.0
+    eye = np.eye(3)
+    cols = [np.kron(np.ones((n, 1)), eye)]                               # the constant, per axis
+    cols += [np.kron(basis[ok][:, [k]], eye) for k in range(K)]          # each basis function times a 3-vector
+    cols += [f[ok].reshape(-1, 1) for f in fields]                       # each field times a scalar
+    X = np.hstack(cols)
+    y = (resid[ok] - resid[ok].mean(axis=0)).reshape(-1)
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    return float(np.sum((X @ coef) ** 2))
 
 
 class JointTranslation(Effect):
@@ -63,16 +102,25 @@ class JointTranslation(Effect):
             idx = ch.downstream[j]
             seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
             basis = angle_basis(angles[j], linear=False, cubic=True)
+            lin = linear_fields(hyp, j, angles[j])
             with warnings.catch_warnings():          # frames where every such marker is hidden
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(seen_from_parent, axis=1)
-            gain = ctx.bic_gain(len(idx) * explained(mean, basis), 3 * basis.shape[1])
-            out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain), {"joint": j, "basis": basis}))
+            gain = ctx.bic_gain(len(idx) * explained_with(mean, basis, lin), 3 * basis.shape[1] + len(lin))
+            out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
+                                {"joint": j, "basis": basis, "linear": lin}))
         return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
-        term = (proposal.payload["joint"], proposal.payload["basis"])
-        return hyp.refit(terms=hyp.terms + Terms(centres=[term]), effect=proposal, max_iter=10)
+        j = proposal.payload["joint"]
+        ch = hyp.chain
+        idx = ch.downstream[j]
+        R = hyp.fit.seg_R[ch.parent[j]]                       # the linear fields, parent frame -> world
+        world = [(idx, np.broadcast_to(np.einsum("fij,fj->fi", R, np.nan_to_num(g))[:, None, :],
+                                       (len(g), len(idx), 3)).copy())
+                 for g in proposal.payload.get("linear", [])]
+        terms = Terms(centres=[(j, proposal.payload["basis"])], world=world)
+        return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]
