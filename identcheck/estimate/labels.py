@@ -227,6 +227,19 @@ def screen(model, trial) -> tuple:
     xyz = trial.as_array().copy()
     col = {m: i for i, m in enumerate(trial.labels)}
     warnings = []
+
+    def leave_out(i: int, j: int, a: int, b: int, why: str) -> None:
+        """Rows a..b left out for markers i and j (chain columns), with the warning saying why."""
+        mi, mj = chain.labels[i], chain.labels[j]
+        xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
+        fa, fb = trial.frame_number(a), trial.frame_number(b)
+        warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
+                         "file_frames": [fa, fb],
+                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of the "
+                                    f"file (rows {a}-{b}; {why}); those frames are left out for these two markers. "
+                                    f"Which labelling is right, only a reference (static) trial can tell: check the "
+                                    f"labels."})
+
     for _ in range(MAX_SWAPS):
         # a real swap fits well exchanged; an artefact on one marker (a bad gap edge) can merely fit better
         found = [d for d in detect(data, chain, sigma, n_obs)
@@ -235,31 +248,14 @@ def screen(model, trial) -> tuple:
             break
         (i, j), (a, b) = found[0]["cols"], found[0]["span"]     # the strongest; others may be its echoes
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]              # exchanged back, to look for more
-        mi, mj = chain.labels[i], chain.labels[j]
-        xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
-        fa, fb = trial.frame_number(a), trial.frame_number(b)
-        warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
-                         "file_frames": [fa, fb],
-                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of the file "
-                                    f"(rows {a}-{b}; there, their "
-                                    f"distances to the other markers of their segments fit clearly better exchanged than "
-                                    f"as labelled in the rest of the trial); those frames are left out for these two "
-                                    f"markers. Which labelling is right, only a reference (static) trial can tell: check "
-                                    f"the labels."})
+        leave_out(i, j, a, b, "there, their distances to the other markers of their segments fit clearly better "
+                              "exchanged than as labelled in the rest of the trial")
     for d in flips(data, chain):               # exchanges the distances cannot see: the segment's pose flips
         (i, j), (a, b) = d["cols"], d["span"]
-        if any({chain.labels[i], chain.labels[j]} <= set(w["markers"]) for w in warnings):
-            continue
-        mi, mj = chain.labels[i], chain.labels[j]
-        xyz[a:b + 1, [col[mi], col[mj]]] = np.nan
-        fa, fb = trial.frame_number(a), trial.frame_number(b)
-        warnings.append({"kind": "label_swap", "markers": [mi, mj], "frames": [int(a), int(b)],
-                         "file_frames": [fa, fb],
-                         "message": f"{trial.source}: markers {mi} and {mj} look swapped in frames {fa}-{fb} of "
-                                    f"the file (rows {a}-{b}; their segment turns by more than {FLIP_DEG:g} deg from "
-                                    f"one frame to the next at both ends of that span, and no longer does with the "
-                                    f"two exchanged; their distances to the rest of the segment are too alike to "
-                                    f"show it); those frames are left out for these two markers. Check the labels."})
+        if not any({chain.labels[i], chain.labels[j]} <= set(w["markers"]) for w in warnings):
+            leave_out(i, j, a, b, f"their segment turns by more than {FLIP_DEG:g} deg from one frame to the next at "
+                                  "both ends of that span, and no longer does with the two exchanged; their distances "
+                                  "to the rest of the segment are too alike to show it")
     if not warnings:
         return trial, []
     return trial.replace(xyz=xyz), warnings
