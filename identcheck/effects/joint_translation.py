@@ -25,7 +25,6 @@ from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
-from identcheck.effects.soft_tissue import explained
 
 
 MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
@@ -49,8 +48,8 @@ def linear_fields(hyp, joint: str, angles: np.ndarray) -> list:
 
 def explained_with(resid: np.ndarray, basis: np.ndarray, fields: list) -> float:
     """Sum of squares of `resid` (F, 3) explained by `basis` (F, K) times free 3-vectors and the (F, 3) `fields`
-    times free scalars, beyond a constant 3-vector, over the rows where all are finite (:func:`explained` with
-    fields)."""
+    times free scalars, beyond a constant 3-vector, over the rows where all are finite (:func:`identcheck.effects.soft_tissue.explained`
+    with fields)."""
     ok = np.all(np.isfinite(resid), axis=1)
     for f in fields:
         ok &= np.all(np.isfinite(f), axis=1)
