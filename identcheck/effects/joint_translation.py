@@ -25,6 +25,7 @@ from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
+from identcheck.effects.soft_tissue import explained
 
 
 MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
@@ -44,26 +45,6 @@ def linear_fields(hyp, joint: str, angles: np.ndarray) -> list:
     else:
         out = [a @ S.T for S in _SYMMETRIC]
     return [f - np.nanmean(f, axis=0) for f in out]
-
-
-def explained_with(resid: np.ndarray, basis: np.ndarray, fields: list) -> float:
-    """Sum of squares of `resid` (F, 3) explained by `basis` (F, K) times free 3-vectors and the (F, 3) `fields`
-    times free scalars, beyond a constant 3-vector, over the rows where all are finite (:func:`identcheck.effects.soft_tissue.explained`
-    with fields)."""
-    ok = np.all(np.isfinite(resid), axis=1)
-    for f in fields:
-        ok &= np.all(np.isfinite(f), axis=1)
-    n, K = int(ok.sum()), basis.shape[1]
-    if n <= K + len(fields) + 2:
-        return 0.0
-    eye = np.eye(3)
-    cols = [np.kron(np.ones((n, 1)), eye)]                               # the constant, per axis
-    cols += [np.kron(basis[ok][:, [k]], eye) for k in range(K)]          # each basis function times a 3-vector
-    cols += [f[ok].reshape(-1, 1) for f in fields]                       # each field times a scalar
-    X = np.hstack(cols)
-    y = (resid[ok] - resid[ok].mean(axis=0)).reshape(-1)
-    coef = np.linalg.lstsq(X, y, rcond=None)[0]
-    return float(np.sum((X @ coef) ** 2))
 
 
 class JointTranslation(Effect):
@@ -105,7 +86,7 @@ class JointTranslation(Effect):
             with warnings.catch_warnings():          # frames where every such marker is hidden
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(seen_from_parent, axis=1)
-            gain = ctx.bic_gain(len(idx) * explained_with(mean, basis, lin), 3 * basis.shape[1] + len(lin))
+            gain = ctx.bic_gain(len(idx) * explained(mean, basis, lin), 3 * basis.shape[1] + len(lin))
             out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
                                 {"joint": j, "basis": basis, "linear": lin}))
         return sorted(out, key=lambda p: -p.strength)

@@ -20,15 +20,26 @@ from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
 
-def explained(resid: np.ndarray, basis: np.ndarray) -> float:
-    """Sum of squares of `resid` (F, 3) explained by `basis` (F, K) plus a constant, over finite rows."""
+def explained(resid: np.ndarray, basis: np.ndarray, fields: list = ()) -> float:
+    """Sum of squares of `resid` (F, 3) explained by `basis` (F, K) times free 3-vectors, plus a constant, over the
+    finite rows; with `fields` (each (F, 3)), also by each field times a free scalar (a direction that turns with
+    the frame, which a basis times a fixed 3-vector cannot hold: :mod:`identcheck.effects.joint_translation`)."""
     ok = np.all(np.isfinite(resid), axis=1)
-    if ok.sum() <= basis.shape[1] + 2:
+    for f in fields:
+        ok &= np.all(np.isfinite(f), axis=1)
+    n, K = int(ok.sum()), basis.shape[1]
+    if n <= K + len(fields) + 2:
         return 0.0
-    X = np.column_stack([np.ones(ok.sum()), basis[ok]])
     y = resid[ok] - resid[ok].mean(axis=0)
-    coef = np.linalg.lstsq(X, y, rcond=None)[0]
-    return float(np.sum((X @ coef) ** 2))
+    if not len(fields):                      # the three axes share one design: one small least squares
+        X = np.column_stack([np.ones(n), basis[ok]])
+        return float(np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
+    eye = np.eye(3)
+    X = np.hstack([np.kron(np.ones((n, 1)), eye)]                          # the constant, per axis
+                  + [np.kron(basis[ok][:, [k]], eye) for k in range(K)]    # each basis function times a 3-vector
+                  + [f[ok].reshape(-1, 1) for f in fields])                # each field times a scalar
+    y = y.reshape(-1)
+    return float(np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
 
 
 class SoftTissue(Effect):

@@ -183,7 +183,7 @@ class TimeOffset(Effect):
     def evidence(self, ctx, before, after, proposal) -> dict:
         seg = proposal.payload["segment"]
         idx = proposal.payload["columns"]
-        v = shifted(before.data[:, idx], ctx.rate_hz, 0.0, derivative=1)
+        v = smooth_velocity(before.data[:, idx], ctx.rate_hz)           # as the detector reads the delay
         r = np.where((before.weights > 0)[:, idx, None], before.residuals()[:, idx], np.nan)
         return {"x": np.nansum(v * r, axis=(1, 2)) / np.maximum(np.nansum(v * v, axis=(1, 2)), 1e-9) * -1000,
                 "x_label": "frame-wise delay estimate (ms)", "y": np.linalg.norm(np.nanmean(v, axis=1), axis=1),

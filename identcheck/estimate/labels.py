@@ -126,18 +126,17 @@ their median misfit over the trial; otherwise it only trades one distortion for 
 another segment's leaves its own segment distorted, and exchanging two of that segment's markers does not fix it)."""
 
 
+def _angle_deg(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """The angles between rotations (..., 3, 3), deg; NaN rotations give NaN (which compares False)."""
+    cos = (np.einsum("...ji,...ji->...", Ra, Rb) - 1) / 2                 # (trace(Raᵀ Rb) − 1) / 2
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
 def _turns(poses_R: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(frames with a pose (n,), the angle turned from the previous such frame (n,), deg; the first gets 0)."""
     idx = np.flatnonzero(valid)
     R = poses_R[idx]
-    rel = np.einsum("fji,fjk->fik", R[:-1], R[1:])                       # R_prevᵀ R
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
-    return idx, np.concatenate([[0.0], np.degrees(np.arccos(cos))])
-
-
-def _turn(Ra: np.ndarray, Rb: np.ndarray) -> float:
-    """The angle between two rotations (deg); NaN rotations give NaN (compares False)."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(Ra.T @ Rb) - 1) / 2, -1.0, 1.0))))
+    return idx, np.concatenate([[0.0], _angle_deg(R[:-1], R[1:])])
 
 
 def flips(data: np.ndarray, chain) -> list:
@@ -189,7 +188,7 @@ def flips(data: np.ndarray, chain) -> list:
                     swapped[np.ix_(inside, [ii, jj])] = swapped[np.ix_(inside, [jj, ii])]
                     near = segment_poses(swapped, local)
                     misfit = float(np.max(near.rms))        # NaN (no pose) compares False below
-                    if (all(_turn(near.R[at[p]], near.R[at[q]]) <= FLIP_DEG for p, q in ends)
+                    if (all(_angle_deg(near.R[at[p]], near.R[at[q]]) <= FLIP_DEG for p, q in ends)
                             and misfit <= shape_tol and (best is None or misfit < best[0])):
                         best = (misfit, idx[ii], idx[jj])
             if best is not None:                    # the exchange that leaves the segment's own shape intact
