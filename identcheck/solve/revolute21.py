@@ -16,6 +16,7 @@ into :mod:`identcheck.solve.generated` (:func:`identcheck.solve.formulas.revolut
 from __future__ import annotations
 
 import warnings
+from functools import lru_cache
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -125,6 +126,7 @@ def _check_samples(xyz, n_min=N_UNKNOWNS):
     return xyz
 
 
+@lru_cache(maxsize=1)
 def compiled_available() -> bool:
     """Whether the compiled kernel (:mod:`identcheck.solve.revolute21_compiled`, numba) can be used here."""
     try:
@@ -308,10 +310,14 @@ def is_real(r2, S, v, rho2, tol, slack, xp=np):
     r² > 0, sin²α > 0, ρ² >= 0 up to ``tol``; cos²α = 1 − S >= 0 up to ``slack`` (rounding
     can push a hinge perpendicular to A1A2 slightly below 0; it is then taken as 0); and
     u² = v and cos²α not both <= 0. At a root of (13), w² = (1 − S)·v, so the two share a sign:
-    both negative is the root that the derivation proves non-real (E1).
+    both negative is the root that the derivation proves non-real (E1). That sign is read from the one larger
+    in magnitude.
     """
     C = 1 - S
-    return (r2 > tol) & (S > tol) & (C >= -slack) & (xp.maximum(C, v) > 0) & (rho2 > -tol)
+    # the sign they share is read from the larger of the two: the smaller may be rounding alone (a root whose
+    # cos²α is 0 in exact arithmetic, with u² clearly negative, came out at +1e-16 and passed for real)
+    larger = xp.where(abs(C) >= abs(v), C, v)
+    return (r2 > tol) & (S > tol) & (C >= -slack) & (larger > 0) & (rho2 > -tol)
 
 
 def _cos2_slack(coeffs, q, Zs, S, v, ratio):

@@ -128,6 +128,7 @@ def _one(x, params, valid, Zs, ratio, handled, i, imag_tol, real_tol, round_, MK
         u = t if from_c else (-mm if w < 0 else mm)
         l = u - Z1 * ca
         rho2 = _rho2(q, Z1, Z2, Z3, Z4, Z5, l)[0]
+        # NumPy's |Im| <= IMAG_TOL (1 + |q|) with Im = 0 here: False only for a NaN root, as there
         ok = (0.0 <= imag_tol * (1 + abs(q))) and math.isfinite(l)
         slack = 0.0
         if S > 1 and v > 0:                       # _cos2_slack
@@ -137,7 +138,7 @@ def _one(x, params, valid, Zs, ratio, handled, i, imag_tol, real_tol, round_, MK
             slope = (3 * c0 * q + 2 * c1) * q + c2
             bracket = size / abs(slope) + aq + abs(Z2) + 2 * abs(S) * (Z1s + abs(Z5))
             slack = round_ / ratio[i] * bracket / abs(2 * (Z1s - Z5))
-        ok = (ok and (r2 > real_tol) and (S > real_tol) and (C >= -slack) and (np.maximum(C, v) > 0)
+        ok = (ok and (r2 > real_tol) and (S > real_tol) and (C >= -slack) and ((C if abs(C) >= abs(v) else v) > 0)
               and (rho2 > -real_tol))
         sa = math.sqrt(np.minimum(np.maximum(S, 0.0), 1.0))
         r, rho = math.sqrt(np.maximum(r2, 0.0)), math.sqrt(np.maximum(rho2, 0.0))

@@ -40,6 +40,10 @@ def _needs_numba():
                     np.array([[60.0, -1.0, 6.123234e-17], [2.72156635, 5.14005197, 17.6335576],
                               [-31.1827246, 23.8916435, -28.5316955], [-32.3582951, -22.2736095, 28.5316955],
                               [0.819453315, -5.75808595, -17.6335576]]))], noise=0.0, seed=0)
+@example(problems=[(np.array([0.0, 40.0, 1.0, 0.0, 30.0]),              # l = 0: a root with cos²α 0 exactly, u² < 0
+                    np.array([[10.3002251, 2.28742397, 3.56245176], [29.74710831, 55.04069625, -17.57171847],
+                              [-37.57909988, 7.5648844, 24.86918595], [-30.2333036, -3.97528742, -22.66746968],
+                              [27.76507007, -60.91771721, 11.80755043]]))], noise=0.0, seed=0)
 def test_compiled_verdicts_are_numpys(problems, noise, seed):
     """Random true joints (generic and with the hinge nearly perpendicular to the marker axis), with and without
     noise on the samples (noise gives cubics with one real root, which the kernel hands back to NumPy)."""

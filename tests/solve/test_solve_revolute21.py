@@ -219,3 +219,17 @@ def test_batch_keeps_leading_shape():
         assert b.params.shape == (2, 2, 6, 5) and b.valid.shape == (2, 2, 6) and b.Z.shape == (2, 2, 5)
         assert b.pivot_ratio.shape == (2, 2) and b.valid.sum(-1).tolist() == [[4, 4], [4, 4]]
         assert (b.theta is None) == (not angles) and (not angles or b.theta.shape == (2, 2, 6, 5))
+
+
+def test_a_root_on_the_cos_alpha_zero_boundary_with_negative_u2_is_not_real():
+    """Truth with l = 0: one root of (13) has cos²α = 0 in exact arithmetic and u² = v clearly negative, so it is
+    no joint (E1); rounding put cos²α at +1e-16 and it passed for real. Its sign is read from the larger factor."""
+    truth = np.array([0.0, 40.0, 1.0, 0.0, 30.0])
+    xyz = np.array([[10.3002251, 2.28742397, 3.56245176], [29.74710831, 55.04069625, -17.57171847],
+                    [-37.57909988, 7.5648844, 24.86918595], [-30.2333036, -3.97528742, -22.66746968],
+                    [27.76507007, -60.91771721, 11.80755043]])
+    for angles in (False, True):          # the constants' own reality check, and with the samples rebuilt
+        res = solve_batch(xyz[None], angles=angles)
+        assert res.valid[0].sum() == 4                   # the two parameter sets and their mirrors, nothing more
+        best = np.min(np.abs(res.params[0][res.valid[0]] - truth).max(axis=1))
+        assert best < 1e-6
