@@ -8,13 +8,22 @@ largest marker-distance error against the truth (median and worst over trials), 
 library call (`fit_trial`: label screen, closed-form starts, whole-tree fit, covariance) per joint, with the
 allocator setting the command line makes (``--allocator default`` for glibc's own: ``summary_default_allocator``).
 
+With ``--baseline REV`` the speed is also measured side by side with an earlier commit (checked out into a
+temporary worktree): the same trials fitted by the current code and by the baseline, each in its own process,
+the two processes taking turns for ``--rounds`` rounds, each trial's time the least over its rounds (this
+machine's speed drifts by a third within minutes; the least is what the code costs). ``summary`` then holds
+``speed_vs_baseline``.
+
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_fit_accuracy.py [--trials 6] [--frames 1500]
+    PYTHONPATH=. python benchmarks/bench_fit_accuracy.py [--trials 6] [--frames 1500] [--baseline REV --rounds 3]
 """
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
 import time
 import warnings
@@ -34,6 +43,56 @@ from identcheck.fit.workflow import fit_trial  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.simulate.rigid import simulate  # noqa: E402
 from results_io import machine_info, write_json  # noqa: E402
+from worktree import checkout, head  # noqa: E402
+
+TIMES_WORKER = """
+import json, sys, time, warnings
+from threadpoolctl import threadpool_limits
+from identcheck.cli import keep_freed_memory
+from identcheck.fit.workflow import fit_trial
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+keep_freed_memory()
+model, seeds = Model.from_toml(sys.argv[1]), json.loads(sys.argv[2])
+sims = [simulate(model, n_frames=int(sys.argv[3]), noise_mm=float(sys.argv[4]), seed=s) for s in seeds]
+out = []
+with warnings.catch_warnings(), threadpool_limits(1):
+    warnings.simplefilter("ignore")
+    fit_trial(model, sims[0].trial)                      # the lazy imports, not timed
+    for sim in sims:
+        t0 = time.process_time()
+        rep = fit_trial(model, sim.trial)
+        out.append((time.process_time() - t0) / len(rep["joints"]))
+print(json.dumps(out))
+"""
+"""One process's CPU seconds per joint of ``fit_trial`` on each simulated trial (one BLAS thread): the same script
+for the current code and the baseline, so only the library differs."""
+
+
+def _worker_times(code_root: Path, seeds: list, frames: int, noise_mm: float) -> list:
+    env = {**os.environ, "PYTHONPATH": str(code_root)}
+    out = subprocess.run([sys.executable, "-c", TIMES_WORKER, str(ROOT / "examples" / "leg.toml"), json.dumps(seeds),
+                          str(frames), str(noise_mm)], cwd=code_root, env=env, capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def speed_vs_baseline(baseline: str, seeds: list, frames: int, noise_mm: float, rounds: int) -> dict:
+    """CPU seconds per joint of the current code and of `baseline` on the same trials, the processes taking turns;
+    per trial the least over the rounds, then the median over trials."""
+    with checkout(baseline) as base:
+        current, old = [], []
+        for k in range(rounds):
+            print(f"speed round {k + 1} of {rounds}: current, then {baseline}", flush=True)
+            current.append(_worker_times(ROOT, seeds, frames, noise_mm))
+            old.append(_worker_times(base, seeds, frames, noise_mm))
+    cur, bas = np.min(current, axis=0), np.min(old, axis=0)
+    return {"baseline": baseline, "current": head(), "rounds": rounds,
+            "current_seconds_per_joint": round(float(np.median(cur)), 3),
+            "baseline_seconds_per_joint": round(float(np.median(bas)), 3),
+            "speed_up": round(float(np.median(bas) / np.median(cur)), 2),
+            "per_trial_current": [round(float(x), 3) for x in cur],
+            "per_trial_baseline": [round(float(x), 3) for x in bas]}
 
 
 def _max_err(dist: dict, truth: dict) -> float:
@@ -49,6 +108,8 @@ def main(argv=None) -> int:
     ap.add_argument("--allocator", choices=("default", "kept"), default="kept",
                     help="kept: the allocator setting the command line makes (identcheck.cli.keep_freed_memory), "
                          "so that the times are what `identcheck fit` spends; default: glibc's own")
+    ap.add_argument("--baseline", help="an earlier commit to time side by side with the current code")
+    ap.add_argument("--rounds", type=int, default=3, help="turns each of the two processes takes (with --baseline)")
     a = ap.parse_args(argv)
     if a.allocator == "kept":
         keep_freed_memory()
@@ -100,9 +161,15 @@ def main(argv=None) -> int:
         summary[name] = s
     print("CPU seconds of the whole-tree row: the whole fit_trial call divided by the number of joints "
           "(closed-form starts included, whose own time is not separated here).")
-    write_json(a.out, "fit_accuracy", {"summary" if a.allocator == "kept" else "summary_default_allocator": summary,
-                                       "trials": a.trials, "frames": a.frames, "noise_mm": a.noise_mm,
-                                       "allocator": a.allocator, "machine": machine_info()}, merge=True)
+    entry = {"summary" if a.allocator == "kept" else "summary_default_allocator": summary,
+             "trials": a.trials, "frames": a.frames, "noise_mm": a.noise_mm, "allocator": a.allocator,
+             "machine": machine_info()}
+    if a.baseline:
+        speed = speed_vs_baseline(a.baseline, [300 + k for k in range(a.trials)], a.frames, a.noise_mm, a.rounds)
+        print(f"CPU s per joint, least of {a.rounds} turns, median over trials: current {speed['current_seconds_per_joint']}"
+              f", {a.baseline} {speed['baseline_seconds_per_joint']} ({speed['speed_up']}x)")
+        entry["speed_vs_baseline"] = speed
+    write_json(a.out, "fit_accuracy", entry, merge=True)
     return 0
 
 

@@ -25,6 +25,12 @@ from identcheck.skeleton import Skeleton
 
 MAX_ITER = 60
 REL_TOL = 1e-8        # stop when the cost falls by less than this fraction
+FAST_RATE = 0.1
+"""Where each accepted step lowers the cost by at most this fraction of the step before (the iteration converges
+geometrically, at rate ρ ≤ FAST_RATE), the decrease still to come is at most ``drop·ρ/(1 − ρ)``: the fit stops
+when that is below ``REL_TOL`` of the cost, one normal-equation build before the step that would only confirm it
+(on the bundled leg: 4 iterations instead of 5, the cost within 1e-10 of its minimum), and it does not try to
+extend such a step (:func:`_extend` is for the crawl, where successive steps barely shrink)."""
 
 
 def _cost(pred, data, w) -> float:
@@ -91,7 +97,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     pen = (lambda st: float(np.sum(penalty(st)[0] ** 2))) if penalty else (lambda st: 0.0)
     R, t, centre, pred = forward(chain, terms, s)
     cost = _cost(pred, y, w) + pen(s)
-    lam, it, converged = 1e-3, 0, False
+    lam, it, converged, last_drop = 1e-3, 0, False, None
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
         A, B, C, g, h = _normal(chain, terms, s, R, centre, pred, y, w)
@@ -113,10 +119,14 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             new = _cost(p2, y, w) + pen(trial)
             if new <= cost:
                 improved = True
-                done = cost - new <= tol * max(cost, 1e-300)
-                if not done:
+                drop = cost - new
+                rate = drop / last_drop if last_drop else 1.0
+                fast = rate <= FAST_RATE
+                done = drop <= tol * max(cost, 1e-300) or (fast and drop * rate / (1 - rate) <= tol * max(new, 1e-300))
+                if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
                                                          (trial, R2, t2, c2, p2, new))
+                last_drop = cost - new
                 s, R, t, centre, pred, cost = trial, R2, t2, c2, p2, new
                 lam = max(lam / 10, 1e-12)
                 break

@@ -133,9 +133,12 @@ class Block:
 def _about(d: np.ndarray) -> np.ndarray:
     """(..., 3, 3) whose column a is ``e_a × d``: the derivative of a point at lever `d` (..., 3) with respect to
     a rotation vector."""
-    z = np.zeros_like(d[..., 0])
+    out = np.zeros(d.shape + (3,))
     d0, d1, d2 = d[..., 0], d[..., 1], d[..., 2]
-    return np.stack([np.stack([z, -d2, d1], -1), np.stack([d2, z, -d0], -1), np.stack([-d1, d0, z], -1)], -1)
+    out[..., 1, 0], out[..., 2, 0] = -d2, d1
+    out[..., 0, 1], out[..., 2, 1] = d2, -d0
+    out[..., 0, 2], out[..., 1, 2] = -d1, d0
+    return out
 
 
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.model import tangents
+from identcheck.bundle.model import cross3, tangents
 from identcheck.bundle.uncertainty import joint_offsets
 from identcheck.geometry.rotations import rotvec_matrix
 
@@ -26,9 +26,9 @@ def _technical(local3: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     o = local3[0]
     x = local3[1] - o
     x = x / np.linalg.norm(x)
-    z = np.cross(x, local3[2] - o)
+    z = cross3(x, local3[2] - o)
     z = z / np.linalg.norm(z)
-    return o, np.stack([x, np.cross(z, x), z])
+    return o, np.stack([x, cross3(z, x), z])
 
 
 def _constants(state, chain, dc: np.ndarray, joint: str):

@@ -140,7 +140,7 @@ def forward(chain: Skeleton, terms: Terms, s: State):
     pred = np.empty((F, chain.n_markers, 3))
     for seg in chain.segments:
         idx = chain.seg_markers[seg]
-        pred[:, idx] = np.einsum("fij,fkj->fki", R[seg], local[:, idx]) + t[seg][:, None]
+        pred[:, idx] = local[:, idx] @ np.swapaxes(R[seg], 1, 2) + t[seg][:, None]
     n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
     for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
         pred[:, cols] += p[0] * fld
@@ -150,9 +150,14 @@ def forward(chain: Skeleton, terms: Terms, s: State):
 def cross3(a, b) -> np.ndarray:
     """The cross product of two 3-vectors (or stacks of them, last axis), written out: numpy's ``cross`` spends
     most of its time on argument handling at these sizes."""
+    a, b = np.asarray(a), np.asarray(b)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack(np.broadcast_arrays(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
 
 
 def tangents(a: np.ndarray):

@@ -41,7 +41,7 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
             sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
             rf = r[:, idx].reshape(F, n) * sw
-        Jt, Gt = Jf.transpose(0, 2, 1), Gf.transpose(0, 2, 1)
+        Jt, Gt = np.ascontiguousarray(Jf.transpose(0, 2, 1)), Gf.transpose(0, 2, 1)   # a contiguous Jᵀ: JᵀJ at BLAS speed
         _add(A, fr, fr, Jt @ Jf)
         _add(B, fr, cr, Jt @ Gf)
         _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
@@ -59,6 +59,21 @@ def ridged(A: np.ndarray) -> np.ndarray:
     return A + 1e-12 * np.maximum(scale, np.median(scale) + 1e-300) * np.eye(k)
 
 
+def lower_inverse(L: np.ndarray) -> np.ndarray:
+    """The inverses (F, k, k) of lower-triangular matrices `L` (F, k, k) with a nonzero diagonal, by forward
+    substitution row by row, each row for every frame at once: ``X_i = (e_i − L_i,<i X_<i) / L_ii``.
+
+    Why not ``np.linalg.inv``: it factorises each of the F small matrices again (LU with pivoting, one LAPACK call
+    per frame); k vectorised steps cost a third of that at k = 11 and F = 1500."""
+    F, k, _ = L.shape
+    X = np.zeros_like(L)
+    for i in range(k):
+        row = -np.einsum("fj,fjc->fc", L[:, i, :i], X[:, :i, :]) if i else np.zeros((F, k))
+        row[:, i] += 1.0
+        X[:, i, :] = row / L[:, i, i, None]
+    return X
+
+
 def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.ndarray, h: np.ndarray):
     """The per-frame unknowns eliminated (Schur complement): ``S = C − Σ_f B_fᵀ A_f⁻¹ B_f`` (P, P) and the reduced
     gradient ``h − Σ_f B_fᵀ A_f⁻¹ g_f`` ((P,), or per frame (F, P) when `h` is), with `A_damped` (F, k, k) the
@@ -70,7 +85,7 @@ def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.n
     ridge) is solved as a general system instead."""
     F, k, P = B.shape
     try:
-        Linv = np.linalg.inv(np.linalg.cholesky(A_damped))
+        Linv = lower_inverse(np.linalg.cholesky(A_damped))
     except np.linalg.LinAlgError:
         Linv = None
     if Linv is not None:                                 # A⁻¹ = L⁻ᵀL⁻¹: both sides of each product are L⁻¹ times

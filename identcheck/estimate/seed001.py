@@ -780,6 +780,17 @@ _SKEW_BASIS = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
 """``[φ]× = Σ_k φ_k K_k``: ``_SKEW_BASIS[k]`` is the cross-product matrix of the k-th unit vector."""
 
 
+def _skew_sandwich(Sphi: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``E[[φ]×ᵀ G [φ]×] = Σ_kn Σφ_kn K_kᵀ G K_n`` per frame (F, 3, 3), for φ with covariance `Sphi` (F, 3, 3): nine
+    batched 3×3 products (a four-operand einsum took twelve times as long on 1500 frames, the same numbers)."""
+    out = np.zeros(G.shape)
+    for k in range(3):
+        left = _SKEW_BASIS[k].T @ G
+        for n in range(3):
+            out += Sphi[:, k, n, None, None] * (left @ _SKEW_BASIS[n])
+    return out
+
+
 def _noise_information(R0, R1, geo0, geo1, Wi, noise2, method) -> np.ndarray:
     """Expected part of the normal matrix ``A = Σ_t M_tᵀ G_t M_t`` due to pose noise alone.
 
@@ -799,7 +810,7 @@ def _noise_information(R0, R1, geo0, geo1, Wi, noise2, method) -> np.ndarray:
     blocks, means = [], []
     for R, geo, sign in ((R0, geo0, 1.0), (R1, geo1, -1.0)):
         Sphi = noise2 * R @ geo.inertia_inv @ np.swapaxes(R, 1, 2)
-        E = np.einsum("fkn,kji,fjm,nml->fil", Sphi, _SKEW_BASIS, Wi, _SKEW_BASIS, optimize=True)
+        E = _skew_sandwich(Sphi, Wi)
         blocks.append(np.einsum("fji,fjk,fkl->il", R, E, R, optimize=True))
         shrink = 0.5 * (Sphi - np.trace(Sphi, axis1=1, axis2=2)[:, None, None] * np.eye(3))
         means.append(sign * shrink @ R)                                 # E[δM²] block

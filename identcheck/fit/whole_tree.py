@@ -56,6 +56,11 @@ CONVERGE_BUDGET_S = 10.0
 its damping reset: a fit crawling along the valley of a segment posed by two markers needed ~1200 iterations).
 A best fit still not converged answers nothing: its joints are undetermined and a warning says why."""
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
+START_SHAPE_TOL_MM = 0.1
+"""Body-fixed coordinates of a start's segment poses are averaged over the frames (:func:`refine_local`) until they
+move less than this: the whole-tree fit refines them, so its start needs them to a fraction of the noise, not to
+the 1e-9 mm of the closed forms' own poses (on the bundled leg: 2 passes a segment instead of 4, the same fits
+in the same number of iterations)."""
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
                          # reach the same minimum to ~1e-3 mm)
 @dataclass
@@ -96,7 +101,7 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
             raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
                                   "pose it (three are needed to start the whole-tree fit)")
         try:
-            local, poses = refine_local(pts)
+            local, poses = refine_local(pts, tol=START_SHAPE_TOL_MM)
         except ValueError as exc:
             raise DegenerateError(f"segment {seg!r}: {exc}") from None
         if poses.valid.sum() < 3:

@@ -56,5 +56,5 @@ def chain_poses(joints, root: str, root_R, root_t, rel_R: dict, c_parent: dict, 
 def place_markers(R, t, local):
     """Markers of one segment in the world: R (F, 3, 3), t (F, 3), local (m, 3) -> (F, m, 3)."""
     local = np.asarray(local) if not isinstance(local, np.ndarray) else local
-    return np.einsum("fij,kj->fki", R, local) + t[:, None, :] if local.dtype != object else \
+    return local @ np.swapaxes(R, 1, 2) + t[:, None, :] if local.dtype != object else \
         np.stack([apply(R, p) + t for p in local], axis=1)

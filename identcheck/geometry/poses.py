@@ -38,12 +38,12 @@ class Poses:
     def to_world(self, local_points) -> np.ndarray:
         """Body-fixed points (k, 3) → world (F, k, 3); NaN in frames without a pose."""
         p = np.asarray(local_points, dtype=float)
-        return np.einsum("fij,kj->fki", self.R, p) + self.t[:, None, :]
+        return p @ np.swapaxes(self.R, 1, 2) + self.t[:, None, :]
 
     def to_local(self, world_points) -> np.ndarray:
         """World points (F, k, 3) → body-fixed (F, k, 3)."""
         w = np.asarray(world_points, dtype=float) - self.t[:, None, :]
-        return np.einsum("fji,fkj->fki", self.R, w)
+        return w @ self.R
 
 
 def reference_shape(points) -> np.ndarray:
@@ -84,13 +84,13 @@ def segment_poses(points, local=None) -> Poses:
     cl = (w[..., None] * loc[None]).sum(axis=1) / safe             # (F, 3) local centroid
     Pc = (P - cp[:, None]) * w[..., None]
     Lc = (loc[None] - cl[:, None]) * w[..., None]
-    H = np.einsum("fki,fkj->fij", Pc, Lc)                          # Σ p lᵀ
+    H = np.swapaxes(Pc, 1, 2) @ Lc                                 # Σ p lᵀ
     R = best_rotations(H, bound=0.5 * (np.einsum("fki,fki->f", Pc, Pc) + np.einsum("fki,fki->f", Lc, Lc)))
     t = cp - np.einsum("fij,fj->fi", R, cl)
     valid = (n >= MIN_MARKERS) & _spread(w, loc)
     R[~valid] = np.nan
     t[~valid] = np.nan
-    pred = np.einsum("fij,kj->fki", R, loc) + t[:, None, :]
+    pred = loc @ np.swapaxes(R, 1, 2) + t[:, None, :]
     res = np.where(w > 0, np.sum((pred - P) ** 2, axis=2), 0.0)
     rms = np.where(valid, np.sqrt(res.sum(axis=1) / np.maximum(n, 1)), np.nan)
     return Poses(R=R, t=t, valid=valid, local=loc, rms=rms)

@@ -53,3 +53,22 @@ def test_the_extended_iteration_reaches_the_same_minimum(seed, monkeypatch):
     assert extended.converged and plain.converged
     assert abs(extended.rss - plain.rss) <= 1e-6 * plain.rss
     assert extended.iterations <= plain.iterations
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10_000), noise=st.floats(0.2, 2.0), frames=st.integers(80, 400))
+def test_stopping_on_a_fast_rate_leaves_the_cost_within_tolerance(seed, noise, frames):
+    """Stopping where the geometric rate says the rest of the decrease is below the tolerance: the cost is within
+    a few times REL_TOL of the cost reached when every fit runs until a step itself falls below it, and no more
+    iterations are taken."""
+    sim = simulate(MODEL, n_frames=frames, noise_mm=noise, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.trial.as_array()
+    state = initial_state(chain, data)
+    early = fit_chain(chain, data, state, max_iter=500)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(chain_mod, "FAST_RATE", 0.0)                     # no step counts as fast: the plain rule alone
+        plain = fit_chain(chain, data, state, max_iter=500)
+    assert early.converged and plain.converged
+    assert early.rss <= plain.rss * (1 + 3 * chain_mod.REL_TOL)
+    assert early.iterations <= plain.iterations

@@ -402,3 +402,20 @@ def test_second_order_terms_match_monte_carlo(seed, cc):
     assert np.abs(psi_pred).max() > 4 * se.max()                 # the term is really there
     dA = A.mean(axis=0) - A_clean
     np.testing.assert_allclose(dA, N_pred, atol=4 * A.std(axis=0).max() / np.sqrt(reps) + 0.1 * np.abs(N_pred).max())
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), F=st.integers(1, 7))
+def test_skew_sandwich_is_the_expectation_it_stands_for(seed, F):
+    """``Σ_kn Σφ_kn K_kᵀ G K_n`` against its definition written as one contraction, on random covariances and
+    weights; and for a single φ (Σφ = φφᵀ) it is ``[φ]×ᵀ G [φ]×`` itself."""
+    from identcheck.estimate.seed001 import _SKEW_BASIS, _skew, _skew_sandwich
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(F, 3, 3))
+    Sphi, G = X @ np.swapaxes(X, 1, 2), rng.normal(size=(F, 3, 3))
+    want = np.einsum("fkn,kji,fjm,nml->fil", Sphi, _SKEW_BASIS, G, _SKEW_BASIS)
+    np.testing.assert_allclose(_skew_sandwich(Sphi, G), want, atol=1e-12 * (1 + np.abs(want).max()))
+    phi = rng.normal(size=(F, 3))
+    cross = _skew(phi)
+    np.testing.assert_allclose(_skew_sandwich(phi[:, :, None] * phi[:, None, :], G),
+                               np.swapaxes(cross, 1, 2) @ G @ cross, atol=1e-12 * (1 + np.abs(G).max() * 9))
