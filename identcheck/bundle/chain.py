@@ -30,7 +30,8 @@ FAST_RATE = 0.1
 geometrically, at rate ρ ≤ FAST_RATE), the decrease still to come is at most ``drop·ρ/(1 − ρ)``: the fit stops
 when that is below ``REL_TOL`` of the cost, one normal-equation build before the step that would only confirm it
 (on the bundled leg: 4 iterations instead of 5, the cost within 1e-10 of its minimum), and it does not try to
-extend such a step (:func:`_extend` is for the crawl, where successive steps barely shrink)."""
+extend such a step (:func:`_extend` is for the crawl, where successive steps barely shrink). Only a step taken at
+the damping the iteration started with counts: one accepted after the damping was raised is short by choice."""
 
 
 def _cost(pred, data, w) -> float:
@@ -107,7 +108,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         k = A.shape[1]
         scaleA = np.trace(A, axis1=1, axis2=2)[:, None] / k + 1e-12
         improved = False
-        for _ in range(12):
+        for attempt in range(12):
             Ad = A + lam * (A * np.eye(k)) + 1e-9 * scaleA[..., None] * np.eye(k)
             Cd = C + lam * np.diag(np.diag(C)) + 1e-9 * (np.trace(C) / max(len(C), 1)) * np.eye(len(C))
             S, reduced, back = eliminate_frames(Ad, B, Cd, g, h)
@@ -121,7 +122,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 improved = True
                 drop = cost - new
                 rate = drop / last_drop if last_drop else 1.0
-                fast = rate <= FAST_RATE
+                fast = rate <= FAST_RATE and attempt == 0     # a drop made small by raised damping says nothing
                 done = drop <= tol * max(cost, 1e-300) or (fast and drop * rate / (1 - rate) <= tol * max(new, 1e-300))
                 if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
