@@ -29,8 +29,7 @@ SKIP_RATIO = 10.0
 below 1/SKIP_RATIO of the best score fitted so far is not fitted this round (detectors underestimate by
 5x at most in the hidden-effect trials), unless it is another place for the leading effect (a delay's
 linearised detector cannot tell which segment lags when the lag is several frames) or an effect marked
-``always_fit`` (a swap's strength is read from distances, not from the residual; a joint translation's from the
-residual the rigid fit left after moving the joint). Those are fitted even when their strength is below the bar."""
+``always_fit`` (a swap's strength is read from distances, not from the residual)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
@@ -225,9 +224,9 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                            key=lambda pe: -pe[0].strength)
         tried, best, leader, drift = [], 0.0, None, None
         for prop, eff in proposals:
-            if prop.strength <= bar and not eff.fits_always(prop):
+            if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
-            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.fits_always(prop):
+            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.always_fit:
                 # (other places of the leader, and effects whose strength is no estimate of their score: always)
                 log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
                 continue

@@ -22,14 +22,9 @@ class Effect:
     name = ""
     max_proposals = 1       # how many of the detector's best proposals are fitted each round
     always_fit = False
-    """Fit this effect's proposals even when its detector's strength is far below the best score of the round, or below
-    the bar a consistent fit sets:
+    """Fit this effect's proposals even when its detector's strength is far below the best score of the round:
     for detectors whose strength is not an estimate of the fitted score (a label swap's is read from distances
     within segments and fell 20x short of its score on a gait trial)."""
-
-    def fits_always(self, proposal: Proposal) -> bool:
-        """Whether this proposal is fitted whatever its detector's strength (:attr:`always_fit`, by default)."""
-        return self.always_fit
 
     def propose(self, ctx, hyp) -> list:
         """Proposals, strongest first, from the residuals of hypothesis `hyp` (empty: no sign of it)."""

@@ -51,15 +51,6 @@ class JointTranslation(Effect):
     name = "joint_translation"
     max_proposals = 3
 
-    def fits_always(self, proposal) -> bool:
-        """A hinge's proposal is refitted whatever the detector says. The detector regresses the residuals left by the
-        rigid fit, which has already moved the hinge's axis to absorb what it could; refitted with the centre free
-        to move, the joint gives back much more: on held-out knees (seed 15) whose centre moved 4-12 mm the strength
-        was -12 to -2 while the refit scored 116-227, so the proposals never reached the refit. A ball joint's
-        stays gated by its strength: its basis spans three angles, and in gait, where the hip's angles follow the
-        knee's, a hip refitted that way took up a knee's effect (score 164, then 489 for a second copy)."""
-        return proposal.payload.get("hinge", False)
-
     def inject(self, sim, rng) -> Change:
         """A joint centre moves in its parent frame along v by A (2a(t) − 1)², a the joint angle scaled
         to [0, 1]: at rest mid-range, A away at either end of the range; the child segment and everything
@@ -97,7 +88,7 @@ class JointTranslation(Effect):
                 mean = np.nanmean(seen_from_parent, axis=1)
             gain = ctx.bic_gain(len(idx) * explained(mean, basis, lin), 3 * basis.shape[1] + len(lin))
             out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
-                                {"joint": j, "basis": basis, "linear": lin, "hinge": ch.types[j] == "revolute"}))
+                                {"joint": j, "basis": basis, "linear": lin}))
         return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
