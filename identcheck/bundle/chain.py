@@ -218,7 +218,7 @@ def _between_if_far(s: State, joint: str, P: Poses, C: Poses, axis_parent) -> No
     determined when the joint turns little: gait's hip) lies more than :data:`FAR_CENTRE_MM` from both (a hinge:
     its axis line); a hinge keeps its axis direction and starts at the axis point nearest that midpoint."""
     def world(poses, local):
-        return np.einsum("fij,j->fi", poses.R, local) + poses.t
+        return poses.to_world(local[None])[:, 0]
 
     centre = world(P, s.c_parent[joint])
     a_world = None if axis_parent is None else np.einsum("fij,j->fi", P.R, axis_parent / np.linalg.norm(axis_parent))
@@ -231,13 +231,13 @@ def _between_if_far(s: State, joint: str, P: Poses, C: Poses, axis_parent) -> No
     if not min(near) > FAR_CENTRE_MM:
         return
     mid = (world(P, P.local.mean(axis=0)) + world(C, C.local.mean(axis=0))) / 2
-    cp = np.nanmedian(np.einsum("fji,fj->fi", P.R, mid - P.t), axis=0)
+    cp = np.nanmedian(P.to_local(mid[:, None])[:, 0], axis=0)
     if axis_parent is not None:                        # onto the hinge axis through O'Brien's point
         a = axis_parent / np.linalg.norm(axis_parent)
         cp = s.c_parent[joint] + a * float(a @ (cp - s.c_parent[joint]))
     mid = world(P, cp)
     s.c_parent[joint] = cp
-    s.c_child[joint] = np.nanmedian(np.einsum("fji,fj->fi", C.R, mid - C.t), axis=0)
+    s.c_child[joint] = np.nanmedian(C.to_local(mid[:, None])[:, 0], axis=0)
 
 
 def initial_state(chain: Skeleton, data, frames: dict | None = None) -> State:

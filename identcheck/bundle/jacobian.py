@@ -19,7 +19,7 @@ import numpy as np
 
 from identcheck.bundle.model import (State, Terms, cross3, hinge_turns, n_const, second_axis, tangents, tilt_axis,
                                      turn_beta, turn_rate)
-from identcheck.geometry.rotations import hinge_matrix
+from identcheck.geometry.rotations import hinge_matrix, skew
 from identcheck.skeleton import Skeleton
 
 
@@ -130,17 +130,6 @@ class Block:
     G: np.ndarray
 
 
-def _about(d: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) whose column a is ``e_a × d``: the derivative of a point at lever `d` (..., 3) with respect to
-    a rotation vector."""
-    out = np.zeros(d.shape + (3,))
-    d0, d1, d2 = d[..., 0], d[..., 1], d[..., 2]
-    out[..., 1, 0], out[..., 2, 0] = -d2, d1
-    out[..., 0, 1], out[..., 2, 1] = d2, -d0
-    out[..., 0, 2], out[..., 1, 2] = -d1, d0
-    return out
-
-
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
                     pred: np.ndarray) -> tuple[Layout, list]:
     """The derivatives of the predictions `pred` (F, M, 3) of state `s` (with the segments' rotations `R` and
@@ -184,7 +173,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         idx, m = grp.cols, len(grp.cols)
         J = np.zeros((F, m, 3, len(grp.frame_cols)))
         G = np.zeros((F, m, 3, len(grp.const_cols)))
-        J[..., 0:3] = _about(lever[:, idx] - s.root_t[:, None])
+        J[..., 0:3] = -skew(lever[:, idx] - s.root_t[:, None])    # column a: e_a × lever (a turn about the root)
         J[..., 3:6] = np.eye(3)
         for i in range(m):                                   # each marker's own position: the segment's rotation
             G[:, i, :, 3 * i:3 * i + 3] = R[grp.segment]
@@ -193,7 +182,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
             P, C = chain.parent[j], chain.child[j]
             d = dx[j] = lever[:, idx] - centre[j][:, None]
             if chain.types[j] == "spherical":
-                J[..., fc:fc + 3] = _about(d)
+                J[..., fc:fc + 3] = -skew(d)
                 fc += 3
             else:
                 J[..., fc] = cross3(hinge_w[j][:, None], d)

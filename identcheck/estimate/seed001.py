@@ -58,6 +58,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
 from identcheck.geometry.poses import MIN_MARKERS, Poses, refine_local, segment_poses
+from identcheck.geometry.rotations import skew
 
 MIN_FRAMES = 3
 """Fewest frames with valid poses of both segments (two rotations about different axes, plus
@@ -709,13 +710,6 @@ def _cluster_geometry(local: np.ndarray, seen: np.ndarray) -> _Geometry:
     return _Geometry(centroid, np.linalg.inv(J), n)
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrices, shape (..., 3, 3), of vectors shape (..., 3)."""
-    z = np.zeros(v.shape[:-1])
-    x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
-
-
 def _prediction_covariance(R: np.ndarray, c: np.ndarray, geo: _Geometry) -> np.ndarray:
     """Covariance (world, per unit noise σ = 1) of a segment's per-frame prediction of a body point.
 
@@ -725,7 +719,7 @@ def _prediction_covariance(R: np.ndarray, c: np.ndarray, geo: _Geometry) -> np.n
     ``φ × R(c − x̄) + n̄`` has covariance ``R (I/n + [r]× J⁻¹ [r]×ᵀ) Rᵀ σ²``, ``r = c − x̄``
     (body frame). Shape (F, 3, 3).
     """
-    S = _skew(c[None] - geo.centroid)                                   # (F, 3, 3)
+    S = skew(c[None] - geo.centroid)                                   # (F, 3, 3)
     body = np.eye(3) / geo.count[:, None, None] + S @ geo.inertia_inv @ np.swapaxes(S, 1, 2)
     return R @ body @ np.swapaxes(R, 1, 2)
 
@@ -765,7 +759,7 @@ def _bias_term(R0, R1, c0, c1, geo0, geo1, Wi, noise2, method):
     for R, c, geo, sign in ((R0, c0, geo0, 1.0), (R1, c1, geo1, -1.0)):
         r = np.einsum("fij,fj->fi", R, c[None] - geo.centroid)
         Sphi = noise2 * R @ geo.inertia_inv @ np.swapaxes(R, 1, 2)
-        B = Wi @ _skew(r) @ Sphi
+        B = Wi @ skew(r) @ Sphi
         eiv = np.einsum("ijk,fkj->fi", _LEVI_CIVITA, B)                 # E[[φ]× G [r]× φ]
         blocks.append(np.einsum("fji,fj->i", R, eiv))                   # Rᵀ ·
         shrink = 0.5 * (np.einsum("fij,fj->fi", Sphi, r) - np.trace(Sphi, axis1=1, axis2=2)[:, None] * r)
@@ -774,9 +768,7 @@ def _bias_term(R0, R1, c0, c1, geo0, geo1, Wi, noise2, method):
     return eiv, mean_r
 
 
-_SKEW_BASIS = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                        [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                        [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=float)
+_SKEW_BASIS = skew(np.eye(3))
 """``[φ]× = Σ_k φ_k K_k``: ``_SKEW_BASIS[k]`` is the cross-product matrix of the k-th unit vector."""
 
 

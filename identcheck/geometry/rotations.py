@@ -17,6 +17,16 @@ def rotvec_matrix(w: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(np.atleast_2d(w)).as_matrix()
 
 
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrices [v]× (..., 3, 3) of vectors (..., 3): ``skew(v) @ x == v × x``; float64."""
+    v = np.asarray(v, dtype=float)
+    out = np.zeros(v.shape + (3,))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
 def hinge_matrix(axis: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """Rotations (F, 3, 3) about one unit axis (3,) by angles θ (F,), float64."""
     return rotvec_matrix(np.outer(theta, axis))

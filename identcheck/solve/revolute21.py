@@ -314,8 +314,7 @@ def is_real(r2, S, v, rho2, tol, slack, xp=np):
     in magnitude.
     """
     C = 1 - S
-    # the sign they share is read from the larger of the two: the smaller may be rounding alone (a root whose
-    # cos²α is 0 in exact arithmetic, with u² clearly negative, came out at +1e-16 and passed for real)
+    # the smaller may be rounding alone: a root with cos²α exactly 0 and u² clearly negative came out at +1e-16
     larger = xp.where(abs(C) >= abs(v), C, v)
     return (r2 > tol) & (S > tol) & (C >= -slack) & (larger > 0) & (rho2 > -tol)
 

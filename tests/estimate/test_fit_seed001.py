@@ -409,13 +409,14 @@ def test_second_order_terms_match_monte_carlo(seed, cc):
 def test_skew_sandwich_is_the_expectation_it_stands_for(seed, F):
     """``Σ_kn Σφ_kn K_kᵀ G K_n`` against its definition written as one contraction, on random covariances and
     weights; and for a single φ (Σφ = φφᵀ) it is ``[φ]×ᵀ G [φ]×`` itself."""
-    from identcheck.estimate.seed001 import _SKEW_BASIS, _skew, _skew_sandwich
+    from identcheck.estimate.seed001 import _SKEW_BASIS, _skew_sandwich
+    from identcheck.geometry.rotations import skew
     rng = np.random.default_rng(seed)
     X = rng.normal(size=(F, 3, 3))
     Sphi, G = X @ np.swapaxes(X, 1, 2), rng.normal(size=(F, 3, 3))
     want = np.einsum("fkn,kji,fjm,nml->fil", Sphi, _SKEW_BASIS, G, _SKEW_BASIS)
     np.testing.assert_allclose(_skew_sandwich(Sphi, G), want, atol=1e-12 * (1 + np.abs(want).max()))
     phi = rng.normal(size=(F, 3))
-    cross = _skew(phi)
+    cross = skew(phi)
     np.testing.assert_allclose(_skew_sandwich(phi[:, :, None] * phi[:, None, :], G),
                                np.swapaxes(cross, 1, 2) @ G @ cross, atol=1e-12 * (1 + np.abs(G).max() * 9))
