@@ -13,6 +13,11 @@ paper puts the root.
 Edge weight: the RMS residual (mm), not eq. (19) as printed, which divides by √n once more and
 so favours pairs with more usable frames when occlusion differs between pairs (erratum O2 in
 ``derivations/ERRATA.md, seed 002``). With equal frame counts the two give the same tree.
+When the caller can say what residual a perfect joint would leave at each pair's fit (``expected``,
+e.g. from the marker noise and the two clusters' geometry), the tree is the minimum spanning tree
+of the *excess* r² − r_expected² instead: a joint between two small or far clusters leaves a large
+residual from their pose noise alone, and a raw comparison would prefer a wrong joint between two
+well-posed clusters that fits a few mm worse than a joint can (erratum O5).
 
 Section 3.4, playback: the articulated model made of the fitted joints, driven by the root's
 pose and each joint's measured relative rotation, rebuilds every segment's pose by eqs. (4) and
@@ -78,7 +83,9 @@ class Hierarchy:
     margin_mm : dict of str to float
         Child segment → how much the summed residual of the best tree without this joint
         exceeds the chosen tree's (≥ 0; inf if no other tree exists). Near 0: the data hardly
-        prefer this joint to an alternative.
+        prefer this joint to an alternative. (With ``expected`` the tree minimises the excess
+        instead, and a margin can be negative: the cheapest replacement fits with a smaller raw
+        residual, but further beyond what its own pose noise allows.)
     unused_fits : tuple of (str, str, float)
         Pairs left out of the tree whose residual is no larger than the largest residual in
         it: a loop joint (section 5) or a hierarchy the data cannot settle.
@@ -90,6 +97,9 @@ class Hierarchy:
         Segments left out → why (fewer than 3 markers, no pose).
     poses : dict of str to Poses
         The segment poses used.
+    excess_mm2 : numpy.ndarray or None
+        With ``expected``: r² − r_expected² per pair, mm² (the tree's edge weights), inf where
+        ``residual_mm`` is; None without.
     """
 
     segments: tuple
@@ -104,6 +114,12 @@ class Hierarchy:
     root_rule: str
     skipped: dict = field(default_factory=dict)
     poses: dict = field(default_factory=dict, repr=False)
+    excess_mm2: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def weight(self) -> np.ndarray:
+        """The edge weights the tree minimises: ``excess_mm2`` when known, else ``residual_mm`` (same order as r²)."""
+        return self.residual_mm if self.excess_mm2 is None else self.excess_mm2
 
     def edges(self) -> list[tuple[str, str, float]]:
         """(parent, child, RMS residual mm) for every joint, breadth first."""
@@ -146,7 +162,7 @@ class Playback:
 
 # ---------------------------------------------------------------------- section 3.3
 def infer_hierarchy(segments: Mapping, root: str | None = None,
-                    hinge_tol_deg: float = HINGE_TOL_DEG) -> Hierarchy:
+                    hinge_tol_deg: float = HINGE_TOL_DEG, expected=None) -> Hierarchy:
     """Infer the segment tree from motion by a minimum spanning tree over joint residuals.
 
     Parameters
@@ -159,6 +175,10 @@ def infer_hierarchy(segments: Mapping, root: str | None = None,
         The root segment; by default the tree's centre (module docstring).
     hinge_tol_deg : float
         Passed to :func:`identcheck.estimate.obrien.joint_location`.
+    expected : callable, optional
+        ``expected(name_a, name_b, fit) -> float``: the RMS residual (mm) a perfect joint at the pair's fit
+        would leave (NaN: unknown, counted as 0). When given, the tree minimises the excess r² − expected²
+        (module docstring).
 
     Returns
     -------
@@ -214,9 +234,20 @@ def infer_hierarchy(segments: Mapping, root: str | None = None,
             pair_fit[i, j] = f
             W[i, j] = W[j, i] = f.rms_residual
 
-    # Every spanning tree has n - 1 edges, so adding 1 mm to every weight leaves the minimum
-    # tree unchanged; it keeps zero residuals (exact data) from reading as "no edge".
-    graph = np.where(np.isfinite(W) & ~np.eye(n, dtype=bool), W + 1.0, 0.0)
+    excess = None
+    if expected is not None:
+        excess = np.full((n, n), np.inf)
+        np.fill_diagonal(excess, 0.0)
+        for (i, j), f in pair_fit.items():
+            e = float(expected(names[i], names[j], f))
+            excess[i, j] = excess[j, i] = W[i, j] ** 2 - (e ** 2 if np.isfinite(e) else 0.0)
+    weight = W if excess is None else excess
+    # Every spanning tree has n - 1 edges, so adding a constant to every weight leaves the minimum
+    # tree unchanged; shifted to 1 and above, zero residuals (exact data) and negative excesses do not
+    # read as "no edge".
+    off = ~np.eye(n, dtype=bool) & np.isfinite(weight)
+    shift = 1.0 - min(0.0, float(weight[off].min())) if off.any() else 1.0
+    graph = np.where(off, weight + shift, 0.0)
     n_comp, label = connected_components(graph, directed=False)
     if n_comp > 1:
         groups = ["{" + ", ".join(names[k] for k in range(n) if label[k] == c) + "}" for c in range(n_comp)]
@@ -256,7 +287,7 @@ def infer_hierarchy(segments: Mapping, root: str | None = None,
                      order=tuple(names[k] for k in order), residual_mm=W, fits=fits,
                      margin_mm=margins, unused_fits=unused,
                      total_residual_mm=float(sum(W[u, v] for v, u in parent_idx.items())),
-                     root_rule=rule, skipped=skipped, poses=poses)
+                     root_rule=rule, skipped=skipped, poses=poses, excess_mm2=excess)
 
 
 def _hops(adj: np.ndarray) -> np.ndarray:

@@ -2,12 +2,17 @@
 3.3), how sure the data are of each joint, what else fits, and where the one- and two-marker groups attach.
 
 Segments with three or more markers have a pose in every frame, and every pair of them gets an O'Brien joint
-fit (:func:`identcheck.estimate.hierarchy.infer_hierarchy`); the tree is the minimum spanning tree of the RMS
-residuals. For each joint of the tree the *runner-up* is the cheapest pair that could replace it (across the
+fit (:func:`identcheck.estimate.hierarchy.infer_hierarchy`). With the marker noise known, the tree is the minimum
+spanning tree of each pair's *excess*, its mean squared residual less :data:`FLOOR_TRUST` times the square of
+what noise alone would leave for a perfect joint at that fit (:func:`noise_residual_mm`): pose noise grows with
+a cluster's distance from the joint and shrinks with its spread, so raw residuals favour joints between two
+well-posed clusters over true joints of small or distant ones (erratum O5 of seed 002). Without the noise, the
+RMS residuals. For each joint of the tree the *runner-up* is the cheapest pair that could replace it (across the
 cut the joint makes; the best tree without the joint uses it), and the two are compared frame by frame: the
-difference of their mean squared residuals over its standard error (batch means over :data:`N_BATCHES`
-stretches of the trial, so smooth motion's serial correlation does not shrink it), turned into millimetres of
-RMS. A joint is **ambiguous** when the runner-up's residual exceeds its own by less than :data:`Z_AMBIGUOUS`
+difference of their excesses (mean squared residual less the noise-only square) over its standard error (batch
+means over :data:`N_BATCHES` stretches of the trial, so smooth motion's serial correlation does not shrink it),
+turned into millimetres of RMS. A joint is **ambiguous** when the runner-up's excess exceeds its own by less
+than :data:`Z_AMBIGUOUS`
 units, a unit being that standard error but at least :data:`REL_AMBIGUOUS` of the joint's residual (soft
 tissue makes residuals systematic: a difference of a few per cent is not evidence even when it is
 "significant"). It is ambiguous as well when both residuals are within :data:`NOISE_OK` times what marker noise
@@ -45,6 +50,11 @@ from identcheck.infer.grouping import pose_noise_factor
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
+FLOOR_TRUST = 0.8
+"""Share of the noise-only mean square (the floor) taken off each pair's before the tree is chosen. The floor scales
+with the estimated noise σ², which is good to about 5 % in σ under serially correlated noise (and is inflated by
+soft tissue), so 10 % in σ²; two standard errors of that are kept as a margin: a pair whose fitted point lies far
+from both clusters has a large floor, and a full subtraction would let the floor's own error decide."""
 REL_AMBIGUOUS = 0.10
 """A runner-up within this fraction of a joint's residual (times :data:`Z_AMBIGUOUS`) is within the noise."""
 Z_AMBIGUOUS = 2.0
@@ -185,8 +195,10 @@ def _phi(x: float) -> float:
     return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0))) if np.isfinite(x) else (1.0 if x > 0 else 0.0)
 
 
-def compare_residuals(e_chosen: np.ndarray, e_other: np.ndarray, r_chosen: float, r_other: float) -> tuple:
-    """How far a runner-up's residual exceeds a joint's, in units of what noise and soft tissue allow.
+def compare_residuals(e_chosen: np.ndarray, e_other: np.ndarray, r_chosen: float, r_other: float,
+                      floors: tuple = (0.0, 0.0)) -> tuple:
+    """How far a runner-up's residual exceeds a joint's, beyond what each would leave as a perfect joint, in units
+    of what noise and soft tissue allow.
 
     Parameters
     ----------
@@ -194,13 +206,19 @@ def compare_residuals(e_chosen: np.ndarray, e_other: np.ndarray, r_chosen: float
         Per-frame residuals |e_f| of the two fits, mm, NaN where a fit has no frame.
     r_chosen, r_other : float
         Their RMS residuals, mm.
+    floors : (float, float)
+        The RMS residuals a perfect joint would leave at each fit (:func:`noise_residual_mm`), mm; NaN or 0 when
+        unknown. The margin compares the excesses r² − floor².
 
     Returns
     -------
     x : float
-        ``(r_other - r_chosen) / unit``; the unit is the batch-means standard error of that difference, at least
-        :data:`REL_AMBIGUOUS` ``r_chosen``.
+        ``margin / unit``.
     unit_mm : float
+        The batch-means standard error of the margin, at least :data:`REL_AMBIGUOUS` ``r_chosen``.
+    margin_mm : float
+        ``((r_other² − floor_other²) − (r_chosen² − floor_chosen²)) / (r_other + r_chosen)``: ``r_other − r_chosen``
+        when the floors are 0.
     """
     ok = np.isfinite(e_chosen) & np.isfinite(e_other)
     d = e_other[ok] ** 2 - e_chosen[ok] ** 2
@@ -210,7 +228,9 @@ def compare_residuals(e_chosen: np.ndarray, e_other: np.ndarray, r_chosen: float
         means = np.array([b.mean() for b in np.array_split(d, n_b)])
         se_mm = float(means.std(ddof=1) / np.sqrt(n_b)) / max(r_other + r_chosen, 1e-12)
     unit = max(se_mm, REL_AMBIGUOUS * r_chosen, 1e-9)
-    return float((r_other - r_chosen) / unit), float(unit)
+    f_c, f_o = (float(f) if f is not None and np.isfinite(f) else 0.0 for f in floors)
+    margin = ((r_other ** 2 - f_o ** 2) - (r_chosen ** 2 - f_c ** 2)) / max(r_other + r_chosen, 1e-12)
+    return float(margin / unit), float(unit), float(margin)
 
 
 def _subtree(parent: dict, v: str) -> set:
@@ -229,10 +249,14 @@ def noise_residual_mm(h: Hierarchy, parent: str, child: str, fit, sigma_mm: floa
     """The RMS O'Brien residual marker noise σ alone would leave for a perfect joint at the fit's location: the
     two posed segments carry their pose noise to the joint point, ``sqrt(3 σ² (f_P² + f_C²))`` with f the pose
     noise factors there (:func:`identcheck.infer.grouping.pose_noise_factor`); NaN without σ."""
+    return _noise_residual(h.poses, parent, child, fit, sigma_mm)
+
+
+def _noise_residual(poses: dict, parent: str, child: str, fit, sigma_mm: float) -> float:
     if not np.isfinite(sigma_mm):
         return float("nan")
-    fp = pose_noise_factor(h.poses[parent].local, fit.centre_parent)[0]
-    fc = pose_noise_factor(h.poses[child].local, fit.centre_child)[0]
+    fp = pose_noise_factor(poses[parent].local, fit.centre_parent)[0]
+    fc = pose_noise_factor(poses[child].local, fit.centre_child)[0]
     return float(sigma_mm * np.sqrt(3.0 * (fp ** 2 + fc ** 2)))
 
 
@@ -275,7 +299,7 @@ def _separating_motion(u, v, a, b, h: Hierarchy) -> str:
 def _tree_edges(h: Hierarchy, sigma_mm: float) -> tuple[list, list]:
     """Edges of the O'Brien tree with runner-ups and confidence; and the ambiguity reports."""
     names = list(h.segments)
-    W = h.residual_mm
+    W = h.weight
     edges, ambiguous = [], []
     undirected = [(h.parent[c], c) for c in h.order[1:]]
     for v in h.order[1:]:
@@ -293,13 +317,13 @@ def _tree_edges(h: Hierarchy, sigma_mm: float) -> tuple[list, list]:
         if cand is not None and np.isfinite(best):
             a, b = cand
             other = joint_location(h.poses[b], h.poses[a], names=(b, a))
-            x, unit = compare_residuals(fit.frame_residual_mm, other.frame_residual_mm, fit.rms_residual,
-                                        other.rms_residual)
             floor = (noise_residual_mm(h, u, v, fit, sigma_mm), noise_residual_mm(h, b, a, other, sigma_mm))
+            x, unit, margin = compare_residuals(fit.frame_residual_mm, other.frame_residual_mm, fit.rms_residual,
+                                                other.rms_residual, floor)
             noise_only = bool(fit.rms_residual <= NOISE_OK * floor[0] and other.rms_residual <= NOISE_OK * floor[1])
             conf, amb = (0.5, True) if noise_only else (_phi(x), bool(x < Z_AMBIGUOUS))
             runner = {"parent": b, "child": a, "residual_mm": float(other.rms_residual),
-                      "margin_mm": float(other.rms_residual - fit.rms_residual), "margin_units": x,
+                      "margin_mm": margin, "margin_units": x,
                       "unit_mm": unit, "noise_only_mm": [_nan_none(f) for f in floor], "both_within_noise": noise_only}
             if amb:
                 alt = [p for p in undirected if p != (u, v)] + [(b, a)]
@@ -570,7 +594,9 @@ def infer_tree(trial, grouping, root: str | None = None, sigma_mm: float = float
     h, edges, ambiguous, loops = None, [], [], []
     if len(posed) >= 2:
         try:
-            h = infer_hierarchy({g: poses[g] for g in posed}, root=root)
+            expected = (None if not np.isfinite(sigma_mm) else
+                        lambda a, b, fit: np.sqrt(FLOOR_TRUST) * _noise_residual(poses, a, b, fit, sigma_mm))
+            h = infer_hierarchy({g: poses[g] for g in posed}, root=root, expected=expected)
         except InputError as exc:
             raise exc.naming(trial.source) from None
         edges, ambiguous = _tree_edges(h, sigma_mm)

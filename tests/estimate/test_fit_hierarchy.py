@@ -83,6 +83,28 @@ def test_mst_is_the_minimum_over_every_tree_and_margins_are_exact(tree, seed, no
         assert h.margin_mm[child] == pytest.approx(without - best, rel=1e-9, abs=1e-9)
 
 
+@given(trees(max_segments=5), st.integers(0, 2**16), st.floats(0.2, 3.0), st.integers(0, 2**16))
+def test_with_expected_residuals_the_tree_minimises_the_summed_excess(tree, seed, noise, salt):
+    """With ``expected`` (what a perfect joint would leave at each pair), brute force over all labelled trees: the
+    chosen tree has the least summed excess r² − expected²; a zero expectation gives the raw residual tree."""
+    model, _ = tree
+    sim = simulate(model, n_frames=40, seed=seed, noise_mm=noise)
+    pts = points_by_segment(sim.trial, model)
+    rng = np.random.default_rng(salt)
+    scale = {frozenset(p): rng.uniform(0.0, 1.5) for p in itertools.combinations(model.segments, 2)}
+    h = infer_hierarchy(pts, root="s0", expected=lambda a, b, fit: scale[frozenset((a, b))] * fit.rms_residual)
+    E, idx = h.excess_mm2, {s: k for k, s in enumerate(h.segments)}
+    W = h.residual_mm
+    for (a, b), s in ((tuple(p), s) for p, s in scale.items()):
+        assert E[idx[a], idx[b]] == pytest.approx(W[idx[a], idx[b]] ** 2 * (1.0 - s ** 2), rel=1e-9, abs=1e-12)
+    totals = [sum(E[e] for e in edges) for edges in prufer_trees(len(E))]
+    chosen = sum(E[idx[c], idx[p]] for c, p in h.parent.items())
+    assert chosen == pytest.approx(min(totals), rel=1e-9, abs=1e-9)
+    plain = infer_hierarchy(pts, root="s0")
+    zero = infer_hierarchy(pts, root="s0", expected=lambda a, b, fit: 0.0)
+    assert zero.parent == plain.parent and np.array_equal(zero.residual_mm, plain.residual_mm)
+
+
 @given(trees(max_segments=4), st.integers(0, 2**16), st.floats(0, 2.0))
 def test_edge_weights_are_symmetric_pair_fits(tree, seed, noise):
     model, _ = tree

@@ -134,10 +134,10 @@ def test_compare_residuals_counts_what_noise_allows():
     rng = np.random.default_rng(0)
     a = np.abs(rng.normal(5, 1, 500))
     same = np.abs(rng.normal(5, 1, 500))
-    x_same, unit = compare_residuals(a, same, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(same**2))))
+    x_same, unit, _ = compare_residuals(a, same, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(same**2))))
     assert abs(x_same) < 2 and unit >= 0.1 * 5
     far = a + 10
-    x_far, _ = compare_residuals(a, far, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(far**2))))
+    x_far, _, _ = compare_residuals(a, far, float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(far**2))))
     assert x_far > 10
 
 
