@@ -245,12 +245,13 @@ class Counterexample:
         (:func:`identcheck.certify.seal.seal`), which ``identcheck verify`` checks before re-verifying it."""
         return seal(self.to_dict(digits))
 
-    def to_dict(self, digits: int = 60) -> dict:
+    def to_dict(self, digits: int = 60, check: Check | None = None) -> dict:
         """JSON form (format ``/1``, what a table embeds): everything :func:`from_dict` needs to re-check it
-        (``digits`` significant digits)."""
+        (``digits`` significant digits). ``check``: this counterexample's :meth:`check` at the default precision
+        when the caller has already run it (it is a third of a table's time), else it is run here."""
         s = lambda v: mpmath.nstr(v, digits)  # noqa: E731
         vecs = lambda vs: [[s(x) for x in v] for v in vs]  # noqa: E731
-        chk = self.check()
+        chk = self.check() if check is None else check
         return {"format": FORMAT, "joint": self.joint, "p": self.p, "q": self.q, "case": self.key,
                 "construction": self.construction, "delta": s(self.delta), "n_samples": len(self.data),
                 "marker_distances_truth": {k: s(v) for k, v in self.truth.marker_distances().items()},
