@@ -65,7 +65,8 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     truth = json.loads((trial_dir / entry["truth"]).read_text())
     trial = ic.read_trial(trial_dir / entry["trc"])
     row = {"id": entry["id"], "categories": entry["categories"], "n_markers": trial.n_markers,
-           "n_frames": trial.n_frames, "n_segments": len(truth["segments"])}
+           "n_frames": trial.n_frames, "n_segments": len(truth["segments"]),
+           "sigma_mm": (truth.get("noise") or {}).get("sigma_mm")}
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -104,6 +105,23 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     return row
 
 
+NOISE_BINS = (0.6, 1.0)
+"""Marker noise σ (mm, per coordinate, the generator's truth) bins of the rates: the issue asks for them over noise."""
+FRAME_BINS = (1000, 1500)
+"""Trial length (frames) bins of the rates."""
+
+
+def _bin_names(edges, unit: str) -> list:
+    lo = [None, *edges]
+    hi = [*edges, None]
+    return [(f"< {b:g} {unit}" if a is None else f">= {a:g} {unit}" if b is None else f"{a:g}-{b:g} {unit}")
+            for a, b in zip(lo, hi)]
+
+
+def _bin(value: float, edges, unit: str) -> str:
+    return _bin_names(edges, unit)[int(np.searchsorted(edges, value, side="right"))]
+
+
 def _rate(rows, key) -> float | None:
     vals = [r[key] for r in rows if r.get(key) is not None]
     return float(np.mean(vals)) if vals else None
@@ -129,8 +147,15 @@ def summarise(rows: list) -> dict:
     for r in ok:
         for c in r["categories"]:
             cats[c].append(r)
+    noise, length = defaultdict(list), defaultdict(list)
+    for r in ok:
+        if r.get("sigma_mm") is not None:
+            noise[_bin(r["sigma_mm"], NOISE_BINS, "mm")].append(r)
+        length[_bin(r["n_frames"], FRAME_BINS, "frames")].append(r)
     big = [r for r in ok if r["n_markers"] >= TARGET["markers"] and r["n_frames"] >= TARGET["frames"]]
     return {"all": block(ok), "by_category": {c: block(rs) for c, rs in sorted(cats.items())},
+            "by_noise": {k: block(noise[k]) for k in _bin_names(NOISE_BINS, "mm") if noise[k]},
+            "by_frames": {k: block(length[k]) for k in _bin_names(FRAME_BINS, "frames") if length[k]},
             "errors": [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r],
             "speed_target": {**TARGET, "trials": len(big),
                              "max_seconds": float(max(r["seconds"] for r in big)) if big else None,
@@ -142,12 +167,14 @@ def table(summary: dict) -> str:
     def pct(x):
         return "   -" if x is None else f"{100 * x:4.0f}"
 
-    head = (f"{'trials':<22}{'n':>4} {'group%':>7} {'seg%':>6} {'tree%':>6} {'joint%':>7} {'type%':>6} "
+    head = (f"{'trials':<26}{'n':>4} {'group%':>7} {'seg%':>6} {'tree%':>6} {'joint%':>7} {'type%':>6} "
             f"{'reported%':>10} {'ok|right':>9} {'ok|wrong':>9} {'med s':>6} {'max s':>6}")
     lines = [head, "-" * len(head)]
-    rows = [("all", summary["all"])] + list(summary["by_category"].items())
+    rows = ([("all", summary["all"])] + list(summary["by_category"].items())
+            + [(f"noise {k}", b) for k, b in summary.get("by_noise", {}).items()]
+            + [(f"length {k}", b) for k, b in summary.get("by_frames", {}).items()])
     for name, b in rows:
-        lines.append(f"{name:<22}{b['trials']:>4} {pct(b['grouping_exact']):>7} {pct(b['segments_found']):>6} "
+        lines.append(f"{name:<26}{b['trials']:>4} {pct(b['grouping_exact']):>7} {pct(b['segments_found']):>6} "
                      f"{pct(b['tree_exact']):>6} {pct(b['joints_found']):>7} {pct(b['types_right']):>6} "
                      f"{pct(b['wrong_but_reported']):>10} {pct(b['ok_when_tree_right']):>9} "
                      f"{pct(b['ok_when_tree_wrong']):>9} {b['median_seconds'] or 0:6.2f} {b['max_seconds'] or 0:6.2f}")
