@@ -121,7 +121,10 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
     ``local``: (N, 3) samples in the frame of the two parent markers (A1 origin, A2 on +z).
     Orthogonal distance regression: the constants and one β per sample are fitted together
     (a smooth problem with a sparse Jacobian), from each seed of the closed form, each run stopped after
-    ``max_nfev`` evaluations (a start for a later fit needs fewer than an answer).
+    ``max_nfev`` evaluations (a start for a later fit needs fewer than an answer). The closed form's slots come
+    in mirror pairs (:func:`mirror`: the same meridian, ERRATA E2): one of each pair is refined and the result
+    mirrored, which halves the work and returns the two as exact mirror images (refined separately, runs stopped
+    by the budget in a flat valley ended up to several mm apart).
     """
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
@@ -131,28 +134,43 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
     lo, hi = _odr_bounds(N, scale)
     found = []
 
+    units = np.array([scale, scale, 1.0, scale, scale])
+
     def refine(s):
         s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
         x0 = np.r_[s, _nearest_beta(s, R, z)]
         sol = least_squares(_odr, x0, jac=_odr_jacobian, args=(R, z), bounds=(lo, hi), x_scale="jac",
                             tr_solver="lsmr", max_nfev=max_nfev, ftol=TOL, xtol=TOL, gtol=TOL)
         p = sol.x[:5]
-        found.append((p, float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(sol, N)))
+        rms, unc = float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(sol, N)
+        found.extend([(p, rms, unc), (mirror(p), rms, unc)])     # the same meridian: the same fit (ERRATA E2)
 
-    for s in seeds:
-        refine(s)
+    def met(s) -> bool:
+        return any(np.max(np.abs(s - q) / units) <= 1e-3 for q, _, _ in found)
+
+    refined = []
+    for s in seeds:                 # the closed form's slots come in mirror pairs: each pair is refined once
+        if not any(np.max(np.abs(mirror(s) - t) / units) <= 1e-9 for t in refined):
+            refined.append(s)
+            refine(s)
     found.sort(key=lambda t: t[1])
     if found:                       # the fitted joint's own twins (ERRATA E1): noise can hide them from the seeds
         for s in twin_seeds(found[0][0], R, z):
-            if all(np.max(np.abs(s - q) / np.r_[scale, scale, 1.0, scale, scale]) > 1e-3 for q, _, _ in found):
+            if not met(s):
                 refine(s)
         found.sort(key=lambda t: t[1])
-    units = np.array([scale, scale, 1.0, scale, scale])
     distinct = []
     for p, rms, unc in found:
         if all(np.max(np.abs(p - q) / units) > 1e-4 for q, _, _ in distinct):
             distinct.append((p, rms, unc))
     return distinct
+
+
+def mirror(params) -> np.ndarray:
+    """The mirror image (d, r, π − α, −l, ρ) of a joint: its meridian is the same curve (y changes sign, R and z do
+    not), so it fits any samples exactly as well (ERRATA E2)."""
+    d, r, a, l, rho = params
+    return np.array([d, r, np.pi - a, -l, rho], dtype=float)
 
 
 def twin_seeds(params, R, z) -> list:
