@@ -241,6 +241,15 @@ def _epilog(example: str, ok: str, no: str | None = None) -> str:
     return f"example:\n  {example}\nexit codes:\n" + "\n".join(codes) + "\nreference: docs/cli.md"
 
 
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, read from the package metadata only when asked (importing
+    importlib.metadata for every call cost 14 ms of each verb's start-up)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"identcheck {identcheck.__version__}")
+        parser.exit()
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``identcheck`` argument parser: one subcommand per verb of docs/contract.md (reference: docs/cli.md)."""
     p = argparse.ArgumentParser(prog="identcheck", formatter_class=_Help, epilog=(
@@ -250,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Can the joint parameters of this skeleton be identified from these markers? "
         "Certified answers, generated solvers."))
     p.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
-    p.add_argument("--version", action="version", version=f"identcheck {identcheck.__version__}")
+    p.add_argument("--version", action=_Version, nargs=0, help="show the installed version and exit")
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
 
     s = sub.add_parser("derive", formatter_class=_Help, epilog=_epilog("identcheck derive --out derivations/out --json", "every derivation agrees with the paper (or a recorded erratum) and the generated code is up to date", "an unrecorded disagreement, or stale generated code (--regenerate rewrites it)"),

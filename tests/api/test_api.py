@@ -163,6 +163,14 @@ def test_version(capsys):
     assert capsys.readouterr().out.strip() == f"identcheck {ic.__version__}"
 
 
+def test_the_parser_reads_the_version_only_when_asked():
+    """Building the command line's parser (every verb does) does not import importlib.metadata: ``--version``
+    reads the package metadata when it is given."""
+    script = ("import sys, identcheck.cli as c; c.build_parser(); "
+              "assert 'importlib.metadata' not in sys.modules, 'metadata read for every verb'")
+    subprocess.run([sys.executable, "-c", script], check=True, cwd=ROOT)
+
+
 def test_import_is_light_and_names_resolve():
     script = """
 import sys
