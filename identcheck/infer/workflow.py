@@ -17,7 +17,7 @@ from identcheck.infer.grouping import given_grouping, group_markers
 from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
 from identcheck.infer.model_writer import check_model, model_text, write_model
 from identcheck.infer.result import SkeletonResult
-from identcheck.infer.tree import infer_tree
+from identcheck.infer.tree import FLOOR_TRUST, infer_tree
 from identcheck.io.model import virtual_names
 
 PREDICTED_SUFFIX = ".model"
@@ -76,10 +76,16 @@ def _joints(tree, sigma: float) -> list:
 
 
 def _joint_comment(j: dict) -> list:
+    """The model file's comment on one joint: its residual and the runner-up's, each beside what marker noise alone
+    would leave there when that is known (the tree is chosen on the excess over it, so a runner-up can have the
+    smaller residual), the confidence, the type and its evidence."""
     t, ty = j["evidence"]["tree"], j["evidence"]["type"]
     ru = t["runner_up"]
-    lines = [f"{j['name']}: {j['parent']} -> {j['child']}, residual {j['residual_mm']:.3g} mm"
-             + (f" (runner-up {ru['parent']}-{ru['child']}: {ru['residual_mm']:.3g} mm)" if ru else "")
+    floors = (ru or {}).get("noise_only_mm") or [None, None]
+    noise = lambda f: f" (noise alone {f:.3g})" if f is not None else ""  # noqa: E731
+    lines = [f"{j['name']}: {j['parent']} -> {j['child']}, residual {j['residual_mm']:.3g} mm{noise(floors[0])}"
+             + (f" (runner-up {ru['parent']}-{ru['child']}: {ru['residual_mm']:.3g} mm{noise(floors[1])})"
+                if ru else "")
              + f"; confidence {j['confidence']:.2f}" + ("; AMBIGUOUS (see the header)" if t["ambiguous"] else "")]
     lines.append(f"  {j['type']}: {ty['rule']}")
     if "rotation_spread_deg" in ty:
@@ -89,15 +95,19 @@ def _joint_comment(j: dict) -> list:
     return lines
 
 
-def _header(doc: dict, grouping) -> list:
+def _header(doc: dict, grouping, excess: bool) -> list:
+    """The model file's header comment: the trial, the rules that made the segments, the tree (``excess``: weighed
+    against what noise alone leaves) and the types, then what the data leave open."""
     tol = grouping.tolerance
     lines = [f"Inferred by `identcheck skeleton` from {doc['trial']} (frames {doc['frames'][0]}-{doc['frames'][1]}, "
              f"{doc['n_frames']} frames): edit the names freely, check the ambiguities below.",
              ("Segments: markers whose distances stay constant within "
               f"{tol.tolerance_mm:.3g} mm ({tol.rule})." if grouping.source == "inferred"
               else f"Segments: as given in {grouping.source}."),
-             "Tree: minimum spanning tree over pairwise O'Brien joint-fit residuals (O'Brien et al. 2000, 3.3); "
-             f"root {doc['root']} ({doc['root_rule']}).",
+             "Tree: minimum spanning tree over pairwise O'Brien joint fits (O'Brien et al. 2000, 3.3), each weighed by "
+             + (f"its mean squared residual less {FLOOR_TRUST:g} x what marker noise alone would leave there; "
+                if excess else "its RMS residual; ")
+             + f"root {doc['root']} ({doc['root_rule']}).",
              "Types: single-axis relative rotation -> revolute, else spherical (see each joint)."]
     why: dict = {}
     for m in doc["unassigned_markers"]:
@@ -244,7 +254,8 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
            "noise": None if noise is None else {"sigma_mm": noise.sigma_mm, "lag1": noise.lag1,
                                                 "n_pairs": noise.n_pairs},
            "warnings": list(grouping.warnings), "model": None, "playback": None}
-    text = model_text(placed, [{**j, "comment": _joint_comment(j)} for j in joints], _header(doc, grouping))
+    excess = tree.hierarchy is not None and tree.hierarchy.excess_mm2 is not None
+    text = model_text(placed, [{**j, "comment": _joint_comment(j)} for j in joints], _header(doc, grouping, excess))
     if out is not None:
         write_model(out, text)
         doc["model"] = str(out)

@@ -49,6 +49,9 @@ def test_json_model_and_fit(leg, capsys):
     assert set(model.joints) == {j["name"] for j in doc["joints"]}
     for j in doc["joints"]:
         assert f"# {j['name']}: {j['parent']} -> {j['child']}, residual" in text
+        floors = (j["evidence"]["tree"]["runner_up"] or {}).get("noise_only_mm") or [None]
+        if floors[0] is not None:       # the tree weighs each residual against what noise alone leaves: said
+            assert f"residual {j['residual_mm']:.3g} mm (noise alone {floors[0]:.3g})" in text
     assert "rotation spreads" in text and "Not in any segment: loose0" in text
     rc, stdout, _ = run(["fit", out, trial, "--json"], capsys)
     fitted = json.loads(stdout)
