@@ -85,7 +85,7 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     name = {}
     for g, ms in doc["segments"].items():
         votes = [owner[m] for m in ms if m in owner]
-        name[g] = max(set(votes), key=votes.count) if votes else None
+        name[g] = max(sorted(set(votes)), key=votes.count) if votes else None
     true_edges = {frozenset((j["parent"], j["child"])): j["type"] for j in truth["joints"]}
     found = {}
     for j in doc["joints"]:

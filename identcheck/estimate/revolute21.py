@@ -17,6 +17,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from identcheck.solve import revolute21
+from identcheck.solve.revolute21 import mirror
 
 GRID = 256
 NEWTON = 6
@@ -122,9 +123,9 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
     Orthogonal distance regression: the constants and one β per sample are fitted together
     (a smooth problem with a sparse Jacobian), from each seed of the closed form, each run stopped after
     ``max_nfev`` evaluations (a start for a later fit needs fewer than an answer). The closed form's slots come
-    in mirror pairs (:func:`mirror`: the same meridian, ERRATA E2): one of each pair is refined and the result
-    mirrored, which halves the work and returns the two as exact mirror images (refined separately, runs stopped
-    by the budget in a flat valley ended up to several mm apart).
+    in mirror pairs (:func:`identcheck.solve.revolute21.mirror`: the same meridian, ERRATA E2): one of each pair
+    is refined and the result mirrored, which halves the work and returns the two as exact mirror images (refined
+    separately, runs stopped by the budget in a flat valley ended up to several mm apart).
     """
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
@@ -164,13 +165,6 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
         if all(np.max(np.abs(p - q) / units) > 1e-4 for q, _, _ in distinct):
             distinct.append((p, rms, unc))
     return distinct
-
-
-def mirror(params) -> np.ndarray:
-    """The mirror image (d, r, π − α, −l, ρ) of a joint: its meridian is the same curve (y changes sign, R and z do
-    not), so it fits any samples exactly as well (ERRATA E2)."""
-    d, r, a, l, rho = params
-    return np.array([d, r, np.pi - a, -l, rho], dtype=float)
 
 
 def twin_seeds(params, R, z) -> list:

@@ -1,25 +1,24 @@
 """Which segment joins which: the minimum spanning tree over joint-fit residuals (O'Brien et al. 2000, section
 3.3), how sure the data are of each joint, what else fits, and where the one- and two-marker groups attach.
 
-Segments with three or more markers have a pose in every frame, and every pair of them gets an O'Brien joint
-fit (:func:`identcheck.estimate.hierarchy.infer_hierarchy`). With the marker noise known, the tree is the minimum
-spanning tree of each pair's *excess*, its mean squared residual less :data:`FLOOR_TRUST` times the square of
-what noise alone would leave for a perfect joint at that fit (:func:`noise_residual_mm`): pose noise grows with
-a cluster's distance from the joint and shrinks with its spread, so raw residuals favour joints between two
-well-posed clusters over true joints of small or distant ones (erratum O5 of seed 002). Without the noise, the
-RMS residuals. For each joint of the tree the *runner-up* is the cheapest pair that could replace it (across the
-cut the joint makes; the best tree without the joint uses it), and the two are compared frame by frame: the
-difference of their excesses (mean squared residual less the noise-only square) over its standard error (batch
+Segments with three or more markers have a pose in every frame, and every pair of them gets an O'Brien joint fit
+(:func:`identcheck.estimate.hierarchy.infer_hierarchy`). With the marker noise known, the tree is the minimum
+spanning tree of each pair's *excess*, its mean squared residual less :data:`FLOOR_TRUST` times the square of what
+noise alone would leave for a perfect joint at that fit (:func:`noise_residual_mm`): pose noise grows with a
+cluster's distance from the joint and shrinks with its spread, so raw residuals favour joints between two
+well-posed clusters over true joints of small or distant ones (erratum O5 of seed 002); without a noise estimate,
+it is the minimum spanning tree of the RMS residuals. For each joint of the tree the *runner-up* is the cheapest
+pair that could replace it (across the cut the joint makes; the best tree without the joint uses it), and the two
+are compared frame by frame: the difference of their excesses (the tree's weights) over its standard error (batch
 means over :data:`N_BATCHES` stretches of the trial, so smooth motion's serial correlation does not shrink it),
-turned into millimetres of RMS. A joint is **ambiguous** when the runner-up's excess exceeds its own by less
-than :data:`Z_AMBIGUOUS`
-units, a unit being that standard error but at least :data:`REL_AMBIGUOUS` of the joint's residual (soft
-tissue makes residuals systematic: a difference of a few per cent is not evidence even when it is
+turned into millimetres of RMS. A joint is **ambiguous** when the runner-up's excess exceeds its own by less than
+:data:`Z_AMBIGUOUS` units, a unit being that standard error but at least :data:`REL_AMBIGUOUS` of the joint's
+residual (soft tissue makes residuals systematic: a difference of a few per cent is not evidence even when it is
 "significant"). It is ambiguous as well when both residuals are within :data:`NOISE_OK` times what marker noise
 alone would leave for a perfect joint there (:func:`noise_residual_mm`): two exact joints whose residuals differ
-only through how the two pairs' poses carry the noise. Its ``confidence`` is Φ(margin / unit) (0.5 when
-ambiguous by noise). **Loops** are pairs the tree does not use whose residual is no larger than the worst joint
-in it, or within the noise (section 5: a closed chain, or segments that hardly move relative to each other).
+only through how the two pairs' poses carry the noise. Its ``confidence`` is Φ(margin / unit) (0.5 when ambiguous
+by noise). **Loops** are pairs the tree does not use whose residual is no larger than the worst joint in it, or
+within the noise (section 5: a closed chain, or segments that hardly move relative to each other).
 
 A group of one or two markers has no pose, so O'Brien's fit cannot join it. In the frame of each segment with a
 pose, its markers are fitted by a sphere (one centre for both: a ball joint) and by a circle (a hinge)
@@ -245,14 +244,11 @@ def _subtree(parent: dict, v: str) -> set:
     return out
 
 
-def noise_residual_mm(h: Hierarchy, parent: str, child: str, fit, sigma_mm: float) -> float:
+def noise_residual_mm(poses: dict, parent: str, child: str, fit, sigma_mm: float) -> float:
     """The RMS O'Brien residual marker noise σ alone would leave for a perfect joint at the fit's location: the
-    two posed segments carry their pose noise to the joint point, ``sqrt(3 σ² (f_P² + f_C²))`` with f the pose
-    noise factors there (:func:`identcheck.infer.grouping.pose_noise_factor`); NaN without σ."""
-    return _noise_residual(h.poses, parent, child, fit, sigma_mm)
-
-
-def _noise_residual(poses: dict, parent: str, child: str, fit, sigma_mm: float) -> float:
+    two posed segments (``poses``: segment -> Poses) carry their pose noise to the joint point,
+    ``sqrt(3 σ² (f_P² + f_C²))`` with f the pose noise factors there
+    (:func:`identcheck.infer.grouping.pose_noise_factor`); NaN without σ."""
     if not np.isfinite(sigma_mm):
         return float("nan")
     fp = pose_noise_factor(poses[parent].local, fit.centre_parent)[0]
@@ -317,9 +313,10 @@ def _tree_edges(h: Hierarchy, sigma_mm: float) -> tuple[list, list]:
         if cand is not None and np.isfinite(best):
             a, b = cand
             other = joint_location(h.poses[b], h.poses[a], names=(b, a))
-            floor = (noise_residual_mm(h, u, v, fit, sigma_mm), noise_residual_mm(h, b, a, other, sigma_mm))
+            floor = (noise_residual_mm(h.poses, u, v, fit, sigma_mm), noise_residual_mm(h.poses, b, a, other, sigma_mm))
             x, unit, margin = compare_residuals(fit.frame_residual_mm, other.frame_residual_mm, fit.rms_residual,
-                                                other.rms_residual, floor)
+                                                other.rms_residual, tuple(np.sqrt(FLOOR_TRUST) * f for f in floor))
+            # the margin measures the same excess the tree and its runner-up were chosen on
             noise_only = bool(fit.rms_residual <= NOISE_OK * floor[0] and other.rms_residual <= NOISE_OK * floor[1])
             conf, amb = (0.5, True) if noise_only else (_phi(x), bool(x < Z_AMBIGUOUS))
             runner = {"parent": b, "child": a, "residual_mm": float(other.rms_residual),
@@ -461,7 +458,7 @@ def _loops(h: Hierarchy, edges: list, sigma_mm: float) -> list:
             why = "as well as a joint in it" if W[i, j] <= worst else ""
             if not why and W[i, j] <= LOOP_SEARCH * worst and np.isfinite(sigma_mm):
                 fit = joint_location(h.poses[a], h.poses[b], names=(a, b))
-                floor = noise_residual_mm(h, a, b, fit, sigma_mm)
+                floor = noise_residual_mm(h.poses, a, b, fit, sigma_mm)
                 why = f"within what noise alone leaves ({floor:.3g} mm)" if W[i, j] <= NOISE_OK * floor else ""
             if why:
                 out.append({"segments": [a, b], "residual_mm": float(W[i, j]),
@@ -595,7 +592,7 @@ def infer_tree(trial, grouping, root: str | None = None, sigma_mm: float = float
     if len(posed) >= 2:
         try:
             expected = (None if not np.isfinite(sigma_mm) else
-                        lambda a, b, fit: np.sqrt(FLOOR_TRUST) * _noise_residual(poses, a, b, fit, sigma_mm))
+                        lambda a, b, fit: np.sqrt(FLOOR_TRUST) * noise_residual_mm(poses, a, b, fit, sigma_mm))
             h = infer_hierarchy({g: poses[g] for g in posed}, root=root, expected=expected)
         except InputError as exc:
             raise exc.naming(trial.source) from None

@@ -342,6 +342,13 @@ def _cos2_slack(coeffs, q, Zs, S, v, ratio):
     return slack
 
 
+def mirror(params) -> np.ndarray:
+    """The mirror image (d, r, π − α, −l, ρ) of a joint's constants (the slot beside it in :func:`_slots`): it
+    reproduces the same samples, its meridian about the A1A2 line being the same curve (ERRATA E2)."""
+    d, r, a, l, rho = params
+    return np.array([d, r, np.pi - a, -l, rho], dtype=float)
+
+
 def _slots(params, scale, d, r, alpha, l, rho):
     """Write the (n, 3) constants of the σ = +1 joints into ``params`` (n, 6, 5), input units.
 
