@@ -18,7 +18,9 @@ Rows:
   the CPU seconds of the ``fit`` call alone (``call_cpu_s``);
 * ``table``: ``python -m identcheck table --json``, every case with its exact certificates. Warm, the
   derivations (their values and the printed forms the certificates record), the joint models and their
-  compiled Jacobians come from the disk cache (:mod:`identcheck.derive.cache`); cold, SymPy computes them.
+  compiled Jacobians come from the disk cache (:mod:`identcheck.derive.cache`); cold, SymPy computes them;
+* ``plan body16``: ``python -m identcheck plan examples/body16.toml --json``, the whole plan (rank, windows,
+  motion, robustness, suggestions) of the 16-marker body.
 
 ``--baseline REV`` also runs every selected row with the code of commit ``REV`` (a temporary worktree), in
 the same run, rows named ``NAME @REV``.
@@ -157,6 +159,7 @@ def main() -> None:
                                                       "--json"])]) for ex in ("knee_21", "hip_22")]
         runs += [("fit sparse_leg", FIT, [str(ROOT / "examples/sparse_leg.toml"), str(t["sparse_leg"])])]
         runs += [("table", CLI, [json.dumps(["table", "--json"])])]
+        runs += [("plan body16", CLI, [json.dumps(["plan", str(ROOT / "examples/body16.toml"), "--json"])])]
         for cold in (False, True):
             for name, code, args in runs:
                 if a.only is None or a.only in name:

@@ -79,23 +79,33 @@ def eliminate(F, blocks, keep, drop_constants: bool = False) -> Eliminated:
             if j is not None:
                 M[i, j] = v
     R, rank = M.rref()
+    pivots = _pivot_columns(R, rank)
     ne = len(elim)
-    lo, hi = 0, rank                           # rows 0..r_e-1 have their pivot among the eliminated columns
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if any(R[mid, j] != 0 for j in range(ne)):
-            lo = mid + 1
-        else:
-            hi = mid
+    lo = sum(1 for c in pivots if c < ne)      # rows 0..lo-1 have their pivot among the eliminated columns
+    kept_pivots = set(pivots[lo:])
     out = []
     for r in range(lo, rank):
-        row = {}
-        for c, key in enumerate(keep):
-            v = R[r, ne + c]
-            if v != 0:
-                row[key] = v
+        row = {keep[pivots[r] - ne]: R[r, pivots[r]]}
+        for c in range(pivots[r] + 1, len(cols)):
+            if c not in kept_pivots:           # another row's pivot column is zero in this row
+                v = R[r, c]
+                if v != 0:
+                    row[keep[c - ne]] = v
         out.append(row)
     return Eliminated(Summary(keep, out), lo, rank)
+
+
+def _pivot_columns(R, rank: int) -> list:
+    """The pivot column of each of the first `rank` rows of the reduced row echelon form `R`: one walk to the
+    right, since each row's pivot lies right of the one above (at most rank + ncols entries read, where a
+    search row by row would read every zero before each pivot)."""
+    pivots, c = [], 0
+    for r in range(rank):
+        while R[r, c] == 0:
+            c += 1
+        pivots.append(c)
+        c += 1
+    return pivots
 
 
 def pose_keys(segment: str, frames) -> list:

@@ -9,6 +9,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from identcheck.certify import tree_elimination, tree_rank
 from identcheck.certify.tree_equations import axis_rotation_derivative, tilt_rates
+from identcheck.exact.linalg import Field
 from identcheck.exact.algebra import axis_rotation, half_angle, mm, quaternion_rotation
 
 from dense_tree_reference import dense_verdicts
@@ -138,3 +139,32 @@ def test_warm_starts_keep_the_verdicts_and_say_what_min_frames_means(spec):
         if j.local:
             assert warm.joints[n].min_frames == max(2, j.min_frames)
             assert j.min_frames <= quick.joints[n].min_frames == quick.frames - 1      # the scan stopped: stable
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 12), st.integers(1, 10), st.integers(0, 10), st.floats(0.05, 0.9), st.integers(0, 2**32))
+def test_eliminate_reads_the_echelon_rows_over_the_kept_columns(n_rows, n_elim, n_keep, density, seed):
+    """The summary rows equal the rows of the reduced echelon form with their pivot among the kept columns, read
+    entry by entry (the reading skips the other rows' pivot columns and everything left of each pivot); the
+    ranks are the rank of all rows and of the eliminated columns alone."""
+    rng = random.Random(seed)
+    F = Field("GFp", rng)
+    elim = [("e", i) for i in range(n_elim)]
+    keep = [("k", i) for i in range(n_keep)]
+    rows = [{key: F(rng.randrange(1, 7)) for key in elim + keep if rng.random() < density} for _ in range(n_rows)]
+    got = tree_elimination.eliminate(F, [rows], keep)
+    cols = [key for key in elim if any(key in r for r in rows)] + keep
+    M = F.zeros(n_rows, len(cols))
+    for i, r in enumerate(rows):
+        for key, v in r.items():
+            M[i, cols.index(key)] = v
+    R, rank = M.rref()
+    ne = len(cols) - n_keep
+    expected = []
+    for r in range(rank):
+        if all(R[r, c] == 0 for c in range(ne)):
+            expected.append({keep[c - ne]: R[r, c] for c in range(ne, len(cols)) if R[r, c] != 0})
+    assert got.rank == rank
+    assert got.rank_eliminated == rank - len(expected)
+    assert got.summary.rows == expected
+    assert [list(r) for r in got.summary.rows] == [list(r) for r in expected]      # kept columns in their order
