@@ -25,11 +25,14 @@ log = logging.getLogger("identcheck")
 
 MAX_STEPS = 4
 SKIP_RATIO = 10.0
-"""Proposals are fitted strongest first; one whose detector strength (its own estimate of the score) is
-below 1/SKIP_RATIO of the best score fitted so far is not fitted this round (detectors underestimate by
-5x at most in the hidden-effect trials), unless it is another place for the leading effect (a delay's
-linearised detector cannot tell which segment lags when the lag is several frames) or an effect marked
-``always_fit`` (a swap's strength is read from distances, not from the residual)."""
+"""Proposals are fitted strongest first. Every effect's strongest place is fitted whenever its detector clears
+the bar: effects are compared by their fitted scores, never by their detectors' estimates, which are not on one
+scale (a hip centre pistoning in the pelvis: the markers' mean residual seen from the pelvis estimated 1 816
+where the fit scored 22 930, and skin on the thigh, estimated 5 020, scored 20 013 and was named instead). An
+effect's further places are not fitted this round when their strength is below 1/SKIP_RATIO of the best score
+fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
+lag is several frames) or is marked ``always_fit`` (a swap's strength is read from distances, not from the
+residual)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
@@ -61,13 +64,18 @@ class Step:
     score: float
     evidence: dict = field(default_factory=dict)
     rejected: tuple = ()
+    alike: tuple = ()
 
     def equivalents(self) -> list:
-        """Other effects of its round that explain the trial as well, within :data:`EQUIVALENT_GAIN` of its score
-        (a skin cluster moving on the root segment with the hip's angles is the hip centre moving in the root,
-        to the last marker): the data cannot tell them from this one. [(name, where)]."""
-        return [(n, w) for n, w, sc in self.rejected
-                if n != self.name and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
+        """Other effects that the data cannot tell from this one. [(name, where)]: those of its round that explain
+        the trial as well, within :data:`EQUIVALENT_GAIN` of its score (a skin cluster moving on the root segment
+        with the hip's angles is the hip centre moving in the root, to the last marker), and those no data could
+        tell from it (``alike``, :meth:`identcheck.effects.base.Effect.alike`: a knee's centre moving in the thigh
+        moves the markers of a last segment as its skin cluster moving as one does)."""
+        out = [(n, w) for n, w, sc in self.rejected
+               if n != self.name and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
+        return out + [(n, w) for n, w in self.alike
+                      if n != self.name and place(n, w) not in {place(k, v) for k, v in out}]
 
 
 @dataclass(frozen=True)
@@ -209,6 +217,16 @@ def creep(ctx: Context, h: Hypothesis) -> float:
     return max(score(ctx, h.refit(max_iter=CREEP_ITER), h), 0.0)
 
 
+def place(name: str, where: dict) -> tuple:
+    """What makes an effect's place itself: its name and the non-numeric parts of `where` (joint, segment,
+    markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude). An effect adopted at a place
+    is not proposed there again: the same terms a second time only repeat the first (a knee's translation adopted
+    three times in a row, each refit creeping on a little further)."""
+    def key(v):  # noqa: E306
+        return tuple(key(x) for x in v) if isinstance(v, (list, tuple)) else v
+    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not isinstance(v, float)))
+
+
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:
     """Find, name and model what the rigid-joint model misses in `trial` (see the module docstring).
 
@@ -222,14 +240,20 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
         proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
-        tried, best, leader, drift = [], 0.0, None, None
+        tried, best, leader, drift, placed = [], 0.0, None, None, set()
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
-            if prop.strength * SKIP_RATIO < best and eff is not leader and not eff.always_fit:
-                # (other places of the leader, and effects whose strength is no estimate of their score: always)
+            if place(eff.name, prop.where) in {place(st.name, st.where) for st in steps}:
+                log.debug("%s %s skipped: adopted already", eff.name, prop.where)
+                continue
+            if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader
+                    and not eff.always_fit):
+                # (each effect's first place, other places of the leader, and effects whose strength is no
+                # estimate of their score: always)
                 log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
                 continue
+            placed.add(eff.name)
             if progress:
                 progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
             try:
@@ -261,7 +285,8 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         sc, eff, prop, cand = adopted
         cand = cand.polish()
         steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
-                          tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8]))
+                          tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8],
+                          tuple(eff.alike(h.chain, prop.where))))
         if progress:
             progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
                      f"(floor {cand.floor(ctx):.3g})")

@@ -34,6 +34,11 @@ class Effect:
         """Hypothesis `hyp` with the effect added where `proposal` says, its parameters fitted."""
         raise NotImplementedError
 
+    def alike(self, chain, where: dict) -> list:
+        """Hypotheses of other effects that no data of this marker set could tell from this one at `where` (the
+        same family of marker motions), as [(name, where)]; by default none."""
+        return []
+
     def implausible(self, proposal: Proposal) -> str:
         """Why the fitted effect cannot be what it claims ('' if it can): e.g. a distortion too large for a
         calibrated capture volume is something else the field is absorbing."""

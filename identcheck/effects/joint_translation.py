@@ -35,16 +35,50 @@ _SYMMETRIC = [np.outer(np.eye(3)[i], np.eye(3)[k]) + np.outer(np.eye(3)[k], np.e
               for i in range(3) for k in range(i, 3)]      # the six symmetric 3 x 3 matrices (up to scale)
 
 
+ABSORBED_SHARE = 0.25
+"""A combination of a ball joint's symmetric fields is modelled only when at least this share of its sum of squares
+(half its size) is left once the best centre shift is taken out of it: otherwise it trades off with the centre
+(its standard error grows by more than 2x), and the translation would leave the joint undetermined."""
+
+
 def linear_fields(hyp, joint: str, angles: np.ndarray) -> list:
     """The translations linear in a joint's angles that a shifted centre cannot absorb, each (F, 3) in the parent
-    frame, centred over frames: ``S ω`` for the six symmetric S (ball joint, ω its rotation vector from the median
-    pose, :func:`identcheck.bundle.hypothesis.joint_angles`), ``θ a`` along a hinge's axis a."""
+    frame, centred over frames: ``θ a`` along a hinge's axis a; for a ball joint, the combinations of the six
+    symmetric ``S ω`` (ω its rotation vector from the median pose, :func:`identcheck.bundle.hypothesis.joint_angles`)
+    that this motion keeps apart from a centre shift. The six are independent of it only when the joint turns
+    about every axis alike; in gait (flexion mostly) some of them are nearly a centre shift's ``(I − Rot ω) δ``, and
+    fitting them would leave the centre undetermined (a hip pistoning in gait: marker distances' SE 10 mm).
+    Kept: the combinations with at least :data:`ABSORBED_SHARE` of their size left after the best shift is
+    subtracted (eigenvectors of the projection's Gram matrix in an orthonormal basis of the fields)."""
     a = angles - np.nanmean(angles, axis=0)
     if hyp.chain.types[joint] == "revolute":
         out = [a[:, :1] * hyp.fit.state.axis[joint][None, :]]
     else:
-        out = [a @ S.T for S in _SYMMETRIC]
+        out = _not_a_shift([a @ S.T for S in _SYMMETRIC], angles)
     return [f - np.nanmean(f, axis=0) for f in out]
+
+
+def _not_a_shift(fields: list, omega: np.ndarray) -> list:
+    """The combinations of `fields` (each (F, 3)) that a centre shift ``(I − Rot ω) δ`` does not absorb (see
+    :func:`linear_fields`), as fields of the same shape."""
+    from scipy.spatial.transform import Rotation
+
+    ok = np.all(np.isfinite(omega), axis=1)
+    if ok.sum() < 3:
+        return fields
+    X = np.stack([f[ok] - f[ok].mean(axis=0) for f in fields], axis=-1)                   # (n, 3, K)
+    lever = np.eye(3)[None] - Rotation.from_rotvec(omega[ok]).as_matrix()             # (n, 3, 3): δ's columns
+    lever = lever - lever.mean(axis=0)
+    X, lever = X.reshape(-1, X.shape[-1]), lever.reshape(-1, 3)
+    _, sv, Vt = np.linalg.svd(X, full_matrices=False)
+    if not sv[0] > 0:
+        return []                           # the joint did not turn: no linear translation to see
+    B = Vt[sv > 1e-9 * sv[0]].T / sv[sv > 1e-9 * sv[0]]       # X @ B: orthonormal (dependent fields dropped)
+    XB = X @ B
+    P = XB - lever @ np.linalg.lstsq(lever, XB, rcond=None)[0]
+    share, V = np.linalg.eigh(P.T @ P)                         # the share of each combination's sum of squares left
+    full = np.stack(fields, axis=-1)                                                  # (F, 3, K)
+    return [full @ (B @ v) for v in V[:, share >= ABSORBED_SHARE].T]
 
 
 class JointTranslation(Effect):
@@ -90,6 +124,18 @@ class JointTranslation(Effect):
             out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
                                 {"joint": j, "basis": basis, "linear": lin}))
         return sorted(out, key=lambda p: -p.strength)
+
+    def alike(self, chain, where: dict) -> list:
+        """When every marker below the joint is on its child segment (a last segment), the centre moving in the
+        parent by D(θ) moves those markers exactly as the child's cluster moving as one on its segment by
+        Rot(θ)ᵀ D(θ) would: nothing but a marker further down could tell a translating joint from that skin."""
+        j = where["joint"]
+        child = chain.child[j]
+        cols = chain.seg_markers[child]
+        if len(cols) < 2 or set(chain.downstream[j]) != set(cols):
+            return []
+        return [("soft_tissue", {"markers": [chain.labels[c] for c in cols], "segment": child, "joint": j,
+                                 "together": True})]
 
     def apply(self, ctx, hyp, proposal):
         j = proposal.payload["joint"]

@@ -98,6 +98,18 @@ class SoftTissue(Effect):
                                             gain, {"col": int(col), "basis": basis, "joint": j}))
         return sorted(out, key=lambda p: -p.strength)
 
+    def alike(self, chain, where: dict) -> list:
+        """A cluster moving as one on a last segment, with its own joint's angles, is that joint's centre moving
+        in the parent (:meth:`identcheck.effects.joint_translation.JointTranslation.alike`)."""
+        j, seg = where.get("joint"), where.get("segment")
+        if not where.get("together") or j is None or chain.child.get(j) != seg:
+            return []
+        if set(chain.downstream[j]) != set(chain.seg_markers[seg]):
+            return []
+        from identcheck.effects.joint_translation import MODELLED     # (that module builds on this one)
+
+        return [("joint_translation", {"joint": j, "modelled": MODELLED})]
+
     def apply(self, ctx, hyp, proposal):
         term = (proposal.payload["col"], proposal.payload["basis"])
         return hyp.refit(terms=hyp.terms + Terms(markers=[term]), effect=proposal)
