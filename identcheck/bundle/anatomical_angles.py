@@ -143,3 +143,26 @@ def anatomical_angles(fit, joint: str) -> tuple[np.ndarray, JointFrames]:
     fit = getattr(fit, "fit", fit)
     frames = joint_frames(fit, joint)
     return cardan_angles(frames.parent, fit.state.rel_R[joint], frames.child), frames
+
+
+ROM_SHARE = 0.95
+"""The share of frames a range of motion spans (the central ones): a few frames whose pose the data barely fix (a
+thigh showing one marker) can turn a fitted joint half a turn, and would make the whole range meaningless."""
+
+
+def motion_ranges(fit, joint: str) -> list:
+    """[(angle name, degrees)]: the range of each of the joint's angles over the central :data:`ROM_SHARE` of the
+    frames: a hinge's flexion–extension; a ball joint's flexion–extension, ab-/adduction and axial rotation
+    (:func:`anatomical_angles`), not rotation-vector components, which are no angles anyone reads and jump by
+    2π where the rotation nears a half-turn. Each angle is measured about its circular mean, wrapped to a turn
+    (unwrapping frame to frame would carry every flipped frame's jump into all frames after it)."""
+    fit = getattr(fit, "fit", fit)
+    if fit.chain.types[joint] == "revolute":
+        names, angles = ANGLE_NAMES[:1], fit.state.theta[joint][:, None]
+    else:
+        names, angles = ANGLE_NAMES, anatomical_angles(fit, joint)[0]
+    centre = np.angle(np.nanmean(np.exp(1j * angles), axis=0))              # each angle's circular mean
+    about = np.angle(np.exp(1j * (angles - centre)))                           # wrapped to (-π, π] about it
+    tail = 50.0 * (1.0 - ROM_SHARE)
+    lo, hi = np.nanpercentile(about, [tail, 100.0 - tail], axis=0)
+    return [(n, float(np.rad2deg(h - lw))) for n, lw, h in zip(names, lo, hi)]

@@ -14,11 +14,12 @@ import numpy as np
 from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
+from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information, initial_state
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
-from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, joint_angles, score
+from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
 from identcheck.estimate.noise import noise_floor
 
 log = logging.getLogger("identcheck")
@@ -320,18 +321,18 @@ def joint_report(ctx: Context, h: Hypothesis) -> dict:
     and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion."""
     ch = h.chain
     judged = assess(h.fit, h.data, h.weights)
-    angles = joint_angles(h)
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:
         P, C = ch.parent[j], ch.child[j]
         idx = np.concatenate([ch.seg_markers[P], ch.seg_markers[C]])
-        rom = np.rad2deg(np.ptp(np.unwrap(angles[j], axis=0), axis=0))
+        rom = ", ".join(f"{name} {deg:.1f}" for name, deg in motion_ranges(h.fit, j))
         answer = joint_answer(judged, j)
         practical = answer["practical"]
         determined = practical["verdict"] == "determined"
-        reason = "ok" if determined else (f"{practical['reason']}; range of motion {', '.join(f'{x:.1f}' for x in rom)} "
-                                          f"deg{'. ' + practical['motion_advice'] if practical['motion_advice'] else ''}")
+        reason = "ok" if determined else (f"{practical['reason']}; range of motion over the central "
+                                          f"{100 * ROM_SHARE:.0f} % of frames: {rom} deg"
+                                          f"{'. ' + practical['motion_advice'] if practical['motion_advice'] else ''}")
         out[j] = {"type": ch.types[j], "declared_type": ctx.model.joints[j].type, "unique": determined, **answer,
                   "rms_residual": round(float(np.sqrt(np.nanmean(res[:, idx] ** 2))), 4),
                   "excitation": {"ok": determined, "reason": reason}}

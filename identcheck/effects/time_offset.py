@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from identcheck.bundle.hypothesis import score
 from identcheck.bundle.model import Terms
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, pick
@@ -24,6 +25,7 @@ from identcheck.effects.injection import Change, cannot, marker_column, pick
 NEWTON_STEPS = 6
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
+WHOLE_FRAME_TRY = 0.02   # a delay this far (frames) or more from a whole frame is also tried at that frame
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
@@ -166,6 +168,27 @@ class TimeOffset(Effect):
             current.fit.state.term_params = current.fit.state.term_params[:-1]
             if abs(dtau) < TAU_TOL_S:
                 break
+        # the Gauss-Newton delay minimises a residual that interpolating between frames also lowers (it averages
+        # the noise away in part, most at half a frame): it leans off a whole-frame lag, which interpolates
+        # nothing (held-out pelvis 4 frames late: 38.5 ms found, 40 ms scoring 660 more once that is charged).
+        # The nearest whole-frame delay is tried as well, the better by the criterion kept
+        taus = [tau]
+        whole = round(tau * ctx.rate_hz) / ctx.rate_hz
+        if whole != 0.0 and abs(whole - tau) * ctx.rate_hz > WHOLE_FRAME_TRY:
+            taus.append(whole)
+        fits = [self._shifted_fit(ctx, hyp, current, idx, t) for t in taus]
+        best = max(range(len(fits)), key=lambda k: score(ctx, fits[k], hyp))
+        new, tau = fits[best], taus[best]
+        new.effects = hyp.effects + [proposal]
+        proposal.where["delay_ms"] = round(1000 * tau, 2)
+        proposal.payload["tau"] = tau
+        return new
+
+    @staticmethod
+    def _shifted_fit(ctx, hyp, current, idx, tau: float):
+        """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
+        charged for the delay, the samples the shift sets aside and what interpolation removes from noise."""
+        base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
@@ -175,9 +198,6 @@ class TimeOffset(Effect):
         moved = int(np.sum((hyp.weights[:, idx] > 0) & ~lost[:, idx]))
         smoothed = 3 * moved * interpolation_loss(tau * ctx.rate_hz) / np.log(ctx.n_obs)
         new.extra_params = hyp.extra_params + 1 + 3 * int(lost.sum()) + smoothed
-        new.effects = hyp.effects + [proposal]
-        proposal.where["delay_ms"] = round(1000 * tau, 2)
-        proposal.payload["tau"] = tau
         return new
 
     def evidence(self, ctx, before, after, proposal) -> dict:

@@ -61,3 +61,38 @@ def test_diagnose_names_one_marker_lagging_on_a_three_marker_pelvis():
     first = ic.diagnose(model, trial).to_dict()["effects"][0]
     assert first["name"] == "time_offset" and first["where"].get("markers") == ["RASI"]
     assert abs(first["where"]["delay_ms"] - 40.0) < 4.0
+
+
+@settings(max_examples=4, deadline=None)
+@given(st.integers(0, 2**16), st.integers(2, 4), st.sampled_from([0.0, 0.4]), st.floats(-0.2, 0.2))
+def test_a_segment_late_by_whole_frames_is_found_at_them_and_a_fractional_lag_is_kept(seed, frames, fraction, lean):
+    """The shank late by 2-4 whole frames (0.6 mm white noise), the delay's refinement left `lean` frames off the
+    truth (as the least-squares delay leans, interpolation lowering the noise too): the whole-frame delay is
+    tried and kept, to the millisecond. Late by a fraction more (0.4 frame), the delay stays fractional, within
+    1.5 ms of the truth."""
+    import identcheck.effects.time_offset as time_offset
+    from identcheck.diagnose.workflow import start
+    from identcheck.effects.registry import EFFECTS
+
+    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
+    xyz = sim.trial.as_array().copy()
+    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
+    rate = sim.trial.rate_hz
+    lag_s = (frames + fraction) / rate
+    xyz[:, cols] = shifted(xyz[:, cols], rate, -lag_s, extrapolate=True)
+    xyz += np.random.default_rng(seed).normal(0, 0.6, xyz.shape)
+    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    eff = EFFECTS["time_offset"]
+    prop = next(p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where)
+    if fraction == 0.0:
+        prop.payload["tau"] = lag_s + lean / rate
+        steps, time_offset.NEWTON_STEPS = time_offset.NEWTON_STEPS, 0          # the delay as the refinement left it
+        try:
+            eff.apply(ctx, h, prop)
+        finally:
+            time_offset.NEWTON_STEPS = steps
+        assert prop.where["delay_ms"] == round(1000 * lag_s, 2) or abs(lean) <= time_offset.WHOLE_FRAME_TRY
+    else:
+        eff.apply(ctx, h, prop)
+        assert abs(prop.where["delay_ms"] - 1000 * lag_s) < 1.5
