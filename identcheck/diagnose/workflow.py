@@ -223,9 +223,13 @@ def place(name: str, where: dict) -> tuple:
     markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude). An effect adopted at a place
     is not proposed there again: the same terms a second time only repeat the first (a knee's translation adopted
     three times in a row, each refit creeping on a little further)."""
-    def key(v):  # noqa: E306
-        return tuple(key(x) for x in v) if isinstance(v, (list, tuple)) else v
-    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not isinstance(v, float)))
+    def key(v):  # noqa: E306 - hashable, whatever `where` holds
+        if isinstance(v, dict):
+            return tuple(sorted((k, key(x)) for k, x in v.items()))
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return tuple(key(x) for x in v)
+        return v
+    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not isinstance(v, (float, np.floating))))
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:

@@ -170,7 +170,7 @@ class TimeOffset(Effect):
                 break
         # the Gauss-Newton delay minimises a residual that interpolating between frames also lowers (it averages
         # the noise away in part, most at half a frame): it leans off a whole-frame lag, which interpolates
-        # nothing (held-out pelvis 4 frames late: 38.5 ms found, 40 ms scoring 660 more once that is charged).
+        # nothing (held-out pelvis 4 frames late: 38.2 ms found, 40 ms scoring 661 more once that is charged).
         # The nearest whole-frame delay is tried as well, the better by the criterion kept
         taus = [tau]
         whole = round(tau * ctx.rate_hz) / ctx.rate_hz

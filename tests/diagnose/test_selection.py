@@ -123,3 +123,12 @@ def test_a_translating_joint_above_a_last_segment_is_reported_alike_its_cluster_
     assert step.equivalents() == [("joint_translation", where)]                        # named once
     alone = workflow.Step("soft_tissue", knee[0][1], 1.0, 0.9, 500.0, rejected=(), alike=(("joint_translation", where),))
     assert alone.equivalents() == [("joint_translation", where)]
+
+
+def test_a_place_is_hashable_whatever_where_holds():
+    """Nested lists, dicts, arrays and numpy scalars in `where` give a place; fitted sizes (floats) are left out."""
+    import numpy as np
+
+    a = workflow.place("x", {"frames": np.array([1, 2]), "sub": {"m": ["A"]}, "size": np.float32(2.5), "n": 3})
+    b = workflow.place("x", {"frames": [1, 2], "sub": {"m": ("A",)}, "size": 7.0, "n": 3})
+    assert a == b and hash(a) == hash(b)
