@@ -241,7 +241,6 @@ def _epilog(example: str, ok: str, no: str | None = None) -> str:
     return f"example:\n  {example}\nexit codes:\n" + "\n".join(codes) + "\nreference: docs/cli.md"
 
 
-
 class _Version(argparse.Action):
     """``--version``: the installed version, read from the package metadata only when asked (importing
     importlib.metadata for every call cost 14 ms of each verb's start-up)."""
@@ -249,6 +248,7 @@ class _Version(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         print(f"identcheck {identcheck.__version__}")
         parser.exit()
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``identcheck`` argument parser: one subcommand per verb of docs/contract.md (reference: docs/cli.md)."""

@@ -246,10 +246,11 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
         tried, best, leader, drift, placed = [], 0.0, None, None, set()
+        taken = {place(st.name, st.where) for st in steps}
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
-            if place(eff.name, prop.where) in {place(st.name, st.where) for st in steps}:
+            if place(eff.name, prop.where) in taken:
                 log.debug("%s %s skipped: adopted already", eff.name, prop.where)
                 continue
             if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader

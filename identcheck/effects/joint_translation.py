@@ -20,12 +20,13 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
-from identcheck.effects.soft_tissue import explained
+from identcheck.effects.soft_tissue import explained, last_cluster
 
 
 MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
@@ -61,8 +62,6 @@ def linear_fields(hyp, joint: str, angles: np.ndarray) -> list:
 def _not_a_shift(fields: list, omega: np.ndarray) -> list:
     """The combinations of `fields` (each (F, 3)) that a centre shift ``(I − Rot ω) δ`` does not absorb (see
     :func:`linear_fields`), as fields of the same shape."""
-    from scipy.spatial.transform import Rotation
-
     ok = np.all(np.isfinite(omega), axis=1)
     if ok.sum() < 3:
         return fields
@@ -126,16 +125,10 @@ class JointTranslation(Effect):
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
-        """When every marker below the joint is on its child segment (a last segment), the centre moving in the
-        parent by D(θ) moves those markers exactly as the child's cluster moving as one on its segment by
-        Rot(θ)ᵀ D(θ) would: nothing but a marker further down could tell a translating joint from that skin."""
-        j = where["joint"]
-        child = chain.child[j]
-        cols = chain.seg_markers[child]
-        if len(cols) < 2 or set(chain.downstream[j]) != set(cols):
-            return []
-        return [("soft_tissue", {"markers": [chain.labels[c] for c in cols], "segment": child, "joint": j,
-                                 "together": True})]
+        """Above a last segment, that segment's cluster moving as one
+        (:func:`identcheck.effects.soft_tissue.last_cluster`)."""
+        cluster = last_cluster(chain, where["joint"])
+        return [] if cluster is None else [("soft_tissue", cluster)]
 
     def apply(self, ctx, hyp, proposal):
         j = proposal.payload["joint"]

@@ -42,6 +42,18 @@ def explained(resid: np.ndarray, basis: np.ndarray, fields: list = ()) -> float:
     return float(np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
 
 
+def last_cluster(chain, joint: str) -> dict | None:
+    """Where a joint's child is a last segment (every marker below the joint is on it, two or more), that
+    segment's cluster moving as one, as a soft-tissue ``where``; else None. Its markers then move exactly as they
+    would if the joint's centre moved in the parent: a centre moving by D(θ) is the cluster moving by Rot(θ)ᵀ D(θ)
+    on its segment, and nothing but a marker further down could tell the two apart (both effects' ``alike``)."""
+    child = chain.child[joint]
+    cols = chain.seg_markers[child]
+    if len(cols) < 2 or set(chain.downstream[joint]) != set(cols):
+        return None
+    return {"markers": [chain.labels[c] for c in cols], "segment": child, "joint": joint, "together": True}
+
+
 class SoftTissue(Effect):
     name = "soft_tissue"
     max_proposals = 3
@@ -100,11 +112,11 @@ class SoftTissue(Effect):
 
     def alike(self, chain, where: dict) -> list:
         """A cluster moving as one on a last segment, with its own joint's angles, is that joint's centre moving
-        in the parent (:meth:`identcheck.effects.joint_translation.JointTranslation.alike`)."""
-        j, seg = where.get("joint"), where.get("segment")
-        if not where.get("together") or j is None or chain.child.get(j) != seg:
+        in the parent (:func:`last_cluster`)."""
+        j = where.get("joint")
+        if not where.get("together") or j is None or chain.child.get(j) != where.get("segment"):
             return []
-        if set(chain.downstream[j]) != set(chain.seg_markers[seg]):
+        if last_cluster(chain, j) is None:
             return []
         from identcheck.effects.joint_translation import MODELLED     # (that module builds on this one)
 
