@@ -37,6 +37,7 @@ import numpy as np
 from identcheck.errors import InputError
 from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR, frame_to_frame_sd
 from identcheck.geometry.poses import MIN_MARKERS, segment_poses
+from identcheck.infer.separated_groups import widen
 
 SPREAD_PERCENTILES = (2.5, 97.5)
 """A pair's spread: half the distance between these percentiles of its distance over the frames."""
@@ -351,7 +352,7 @@ def _compete(xyz: np.ndarray, S: np.ndarray, tolerance: float, groups: list) -> 
     return kept + _agglomerate(xyz, S, tolerance, sorted(left))
 
 
-def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[list, list]:
+def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[list, list, list]:
     """Groups of markers that move as rigid bodies; and the markers rigid with none.
 
     First complete-linkage agglomeration on the pair spreads: the two groups whose *largest* pair spread is the
@@ -360,7 +361,10 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
     a pose in all three. A marker left in a group of one or two then joins a larger group with which it passes
     both tests. Then the bodies compete for the markers (:func:`_compete`) until the grouping stops changing (at
     most :data:`COMPETE_ROUNDS` rounds): with soft tissue, the tolerance can let a marker near a joint pass for
-    rigid with both segments, and it belongs to the one in whose frame it stays stillest.
+    rigid with both segments, and it belongs to the one in whose frame it stays stillest. Last, markers left loose
+    or paired by the one tolerance join groups that stay well apart from everything else
+    (:func:`identcheck.infer.separated_groups.widen`): skin markers on the moving segment of a functional trial
+    wobble more than the still rest of the body, which sets the tolerance.
 
     Parameters
     ----------
@@ -380,6 +384,9 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
         Each group's marker columns (2 or more), ascending; groups in order of their first column.
     loose : list of int
         Markers rigid with no other (ascending).
+    widened : list of identcheck.infer.separated_groups.Widened
+        The groups that gathered markers beyond the tolerance because they stay apart from everything else
+        (:func:`identcheck.infer.separated_groups.widen`).
     """
     xyz = np.asarray(xyz, dtype=float)
     if len(xyz) > MAX_GROUPING_FRAMES:
@@ -395,7 +402,8 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
         seen.add(_key(groups))
     out = sorted((sorted(g) for g in groups if len(g) >= 2), key=lambda g: g[0])
     loose = sorted(g[0] for g in groups if len(g) == 1)
-    return out, loose
+    out, loose, widened = widen(xyz, S, tolerance, out, loose, nodes, _rigid)
+    return out, loose, widened
 
 
 def _key(groups: list) -> frozenset:
@@ -422,6 +430,11 @@ class Grouping:
     source : str
         "inferred", or the segments file.
     warnings : tuple of str
+    widened : dict of str to dict
+        Inferred only: group → ``{"spread_mm", "separation_mm", "added", "note"}`` for each group that gathered
+        markers beyond the tolerance (:func:`identcheck.infer.separated_groups.widen`): its largest internal
+        spread, its smallest complete-linkage spread to the rest, the markers added, and the two readings in words.
+        Such a group is an interpretation the data leave open, so the skeleton is not called settled.
     """
 
     groups: dict
@@ -431,10 +444,12 @@ class Grouping:
     internal_spread_mm: dict
     source: str
     warnings: tuple = ()
+    widened: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"source": self.source, **self.tolerance.to_dict(),
-                "internal_spread_mm": {k: _num(v) for k, v in self.internal_spread_mm.items()}}
+                "internal_spread_mm": {k: _num(v) for k, v in self.internal_spread_mm.items()},
+                "widened": self.widened}
 
 
 def _num(x):
@@ -487,14 +502,27 @@ def group_markers(trial) -> Grouping:
     usable = [i for i, m in enumerate(labels) if m not in unused]
     stats = pair_statistics(trial.xyz)
     tol = rigidity_tolerance(stats)
-    cols, loose = partition(trial.xyz, stats.spread_mm, tol.tolerance_mm, usable)
+    cols, loose, widened = partition(trial.xyz, stats.spread_mm, tol.tolerance_mm, usable)
     if len(cols) == 1 and len(cols[0]) == len(labels):
         raise InputError([f"all {len(labels)} markers move as one rigid body (every pair's distance stays within "
                           f"{tol.tolerance_mm:.3g} mm): there is no joint to infer; record a trial in which the "
                           "segments move relative to each other"], source=trial.source)
     groups = {f"seg{k}": tuple(labels[i] for i in g) for k, g in enumerate(cols, start=1)}
     internal = {f"seg{k}": _internal(stats, g) for k, g in enumerate(cols, start=1)}
-    return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred")
+    home = {i: f"seg{k}" for k, g in enumerate(cols, start=1) for i in g}
+    wide = {}
+    for w in widened:                                   # a body may grow twice: the entries add up
+        entry = wide.setdefault(home[w.added[0]], {"spread_mm": 0.0, "separation_mm": float("inf"), "added": []})
+        entry["spread_mm"] = max(entry["spread_mm"], w.spread_mm)
+        entry["separation_mm"] = min(entry["separation_mm"], w.separation_mm)
+        entry["added"] = sorted(entry["added"] + [labels[i] for i in w.added], key=labels.index)
+    for name, entry in wide.items():
+        entry["note"] = (f"{', '.join(entry['added'])} joined {name} although they move up to "
+                         f"{entry['spread_mm']:.3g} mm relative to its other markers, more than the rigidity tolerance "
+                         f"{tol.tolerance_mm:.3g} mm, because everything else moves at least "
+                         f"{entry['separation_mm']:.3g} mm relative to them: skin markers wobbling on one segment, or "
+                         "segments joined by a joint that hardly moves in this trial")
+    return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred", widened=wide)
 
 
 def given_grouping(trial, segments: dict, source: str = "--segments") -> Grouping:

@@ -51,8 +51,11 @@ class SkeletonResult:
 
     @property
     def ok(self) -> bool:
-        """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed."""
-        return bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
+        """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
+        group held together beyond the rigidity tolerance (``grouping.widened``)."""
+        widened = (self.other.get("grouping") or {}).get("widened")
+        return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
+                and not widened)
 
     @classmethod
     def from_dict(cls, doc: dict) -> "SkeletonResult":

@@ -116,6 +116,8 @@ def _header(doc: dict, grouping, excess: bool) -> list:
         lines.append(f"Not in any segment: {', '.join(markers)}: {reason}")
     for c in doc["cannot_place"]:
         lines.append(f"Left out, cannot place {c['segment']} {c['markers']}: {c['reason']}")
+    for w in (doc["grouping"].get("widened") or {}).values():
+        lines.append(f"WOBBLING GROUP: {w['note']}")
     for a in doc["ambiguous"]:
         lines.append(f"AMBIGUOUS: {a['joint'][0]}-{a['joint'][1]} ({a['residual_mm']:.3g} mm) or "
                      f"{a['alternative'][0]}-{a['alternative'][1]} ({a['alternative_residual_mm']:.3g} mm): "

@@ -347,6 +347,8 @@ def skeleton_text(result) -> str:
                      "does not use")
     for c in doc["cannot_place"]:
         lines.append(f"cannot place {c['segment']} ({', '.join(c['markers'])}): {c['reason']}")
+    for w in (g.get("widened") or {}).values():
+        lines.append(f"wobbling group: {w['note']}")
     for m in doc["unassigned_markers"]:
         lines.append(f"unassigned marker {m}: {doc['unassigned'][m]}")
     pb = doc.get("playback") or {}

@@ -90,8 +90,8 @@ def test_a_marker_near_a_joint_stays_in_its_own_segment():
 def test_partition_without_rigid_pairs_leaves_every_marker_loose():
     S = np.full((4, 4), 50.0)
     np.fill_diagonal(S, 0)
-    groups, loose = partition(np.zeros((20, 4, 3)), S, 1.0)
-    assert groups == [] and loose == [0, 1, 2, 3]
+    groups, loose, widened = partition(np.zeros((20, 4, 3)), S, 1.0)
+    assert groups == [] and loose == [0, 1, 2, 3] and widened == []
 
 
 # ---------------------------------------------------------------------- bad input

@@ -5,7 +5,8 @@ Walking moves the hips and knees mostly about one axis and hardly moves the trun
 checks are the anatomy the motion can show: the leg clusters are found as segments, the hips join the thighs to
 the pelvis and the knees the shanks to the thighs, and, given the example models' segments, the tree and the joint
 types are the examples' own (hips spherical, knees revolute). The functional trials (one joint moving, the rest of
-the body still) are checked with their clusters given: the knee is a hinge, the hip a ball joint.
+the body still) are checked with their clusters given (the knee is a hinge, the hip a ball joint) and alone (the
+leg's clusters chain pelvis - thigh - shank).
 """
 import json
 from pathlib import Path
@@ -81,6 +82,46 @@ def test_walking2_alone_gives_anatomically_sensible_legs():
     assert parent[thigh_r] == pelvis and parent[shank_r] == thigh_r
     shank_l = owner["LTB1"]
     assert parent[shank_l] == owner["LTH1"] and parent[owner["LTH1"]] == pelvis
+
+
+def test_walking2_alone_gives_every_leg_segment_and_joint():
+    """Every segment of the lower body comes out whole (the pelvis's skin markers and a thigh marker wobble 6-8 mm,
+    more than the trial-wide tolerance, but far less than against any other segment), chained pelvis - thigh -
+    shank - foot on both sides, hips ball joints, knees hinges."""
+    doc = skeleton(WALK2).to_dict()
+    whole = {"pelvis": {"LPSI", "RPSI", "RASI", "LASI"}, "thigh_r": {"RTH1", "RTH2", "RTH3"},
+             "thigh_l": {"LTH1", "LTH2", "LTH3"}, "shank_r": {"RTB1", "RTB2", "RTB3"}, "shank_l": {"LTB1", "LTB2", "LTB3"},
+             "foot_r": {"RCAL", "RMT1", "RMT2"}, "foot_l": {"LCAL", "LMT1", "LMT2"}}
+    owner = {m: s for s, ms in doc["segments"].items() for m in ms}
+    seg = {}
+    for name, markers in whole.items():
+        (seg[name],) = {owner[m] for m in markers}
+    assert len(set(seg.values())) == len(seg)
+    joints = {(j["parent"], j["child"]): j["type"] for j in doc["joints"]}
+    for side in "rl":
+        assert joints[seg["pelvis"], seg[f"thigh_{side}"]] == "spherical"
+        assert joints[seg[f"thigh_{side}"], seg[f"shank_{side}"]] == "revolute"
+        assert (seg[f"shank_{side}"], seg[f"foot_{side}"]) in joints
+
+
+@pytest.mark.parametrize("trial, hip_type, knee_type", [(HIP, "spherical", None), (KNEE, None, "revolute")])
+def test_functional_trials_alone_give_pelvis_thigh_shank(trial, hip_type, knee_type):
+    """biobuddy's functional trials, full-body marker set, no segments given: the still body sets a rigidity
+    tolerance of 1-3 mm that the moving leg's skin markers exceed (3-9 mm), yet the right thigh and shank clusters
+    come out whole and chain pelvis - thigh - shank; the joint that moves is typed (the hip a ball joint, the knee a
+    hinge). The groups held together beyond the tolerance are reported, so the skeleton is not called settled."""
+    pytest.importorskip("ezc3d")
+    doc = skeleton(trial).to_dict()
+    owner = {m: s for s, ms in doc["segments"].items() for m in ms}
+    (thigh,) = {owner[m] for m in ("RTHI1", "RTHI2", "RTHI3")}
+    (shank,) = {owner[m] for m in ("RLEG1", "RLEG2", "RLEG3")}
+    pelvis = [owner[m] for m in ("LPSIS", "RPSIS", "LASIS", "RASIS") if m in owner]
+    assert len(pelvis) >= 3 and len(set(pelvis)) == 1
+    joints = {(j["parent"], j["child"]): j["type"] for j in doc["joints"]}
+    assert (pelvis[0], thigh) in joints and (thigh, shank) in joints
+    assert hip_type is None or joints[pelvis[0], thigh] == hip_type
+    assert knee_type is None or joints[thigh, shank] == knee_type
+    assert doc["grouping"]["widened"] and not doc["ok"]
 
 
 @pytest.mark.parametrize("trial, example, kind", [(KNEE, "real_right_knee_cluster.toml", "revolute"),

@@ -1,0 +1,186 @@
+"""Skin markers that wobble more than the trial-wide tolerance, grouped by how well they stay apart from the rest.
+
+:func:`identcheck.infer.grouping.partition` calls a pair rigid when its spread is within one tolerance for the
+whole trial, set by the noise and by the wobble of a typical marker. In a functional trial of one joint most of
+the body hardly moves, and that typical wobble is the still markers': 0.35 mm in biobuddy's knee trial, where the
+thigh cluster's markers, driven by the moving knee, spread up to 8.8 mm from each other. Every marker of the
+moving leg was then left loose, and the leg had no segment at all. In walking2 a pelvis with two skin markers
+that wobble 6-8 mm came out as one body and two loose markers.
+
+What still tells a segment's markers apart is that they move relative to each other much less than relative to
+everything else. On the complete-linkage tree of the pair spreads (the height of a node is the largest spread
+between two of its markers), a node of height h whose parent joins it to the rest at a height of at least
+:data:`SEPARATION_FACTOR` x h is a group held apart from everything: every marker outside it moves relative to
+some member at least twice as much as the members move among themselves. :func:`widen` takes the largest such
+nodes, top down, with h at most :data:`MAX_WOBBLE_MM` (skin markers move by up to about that on their segment),
+and lets them gather what the tolerance left loose:
+
+- a node may hold at most one of the bodies the tolerance found (three or more markers, with a pose). Two such
+  bodies are two segments whose markers each stay rigid, moving relative to each other coherently: a joint that
+  hardly moves, not skin wobble, and the node is left to its children;
+- the node's loose markers and whole pairs join that body, or, without one, form a new group;
+- a new group of four or more markers, or a body with markers added, must pass the pose test of
+  :func:`~identcheck.infer.grouping.partition` at :data:`MAX_WOBBLE_MM`: each marker, seen in the frame of the
+  others, stays within that much (times the pose's own noise amplification) of one body-fixed place. Not at the
+  node's height: a distance hardly sees a marker slide across the line to its partner, and skin slides that way
+  too (biobuddy's hip trial: pelvis markers whose distances spread 3.2 mm move 7-10 mm in the frame of the other
+  three), so the pose test can tell neither a skin marker's slide nor a marker near a hinge's axis from rigid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.cluster.hierarchy import linkage
+from scipy.spatial.distance import squareform
+
+from identcheck.geometry.poses import MIN_MARKERS
+
+SEPARATION_FACTOR = 2.0
+"""A node is held apart from the rest when its parent's height is at least this many times its own."""
+MAX_WOBBLE_MM = 15.0
+"""The largest spread between two markers of one group that :func:`widen` accepts, mm (skin markers on a thigh in
+gait move by 10-20 mm relative to the bone; within a cluster, relative to each other, somewhat less)."""
+UNSEEN_MM = 1.0e6
+"""Stand-in spread for pairs never seen together often enough (never rigid)."""
+
+
+@dataclass(frozen=True)
+class Widened:
+    """One group that :func:`widen` made or enlarged.
+
+    Attributes
+    ----------
+    columns : tuple of int
+        Its marker columns.
+    added : tuple of int
+        The columns that the trial-wide tolerance had left loose or in a pair.
+    spread_mm : float
+        The node's height: the largest spread between two of its markers.
+    separation_mm : float
+        Its parent's height: the smallest complete-linkage spread to the rest.
+    """
+
+    columns: tuple
+    added: tuple
+    spread_mm: float
+    separation_mm: float
+
+
+def _children(Z: np.ndarray, n: int):
+    """Each node's two children and height, and each node's leaves, for a SciPy linkage over n leaves."""
+    kids = {n + k: (int(a), int(b)) for k, (a, b, _, _) in enumerate(Z)}
+    height = {n + k: float(h) for k, (_, _, h, _) in enumerate(Z)}
+    leaves = {i: [i] for i in range(n)}
+    for k in range(len(Z)):
+        a, b = kids[n + k]
+        leaves[n + k] = leaves[a] + leaves[b]
+    return kids, height, leaves
+
+
+def _dendrogram(spread: np.ndarray, nodes: list):
+    """The complete-linkage tree of `spread` over the columns `nodes`: each inner node's two children, each node's
+    height and leaves (as columns), and the root."""
+    n = len(nodes)
+    S = np.asarray(spread, dtype=float)[np.ix_(nodes, nodes)]
+    S = np.where(np.isfinite(S), S, UNSEEN_MM)
+    S = np.maximum(S, S.T)
+    np.fill_diagonal(S, 0.0)
+    Z = linkage(squareform(S, checks=False), method="complete")
+    kids, height, leaves = _children(Z, n)
+    leaves = {k: [nodes[i] for i in v] for k, v in leaves.items()}
+    return kids, height, leaves, 2 * n - 2
+
+
+def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, nodes: list,
+          rigid) -> tuple[list, list, list]:
+    """Gather the markers the trial-wide tolerance left loose or paired into groups held apart from the rest.
+
+    Parameters
+    ----------
+    xyz : array, shape (n_frames, n_markers, 3)
+        Marker positions, mm (the frames the poses are tested on).
+    spread : array, shape (n_markers, n_markers)
+        Pair spreads, mm (NaN: not seen together often enough).
+    tolerance : float
+        The trial-wide rigidity tolerance, mm.
+    groups, loose : list
+        :func:`~identcheck.infer.grouping.partition`'s groups (lists of columns) and loose columns.
+    nodes : list of int
+        The columns grouped.
+    rigid : callable
+        ``rigid(xyz, members, tolerance) -> bool``, the pose test.
+
+    Returns
+    -------
+    groups : list of list of int
+    loose : list of int
+    widened : list of Widened
+    """
+    if len(nodes) < 2:
+        return groups, loose, []
+    kids, height, leaves, root = _dendrogram(spread, sorted(nodes))
+    body_of = {m: k for k, g in enumerate(groups) if len(g) >= MIN_MARKERS for m in g}
+    pair_of = {m: k for k, g in enumerate(groups) if len(g) < MIN_MARKERS for m in g}
+    taken_pairs, grown, widened = set(), {}, []
+    new_groups = []
+    stack = [(root, 0.0)]                                   # the root is never held apart from anything
+    while stack:
+        node, parent_h = stack.pop()
+        if node not in kids:
+            continue
+        h = height[node]
+        if h <= tolerance:
+            continue
+        members = sorted(leaves[node])
+        result = None
+        if h <= MAX_WOBBLE_MM and parent_h >= SEPARATION_FACTOR * h:
+            result = _gather(xyz, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid)
+        if result is None:
+            stack.extend((child, h) for child in kids[node])
+            continue
+        if result:
+            body, added, w = result
+            if body is None:
+                new_groups.append(sorted(added))
+            else:
+                grown[body] = sorted(set(grown.get(body, groups[body])) | set(added))
+            widened.append(w)
+    used = {m for w in widened for m in w.added}
+    out = []
+    for k, g in enumerate(groups):
+        if k in grown:
+            out.append(grown[k])
+        elif not (set(g) & used):
+            out.append(list(g))
+    out += new_groups
+    return sorted((sorted(g) for g in out), key=lambda g: g[0]), sorted(m for m in loose if m not in used), widened
+
+
+def _gather(xyz, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid):
+    """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
+    it has nothing to add, else (the body it grows or None, the columns it adds, a Widened)."""
+    bodies = {body_of[m] for m in members if m in body_of}
+    if len(bodies) > 1:
+        return None
+    inside = set(members)
+    added = []
+    for m in members:
+        if m in body_of:
+            continue
+        if m in pair_of:
+            k = pair_of[m]
+            if k in taken_pairs or not set(groups[k]) <= inside:
+                continue
+        added.append(m)
+    if not added:
+        return ()
+    body = next(iter(bodies)) if bodies else None
+    base = list(grown.get(body, groups[body])) if body is not None else []
+    full = sorted(set(base) | set(added))
+    if len(full) < 2 or not rigid(xyz, full, MAX_WOBBLE_MM):
+        return None
+    for m in added:
+        if m in pair_of:
+            taken_pairs.add(pair_of[m])
+    return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), float(h), float(parent_h))
