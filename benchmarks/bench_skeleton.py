@@ -12,7 +12,8 @@ runs on the TRC alone (no model, no grouping), and:
 - **tree**: each inferred segment is named by the true segment holding most of its markers, and the inferred
   joints, as unordered pairs, equal the true joints (``tree_exact``); also the fraction of true joints found
   (``joints_found``), and whether every wrong or missing joint was reported (ambiguous, a loop, a group that cannot
-  be placed, an unassigned marker, or a group held together beyond the rigidity tolerance: ``wrong_but_reported``);
+  be placed, an unassigned marker, a group held together beyond the rigidity tolerance, or one that may be two
+  segments: ``wrong_but_reported``);
 - **types**: among true joints found, the fraction typed right;
 - **honesty**: how often the tool calls a trial settled (``ok``, exit 0) when its tree is right, and when it is
   wrong (the second should be near 0);
@@ -98,12 +99,13 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     row["type_errors"] = [{"joint": sorted(e), "true": t, "found": found[e]} for e, t in true_edges.items()
                           if e in found and found[e] != t]
     widened = (doc.get("grouping") or {}).get("widened") or {}
-    reported = bool(doc["ambiguous"] or doc["loops"] or doc["cannot_place"] or doc["unassigned_markers"] or widened)
+    reported = bool(doc["ambiguous"] or doc["loops"] or doc["cannot_place"] or doc["unassigned_markers"] or widened
+                    or doc.get("may_be_two_segments"))
     row["wrong_but_reported"] = None if row["tree_exact"] else reported
     row["ok"] = bool(doc["ok"])
     row["flags"] = {"ambiguous": len(doc["ambiguous"]), "loops": len(doc["loops"]),
                     "cannot_place": len(doc["cannot_place"]), "unassigned": len(doc["unassigned_markers"]),
-                    "widened": len(widened)}
+                    "widened": len(widened), "may_be_two": len(doc.get("may_be_two_segments") or [])}
     return row
 
 

@@ -445,6 +445,8 @@ class Grouping:
     source: str
     warnings: tuple = ()
     widened: dict = field(default_factory=dict)
+    spread_mm: np.ndarray = field(default=None, repr=False, compare=False)
+    """Every pair's spread (:class:`PairStatistics`), marker columns in trial order."""
 
     def to_dict(self) -> dict:
         return {"source": self.source, **self.tolerance.to_dict(),
@@ -522,7 +524,8 @@ def group_markers(trial) -> Grouping:
                          f"{tol.tolerance_mm:.3g} mm, because everything else moves at least "
                          f"{entry['separation_mm']:.3g} mm relative to them: skin markers wobbling on one segment, or "
                          "segments joined by a joint that hardly moves in this trial")
-    return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred", widened=wide)
+    return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred", widened=wide,
+                    spread_mm=stats.spread_mm)
 
 
 def given_grouping(trial, segments: dict, source: str = "--segments") -> Grouping:
@@ -567,4 +570,4 @@ def given_grouping(trial, segments: dict, source: str = "--segments") -> Groupin
                   f"than the rigidity tolerance {tol.tolerance_mm:.3g} mm: not one rigid body in this trial?"
                   for name, v in internal.items() if np.isfinite(v) and v > tol.tolerance_mm)
     unused = {m: f"not in {source}" for m in trial.labels if m not in set(listed)}
-    return Grouping(groups, (), unused, tol, internal, source, notes)
+    return Grouping(groups, (), unused, tol, internal, source, notes, spread_mm=stats.spread_mm)

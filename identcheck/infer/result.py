@@ -52,10 +52,11 @@ class SkeletonResult:
     @property
     def ok(self) -> bool:
         """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
-        group held together beyond the rigidity tolerance (``grouping.widened``)."""
+        group held together beyond the rigidity tolerance (``grouping.widened``) or moving inside beyond the noise
+        (``may_be_two_segments``)."""
         widened = (self.other.get("grouping") or {}).get("widened")
         return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
-                and not widened)
+                and not widened and not self.other.get("may_be_two_segments"))
 
     @classmethod
     def from_dict(cls, doc: dict) -> "SkeletonResult":

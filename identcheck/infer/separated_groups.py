@@ -78,7 +78,7 @@ def _children(Z: np.ndarray, n: int):
     return kids, height, leaves
 
 
-def _dendrogram(spread: np.ndarray, nodes: list):
+def spread_dendrogram(spread: np.ndarray, nodes: list):
     """The complete-linkage tree of `spread` over the columns `nodes`: each inner node's two children, each node's
     height and leaves (as columns), and the root."""
     n = len(nodes)
@@ -119,7 +119,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
     """
     if len(nodes) < 2:
         return groups, loose, []
-    kids, height, leaves, root = _dendrogram(spread, sorted(nodes))
+    kids, height, leaves, root = spread_dendrogram(spread, sorted(nodes))
     body_of = {m: k for k, g in enumerate(groups) if len(g) >= MIN_MARKERS for m in g}
     pair_of = {m: k for k, g in enumerate(groups) if len(g) < MIN_MARKERS for m in g}
     taken_pairs, grown, widened = set(), {}, []

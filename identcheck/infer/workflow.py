@@ -16,6 +16,7 @@ from identcheck.estimate.obrien import as_poses, joint_location
 from identcheck.infer.grouping import given_grouping, group_markers
 from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
 from identcheck.infer.model_writer import check_model, model_text, write_model
+from identcheck.infer.two_segments import check_groups
 from identcheck.infer.result import SkeletonResult
 from identcheck.infer.tree import FLOOR_TRUST, infer_tree
 from identcheck.io.model import virtual_names
@@ -118,6 +119,8 @@ def _header(doc: dict, grouping, excess: bool) -> list:
         lines.append(f"Left out, cannot place {c['segment']} {c['markers']}: {c['reason']}")
     for w in (doc["grouping"].get("widened") or {}).values():
         lines.append(f"WOBBLING GROUP: {w['note']}")
+    for t in doc["may_be_two_segments"]:
+        lines.append(f"MAY BE TWO SEGMENTS: {t['note']}")
     for a in doc["ambiguous"]:
         lines.append(f"AMBIGUOUS: {a['joint'][0]}-{a['joint'][1]} ({a['residual_mm']:.3g} mm) or "
                      f"{a['alternative'][0]}-{a['alternative'][1]} ({a['alternative_residual_mm']:.3g} mm): "
@@ -255,7 +258,9 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
            "root": tree.root, "root_rule": tree.root_rule, "grouping": grouping.to_dict(),
            "noise": None if noise is None else {"sigma_mm": noise.sigma_mm, "lag1": noise.lag1,
                                                 "n_pairs": noise.n_pairs},
-           "warnings": list(grouping.warnings), "model": None, "playback": None}
+           "warnings": list(grouping.warnings), "model": None, "playback": None,
+           "may_be_two_segments": (check_groups(trial.xyz, trial.labels, segs, grouping.spread_mm, noise.sigma_mm)
+                                   if noise is not None and grouping.source == "inferred" else [])}
     excess = tree.hierarchy is not None and tree.hierarchy.excess_mm2 is not None
     text = model_text(placed, [{**j, "comment": _joint_comment(j)} for j in joints], _header(doc, grouping, excess))
     if out is not None:

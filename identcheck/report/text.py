@@ -349,6 +349,8 @@ def skeleton_text(result) -> str:
         lines.append(f"cannot place {c['segment']} ({', '.join(c['markers'])}): {c['reason']}")
     for w in (g.get("widened") or {}).values():
         lines.append(f"wobbling group: {w['note']}")
+    for t in doc.get("may_be_two_segments", []):
+        lines.append(f"may be two segments: {t['note']}")
     for m in doc["unassigned_markers"]:
         lines.append(f"unassigned marker {m}: {doc['unassigned'][m]}")
     pb = doc.get("playback") or {}

@@ -90,7 +90,8 @@ def test_walking2_alone_gives_every_leg_segment_and_joint():
     shank - foot on both sides, hips ball joints, knees hinges."""
     doc = skeleton(WALK2).to_dict()
     whole = {"pelvis": {"LPSI", "RPSI", "RASI", "LASI"}, "thigh_r": {"RTH1", "RTH2", "RTH3"},
-             "thigh_l": {"LTH1", "LTH2", "LTH3"}, "shank_r": {"RTB1", "RTB2", "RTB3"}, "shank_l": {"LTB1", "LTB2", "LTB3"},
+             "thigh_l": {"LTH1", "LTH2", "LTH3"}, "shank_r": {"RTB1", "RTB2", "RTB3"},
+             "shank_l": {"LTB1", "LTB2", "LTB3"},
              "foot_r": {"RCAL", "RMT1", "RMT2"}, "foot_l": {"LCAL", "LMT1", "LMT2"}}
     owner = {m: s for s, ms in doc["segments"].items() for m in ms}
     seg = {}

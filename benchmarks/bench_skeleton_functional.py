@@ -1,0 +1,202 @@
+"""``identcheck skeleton`` on full-body functional trials it was not tuned on: is the joint that moved found?
+
+The trials come from the independent generator in ``benchmarks/heldout_functional/`` (written from a spec without
+reading identcheck): a full-body marker set (15 segments, 44-75 markers) on a subject standing nearly still while
+one or two joints do a functional motion (star arc, circumduction, flexion cycles), soft tissue driven by the
+joint angles (3-15 mm on the moving segments, about 1 mm or less on the still ones), white, AR(1) or low-pass noise
+of 0.05-1 mm, gaps. Only its output files are read: ``index.json``, each trial's TRC and ``truth.json``
+(``segments``, ``joints`` with ``moving``, ``units``: the segments that stay together through still joints).
+
+The still body sways by up to 3 degrees per joint, so which of its segments the data separate is open; what a lab
+needs from such a trial is the moving joint. For each moving joint (parent P, child C):
+
+- ``child_whole`` / ``parent_whole``: every marker of C (of P) is in one inferred group, and that group holds no
+  marker from across the moving joint (C's group stays within C's unit, P's within P's);
+- ``joint_found``: the tree joins the group holding most of C's markers to the group holding most of P's, each
+  staying on its side of the moving joint (a still pelvis may lose a marker to the trunk, through which it sways);
+- ``type_right``: that joint's type is the truth's (a moving hinge revolute, a moving ball joint spherical);
+- ``leak``: some inferred group mixes markers from both sides of the moving joint (the worst error: a segment
+  across the joint that moved);
+
+and per trial ``all_found`` (every moving joint found and typed right), ``ok`` (the tool calls the skeleton
+settled: exit 0), and the time of the library call.
+
+Usage::
+
+    python benchmarks/heldout_functional/generator.py --out /tmp/hf --n 100 --seed 7
+    PYTHONPATH=. python benchmarks/bench_skeleton_functional.py /tmp/hf [--key K] [--shard K/N --rows R] [--merge R0 R1]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import identcheck as ic  # noqa: E402
+from identcheck.api import skeleton  # noqa: E402
+from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
+
+
+def evaluate(folder: Path, entry: dict) -> dict:
+    """Run ``skeleton`` on one trial and score its moving joints against the truth."""
+    truth = json.loads((folder / entry["truth"]).read_text())
+    trial = ic.read_trial(folder / entry["trc"])
+    row = {"id": entry["id"], "categories": entry["categories"], "n_markers": trial.n_markers,
+           "n_frames": trial.n_frames, "sigma_mm": truth["noise"]["sigma_mm"]}
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            doc = skeleton(trial).to_dict()
+        except ic.InputError as exc:
+            return {**row, "error": str(exc), "seconds": time.perf_counter() - t0}
+    row["seconds"] = time.perf_counter() - t0
+    unit_of = {s: k for k, unit in enumerate(truth["units"]) for s in unit}
+    segment_of = {m: s for s, ms in truth["segments"].items() for m in ms}
+    group_of = {m: g for g, ms in doc["segments"].items() for m in ms}
+    edges = {frozenset((j["parent"], j["child"])): j["type"] for j in doc["joints"]}
+
+    def whole(segment: str):
+        groups = {group_of.get(m) for m in truth["segments"][segment]}
+        if len(groups) != 1 or None in groups:
+            return None
+        (g,) = groups
+        inside = {unit_of[segment_of[m]] for m in doc["segments"][g] if m in segment_of}
+        return g if inside == {unit_of[segment]} else None
+
+    def holder(segment: str):
+        """The group holding most of the segment's markers (at least two, or its only one), if it stays within the
+        segment's unit."""
+        votes = [group_of[m] for m in truth["segments"][segment] if m in group_of]
+        if not votes:
+            return None
+        g = max(sorted(set(votes)), key=votes.count)
+        if votes.count(g) < min(2, len(truth["segments"][segment])):
+            return None
+        inside = {unit_of[segment_of[m]] for m in doc["segments"][g] if m in segment_of}
+        return g if inside == {unit_of[segment]} else None
+
+    moving = []
+    for j in truth["joints"]:
+        if not j["moving"]:
+            continue
+        gc, gp = holder(j["child"]), holder(j["parent"])
+        sides = {unit_of[j["child"]], unit_of[j["parent"]]}
+        leak = any(len({unit_of[segment_of[m]] for m in ms if m in segment_of} & sides) > 1
+                   for ms in doc["segments"].values())
+        found = gc is not None and gp is not None and gc != gp and frozenset((gc, gp)) in edges
+        moving.append({"joint": j["name"], "type": j["type"], "child_whole": whole(j["child"]) is not None,
+                       "parent_whole": whole(j["parent"]) is not None, "joint_found": found,
+                       "type_right": found and edges[frozenset((gc, gp))] == j["type"],
+                       "found_type": edges[frozenset((gc, gp))] if found else None, "leak": leak})
+    row["moving"] = moving
+    row["all_found"] = all(m["joint_found"] and m["type_right"] for m in moving)
+    row["ok"] = bool(doc["ok"])
+    row["n_segments_found"] = len(doc["segments"])
+    row["widened"] = len((doc.get("grouping") or {}).get("widened") or {})
+    return row
+
+
+def summarise(rows: list) -> dict:
+    ok = [r for r in rows if "error" not in r]
+
+    def block(rs):
+        joints = [m for r in rs for m in r["moving"]]
+
+        def rate(key):
+            return float(np.mean([m[key] for m in joints])) if joints else None
+
+        return {"trials": len(rs), "moving_joints": len(joints), "child_whole": rate("child_whole"),
+                "parent_whole": rate("parent_whole"), "joint_found": rate("joint_found"),
+                "type_right": rate("type_right"), "leak": rate("leak"),
+                "all_found": float(np.mean([r["all_found"] for r in rs])) if rs else None,
+                "ok": float(np.mean([r["ok"] for r in rs])) if rs else None,
+                "ok_when_not_all_found": (float(np.mean([r["ok"] for r in rs if not r["all_found"]]))
+                                          if any(not r["all_found"] for r in rs) else None),
+                "median_seconds": float(np.median([r["seconds"] for r in rs])) if rs else None,
+                "max_seconds": float(np.max([r["seconds"] for r in rs])) if rs else None}
+
+    cats = defaultdict(list)
+    for r in ok:
+        for c in r["categories"]:
+            cats[c].append(r)
+    by_joint = defaultdict(list)
+    for r in ok:
+        for m in r["moving"]:
+            by_joint[m["joint"].rsplit("_", 1)[0]].append({**r, "moving": [m]})
+    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in sorted(cats.items())},
+            "by_moving_joint": {c: block(rs) for c, rs in sorted(by_joint.items())},
+            "errors": [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r]}
+
+
+def table(summary: dict) -> str:
+    def pct(x):
+        return "   -" if x is None else f"{100 * x:4.0f}"
+
+    head = (f"{'trials':<22}{'n':>4} {'joints':>6} {'child%':>7} {'parent%':>8} {'found%':>7} {'type%':>6} "
+            f"{'leak%':>6} {'all%':>5} {'ok%':>4} {'ok|miss':>8} {'med s':>6} {'max s':>6}")
+    lines = [head, "-" * len(head)]
+    rows = ([("all", summary["all"])] + [(f"moving {k}", b) for k, b in summary["by_moving_joint"].items()]
+            + list(summary["by_category"].items()))
+    for name, b in rows:
+        lines.append(f"{name:<22}{b['trials']:>4} {b['moving_joints']:>6} {pct(b['child_whole']):>7} "
+                     f"{pct(b['parent_whole']):>8} {pct(b['joint_found']):>7} {pct(b['type_right']):>6} "
+                     f"{pct(b['leak']):>6} {pct(b['all_found']):>5} {pct(b['ok']):>4} "
+                     f"{pct(b['ok_when_not_all_found']):>8} {b['median_seconds'] or 0:6.2f} "
+                     f"{b['max_seconds'] or 0:6.2f}")
+    if summary["errors"]:
+        lines.append(f"errors: {len(summary['errors'])}: " + "; ".join(f"{e['id']}: {e['error'][:120]}"
+                                                                       for e in summary["errors"][:5]))
+    lines.append("per moving joint: child%/parent%: its child's/parent's markers are one group that stays on its side; "
+                 "found%: the tree joins the two; type%: found and typed right; leak%: a group mixes markers from "
+                 "both sides of it. Per trial: all%: every moving joint found and typed right; ok%: called settled "
+                 "(exit 0); ok|miss: called settled among trials where some moving joint was missed")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("trials", nargs="?", type=Path, help="a folder written by benchmarks/heldout_functional")
+    ap.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results.json")
+    ap.add_argument("--key", default="skeleton_functional", help="key of results.json to write")
+    add_shard_arguments(ap)
+    args = ap.parse_args(argv)
+    if args.trials is None and not args.merge:
+        ap.error("give a trials folder (or --merge)")
+    index = json.loads((args.trials / "index.json").read_text()) if args.trials else {"trials": []}
+    if index["trials"] and not args.merge:             # warm up: imports and first-call costs are not timed
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                skeleton(ic.read_trial(args.trials / index["trials"][0]["trc"]))
+            except ic.InputError:
+                pass
+    rows = run_trials(index["trials"], lambda e: evaluate(args.trials, e), args,
+                      lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
+                          f"ERROR {r['error'][:100]}" if "error" in r else
+                          f"all found {r['all_found']}, " + ", ".join(
+                              f"{m['joint']} {'found' if m['joint_found'] else 'missed'}" for m in r["moving"])
+                          + f", {r['seconds']:.2f} s"))
+    if rows is None:
+        return 0
+    summary = summarise(rows)
+    print(table(summary))
+    write_json(args.out, args.key, {"summary": summary, "rows": rows, "source": {
+        "folder": str(args.trials) if args.trials else None, "generator": index.get("generator"),
+        "seed": index.get("seed"), "n": index.get("n")}, "machine": machine_info()})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
