@@ -105,7 +105,8 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     row["ok"] = bool(doc["ok"])
     row["flags"] = {"ambiguous": len(doc["ambiguous"]), "loops": len(doc["loops"]),
                     "cannot_place": len(doc["cannot_place"]), "unassigned": len(doc["unassigned_markers"]),
-                    "widened": len(widened), "may_be_two": len(doc.get("may_be_two_segments") or [])}
+                    "widened": len(widened), "may_be_two": len(doc.get("may_be_two_segments") or []),
+                    "on_joints": len(doc.get("markers_on_joints") or [])}
     return row
 
 

@@ -199,7 +199,7 @@ def rigidity_tolerance(stats: PairStatistics) -> Tolerance:
 
 
 # ---------------------------------------------------------------------- rigid bodies
-def _deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray, np.ndarray]:
+def body_deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray, np.ndarray]:
     """How far each marker of `cols` moves in the frame of the rigid body `body` (3 or more marker columns).
 
     Returns
@@ -256,11 +256,11 @@ def pose_noise_factor(local: np.ndarray, points: np.ndarray) -> np.ndarray:
 def _rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:
     """Whether a set of four or more markers moves as one body: each member, seen in the frame of the others (a
     marker in the fit would pull the pose towards itself and hide its own motion), deviates by at most
-    `tolerance` times that pose's amplification there (:func:`_deviation`). Sets of three or fewer pass."""
+    `tolerance` times that pose's amplification there (:func:`body_deviation`). Sets of three or fewer pass."""
     if len(members) <= MIN_MARKERS:
         return True
     for m in members:
-        d, a = _deviation(xyz, [o for o in members if o != m], [m])
+        d, a = body_deviation(xyz, [o for o in members if o != m], [m])
         if not d[0] <= tolerance * a[0]:
             return False
     return True
@@ -313,7 +313,7 @@ def _agglomerate(xyz: np.ndarray, S: np.ndarray, tolerance: float, nodes: list) 
 
 def _compete(xyz: np.ndarray, S: np.ndarray, tolerance: float, groups: list) -> list:
     """One round of competition between the bodies (groups of three or more): every marker goes to the body in
-    whose frame it stays stillest (:func:`_deviation`, scaled by the amplification; a member of a body of four or
+    whose frame it stays stillest (:func:`body_deviation`, scaled by the amplification; a member of a body of four or
     more is seen in the frame of the others, of a body of three in the body's own), staying in its own body unless
     another is :data:`REASSIGN_MARGIN` times stiller, and to none when no body holds it within `tolerance`. Bodies
     left with fewer than three markers dissolve, and the markers without a body are grouped again
@@ -326,11 +326,11 @@ def _compete(xyz: np.ndarray, S: np.ndarray, tolerance: float, groups: list) -> 
     C = np.full((len(cols), len(bodies)), np.inf)
     row = {m: i for i, m in enumerate(cols)}
     for k, body in enumerate(bodies):
-        d, a = _deviation(xyz, body, cols)
+        d, a = body_deviation(xyz, body, cols)
         C[:, k] = d / a
         for m in body:
             if len(body) > MIN_MARKERS:
-                d1, a1 = _deviation(xyz, [o for o in body if o != m], [m])
+                d1, a1 = body_deviation(xyz, [o for o in body if o != m], [m])
                 C[row[m], k] = float(d1[0] / a1[0])
             else:
                 C[row[m], k] = float(d[row[m]])          # in the fit: no amplification

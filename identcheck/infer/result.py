@@ -53,7 +53,8 @@ class SkeletonResult:
     def ok(self) -> bool:
         """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
         group held together beyond the rigidity tolerance (``grouping.widened``) or moving inside beyond the noise
-        (``may_be_two_segments``)."""
+        (``may_be_two_segments``). A marker that moves with both segments of a joint (``markers_on_joints``) leaves it
+        settled: whichever segment carries it, it moves the same."""
         widened = (self.other.get("grouping") or {}).get("widened")
         return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
                 and not widened and not self.other.get("may_be_two_segments"))

@@ -15,6 +15,7 @@ from identcheck.estimate.noise import noise_floor
 from identcheck.estimate.obrien import as_poses, joint_location
 from identcheck.infer.grouping import given_grouping, group_markers
 from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
+from identcheck.infer.joint_markers import markers_on_joints
 from identcheck.infer.model_writer import check_model, model_text, write_model
 from identcheck.infer.two_segments import check_groups
 from identcheck.infer.result import SkeletonResult
@@ -121,6 +122,8 @@ def _header(doc: dict, grouping, excess: bool) -> list:
         lines.append(f"WOBBLING GROUP: {w['note']}")
     for t in doc["may_be_two_segments"]:
         lines.append(f"MAY BE TWO SEGMENTS: {t['note']}")
+    for m in doc["markers_on_joints"]:
+        lines.append(f"ON A JOINT: {m['note']}")
     for a in doc["ambiguous"]:
         lines.append(f"AMBIGUOUS: {a['joint'][0]}-{a['joint'][1]} ({a['residual_mm']:.3g} mm) or "
                      f"{a['alternative'][0]}-{a['alternative'][1]} ({a['alternative_residual_mm']:.3g} mm): "
@@ -260,7 +263,9 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
                                                 "n_pairs": noise.n_pairs},
            "warnings": list(grouping.warnings), "model": None, "playback": None,
            "may_be_two_segments": (check_groups(trial.xyz, trial.labels, segs, grouping.spread_mm, noise.sigma_mm)
-                                   if noise is not None and grouping.source == "inferred" else [])}
+                                   if noise is not None and grouping.source == "inferred" else []),
+           "markers_on_joints": (markers_on_joints(trial.xyz, trial.labels, placed, joints)
+                                 if grouping.source == "inferred" else [])}
     excess = tree.hierarchy is not None and tree.hierarchy.excess_mm2 is not None
     text = model_text(placed, [{**j, "comment": _joint_comment(j)} for j in joints], _header(doc, grouping, excess))
     if out is not None:

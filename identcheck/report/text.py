@@ -351,6 +351,8 @@ def skeleton_text(result) -> str:
         lines.append(f"wobbling group: {w['note']}")
     for t in doc.get("may_be_two_segments", []):
         lines.append(f"may be two segments: {t['note']}")
+    for m in doc.get("markers_on_joints", []):
+        lines.append(f"on a joint: {m['note']}")
     for m in doc["unassigned_markers"]:
         lines.append(f"unassigned marker {m}: {doc['unassigned'][m]}")
     pb = doc.get("playback") or {}
