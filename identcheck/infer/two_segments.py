@@ -33,6 +33,10 @@ MIN_GROUP = MIN_MARKERS + 2
 """Smallest group checked: a posed part and at least two markers to see in its frame."""
 MAX_FRAMES = 400
 """The check uses at most this many frames, evenly spread."""
+MOVE_ROUNDS = 4
+"""Most markers moved one at a time between the parts of a reported split (:func:`best_split`) ..."""
+MOVE_MAX_GROUP = 16
+"""... in groups of at most this many markers (each round tries every marker: bounded time on large groups)."""
 
 
 def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -> float:
@@ -126,7 +130,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
         return max(rigidity(a), rigidity(b))
 
     score, a, b = min(((worse(s[1], s[2]), s[1], s[2]) for s in splits), key=lambda s: s[0])
-    for _ in range(len(columns)):                 # the tree's splits need not hold the segments' own: move one
+    for _ in range(MOVE_ROUNDS if len(columns) <= MOVE_MAX_GROUP else 0):   # the tree's splits need not hold
         moves = [(sorted(set(a) - {m}), sorted(set(b) | {m})) for m in a if len(a) > MIN_MARKERS] + \
                 [(sorted(set(a) | {m}), sorted(set(b) - {m})) for m in b if len(b) > 2]
         best = min(((worse(x, y), x, y) for x, y in moves), key=lambda s: s[0], default=None)
