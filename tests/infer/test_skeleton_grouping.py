@@ -110,8 +110,27 @@ def test_a_never_visible_marker_is_named():
 
 def test_one_rigid_body_is_bad_input():
     case = make_case(1, 1, counts=[5])
-    with pytest.raises(InputError, match="all 5 markers move as one rigid body"):
+    with pytest.raises(InputError, match="move as one rigid body"):
         group_markers(case.trial)
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 2**16), st.floats(0.2, 2.0), st.floats(0.05, 1.0))
+def test_a_nearly_static_trial_is_refused(seed, sway_deg, noise):
+    """Random trees held in one pose, swaying as one body by up to 2 degrees: whatever the noise, the trial is
+    refused as static, naming it, instead of grouped by noise."""
+    case = make_case(seed, 4, noise_mm=noise)
+    X = case.trial.as_array()
+    still = np.repeat(X[:1], len(X), axis=0)              # the first pose, held ...
+    t = np.arange(len(X)) / 100.0
+    wave = np.stack([np.sin(2 * np.pi * 0.3 * t), np.cos(2 * np.pi * 0.2 * t), 0 * t], axis=1)
+    turn = Rotation.from_rotvec(np.radians(sway_deg) * wave)
+    centre = np.nanmean(still[0], axis=0)
+    still = np.einsum("fij,fnj->fni", turn.as_matrix(), still - centre) + centre      # ... swaying as one
+    noisy = still + np.random.default_rng(seed).normal(0, noise, still.shape)
+    with pytest.raises(InputError, match="the trial is static") as err:
+        group_markers(Trial(noisy, case.trial.labels, 100.0, "standing.trc"))
+    assert "standing.trc" in str(err.value)
 
 
 def test_given_grouping_names_unknown_markers_and_the_file():

@@ -125,6 +125,16 @@ def test_functional_trials_alone_give_pelvis_thigh_shank(trial, hip_type, knee_t
     assert doc["grouping"]["widened"] and not doc["ok"]
 
 
+def test_a_static_trial_is_refused(tmp_path, capsys):
+    """biobuddy's anatomical pose (no pair of markers changes its distance by more than 5.3 mm) is refused as
+    static, naming the file, and no model is written."""
+    trial = DATA / "biobuddy_anat_pose_ECH.c3d"
+    pytest.importorskip("ezc3d")
+    rc = cli.main(["skeleton", str(trial), "--out", str(tmp_path / "m.toml")])
+    err = capsys.readouterr().err
+    assert rc == 2 and trial.name in err and "the trial is static" in err and not (tmp_path / "m.toml").exists()
+
+
 @pytest.mark.parametrize("trial, example, kind", [(KNEE, "real_right_knee_cluster.toml", "revolute"),
                                                   (HIP, "real_right_hip_cluster.toml", "spherical")])
 def test_functional_trials_type_their_joint(trial, example, kind):
