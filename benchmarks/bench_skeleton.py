@@ -51,7 +51,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402  (not ic.skeleton: that name is the module identcheck.skeleton)
-from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
+from results_io import (add_shard_arguments, errors_line, machine_info, run_trials, warm_up,  # noqa: E402
+                        write_json)
 
 GENERATOR = Path(__file__).resolve().parent / "heldout_skeleton" / "generator.py"
 TARGET = {"markers": 40, "frames": 1400, "seconds": 5.0}
@@ -187,9 +188,7 @@ def table(summary: dict) -> str:
     lines.append(f"speed target ({st['markers']}+ markers, {st['frames']}+ frames <= {st['seconds']:g} s): "
                  f"{st['trials']} trials, max {st['max_seconds'] if st['max_seconds'] is None else round(st['max_seconds'], 2)}"
                  f" s, met: {st['met']}")
-    if summary["errors"]:
-        lines.append(f"errors: {len(summary['errors'])}: " + "; ".join(f"{e['id']}: {e['error'][:120]}"
-                                                                       for e in summary["errors"][:5]))
+    lines += errors_line(summary["errors"])
     lines.append("group%: segments and unassigned markers exactly right; seg%: true segments found; tree%: every "
                  "joint right; joint%: true joints found; type%: joints found typed right; reported%: trials with a "
                  "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; ok|right, ok|wrong: "
@@ -214,13 +213,8 @@ def main(argv=None) -> int:
     if folder is None and not args.merge:
         ap.error("give a trials folder or --generate N")
     index = json.loads((folder / "index.json").read_text()) if folder else {"trials": []}
-    if index["trials"] and not args.merge:             # warm up: imports and first-call costs are not timed
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            try:
-                skeleton(ic.read_trial(folder / index["trials"][0]["trc"]))
-            except ic.InputError:
-                pass
+    if index["trials"] and not args.merge:
+        warm_up(lambda: skeleton(ic.read_trial(folder / index["trials"][0]["trc"])))
     rows = run_trials(index["trials"], lambda e: evaluate(folder, e), args,
                       lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
                           f"ERROR {r['error'][:100]}" if "error" in r else

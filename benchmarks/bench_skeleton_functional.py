@@ -46,7 +46,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402
-from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
+from results_io import (add_shard_arguments, errors_line, machine_info, run_trials, warm_up,  # noqa: E402
+                        write_json)
 
 
 def evaluate(folder: Path, entry: dict) -> dict:
@@ -168,9 +169,7 @@ def table(summary: dict) -> str:
                      f"{pct(b['leak']):>6} {pct(b['leak_reported']):>5} {pct(b['all_found']):>5} {pct(b['ok']):>4} "
                      f"{pct(b['ok_when_not_all_found']):>8} {b['median_seconds'] or 0:6.2f} "
                      f"{b['max_seconds'] or 0:6.2f}")
-    if summary["errors"]:
-        lines.append(f"errors: {len(summary['errors'])}: " + "; ".join(f"{e['id']}: {e['error'][:120]}"
-                                                                       for e in summary["errors"][:5]))
+    lines += errors_line(summary["errors"])
     lines.append("per moving joint: child%/parent%: its child's/parent's markers are one group that stays on its side; "
                  "found%: the tree joins the two; type%: found and typed right; leak%: a group mixes markers from "
                  "both sides of it; rep%: of those, every stray marker is reported as moving with both segments. "
@@ -189,13 +188,8 @@ def main(argv=None) -> int:
     if args.trials is None and not args.merge:
         ap.error("give a trials folder (or --merge)")
     index = json.loads((args.trials / "index.json").read_text()) if args.trials else {"trials": []}
-    if index["trials"] and not args.merge:             # warm up: imports and first-call costs are not timed
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            try:
-                skeleton(ic.read_trial(args.trials / index["trials"][0]["trc"]))
-            except ic.InputError:
-                pass
+    if index["trials"] and not args.merge:
+        warm_up(lambda: skeleton(ic.read_trial(args.trials / index["trials"][0]["trc"])))
     rows = run_trials(index["trials"], lambda e: evaluate(args.trials, e), args,
                       lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
                           f"ERROR {r['error'][:100]}" if "error" in r else

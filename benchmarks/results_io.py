@@ -69,3 +69,24 @@ def run_trials(entries: list, evaluate, args, describe) -> list | None:
         if args.rows:
             args.rows.write_text(json.dumps(rows))
     return None if args.shard else rows
+
+
+def errors_line(errors: list) -> list:
+    """The table's line for trials that ended in an error (``[{"id", "error"}]``): empty when there are none."""
+    if not errors:
+        return []
+    return [f"errors: {len(errors)}: " + "; ".join(f"{e['id']}: {e['error'][:120]}" for e in errors[:5])]
+
+
+def warm_up(call) -> None:
+    """One untimed call first (imports and first-call costs are not timed); a refusal of the input is fine."""
+    import warnings
+
+    from identcheck.errors import InputError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            call()
+        except InputError:
+            pass
