@@ -14,12 +14,12 @@ from identcheck.estimate.joint import AXIS_HANDLE_MM
 from identcheck.estimate.noise import noise_floor
 from identcheck.estimate.obrien import as_poses, joint_location
 from identcheck.infer.grouping import given_grouping, group_markers
-from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
 from identcheck.infer.joint_markers import markers_on_joints
+from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
 from identcheck.infer.model_writer import check_model, model_text, write_model
-from identcheck.infer.two_segments import check_groups
 from identcheck.infer.result import SkeletonResult
 from identcheck.infer.tree import FLOOR_TRUST, infer_tree
+from identcheck.infer.two_segments import check_groups
 from identcheck.io.model import virtual_names
 
 PREDICTED_SUFFIX = ".model"
