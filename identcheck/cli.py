@@ -387,14 +387,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("skeleton", formatter_class=_Help, epilog=_epilog(
                            "identcheck skeleton trial.c3d --out model.toml --export-markers playback.c3d",
-                           "a skeleton the data settle (no joint ambiguous, every group of markers placed)",
-                           "the model was written, but some joint is ambiguous or some group cannot be placed"),
+                           "a skeleton the data settle (no joint ambiguous, every group of markers placed, none "
+                           "held together beyond the rigidity tolerance or possibly two segments)",
+                           "the model was written, but some joint is ambiguous, some group cannot be placed, holds "
+                           "markers that wobble beyond the tolerance, or may be two segments"),
                        help="infer the segments, the tree and the joint types from a trial alone and write a model file",
                        description="Group the markers into rigid segments (or take --segments), join them by the "
                                    "minimum spanning tree over pairwise O'Brien joint-fit residuals, type each joint "
                                    "from its motion, and write a model file that fit, plan and diagnose read, with "
                                    "the evidence as comments. Exit 0: a skeleton the data settle; 1: written, but "
-                                   "some joint is ambiguous or some group cannot be placed; 2: bad input. See "
+                                   "some joint is ambiguous, some group cannot be placed, wobbles beyond the "
+                                   "tolerance or may be two segments; 2: bad input (a static trial included). See "
                                    "docs/skeleton.md.")
     s.add_argument("trial", help="the trial (TRC or C3D)")
     s.add_argument("--out", required=True, metavar="MODEL.toml", help="the model file to write")
