@@ -24,7 +24,12 @@ in every frame, and the markers that stay still in a triple's frame (within the 
 95th-percentile deviation from its body-fixed position, which for isotropic scatter matches a pair's spread)
 join it, largest body first. Markers left over pair up by their distances; a marker rigid with no other is left
 alone (``loose``): the tree step tries to attach it as a one-marker segment, and otherwise reports it
-unassigned.
+unassigned. Last, markers left loose or paired join groups held apart from everything else
+(:mod:`identcheck.infer.separated_groups`): skin markers on the moving segment of a functional trial wobble more
+than the one tolerance, which the still rest of the body sets.
+
+A static trial (no pair's spread reaches :data:`STATIC_MM` and :data:`STATIC_SHARE` of the markers' size) is
+refused rather than grouped by noise.
 """
 from __future__ import annotations
 
@@ -65,6 +70,9 @@ STATIC_MM = 15.0
 5.3 mm). Kept well below what joints that move at all leave: the smallest largest spread in 240 trials of the two
 independent generators was 25.8 mm; standing still, sway and arm motion reach 29 mm (OpenSim's subject01_static,
 which is therefore grouped, with every joint reported as hardly rotating)."""
+STATIC_SHARE = 0.03
+"""... and below this share of the markers' median pairwise distance: a hand's or a finger's segments, 20-60 mm
+across, leave spreads of a few mm when their joints move."""
 PAIR_CHUNK = 4_000_000
 """Distances computed at once (frames x pairs), to bound memory on long trials with many markers."""
 
@@ -481,20 +489,31 @@ def _internal(stats: PairStatistics, cols) -> float:
     return float(max(vals)) if vals else float("nan")
 
 
-def _refuse_static(stats: PairStatistics, labels, source: str) -> None:
-    """A static trial (:data:`STATIC_MM`) is refused: its pairs' spreads are noise, sway and skin, and any grouping
-    or tree drawn from them would be noise."""
-    S = np.where(np.isfinite(stats.spread_mm), stats.spread_mm, -np.inf)
-    np.fill_diagonal(S, -np.inf)
-    if len(labels) < 2 or S.max() == -np.inf:             # no pair seen together: other checks speak
+def _refuse_static(stats: PairStatistics, labels, source: str, usable=None) -> None:
+    """A static trial (:data:`STATIC_MM`, :data:`STATIC_SHARE`) is refused: its pairs' spreads are noise, sway and
+    skin, and any grouping or tree drawn from them would be noise. Not judged when some pair of the `usable` markers
+    is never seen together often enough (a spread unknown is not a spread small)."""
+    cols = list(range(len(labels))) if usable is None else list(usable)
+    if len(cols) < 2:
         return
-    a, b = divmod(int(np.argmax(S)), len(labels))
-    if S[a, b] < STATIC_MM:
+    S = stats.spread_mm[np.ix_(cols, cols)].copy()
+    np.fill_diagonal(S, 0.0)
+    if not np.isfinite(S).all():
+        return
+    a, b = divmod(int(np.argmax(S)), len(cols))
+    largest = float(S[a, b])
+    i, j = np.triu_indices(len(cols), 1)
+    few = stats.xyz[np.linspace(0, len(stats.xyz) - 1, min(len(stats.xyz), 50)).astype(int)][:, cols]
+    with warnings.catch_warnings():                      # the markers' size: 50 frames are plenty
+        warnings.simplefilter("ignore", RuntimeWarning)
+        size = float(np.nanmedian(np.linalg.norm(few[:, i] - few[:, j], axis=2)))
+    if largest < STATIC_MM and largest < STATIC_SHARE * size:
         raise InputError([f"the trial is static: no two markers change their distance by more than "
-                          f"{float(S[a, b]):.3g} mm (spread, {labels[a]}-{labels[b]}), below the {STATIC_MM:g} mm "
-                          "that any joint's motion leaves: the markers move as one rigid body up to noise and skin "
-                          "motion, and no segments or joints can be inferred; record a trial in which each joint "
-                          "moves"], source=source)
+                          f"{largest:.3g} mm (spread, {labels[cols[a]]}-{labels[cols[b]]}), below {STATIC_MM:g} mm "
+                          f"and {100 * STATIC_SHARE:g} % of the markers' median distance ({size:.3g} mm), which any "
+                          "joint's motion leaves: the markers move as one rigid body up to noise and skin motion, "
+                          "and no segments or joints can be inferred; record a trial in which each joint moves"],
+                         source=source)
 
 
 def group_markers(trial) -> Grouping:
@@ -511,8 +530,8 @@ def group_markers(trial) -> Grouping:
     Raises
     ------
     InputError
-        Fewer than two markers, a marker never visible, or every marker rigid with every other (one rigid body:
-        no joint to infer).
+        Fewer than two markers, a marker never visible, a static trial (:func:`_refuse_static`), or every marker
+        rigid with every other (one rigid body: no joint to infer).
     """
     labels = trial.labels
     if len(labels) < 2:
@@ -524,7 +543,7 @@ def group_markers(trial) -> Grouping:
               for i, m in enumerate(labels) if seen[i] < MIN_SAMPLES_PER_PAIR}
     usable = [i for i, m in enumerate(labels) if m not in unused]
     stats = pair_statistics(trial.xyz)
-    _refuse_static(stats, labels, trial.source)
+    _refuse_static(stats, labels, trial.source, usable)
     tol = rigidity_tolerance(stats)
     cols, loose, widened = partition(trial.xyz, stats.spread_mm, tol.tolerance_mm, usable)
     if len(cols) == 1 and len(cols[0]) == len(labels):
@@ -541,9 +560,10 @@ def group_markers(trial) -> Grouping:
         entry["separation_mm"] = min(entry["separation_mm"], w.separation_mm)
         entry["added"] = sorted(entry["added"] + [labels[i] for i in w.added], key=labels.index)
     for name, entry in wide.items():
-        entry["note"] = (f"{', '.join(entry['added'])} joined {name} although they move up to "
-                         f"{entry['spread_mm']:.3g} mm relative to its other markers, more than the rigidity tolerance "
-                         f"{tol.tolerance_mm:.3g} mm, because everything else moves at least "
+        new = len(entry["added"]) == len(groups[name])
+        entry["note"] = (f"{', '.join(entry['added'])} " + ("form" if new else "joined") + f" {name} although its "
+                         f"markers move up to {entry['spread_mm']:.3g} mm relative to each other, more than the "
+                         f"rigidity tolerance {tol.tolerance_mm:.3g} mm, because everything else moves at least "
                          f"{entry['separation_mm']:.3g} mm relative to them: skin markers wobbling on one segment, or "
                          "segments joined by a joint that hardly moves in this trial")
     return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred", widened=wide,
@@ -566,7 +586,7 @@ def given_grouping(trial, segments: dict, source: str = "--segments") -> Groupin
     ------
     InputError
         A marker the trial does not have (with the closest label), or one never visible in it; fewer than two
-        segments.
+        segments; a static trial (:func:`_refuse_static`).
     """
     problems = []
     for name, markers in segments.items():
@@ -585,7 +605,7 @@ def given_grouping(trial, segments: dict, source: str = "--segments") -> Groupin
     except InputError as exc:
         raise exc.naming(source, f"(trial {trial.source}) ") from None
     stats = pair_statistics(trial.xyz)
-    _refuse_static(stats, trial.labels, trial.source)
+    _refuse_static(stats, trial.labels, trial.source, [trial.index(m) for m in listed])
     tol = rigidity_tolerance(stats)
     groups = {name: tuple(markers) for name, markers in segments.items()}
     internal = {name: _internal(stats, [trial.index(m) for m in ms]) for name, ms in groups.items()}

@@ -11,12 +11,11 @@ olecranon 31 mm from the elbow's centre.
 For every joint of the tree between two posed segments that turns by at least :data:`MOVING_DEG` (RMS spread of
 the relative rotation about its main axis), each marker of either segment is seen in the frame of the other
 (:func:`identcheck.infer.grouping.body_deviation`, the 95th percentile of its distance from one body-fixed place). It
-moves with both when that deviation is at most :data:`BOTH_FACTOR` times its deviation in the frame of its own
-segment's other markers (noise for a rigid marker, the skin's motion for a skin marker; a marker 50 mm off a
+moves with both when that deviation is within a skin marker's range
+(:data:`~identcheck.infer.separated_groups.MAX_SKIN_MM`) and at most :data:`BOTH_FACTOR` times its deviation in the
+frame of its own segment's other markers (noise for a rigid marker, the skin's motion for a skin marker; a marker 50 mm off a
 hinge's axis moves 17 mm in the other frame for a 20 deg turn). In a segment of three markers a marker has no
-other three to be posed on: it moves with both when it stays within a skin marker's range
-(:data:`~identcheck.infer.separated_groups.MAX_WOBBLE_MM`) and within :data:`NEAR_SHARE` of what its segment's
-median marker moves there.
+other three to be posed on: then within :data:`NEAR_SHARE` of what its segment's median marker moves there.
 """
 from __future__ import annotations
 
@@ -24,7 +23,7 @@ import numpy as np
 
 from identcheck.geometry.poses import MIN_MARKERS
 from identcheck.infer.grouping import MAX_GROUPING_FRAMES, body_deviation
-from identcheck.infer.separated_groups import MAX_WOBBLE_MM
+from identcheck.infer.separated_groups import MAX_SKIN_MM
 
 MOVING_DEG = 10.0
 """Joints turning less than this (RMS spread about their main axis, degrees) are not checked: every marker of two
@@ -33,7 +32,7 @@ BOTH_FACTOR = 2.0
 """A marker moves with the other segment when its deviation there is at most this many times its own ..."""
 NEAR_SHARE = 0.15
 """... or, for a marker whose own deviation cannot be measured (one of three), at most this share of its segment's
-median marker's there, and within :data:`~identcheck.infer.separated_groups.MAX_WOBBLE_MM`."""
+median marker's there, and within :data:`~identcheck.infer.separated_groups.MAX_SKIN_MM`."""
 
 
 def markers_on_joints(xyz, labels, segments: dict, joints: list) -> list:
@@ -69,13 +68,14 @@ def markers_on_joints(xyz, labels, segments: dict, joints: list) -> list:
             continue
         for seg, other in ((a, b), (b, a)):
             there, _ = body_deviation(xyz, cols[other], cols[seg])
-            typical = float(np.nanmedian(np.where(np.isfinite(there), there, np.nan)))
+            finite = there[np.isfinite(there)]
+            typical = float(np.median(finite)) if len(finite) else float("nan")
             for k, m in enumerate(cols[seg]):
                 if m not in own:
                     rest = [c for c in cols[seg] if c != m]
                     own[m] = float(body_deviation(xyz, rest, [m])[0][0]) if len(rest) >= MIN_MARKERS else float("nan")
-                both = (there[k] <= BOTH_FACTOR * own[m] if np.isfinite(own[m])
-                        else there[k] <= min(MAX_WOBBLE_MM, NEAR_SHARE * typical))
+                both = there[k] <= MAX_SKIN_MM and (there[k] <= BOTH_FACTOR * own[m] if np.isfinite(own[m])
+                                                     else there[k] <= NEAR_SHARE * typical)
                 if np.isfinite(there[k]) and both:
                     name = labels[m]
                     out.append({"marker": name, "segment": seg, "also_with": other, "joint": j["name"],

@@ -12,15 +12,18 @@ everything else. On the complete-linkage tree of the pair spreads (the height of
 between two of its markers), a node of height h whose parent joins it to the rest at a height of at least
 :data:`SEPARATION_FACTOR` x h is a group held apart from everything: every marker outside it moves relative to
 some member at least twice as much as the members move among themselves. :func:`widen` takes the largest such
-nodes, top down, with h at most :data:`MAX_WOBBLE_MM` (skin markers move by up to about that on their segment),
+nodes, top down, with h at most :data:`MAX_SKIN_MM` (skin markers move by up to about that on their segment),
 and lets them gather what the tolerance left loose:
 
 - a node may hold at most one of the bodies the tolerance found (three or more markers, with a pose). Two such
   bodies are two segments whose markers each stay rigid, moving relative to each other coherently: a joint that
   hardly moves, not skin wobble, and the node is left to its children;
-- the node's loose markers and whole pairs join that body, or, without one, form a new group;
+- the node's loose markers and whole pairs join that body, or, without one, form a new group; the group made (a
+  body's markers may reach beyond the node) must itself spread by at most :data:`MAX_SKIN_MM` and half its
+  separation, and must not hold every marker (that would be no skeleton); a node never seen together with the
+  rest often enough has no measured separation and is not taken;
 - a new group of four or more markers, or a body with markers added, must pass the pose test of
-  :func:`~identcheck.infer.grouping.partition` at :data:`MAX_WOBBLE_MM`: each marker, seen in the frame of the
+  :func:`~identcheck.infer.grouping.partition` at :data:`MAX_SKIN_MM`: each marker, seen in the frame of the
   others, stays within that much (times the pose's own noise amplification) of one body-fixed place. Not at the
   node's height: a distance hardly sees a marker slide across the line to its partner, and skin slides that way
   too (biobuddy's hip trial: pelvis markers whose distances spread 3.2 mm move 7-10 mm in the frame of the other
@@ -38,7 +41,7 @@ from identcheck.geometry.poses import MIN_MARKERS
 
 SEPARATION_FACTOR = 2.0
 """A node is held apart from the rest when its parent's height is at least this many times its own."""
-MAX_WOBBLE_MM = 15.0
+MAX_SKIN_MM = 15.0
 """The largest spread between two markers of one group that :func:`widen` accepts, mm (skin markers on a thigh in
 gait move by 10-20 mm relative to the bone; within a cluster, relative to each other, somewhat less)."""
 UNSEEN_MM = 1.0e6
@@ -56,7 +59,7 @@ class Widened:
     added : tuple of int
         The columns that the trial-wide tolerance had left loose or in a pair.
     spread_mm : float
-        The node's height: the largest spread between two of its markers.
+        The largest spread between two markers of the group made (a body's markers included).
     separation_mm : float
         Its parent's height: the smallest complete-linkage spread to the rest.
     """
@@ -134,8 +137,9 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
             continue
         members = sorted(leaves[node])
         result = None
-        if h <= MAX_WOBBLE_MM and parent_h >= SEPARATION_FACTOR * h:
-            result = _gather(xyz, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid)
+        if h <= MAX_SKIN_MM and SEPARATION_FACTOR * h <= parent_h < UNSEEN_MM:   # never seen with the rest: no
+            result = _gather(xyz, spread, len(nodes), members, h, parent_h, groups, body_of, pair_of,   # evidence
+                             taken_pairs, grown, rigid)
         if result is None:
             stack.extend((child, h) for child in kids[node])
             continue
@@ -157,7 +161,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
     return sorted((sorted(g) for g in out), key=lambda g: g[0]), sorted(m for m in loose if m not in used), widened
 
 
-def _gather(xyz, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid):
+def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid):
     """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
     it has nothing to add, else (the body it grows or None, the columns it adds, a Widened)."""
     bodies = {body_of[m] for m in members if m in body_of}
@@ -178,9 +182,13 @@ def _gather(xyz, members, h, parent_h, groups, body_of, pair_of, taken_pairs, gr
     body = next(iter(bodies)) if bodies else None
     base = list(grown.get(body, groups[body])) if body is not None else []
     full = sorted(set(base) | set(added))
-    if len(full) < 2 or not rigid(xyz, full, MAX_WOBBLE_MM):
+    if len(full) < 2 or len(full) >= n_nodes:           # never everything: that would be no skeleton at all
+        return None
+    S = spread[np.ix_(full, full)]                      # a body can reach beyond the node: the group's own spread
+    wide = float(np.max(np.where(np.isfinite(S), S, UNSEEN_MM)))
+    if wide > MAX_SKIN_MM or parent_h < SEPARATION_FACTOR * wide or not rigid(xyz, full, MAX_SKIN_MM):
         return None
     for m in added:
         if m in pair_of:
             taken_pairs.add(pair_of[m])
-    return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), float(h), float(parent_h))
+    return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h))

@@ -73,7 +73,8 @@ def own_ratio(xyz: np.ndarray, part: list, sigma_mm: float) -> float:
             shape = np.nanmean(first.to_local(xyz[:, part]), axis=0)                                # average it
             poses = segment_poses(xyz[:, part], shape if np.isfinite(shape).all() else first.local)
             n = len(part)
-            return float(np.sqrt(np.nanmean(poses.rms ** 2) / (sigma_mm ** 2 * (3 * n - 6) / n)))
+            r = float(np.sqrt(np.nanmean(poses.rms ** 2) / (sigma_mm ** 2 * (3 * n - 6) / n)))
+            return r if np.isfinite(r) else float("inf")   # never posed (collinear, unseen): no evidence
         if len(part) == 2:
             d = np.linalg.norm(xyz[:, part[0]] - xyz[:, part[1]], axis=1)
             r = float(np.nanstd(d) / (sigma_mm * np.sqrt(2.0)))
@@ -96,7 +97,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
     -------
     (float, list, list) or None
         The largest ratio and the reported split's posed part and other part (columns); None when the group is too
-        small to split into a posed part and two more markers.
+        small to split into a posed part and two more markers, or no split has a finite ratio.
     """
     if len(columns) < MIN_GROUP:
         return None

@@ -146,3 +146,30 @@ def test_given_grouping_warns_about_a_segment_that_is_not_rigid():
     g = given_grouping(case.trial, mixed, "segs.toml")
     assert g.groups["a"] == tuple(mixed["a"]) and any("'a'" in w for w in g.warnings)
     assert set(g.unused) == set(case.trial.labels) - set(mixed["a"]) - set(mixed["b"])
+
+
+def test_a_small_hinge_is_not_taken_for_a_static_trial():
+    """A finger: two segments of four markers 18-35 mm from a hinge flexing 0-60 deg. No pair's distance changes
+    by 15 mm, but by far more than 3 % of the markers' size: grouped, not refused."""
+    F = 600
+    t = np.arange(F) / 100.0
+    a = np.array([[5, 8, 25], [-6, -7, 30], [8, -5, 35], [-4, 6, 20]], float)
+    b = np.array([[5, 8, -22], [-7, -6, -28], [7, -6, -34], [-5, 6, -18]], float)
+    angle = np.radians(30) * (1 - np.cos(2 * np.pi * 0.4 * t))
+    turn = Rotation.from_rotvec(np.stack([angle, 0 * t, 0 * t], axis=1)).as_matrix()
+    X = np.concatenate([np.repeat(a[None], F, axis=0), np.einsum("fij,nj->fni", turn, b)], axis=1)
+    X = X + np.random.default_rng(3).normal(0, 0.1, X.shape)
+    trial = Trial(X, [f"m{k}" for k in range(8)], 100.0, "finger.trc")
+    assert np.nanmax(pair_statistics(X).spread_mm) < 15
+    assert partition_of(group_markers(trial).groups) == {frozenset(f"m{k}" for k in range(4)),
+                                                          frozenset(f"m{k}" for k in range(4, 8))}
+
+
+def test_segments_never_seen_together_are_not_called_static():
+    """Two segments seen in alternate halves of the trial: their spreads across are unknown, not small, so the
+    static refusal says nothing (the tree step names the split)."""
+    case = make_case(4, 2, counts=[4, 4], parents=[0], types=["spherical"], noise_mm=0.1, n_frames=600)
+    X = case.trial.as_array()
+    X[:300, 4:] = np.nan
+    X[300:, :4] = np.nan
+    group_markers(Trial(X, case.trial.labels, 100.0, "halves.trc"))       # no InputError here

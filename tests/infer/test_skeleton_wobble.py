@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.api import skeleton
 from identcheck.infer.grouping import group_markers
-from identcheck.infer.separated_groups import MAX_WOBBLE_MM, SEPARATION_FACTOR
+from identcheck.infer.separated_groups import MAX_SKIN_MM, SEPARATION_FACTOR
 from identcheck.report.text import skeleton_text
 from identcheck.trial import Trial
 
@@ -74,7 +74,7 @@ def test_a_wobbling_cluster_on_the_moving_segment_is_one_segment(seed, wobble, n
     assert frozenset(child) in groups
     assert frozenset(f"a{k}" for k in range(4)) in groups and frozenset(f"b{k}" for k in range(4)) in groups
     (entry,) = [w for name, w in g.widened.items() if set(g.groups[name]) == child]
-    assert entry["spread_mm"] <= MAX_WOBBLE_MM and entry["separation_mm"] >= SEPARATION_FACTOR * entry["spread_mm"]
+    assert entry["spread_mm"] <= MAX_SKIN_MM and entry["separation_mm"] >= SEPARATION_FACTOR * entry["spread_mm"]
 
 
 @settings(max_examples=10, deadline=None)
