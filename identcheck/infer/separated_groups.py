@@ -137,8 +137,9 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
             continue
         members = sorted(leaves[node])
         result = None
-        if h <= MAX_SKIN_MM and SEPARATION_FACTOR * h <= parent_h < UNSEEN_MM:   # never seen with the rest: no
-            result = _gather(xyz, spread, len(nodes), members, h, parent_h, groups, body_of, pair_of,   # evidence
+        # (a parent at UNSEEN_MM: never seen with the rest, so no evidence of being apart from it)
+        if h <= MAX_SKIN_MM and SEPARATION_FACTOR * h <= parent_h < UNSEEN_MM:
+            result = _gather(xyz, spread, len(nodes), members, h, parent_h, groups, body_of, pair_of,
                              taken_pairs, grown, rigid)
         if result is None:
             stack.extend((child, h) for child in kids[node])
