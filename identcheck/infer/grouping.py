@@ -41,7 +41,8 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR, frame_to_frame_sd
-from identcheck.geometry.poses import MIN_MARKERS, segment_poses
+from identcheck.geometry.poses import MIN_MARKERS
+from identcheck.infer.body_frames import body_deviation, evenly_spaced, is_rigid
 from identcheck.infer.separated_groups import widen
 
 SPREAD_PERCENTILES = (2.5, 97.5)
@@ -57,8 +58,6 @@ COMPUTED_MM = 0.05
 """A marker whose nearest partner's spread is below this (mm) is a computed point (a virtual joint centre, a
 duplicate): left out of the noise and wobble estimates, which are about measured markers."""
 """Smallest tolerance (mm): noise-free data would otherwise split on round-off."""
-DEVIATION_PERCENTILE = 95.0
-"""A marker's deviation in a body's frame: this percentile over frames of its distance from its median position."""
 COMPETE_ROUNDS = 6
 """Most rounds of competition between the bodies for the markers (:func:`_compete`)."""
 REASSIGN_MARGIN = 1.5
@@ -212,73 +211,6 @@ def rigidity_tolerance(stats: PairStatistics) -> Tolerance:
 
 
 # ---------------------------------------------------------------------- rigid bodies
-def body_deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray, np.ndarray]:
-    """How far each marker of `cols` moves in the frame of the rigid body `body` (3 or more marker columns).
-
-    Returns
-    -------
-    deviation : numpy.ndarray, shape (len(cols),)
-        The 95th percentile (:data:`DEVIATION_PERCENTILE`) over frames of the marker's distance from its median
-        body-fixed position, mm; inf when seen with the body's pose in fewer than
-        :data:`~identcheck.estimate.noise.MIN_SAMPLES_PER_PAIR` frames.
-    amplification : numpy.ndarray, shape (len(cols),)
-        How much the body's own pose noise adds to a point there, as a factor on one marker's scatter:
-        ``sqrt(1 + 1/n + tr([r]x J^-1 [r]x^T) / 3)`` for a point at r from the body's centroid, J the body's
-        inertia tensor of its n markers (Kabsch's rotation covariance is σ² J⁻¹). Large where the body's markers
-        are nearly collinear or far away.
-    """
-    poses = segment_poses(xyz[:, body])
-    local = poses.to_local(xyz[:, cols])                                  # (F, k, 3), NaN without pose or marker
-    ok = np.isfinite(local).all(axis=2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        centre = np.nanmedian(local, axis=0)                              # (k, 3)
-        dev = np.linalg.norm(local - centre, axis=2)
-        out = np.nanpercentile(np.where(ok, dev, np.nan), DEVIATION_PERCENTILE, axis=0)
-    out = np.where(ok.sum(axis=0) >= MIN_SAMPLES_PER_PAIR, out, np.inf)
-    return out, np.sqrt(1.0 + pose_noise_factor(poses.local, np.nan_to_num(centre)) ** 2)
-
-
-def pose_noise_factor(local: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """How much a least-squares (Kabsch) pose's own noise moves body-fixed points, per coordinate, in units of the
-    markers' noise σ: ``sqrt(1/n + tr([r]x J^-1 [r]x^T) / 3)`` at ``r`` from the centroid of the n markers at
-    `local`, with J their inertia tensor (the pose's translation error has covariance σ²/n, its rotation error
-    σ² J⁻¹).
-
-    Parameters
-    ----------
-    local : array, shape (n, 3)
-        The body's marker coordinates, mm.
-    points : array, shape (k, 3)
-        Body-fixed points, mm.
-
-    Returns
-    -------
-    numpy.ndarray, shape (k,)
-    """
-    local = np.asarray(local, dtype=float)
-    L = local - local.mean(axis=0)
-    Jinv = np.linalg.pinv(np.sum(L * L) * np.eye(3) - L.T @ L)
-    r = np.atleast_2d(np.asarray(points, dtype=float)) - local.mean(axis=0)
-    X = np.zeros((len(r), 3, 3))                                          # [r]x
-    X[:, 0, 1], X[:, 0, 2], X[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
-    X -= np.transpose(X, (0, 2, 1))
-    return np.sqrt(1.0 / len(L) + np.einsum("kij,jl,kil->k", X, Jinv, X) / 3.0)
-
-
-def _rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:
-    """Whether a set of four or more markers moves as one body: each member, seen in the frame of the others (a
-    marker in the fit would pull the pose towards itself and hide its own motion), deviates by at most
-    `tolerance` times that pose's amplification there (:func:`body_deviation`). Sets of three or fewer pass."""
-    if len(members) <= MIN_MARKERS:
-        return True
-    for m in members:
-        d, a = body_deviation(xyz, [o for o in members if o != m], [m])
-        if not d[0] <= tolerance * a[0]:
-            return False
-    return True
-
-
 def _agglomerate(xyz: np.ndarray, S: np.ndarray, tolerance: float, nodes: list) -> list:
     """Complete linkage on the pair spreads `S` (inf: not rigid) over `nodes`, with the pose test on every merge
     of four or more markers (:func:`partition`); then a marker left in a group of one or two joins a larger group
@@ -294,7 +226,7 @@ def _agglomerate(xyz: np.ndarray, S: np.ndarray, tolerance: float, nodes: list) 
         if not masked[a, b] <= tolerance:
             break
         a, b = min(a, b), max(a, b)
-        if not _rigid(xyz, sorted(groups[a] + groups[b]), tolerance):
+        if not is_rigid(xyz, sorted(groups[a] + groups[b]), tolerance):
             D[a, b] = D[b, a] = np.inf                  # never these two
             continue
         groups[a] += groups[b]
@@ -313,7 +245,7 @@ def _agglomerate(xyz: np.ndarray, S: np.ndarray, tolerance: float, nodes: list) 
                 homes = sorted((float(S[i, h].max()), h[0], k) for k, h in enumerate(groups)
                                if h is not g and len(h) >= len(g) and S[i, h].max() <= tolerance)
                 for _, _, k in homes:
-                    if _rigid(xyz, sorted(groups[k] + [i]), tolerance):
+                    if is_rigid(xyz, sorted(groups[k] + [i]), tolerance):
                         groups[k] = sorted(groups[k] + [i])
                         g.remove(i)
                         moved = True
@@ -370,7 +302,8 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
 
     First complete-linkage agglomeration on the pair spreads: the two groups whose *largest* pair spread is the
     smallest are merged while it is within `tolerance` (ties: the earlier markers first), unless the merged group
-    of four or more markers fails the pose test (:func:`_rigid`): a distance sees a marker move in one direction,
+    of four or more markers fails the pose test (:func:`~identcheck.infer.body_frames.is_rigid`): a distance sees a
+    marker move in one direction,
     a pose in all three. A marker left in a group of one or two then joins a larger group with which it passes
     both tests. Then the bodies compete for the markers (:func:`_compete`) until the grouping stops changing (at
     most :data:`COMPETE_ROUNDS` rounds): with soft tissue, the tolerance can let a marker near a joint pass for
@@ -402,8 +335,7 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
         (:func:`identcheck.infer.separated_groups.widen`).
     """
     xyz = np.asarray(xyz, dtype=float)
-    if len(xyz) > MAX_GROUPING_FRAMES:
-        xyz = xyz[np.linspace(0, len(xyz) - 1, MAX_GROUPING_FRAMES).astype(int)]
+    xyz = evenly_spaced(xyz, MAX_GROUPING_FRAMES)
     nodes = list(range(len(spread))) if usable is None else sorted(int(u) for u in usable)
     S = np.nan_to_num(np.asarray(spread, dtype=float), nan=np.inf)
     groups = _agglomerate(xyz, S, tolerance, nodes)
@@ -415,7 +347,7 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
         seen.add(_key(groups))
     out = sorted((sorted(g) for g in groups if len(g) >= 2), key=lambda g: g[0])
     loose = sorted(g[0] for g in groups if len(g) == 1)
-    out, loose, widened = widen(xyz, S, tolerance, out, loose, nodes, _rigid)
+    out, loose, widened = widen(xyz, S, tolerance, out, loose, nodes)
     return out, loose, widened
 
 
@@ -503,7 +435,7 @@ def _refuse_static(stats: PairStatistics, labels, source: str, usable=None) -> N
     a, b = divmod(int(np.argmax(S)), len(cols))
     largest = float(S[a, b])
     i, j = np.triu_indices(len(cols), 1)
-    few = stats.xyz[np.linspace(0, len(stats.xyz) - 1, min(len(stats.xyz), 50)).astype(int)][:, cols]
+    few = evenly_spaced(stats.xyz, 50)[:, cols]
     with warnings.catch_warnings():                      # the markers' size: 50 frames are plenty
         warnings.simplefilter("ignore", RuntimeWarning)
         size = float(np.nanmedian(np.linalg.norm(few[:, i] - few[:, j], axis=2)))

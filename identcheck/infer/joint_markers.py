@@ -10,19 +10,20 @@ olecranon 31 mm from the elbow's centre.
 
 For every joint of the tree between two posed segments that turns by at least :data:`MOVING_DEG` (RMS spread of
 the relative rotation about its main axis), each marker of either segment is seen in the frame of the other
-(:func:`identcheck.infer.grouping.body_deviation`, the 95th percentile of its distance from one body-fixed place). It
-moves with both when that deviation is within a skin marker's range
+(:func:`identcheck.infer.body_frames.body_deviation`, the 95th percentile of its distance from one body-fixed
+place). It moves with both when that deviation is within a skin marker's range
 (:data:`~identcheck.infer.separated_groups.MAX_SKIN_MM`) and at most :data:`BOTH_FACTOR` times its deviation in the
-frame of its own segment's other markers (noise for a rigid marker, the skin's motion for a skin marker; a marker 50 mm off a
-hinge's axis moves 17 mm in the other frame for a 20 deg turn). In a segment of three markers a marker has no
-other three to be posed on: then within :data:`NEAR_SHARE` of what its segment's median marker moves there.
+frame of its own segment's other markers (noise for a rigid marker, the skin's motion for a skin marker; a marker
+50 mm off a hinge's axis moves 17 mm in the other frame for a 20 deg turn). In a segment of three markers a marker
+has no other three to be posed on: then within :data:`NEAR_SHARE` of what its segment's median marker moves there.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from identcheck.geometry.poses import MIN_MARKERS
-from identcheck.infer.grouping import MAX_GROUPING_FRAMES, body_deviation
+from identcheck.infer.body_frames import body_deviation, evenly_spaced
+from identcheck.infer.grouping import MAX_GROUPING_FRAMES
 from identcheck.infer.separated_groups import MAX_SKIN_MM
 
 MOVING_DEG = 10.0
@@ -53,9 +54,7 @@ def markers_on_joints(xyz, labels, segments: dict, joints: list) -> list:
     list of dict
         ``{"marker", "segment", "also_with", "joint", "deviation_mm", "own_deviation_mm", "note"}``.
     """
-    xyz = np.asarray(xyz, dtype=float)
-    if len(xyz) > MAX_GROUPING_FRAMES:
-        xyz = xyz[np.linspace(0, len(xyz) - 1, MAX_GROUPING_FRAMES).astype(int)]
+    xyz = evenly_spaced(xyz, MAX_GROUPING_FRAMES)
     index = {m: i for i, m in enumerate(labels)}
     cols = {s: [index[m] for m in ms] for s, ms in segments.items()}
     own = {}

@@ -23,7 +23,7 @@ and lets them gather what the tolerance left loose:
   separation, and must not hold every marker (that would be no skeleton); a node never seen together with the
   rest often enough has no measured separation and is not taken;
 - a new group of four or more markers, or a body with markers added, must pass the pose test of
-  :func:`~identcheck.infer.grouping.partition` at :data:`MAX_SKIN_MM`: each marker, seen in the frame of the
+  :func:`~identcheck.infer.body_frames.is_rigid` at :data:`MAX_SKIN_MM`: each marker, seen in the frame of the
   others, stays within that much (times the pose's own noise amplification) of one body-fixed place. Not at the
   node's height: a distance hardly sees a marker slide across the line to its partner, and skin slides that way
   too (biobuddy's hip trial: pelvis markers whose distances spread 3.2 mm move 7-10 mm in the frame of the other
@@ -38,6 +38,7 @@ from scipy.cluster.hierarchy import linkage
 from scipy.spatial.distance import squareform
 
 from identcheck.geometry.poses import MIN_MARKERS
+from identcheck.infer.body_frames import is_rigid
 
 SEPARATION_FACTOR = 2.0
 """A node is held apart from the rest when its parent's height is at least this many times its own."""
@@ -95,8 +96,8 @@ def spread_dendrogram(spread: np.ndarray, nodes: list):
     return kids, height, leaves, 2 * n - 2
 
 
-def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, nodes: list,
-          rigid) -> tuple[list, list, list]:
+def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
+          nodes: list) -> tuple[list, list, list]:
     """Gather the markers the trial-wide tolerance left loose or paired into groups held apart from the rest.
 
     Parameters
@@ -111,8 +112,6 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
         :func:`~identcheck.infer.grouping.partition`'s groups (lists of columns) and loose columns.
     nodes : list of int
         The columns grouped.
-    rigid : callable
-        ``rigid(xyz, members, tolerance) -> bool``, the pose test.
 
     Returns
     -------
@@ -140,7 +139,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
         # (a parent at UNSEEN_MM: never seen with the rest, so no evidence of being apart from it)
         if h <= MAX_SKIN_MM and SEPARATION_FACTOR * h <= parent_h < UNSEEN_MM:
             result = _gather(xyz, spread, len(nodes), members, h, parent_h, groups, body_of, pair_of,
-                             taken_pairs, grown, rigid)
+                             taken_pairs, grown)
         if result is None:
             stack.extend((child, h) for child in kids[node])
             continue
@@ -162,7 +161,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list, 
     return sorted((sorted(g) for g in out), key=lambda g: g[0]), sorted(m for m in loose if m not in used), widened
 
 
-def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, rigid):
+def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown):
     """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
     it has nothing to add, else (the body it grows or None, the columns it adds, a Widened)."""
     bodies = {body_of[m] for m in members if m in body_of}
@@ -187,7 +186,7 @@ def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of
         return None
     S = spread[np.ix_(full, full)]                      # a body can reach beyond the node: the group's own spread
     wide = float(np.max(np.where(np.isfinite(S), S, UNSEEN_MM)))
-    if wide > MAX_SKIN_MM or parent_h < SEPARATION_FACTOR * wide or not rigid(xyz, full, MAX_SKIN_MM):
+    if wide > MAX_SKIN_MM or parent_h < SEPARATION_FACTOR * wide or not is_rigid(xyz, full, MAX_SKIN_MM):
         return None
     for m in added:
         if m in pair_of:

@@ -7,7 +7,7 @@ settled.
 
 With the marker noise σ known, a rigid group can be checked against it: seen in the pose of some of its markers
 (part A, three or more), each other marker (part B) scatters about its body-fixed place by σ²(1 + f²) per
-coordinate, f being how much A's own pose noise adds there (:func:`identcheck.infer.grouping.pose_noise_factor`).
+coordinate, f being how much A's own pose noise adds there (:func:`identcheck.infer.body_frames.pose_noise_factor`).
 The *motion ratio* of a split is the root of the mean, over B's markers and the frames, of the squared distance from
 that place over 3σ²(1 + f²): about 1 for a rigid group whatever the split (0.85-1.15 for 95 % of 172 rigid groups of
 five or more markers in two development draws of the independent skeleton generator), larger when B turns
@@ -23,8 +23,8 @@ import warnings
 
 import numpy as np
 
-from identcheck.geometry.poses import MIN_MARKERS, segment_poses
-from identcheck.infer.grouping import pose_noise_factor
+from identcheck.geometry.poses import MIN_MARKERS, refine_local
+from identcheck.infer.body_frames import body_fixed, evenly_spaced, pose_noise_factor
 from identcheck.infer.separated_groups import spread_dendrogram
 
 RATIO_LIMIT = 1.5
@@ -43,13 +43,11 @@ def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -
     """How much the markers `part_b` move in the pose of `part_a`, in units of what noise σ alone would do
     (module docstring). NaN when A has no pose or B is never seen with it."""
     try:
-        poses = segment_poses(xyz[:, part_a])
+        poses, local, place = body_fixed(xyz, part_a, part_b)
     except ValueError:                                                     # A never seen whole in these frames
         return float("nan")
-    local = poses.to_local(xyz[:, part_b])                                 # (F, k, 3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        place = np.nanmedian(local, axis=0)
         d2 = np.sum((local - place) ** 2, axis=2)                          # NaN where unseen
         expected = 3.0 * sigma_mm ** 2 * (1.0 + pose_noise_factor(poses.local, np.nan_to_num(place)) ** 2)
         per_marker = np.nanmean(d2, axis=0) / expected
@@ -66,12 +64,10 @@ def own_ratio(xyz: np.ndarray, part: list, sigma_mm: float) -> float:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         if len(part) >= MIN_MARKERS:
-            try:
-                first = segment_poses(xyz[:, part])      # the first frame's shape carries that frame's noise:
+            try:                                         # the first frame's shape carries that frame's noise:
+                _, poses = refine_local(xyz[:, part], n_iter=1)    # one averaging step takes most of it out
             except ValueError:                           # never seen whole in these frames: no evidence of rigidity
                 return float("inf")
-            shape = np.nanmean(first.to_local(xyz[:, part]), axis=0)                                # average it
-            poses = segment_poses(xyz[:, part], shape if np.isfinite(shape).all() else first.local)
             n = len(part)
             r = float(np.sqrt(np.nanmean(poses.rms ** 2) / (sigma_mm ** 2 * (3 * n - 6) / n)))
             return r if np.isfinite(r) else float("inf")   # never posed (collinear, unseen): no evidence
@@ -165,8 +161,7 @@ def check_groups(xyz, labels, groups: dict, spread: np.ndarray, sigma_mm: float)
     if not (sigma_mm and np.isfinite(sigma_mm) and sigma_mm > 0):
         return []
     xyz = np.asarray(xyz, dtype=float)
-    if len(xyz) > MAX_FRAMES:
-        xyz = xyz[np.linspace(0, len(xyz) - 1, MAX_FRAMES).astype(int)]
+    xyz = evenly_spaced(xyz, MAX_FRAMES)
     index = {m: i for i, m in enumerate(labels)}
     out = []
     for name, markers in groups.items():

@@ -1,0 +1,107 @@
+"""Markers seen in the frame of a rigid body: how far they move there, and how much the body's own pose noise adds.
+
+The grouping (:mod:`identcheck.infer.grouping`, :mod:`identcheck.infer.separated_groups`), the check for groups
+that may be two segments (:mod:`identcheck.infer.two_segments`), the markers on joints
+(:mod:`identcheck.infer.joint_markers`) and the tree's noise-only residuals (:mod:`identcheck.infer.tree`) all
+pose some markers by least squares and look at others in that frame; this module does it once for all of them.
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR
+from identcheck.geometry.poses import MIN_MARKERS, segment_poses
+
+DEVIATION_PERCENTILE = 95.0
+"""A marker's deviation in a body's frame: this percentile over frames of its distance from its median position."""
+
+
+def evenly_spaced(xyz, n: int) -> np.ndarray:
+    """At most `n` frames of `xyz` (frames first), evenly spread over the trial: the poses these checks need
+    change slowly, and every frame would cost time without changing a verdict."""
+    xyz = np.asarray(xyz, dtype=float)
+    return xyz[np.linspace(0, len(xyz) - 1, n).astype(int)] if len(xyz) > n else xyz
+
+
+def body_fixed(xyz: np.ndarray, body: list, cols: list):
+    """The least-squares poses of the markers `body` (3 or more columns) in every frame, the markers `cols` in that
+    frame, shape (F, k, 3) (NaN without a pose or the marker), and each one's median body-fixed place, (k, 3).
+
+    Raises
+    ------
+    ValueError
+        The body's markers are never all seen in one frame (:func:`identcheck.geometry.poses.segment_poses`).
+    """
+    poses = segment_poses(xyz[:, body])
+    local = poses.to_local(xyz[:, cols])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)             # a marker never seen with the pose: NaN
+        place = np.nanmedian(local, axis=0)
+    return poses, local, place
+
+
+def body_deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray, np.ndarray]:
+    """How far each marker of `cols` moves in the frame of the rigid body `body` (3 or more marker columns).
+
+    Returns
+    -------
+    deviation : numpy.ndarray, shape (len(cols),)
+        The 95th percentile (:data:`DEVIATION_PERCENTILE`) over frames of the marker's distance from its median
+        body-fixed position, mm; inf when seen with the body's pose in fewer than
+        :data:`~identcheck.estimate.noise.MIN_SAMPLES_PER_PAIR` frames.
+    amplification : numpy.ndarray, shape (len(cols),)
+        How much the body's own pose noise adds to a point there, as a factor on one marker's scatter:
+        ``sqrt(1 + 1/n + tr([r]x J^-1 [r]x^T) / 3)`` for a point at r from the body's centroid, J the body's
+        inertia tensor of its n markers (Kabsch's rotation covariance is σ² J⁻¹). Large where the body's markers
+        are nearly collinear or far away.
+    """
+    poses, local, centre = body_fixed(xyz, body, cols)
+    ok = np.isfinite(local).all(axis=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        dev = np.linalg.norm(local - centre, axis=2)
+        out = np.nanpercentile(np.where(ok, dev, np.nan), DEVIATION_PERCENTILE, axis=0)
+    out = np.where(ok.sum(axis=0) >= MIN_SAMPLES_PER_PAIR, out, np.inf)
+    return out, np.sqrt(1.0 + pose_noise_factor(poses.local, np.nan_to_num(centre)) ** 2)
+
+
+def pose_noise_factor(local: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """How much a least-squares (Kabsch) pose's own noise moves body-fixed points, per coordinate, in units of the
+    markers' noise σ: ``sqrt(1/n + tr([r]x J^-1 [r]x^T) / 3)`` at ``r`` from the centroid of the n markers at
+    `local`, with J their inertia tensor (the pose's translation error has covariance σ²/n, its rotation error
+    σ² J⁻¹).
+
+    Parameters
+    ----------
+    local : array, shape (n, 3)
+        The body's marker coordinates, mm.
+    points : array, shape (k, 3)
+        Body-fixed points, mm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (k,)
+    """
+    local = np.asarray(local, dtype=float)
+    L = local - local.mean(axis=0)
+    Jinv = np.linalg.pinv(np.sum(L * L) * np.eye(3) - L.T @ L)
+    r = np.atleast_2d(np.asarray(points, dtype=float)) - local.mean(axis=0)
+    X = np.zeros((len(r), 3, 3))                                          # [r]x
+    X[:, 0, 1], X[:, 0, 2], X[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
+    X -= np.transpose(X, (0, 2, 1))
+    return np.sqrt(1.0 / len(L) + np.einsum("kij,jl,kil->k", X, Jinv, X) / 3.0)
+
+
+def is_rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:
+    """Whether a set of four or more markers moves as one body: each member, seen in the frame of the others (a
+    marker in the fit would pull the pose towards itself and hide its own motion), deviates by at most
+    `tolerance` times that pose's amplification there (:func:`body_deviation`). Sets of three or fewer pass."""
+    if len(members) <= MIN_MARKERS:
+        return True
+    for m in members:
+        d, a = body_deviation(xyz, [o for o in members if o != m], [m])
+        if not d[0] <= tolerance * a[0]:
+            return False
+    return True
