@@ -51,8 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402  (not ic.skeleton: that name is the module identcheck.skeleton)
-from results_io import (add_shard_arguments, errors_line, machine_info, run_trials, warm_up,  # noqa: E402
-                        write_json)
+from results_io import add_shard_arguments, benchmark_folder, errors_line  # noqa: E402
 
 GENERATOR = Path(__file__).resolve().parent / "heldout_skeleton" / "generator.py"
 TARGET = {"markers": 40, "frames": 1400, "seconds": 5.0}
@@ -212,23 +211,13 @@ def main(argv=None) -> int:
                         "--seed", str(args.seed)], check=True)
     if folder is None and not args.merge:
         ap.error("give a trials folder or --generate N")
-    index = json.loads((folder / "index.json").read_text()) if folder else {"trials": []}
-    if index["trials"] and not args.merge:
-        warm_up(lambda: skeleton(ic.read_trial(folder / index["trials"][0]["trc"])))
-    rows = run_trials(index["trials"], lambda e: evaluate(folder, e), args,
-                      lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
-                          f"ERROR {r['error'][:100]}" if "error" in r else
-                          f"group {r['grouping_exact']}, tree {r['tree_exact']}, types {r['types_right']}/"
-                          f"{r['types_checked']}, {r['seconds']:.2f} s"))
-    if rows is None:
-        return 0
-    summary = summarise(rows)
-    print(table(summary))
-    write_json(args.out, args.key, {"summary": summary, "rows": rows, "source": {
-        "folder": str(folder) if folder else None, "generator": index.get("generator"), "seed": index.get("seed"),
-        "n": index.get("n")}, "machine": machine_info()})
-    return 0
-
+    return benchmark_folder(
+        args, folder, lambda e: evaluate(folder, e),
+        lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
+            f"ERROR {r['error'][:100]}" if "error" in r else
+            f"group {r['grouping_exact']}, tree {r['tree_exact']}, types {r['types_right']}/"
+            f"{r['types_checked']}, {r['seconds']:.2f} s"),
+        summarise, table, lambda path: skeleton(ic.read_trial(path)))
 
 if __name__ == "__main__":
     sys.exit(main())

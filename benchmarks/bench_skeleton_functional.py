@@ -46,8 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402
-from results_io import (add_shard_arguments, errors_line, machine_info, run_trials, warm_up,  # noqa: E402
-                        write_json)
+from results_io import add_shard_arguments, benchmark_folder, errors_line  # noqa: E402
 
 
 def evaluate(folder: Path, entry: dict) -> dict:
@@ -187,24 +186,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.trials is None and not args.merge:
         ap.error("give a trials folder (or --merge)")
-    index = json.loads((args.trials / "index.json").read_text()) if args.trials else {"trials": []}
-    if index["trials"] and not args.merge:
-        warm_up(lambda: skeleton(ic.read_trial(args.trials / index["trials"][0]["trc"])))
-    rows = run_trials(index["trials"], lambda e: evaluate(args.trials, e), args,
-                      lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
-                          f"ERROR {r['error'][:100]}" if "error" in r else
-                          f"all found {r['all_found']}, " + ", ".join(
-                              f"{m['joint']} {'found' if m['joint_found'] else 'missed'}" for m in r["moving"])
-                          + f", {r['seconds']:.2f} s"))
-    if rows is None:
-        return 0
-    summary = summarise(rows)
-    print(table(summary))
-    write_json(args.out, args.key, {"summary": summary, "rows": rows, "source": {
-        "folder": str(args.trials) if args.trials else None, "generator": index.get("generator"),
-        "seed": index.get("seed"), "n": index.get("n")}, "machine": machine_info()})
-    return 0
-
+    return benchmark_folder(
+        args, args.trials, lambda e: evaluate(args.trials, e),
+        lambda k, n, e, r: f"[{k}/{n}] {e['id']}: " + (
+            f"ERROR {r['error'][:100]}" if "error" in r else
+            f"all found {r['all_found']}, " + ", ".join(
+                f"{m['joint']} {'found' if m['joint_found'] else 'missed'}" for m in r["moving"])
+            + f", {r['seconds']:.2f} s"),
+        summarise, table, lambda path: skeleton(ic.read_trial(path)))
 
 if __name__ == "__main__":
     sys.exit(main())

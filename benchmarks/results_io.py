@@ -90,3 +90,22 @@ def warm_up(call) -> None:
             call()
         except InputError:
             pass
+
+
+def benchmark_folder(args, folder, evaluate, describe, summarise, table, call) -> int:
+    """The common run of a per-trial benchmark on a generator's folder (``index.json`` listing ``trials`` with a
+    ``trc`` each): one untimed warm-up ``call(path of the first trial)``, the trials (or this shard's, or the
+    merged shards' rows: :func:`run_trials`), the printed ``table(summarise(rows))``, and ``args.key`` of
+    ``args.out`` written with the summary, the rows, where the trials came from and the machine."""
+    index = json.loads((Path(folder) / "index.json").read_text()) if folder else {"trials": []}
+    if index["trials"] and not args.merge:
+        warm_up(lambda: call(Path(folder) / index["trials"][0]["trc"]))
+    rows = run_trials(index["trials"], evaluate, args, describe)
+    if rows is None:
+        return 0
+    summary = summarise(rows)
+    print(table(summary))
+    write_json(args.out, args.key, {"summary": summary, "rows": rows, "source": {
+        "folder": str(folder) if folder else None, "generator": index.get("generator"), "seed": index.get("seed"),
+        "n": index.get("n")}, "machine": machine_info()})
+    return 0
