@@ -138,6 +138,8 @@ def _client(workers, scheduler, dashboard, scratch, n_jobs):
     import dask
     from distributed import Client, LocalCluster
 
+    from .quiet_workers import QuietWorkers
+
     if scheduler:
         with _quiet_logs():
             try:
@@ -156,9 +158,10 @@ def _client(workers, scheduler, dashboard, scratch, n_jobs):
         with _quiet_logs(), dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                                              "temporary-directory": str(scratch)}):
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=dashboard,
-                                   silence_logs=logging.ERROR, local_directory=str(scratch))
+                                   silence_logs=logging.CRITICAL, local_directory=str(scratch))
             client = Client(cluster)
             try:
+                client.register_plugin(QuietWorkers())
                 yield client
             finally:
                 client.close()
