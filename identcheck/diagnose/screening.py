@@ -2,10 +2,12 @@
 iterating on, skipping places far weaker than the best fitted so far.
 
 The rule that skips a proposal depends on the scores of those fitted before it, so the round is sequential in
-what it decides. It need not be in what it computes: while one proposal is fitted, the next one the rule would
-fit as things stand is fitted beside it on another thread (NumPy releases the GIL in its array work). When the
-first is done, the rule is asked again; a speculative fit it would not have made is discarded. The fits kept,
-their scores and their order are those of the one-thread round, whatever the number of threads.
+what it decides. It need not be in what it computes: while one proposal is fitted, the next one is fitted beside
+it on another thread (NumPy releases the GIL in its array work) when the rule is sure to fit it whatever the
+first one scores, as it is for each effect's first place. The fits, their scores and their order are those of
+the one-thread round, whatever the number of threads. (Starting whichever proposal the rule would fit as things
+stand, and discarding it when the first one's score changed that, cost more than it saved: the discarded fits
+held the GIL against the one being waited for.)
 """
 from __future__ import annotations
 
@@ -51,6 +53,20 @@ class _Round:
         return not (eff.name in self.placed and prop.strength * SKIP_RATIO < self.best and eff is not self.leader
                     and not eff.always_fit)
 
+    def next_certain(self, candidates: list, i: int) -> int | None:
+        """The candidate after `i` that the rule will fit next whatever `i` scores, or None when that depends on
+        the score: those in between must be skipped now and stay skipped (the best only grows; but `i`'s effect
+        may come to lead, and a further place of the leader is fitted), and it must be fitted anyway (its
+        effect's first place, or an effect fitted always)."""
+        current = candidates[i][1]
+        for j in range(i + 1, len(candidates)):
+            prop, eff = candidates[j]
+            if eff.always_fit or (eff.name not in self.placed and eff is not current):
+                return j
+            if self.fits(prop, eff) or eff is current:
+                return None
+        return None
+
 
 def fit_candidates(ctx: Context, h: Hypothesis, candidates: list, threads: int = 1, progress=None,
                    step: int = 1) -> list:
@@ -69,12 +85,11 @@ def fit_candidates(ctx: Context, h: Hypothesis, candidates: list, threads: int =
                 ahead[i] = pool.submit(eff.apply, ctx, h, prop)
             return ahead[i]
 
-        def guess_next(i: int) -> None:
-            """Start the first candidate after `i` the rule would fit as things stand."""
-            for j in range(i + 1, len(candidates)):
-                if state.fits(*candidates[j]):
-                    start(j)
-                    return
+        def start_next(i: int) -> None:
+            """Start the candidate the rule fits after `i`, if that is already certain whatever `i` scores."""
+            j = state.next_certain(candidates, i)
+            if j is not None:
+                start(j)
 
         for i, (prop, eff) in enumerate(candidates):
             if not state.fits(prop, eff):
@@ -86,7 +101,7 @@ def fit_candidates(ctx: Context, h: Hypothesis, candidates: list, threads: int =
                 progress(f"step {step}: trying {eff.name} {prop.where}")
             job = start(i)
             if threads > 1:
-                guess_next(i)
+                start_next(i)
             try:
                 cand = job.result()
             except (np.linalg.LinAlgError, ValueError) as exc:

@@ -75,3 +75,32 @@ def test_a_real_round_is_the_same_on_one_and_two_threads():
     one = screening.fit_candidates(ctx, h, [(copy.deepcopy(p), e) for p, e in cands], threads=1)
     two = screening.fit_candidates(ctx, h, [(copy.deepcopy(p), e) for p, e in cands], threads=2)
     assert [(e.name, sc, c.rss) for sc, e, _, c in one] == [(e.name, sc, c.rss) for sc, e, _, c in two]
+
+
+class _Overlap(_Fake):
+    """A fake effect that records how many fits run at once."""
+
+    active = 0
+    most = 0
+    guard = threading.Lock()
+
+    def apply(self, ctx, h, prop):
+        with _Overlap.guard:
+            _Overlap.active += 1
+            _Overlap.most = max(_Overlap.most, _Overlap.active)
+        time.sleep(0.05)
+        with _Overlap.guard:
+            _Overlap.active -= 1
+        return prop.payload["score"]
+
+
+def test_each_effects_first_place_is_fitted_beside_the_one_before(monkeypatch):
+    """Three effects' first places (each fitted whatever the others score): on two threads, two fits run at once;
+    on one, never."""
+    monkeypatch.setattr(screening, "score", lambda ctx, cand, h: cand)
+    monkeypatch.setattr(screening, "creep", lambda ctx, h: 0.0)
+    for threads, most in ((1, 1), (2, 2)):
+        _Overlap.most = 0
+        cands = [(Proposal(f"e{k}", {"i": k}, 100.0 - k, {"score": 10.0}), _Overlap(f"e{k}")) for k in range(3)]
+        assert len(screening.fit_candidates(None, None, cands, threads=threads)) == 3
+        assert _Overlap.most == most
