@@ -16,17 +16,28 @@ from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information, initial_state
-from identcheck.bundle.honest import assess, joint_answer, profile_threads
+from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
-from identcheck.bundle.hypothesis import Context, Hypothesis, consistency
+from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
 from identcheck.estimate.noise import noise_floor
-from identcheck.diagnose.screening import fit_candidates
 
 log = logging.getLogger("identcheck")
 
 MAX_STEPS = 4
+SKIP_RATIO = 10.0
+"""Proposals are fitted strongest first. Every effect's strongest place is fitted whenever its detector clears
+the bar: effects are compared by their fitted scores, never by their detectors' estimates, which are not on one
+scale (a hip centre pistoning in the pelvis: the markers' mean residual seen from the pelvis estimated 1 816
+where the fit scored 22 930, and skin on the thigh, estimated 5 020, scored 20 013 and was named instead). An
+effect's further places are not fitted this round when their strength is below 1/SKIP_RATIO of the best score
+fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
+lag is several frames) or is marked ``always_fit`` (a swap's strength is read from distances, not from the
+residual)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
+CREEP_ITER = 12
+"""Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
+effect, is not the effect's (:func:`creep`)."""
 DECISIVE_GAIN = 50.0
 """A gap the consistency test passes may still hide an effect the criterion finds decisively (a slip under
 strongly correlated noise: the test's allowance for the uncertain noise level is wide); an effect whose gain
@@ -200,6 +211,13 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     return ctx, Hypothesis(chain, fit.terms, data, weights, fit)
 
 
+def creep(ctx: Context, h: Hypothesis) -> float:
+    """What refitting `h` as it is gains (:data:`CREEP_ITER` more iterations, no effect added), in the
+    criterion's units (≥ 0): the rigid fit of data an effect corrupts creeps on for long, and every candidate's
+    refit takes that gain too, so each candidate's score is counted net of it."""
+    return max(score(ctx, h.refit(max_iter=CREEP_ITER), h), 0.0)
+
+
 def place(name: str, where: dict) -> tuple:
     """What makes an effect's place itself: its name and the non-numeric parts of `where` (joint, segment,
     markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude). An effect adopted at a place
@@ -227,16 +245,33 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
         proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
+        tried, best, leader, drift, placed = [], 0.0, None, None, set()
         taken = {place(st.name, st.where) for st in steps}
-        candidates = []
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
             if place(eff.name, prop.where) in taken:
                 log.debug("%s %s skipped: adopted already", eff.name, prop.where)
                 continue
-            candidates.append((prop, eff))
-        tried = fit_candidates(ctx, h, candidates, profile_threads(), progress, len(steps) + 1)
+            if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader
+                    and not eff.always_fit):
+                # (each effect's first place, other places of the leader, and effects whose strength is no
+                # estimate of their score: always)
+                log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
+                continue
+            placed.add(eff.name)
+            if progress:
+                progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
+            try:
+                cand = eff.apply(ctx, h, prop)
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                log.debug("%s %s failed: %s", eff.name, prop.where, exc)
+                continue
+            drift = creep(ctx, h) if drift is None else drift
+            sc = score(ctx, cand, h) - drift
+            tried.append((sc, eff, prop, cand))
+            if not eff.implausible(prop) and sc > best:
+                best, leader = sc, eff
         tried.sort(key=lambda x: -x[0])
         adopted = None
         limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)

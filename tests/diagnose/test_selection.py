@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.diagnose import screening, workflow
+from identcheck.diagnose import workflow
 from identcheck.effects.base import Effect, Proposal
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
@@ -63,8 +63,8 @@ def _run(model, trial, effects, max_steps=1):
 
 def _patched(monkeypatch, model, trial, effects, max_steps):
     monkeypatch.setattr(workflow, "EFFECTS", {e.name: e for e in effects})
-    monkeypatch.setattr(screening, "score", lambda ctx, cand, h: getattr(cand, "gain", 0.0))
-    monkeypatch.setattr(screening, "creep", lambda ctx, h: 0.0)
+    monkeypatch.setattr(workflow, "score", lambda ctx, cand, h: getattr(cand, "gain", 0.0))
+    monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
     monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
     monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: 0.0)
     monkeypatch.setattr(workflow, "consistency", lambda ctx, h: {"consistent": False})
@@ -78,7 +78,7 @@ def test_an_effect_whose_detector_underestimates_is_fitted_and_named(trial, big,
     fitted once, and named when its fitted score is the best; a further place of an effect that does not lead,
     that far below, is not fitted."""
     model, tr = trial
-    weak = big / (screening.SKIP_RATIO * ratio)
+    weak = big / (workflow.SKIP_RATIO * ratio)
     loud = _StandIn("loud", [({"segment": "thigh"}, big, big)])
     quiet = _StandIn("quiet", [({"joint": "hip"}, weak, big * lead)])
     third = _StandIn("third", [({"joint": "knee"}, weak, big / 10), ({"joint": "hip"}, weak / 2, big / 10)])
