@@ -85,9 +85,10 @@ def main(argv=None) -> int:
             row = {"trial": trial.name, **{name: _run(code, model, trial) for name, code in order}}
             row["agree"] = _agree(row["current"], row["baseline"])
             rows.append(row)
-            print(f"[{k}/{len(trials)}] {trial.name}: wall {row['baseline']['wall_s']:.1f} -> "
-                  f"{row['current']['wall_s']:.1f} s, CPU {row['baseline']['cpu_s']:.1f} -> {row['current']['cpu_s']:.1f}"
-                  f" s{'' if row['agree'] else '  (reports differ)'}", file=sys.stderr, flush=True)
+            old, now = row["baseline"], row["current"]
+            print(f"[{k}/{len(trials)}] {trial.name}: wall {old['wall_s']:.1f} -> {now['wall_s']:.1f} s, "
+                  f"CPU {old['cpu_s']:.1f} -> {now['cpu_s']:.1f} s{'' if row['agree'] else '  (reports differ)'}",
+                  file=sys.stderr, flush=True)
     summary = {}
     for clock in ("wall_s", "cpu_s"):
         cur = np.array([r["current"][clock] for r in rows])
