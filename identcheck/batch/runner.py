@@ -138,7 +138,7 @@ def _client(workers, scheduler, dashboard, scratch, n_jobs):
     import dask
     from distributed import Client, LocalCluster
 
-    from .quiet_workers import QuietWorkers
+    from identcheck.batch.quiet_workers import QuietWorkers
 
     if scheduler:
         with _quiet_logs():
