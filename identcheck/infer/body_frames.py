@@ -50,14 +50,18 @@ def body_deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray,
     deviation : numpy.ndarray, shape (len(cols),)
         The 95th percentile (:data:`DEVIATION_PERCENTILE`) over frames of the marker's distance from its median
         body-fixed position, mm; inf when seen with the body's pose in fewer than
-        :data:`~identcheck.estimate.noise.MIN_SAMPLES_PER_PAIR` frames.
+        :data:`~identcheck.estimate.noise.MIN_SAMPLES_PER_PAIR` frames, and for every marker when the body's
+        markers are never all seen in one frame (no pose: no evidence that anything stays still in it).
     amplification : numpy.ndarray, shape (len(cols),)
         How much the body's own pose noise adds to a point there, as a factor on one marker's scatter:
         ``sqrt(1 + 1/n + tr([r]x J^-1 [r]x^T) / 3)`` for a point at r from the body's centroid, J the body's
         inertia tensor of its n markers (Kabsch's rotation covariance is σ² J⁻¹). Large where the body's markers
         are nearly collinear or far away.
     """
-    poses, local, centre = body_fixed(xyz, body, cols)
+    try:
+        poses, local, centre = body_fixed(xyz, body, cols)
+    except ValueError:                                              # never seen whole (in these frames)
+        return np.full(len(cols), np.inf), np.ones(len(cols))
     ok = np.isfinite(local).all(axis=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

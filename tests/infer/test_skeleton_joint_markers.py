@@ -57,3 +57,28 @@ def test_joints_that_hardly_turn_are_not_checked():
     labels = [f"m{k}" for k in range(8)]
     joint = {"name": "j", "parent": "a", "child": "b", "evidence": {"type": {"main_rotation_deg": 2.0}}}
     assert markers_on_joints(X, labels, {"a": labels[:4], "b": labels[4:]}, [joint]) == []
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 2**16))
+def test_a_segment_never_seen_whole_in_the_checked_frames_reports_nothing(seed):
+    """Two three-marker segments joined by a turning joint, but the child's markers are never all visible in one
+    frame (one always occluded, in turn): no pose, so no marker is said to move with it, and the body-frame
+    deviations are infinite (not rigid) rather than an error."""
+    from identcheck.infer.body_frames import body_deviation, is_rigid
+
+    rng = np.random.default_rng(seed)
+    angle = np.radians(30) * np.sin(2 * np.pi * 0.5 * T)
+    turn = Rotation.from_rotvec(angle[:, None] * np.array([1.0, 0, 0])).as_matrix()
+    parent = rng.uniform(-100, 100, size=(3, 3)) + [0, 0, 200]
+    child = rng.uniform(-100, 100, size=(3, 3)) - [0, 0, 200]
+    xyz = np.concatenate([np.broadcast_to(parent, (F, 3, 3)), np.einsum("fij,mj->fmi", turn, child)], axis=1)
+    xyz = xyz + rng.normal(0, 0.3, xyz.shape)
+    for f in range(F):
+        xyz[f, 3 + f % 3] = np.nan
+    labels = ["P1", "P2", "P3", "C1", "C2", "C3"]
+    joint = {"name": "P_C", "parent": "P", "child": "C", "evidence": {"type": {"main_rotation_deg": 17.0}}}
+    assert markers_on_joints(xyz, labels, {"P": labels[:3], "C": labels[3:]}, [joint]) == []
+    dev, amp = body_deviation(xyz, [3, 4, 5], [0, 1])
+    assert np.all(np.isinf(dev)) and np.all(amp == 1.0)
+    assert not is_rigid(xyz, [2, 3, 4, 5], 15.0)
