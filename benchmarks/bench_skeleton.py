@@ -51,7 +51,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402  (not ic.skeleton: that name is the module identcheck.skeleton)
-from results_io import add_shard_arguments, benchmark_folder, errors_line  # noqa: E402
+from results_io import (add_shard_arguments, benchmark_folder, by_category, error_rows,  # noqa: E402
+                        errors_line, percent, seconds_summary)
 
 GENERATOR = Path(__file__).resolve().parent / "heldout_skeleton" / "generator.py"
 TARGET = {"markers": 40, "frames": 1400, "seconds": 5.0}
@@ -144,24 +145,18 @@ def summarise(rows: list) -> dict:
                 "wrong_but_reported": _rate([r for r in rs if r["wrong_but_reported"] is not None],
                                             "wrong_but_reported"),
                 "ok_when_tree_right": _rate([r for r in rs if r["tree_exact"]], "ok"),
-                "ok_when_tree_wrong": _rate([r for r in rs if not r["tree_exact"]], "ok"),
-                "median_seconds": float(np.median([r["seconds"] for r in rs])) if rs else None,
-                "max_seconds": float(np.max([r["seconds"] for r in rs])) if rs else None}
+                "ok_when_tree_wrong": _rate([r for r in rs if not r["tree_exact"]], "ok"), **seconds_summary(rs)}
 
-    cats = defaultdict(list)
-    for r in ok:
-        for c in r["categories"]:
-            cats[c].append(r)
     noise, length = defaultdict(list), defaultdict(list)
     for r in ok:
         if r.get("sigma_mm") is not None:
             noise[_bin(r["sigma_mm"], NOISE_BINS, "mm")].append(r)
         length[_bin(r["n_frames"], FRAME_BINS, "frames")].append(r)
     big = [r for r in ok if r["n_markers"] >= TARGET["markers"] and r["n_frames"] >= TARGET["frames"]]
-    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in sorted(cats.items())},
+    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in by_category(ok).items()},
             "by_noise": {k: block(noise[k]) for k in _bin_names(NOISE_BINS, "mm") if noise[k]},
             "by_frames": {k: block(length[k]) for k in _bin_names(FRAME_BINS, "frames") if length[k]},
-            "errors": [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r],
+            "errors": error_rows(rows),
             "speed_target": {**TARGET, "trials": len(big),
                              "max_seconds": float(max(r["seconds"] for r in big)) if big else None,
                              "met": all(r["seconds"] <= TARGET["seconds"] for r in big) if big else None},
@@ -169,9 +164,6 @@ def summarise(rows: list) -> dict:
 
 
 def table(summary: dict) -> str:
-    def pct(x):
-        return "   -" if x is None else f"{100 * x:4.0f}"
-
     head = (f"{'trials':<26}{'n':>4} {'group%':>7} {'seg%':>6} {'tree%':>6} {'joint%':>7} {'type%':>6} "
             f"{'reported%':>10} {'ok|right':>9} {'ok|wrong':>9} {'med s':>6} {'max s':>6}")
     lines = [head, "-" * len(head)]
@@ -179,10 +171,11 @@ def table(summary: dict) -> str:
             + [(f"noise {k}", b) for k, b in summary.get("by_noise", {}).items()]
             + [(f"length {k}", b) for k, b in summary.get("by_frames", {}).items()])
     for name, b in rows:
-        lines.append(f"{name:<26}{b['trials']:>4} {pct(b['grouping_exact']):>7} {pct(b['segments_found']):>6} "
-                     f"{pct(b['tree_exact']):>6} {pct(b['joints_found']):>7} {pct(b['types_right']):>6} "
-                     f"{pct(b['wrong_but_reported']):>10} {pct(b['ok_when_tree_right']):>9} "
-                     f"{pct(b['ok_when_tree_wrong']):>9} {b['median_seconds'] or 0:6.2f} {b['max_seconds'] or 0:6.2f}")
+        lines.append(f"{name:<26}{b['trials']:>4} {percent(b['grouping_exact']):>7} {percent(b['segments_found']):>6} "
+                     f"{percent(b['tree_exact']):>6} {percent(b['joints_found']):>7} {percent(b['types_right']):>6} "
+                     f"{percent(b['wrong_but_reported']):>10} {percent(b['ok_when_tree_right']):>9} "
+                     f"{percent(b['ok_when_tree_wrong']):>9} {b['median_seconds'] or 0:6.2f} "
+                     f"{b['max_seconds'] or 0:6.2f}")
     st = summary["speed_target"]
     lines.append(f"speed target ({st['markers']}+ markers, {st['frames']}+ frames <= {st['seconds']:g} s): "
                  f"{st['trials']} trials, max {st['max_seconds'] if st['max_seconds'] is None else round(st['max_seconds'], 2)}"

@@ -46,7 +46,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402
-from results_io import add_shard_arguments, benchmark_folder, errors_line  # noqa: E402
+from results_io import (add_shard_arguments, benchmark_folder, by_category, error_rows,  # noqa: E402
+                        errors_line, percent, seconds_summary)
 
 
 def evaluate(folder: Path, entry: dict) -> dict:
@@ -137,36 +138,28 @@ def summarise(rows: list) -> dict:
                 "ok": float(np.mean([r["ok"] for r in rs])) if rs else None,
                 "ok_when_not_all_found": (float(np.mean([r["ok"] for r in rs if not r["all_found"]]))
                                           if any(not r["all_found"] for r in rs) else None),
-                "median_seconds": float(np.median([r["seconds"] for r in rs])) if rs else None,
-                "max_seconds": float(np.max([r["seconds"] for r in rs])) if rs else None}
+                **seconds_summary(rs)}
 
-    cats = defaultdict(list)
-    for r in ok:
-        for c in r["categories"]:
-            cats[c].append(r)
     by_joint = defaultdict(list)
     for r in ok:
         for m in r["moving"]:
             by_joint[m["joint"].rsplit("_", 1)[0]].append({**r, "moving": [m]})
-    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in sorted(cats.items())},
+    return {"all": block(ok), "by_category": {c: block(rs) for c, rs in by_category(ok).items()},
             "by_moving_joint": {c: block(rs) for c, rs in sorted(by_joint.items())},
-            "errors": [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r]}
+            "errors": error_rows(rows)}
 
 
 def table(summary: dict) -> str:
-    def pct(x):
-        return "   -" if x is None else f"{100 * x:4.0f}"
-
     head = (f"{'trials':<22}{'n':>4} {'joints':>6} {'child%':>7} {'parent%':>8} {'found%':>7} {'type%':>6} "
             f"{'leak%':>6} {'rep%':>5} {'all%':>5} {'ok%':>4} {'ok|miss':>8} {'med s':>6} {'max s':>6}")
     lines = [head, "-" * len(head)]
     rows = ([("all", summary["all"])] + [(f"moving {k}", b) for k, b in summary["by_moving_joint"].items()]
             + list(summary["by_category"].items()))
     for name, b in rows:
-        lines.append(f"{name:<22}{b['trials']:>4} {b['moving_joints']:>6} {pct(b['child_whole']):>7} "
-                     f"{pct(b['parent_whole']):>8} {pct(b['joint_found']):>7} {pct(b['type_right']):>6} "
-                     f"{pct(b['leak']):>6} {pct(b['leak_reported']):>5} {pct(b['all_found']):>5} {pct(b['ok']):>4} "
-                     f"{pct(b['ok_when_not_all_found']):>8} {b['median_seconds'] or 0:6.2f} "
+        lines.append(f"{name:<22}{b['trials']:>4} {b['moving_joints']:>6} {percent(b['child_whole']):>7} "
+                     f"{percent(b['parent_whole']):>8} {percent(b['joint_found']):>7} {percent(b['type_right']):>6} "
+                     f"{percent(b['leak']):>6} {percent(b['leak_reported']):>5} {percent(b['all_found']):>5} "
+                     f"{percent(b['ok']):>4} {percent(b['ok_when_not_all_found']):>8} {b['median_seconds'] or 0:6.2f} "
                      f"{b['max_seconds'] or 0:6.2f}")
     lines += errors_line(summary["errors"])
     lines.append("per moving joint: child%/parent%: its child's/parent's markers are one group that stays on its side; "

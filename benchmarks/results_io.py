@@ -71,6 +71,34 @@ def run_trials(entries: list, evaluate, args, describe) -> list | None:
     return None if args.shard else rows
 
 
+def percent(share) -> str:
+    """A share (0-1) as a whole percentage in four columns, ``   -`` when there is none."""
+    return "   -" if share is None else f"{100 * share:4.0f}"
+
+
+def by_category(rows: list) -> dict:
+    """The rows under each of their ``categories`` (a row with several is under each), categories sorted."""
+    out: dict = {}
+    for r in rows:
+        for c in r["categories"]:
+            out.setdefault(c, []).append(r)
+    return dict(sorted(out.items()))
+
+
+def seconds_summary(rows: list) -> dict:
+    """``median_seconds`` and ``max_seconds`` of the rows' ``seconds`` (None for no rows)."""
+    import numpy as np
+
+    times = [r["seconds"] for r in rows]
+    return {"median_seconds": float(np.median(times)) if times else None,
+            "max_seconds": float(np.max(times)) if times else None}
+
+
+def error_rows(rows: list) -> list:
+    """The rows that ended in an error, as ``[{"id", "error"}]`` (what :func:`errors_line` prints)."""
+    return [{"id": r["id"], "error": r["error"]} for r in rows if "error" in r]
+
+
 def errors_line(errors: list) -> list:
     """The table's line for trials that ended in an error (``[{"id", "error"}]``): empty when there are none."""
     if not errors:
