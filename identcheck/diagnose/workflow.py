@@ -20,6 +20,7 @@ from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
+from identcheck.diagnose.backward import Adopted, Redundant, redundant
 from identcheck.estimate.noise import noise_floor
 
 log = logging.getLogger("identcheck")
@@ -240,13 +241,15 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     trial, offset = trial.recentred()
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)
-    h, steps = base, []
-    while len(steps) < max_steps:
+    h, steps, adopted_effects, dropped = base, [], [], set()
+    for _round in range(2 * max_steps):            # a round adopts one effect and may drop one: bounded
+        if len(steps) >= max_steps:
+            break
         bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
         proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
                            key=lambda pe: -pe[0].strength)
         tried, best, leader, drift, placed = [], 0.0, None, None, set()
-        taken = {place(st.name, st.where) for st in steps}
+        taken = {place(st.name, st.where) for st in steps} | dropped
         for prop, eff in proposals:
             if prop.strength <= bar:
                 continue                     # not even its detector's own estimate would clear the bar
@@ -297,7 +300,42 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
                      f"(floor {cand.floor(ctx):.3g})")
         h = cand
+        adopted_effects.append(Adopted(eff, prop))
+        while len(adopted_effects) > 1:       # each pass drops one effect or ends: bounded
+            red = redundant(ctx, base, adopted_effects, lambda without: needed(ctx, without, h))
+            if red is None:
+                break
+            gone = steps[red.index]
+            dropped.add(place(gone.name, gone.where))
+            if progress:
+                progress(f"dropped {gone.name} {gone.where}: the later effects explain what it did (it gains "
+                         f"{red.gain:.0f} given them)")
+            steps = restated(ctx, base, red, [st for i, st in enumerate(steps) if i != red.index])
+            adopted_effects, h = list(red.kept), red.rebuilt[-1]
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)))
+
+
+def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, bool]:
+    """The forward step's rule, asked of an adopted effect given the others: (what `full` gains over `without`, the
+    hypothesis without the effect; would the search adopt an effect gaining that much there?). Yes when it earns
+    its parameters and the gap without it is not consistent with noise, when it gains decisively
+    (:data:`DECISIVE_GAIN`) all the same, or when the joints need it to be determined."""
+    gain = score(ctx, full, without)
+    bar = DECISIVE_GAIN if consistency(ctx, without)["consistent"] else 0.0
+    return gain, bool(gain > bar or undetermined(without) != 0)
+
+
+def restated(ctx: Context, base: Hypothesis, red: Redundant, kept_steps: list) -> list:
+    """The steps left after dropping an effect, with the gaps before and after each and the evidence taken from the
+    rebuilt hypotheses (each fitted to convergence, as the forward search reports them); each keeps the score and
+    the rival candidates of the round that adopted it."""
+    hyps = [h.polish() for h in red.rebuilt[:-1]] + [red.rebuilt[-1]]
+    out = []
+    for i, (a, hyp, old) in enumerate(zip(red.kept, hyps, kept_steps)):
+        prev = base if i == 0 else hyps[i - 1]
+        out.append(Step(old.name, a.proposal.where, prev.gap(ctx), hyp.gap(ctx), old.score,
+                        a.effect.evidence(ctx, prev, hyp, a.proposal), old.rejected, old.alike))
+    return out
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them

@@ -132,3 +132,119 @@ def test_a_place_is_hashable_whatever_where_holds():
     a = workflow.place("x", {"frames": np.array([1, 2]), "sub": {"m": ["A"]}, "size": np.float32(2.5), "n": 3})
     b = workflow.place("x", {"frames": [1, 2], "sub": {"m": ("A",)}, "size": 7.0, "n": 3})
     assert a == b and hash(a) == hash(b)
+
+
+# ---------------------------------------------------------------------- the backward check
+class _Applied:
+    """A stand-in hypothesis: the rigid fit with the named effects applied in order; its criterion value (lower is
+    better) is read from the test's table by the set of effects."""
+
+    def __init__(self, base, applied: tuple):
+        self.base, self.applied, self.chain = base, applied, base.chain
+
+    def polish(self):
+        return self
+
+    def gap(self, ctx):
+        return self.base.gap(ctx)
+
+    def floor(self, ctx):
+        return self.base.floor(ctx)
+
+
+class _Tabled(Effect):
+    """A stand-in effect proposed at one place, every round or only once `after` is applied."""
+
+    def __init__(self, name: str, after: str | None = None):
+        self.name, self.after, self.max_proposals = name, after, 1
+
+    def propose(self, ctx, hyp):
+        if self.after and self.after not in getattr(hyp, "applied", ()):
+            return []
+        return [Proposal(self.name, {"segment": self.name}, 1.0, {})]
+
+    def apply(self, ctx, hyp, proposal):
+        proposal.where["fitted_mm"] = float(len(getattr(hyp, "applied", ())))     # as a delay's fit writes its size
+        base = getattr(hyp, "base", hyp)
+        return _Applied(base, getattr(hyp, "applied", ()) + (self.name,))
+
+
+def _tabled(monkeypatch, model, trial, effects, table, max_steps):
+    value = lambda h: table[frozenset(getattr(h, "applied", ()))]  # noqa: E731
+    monkeypatch.setattr(workflow, "EFFECTS", {e.name: e for e in effects})
+    monkeypatch.setattr(workflow, "score", lambda ctx, new, old: value(old) - value(new))
+    monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
+    monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
+    monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: 0.0)
+    monkeypatch.setattr(workflow, "consistency", lambda ctx, h: {"consistent": False})
+    return workflow.diagnose(model, trial, max_steps=max_steps)
+
+
+def test_an_effect_adopted_before_the_true_one_is_dropped_once_that_one_explains_it(trial):
+    """The case met on a held-out trial: skin on the thigh adopted first while the delay of the shank was not yet
+    seen; once the delay is adopted, the skin gains nothing given it, and the report names the delay alone (its
+    size as refitted without the skin), with the gaps of the rebuilt sequence."""
+    model, tr = trial
+    skin, delay = _Tabled("skin"), _Tabled("delay", after="skin")
+    table = {frozenset(): 1000.0, frozenset({"skin"}): 400.0, frozenset({"delay"}): 0.0,
+             frozenset({"skin", "delay"}): 5.0}            # the skin's terms only cost their parameters
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _tabled(monkeypatch, model, tr, [skin, delay], table, max_steps=4)
+    assert [s.name for s in diag.steps] == ["delay"]
+    assert diag.steps[0].where["fitted_mm"] == 0.0                 # refitted straight after the rigid fit
+    assert diag.after.applied == ("delay",)
+    assert diag.steps[0].gap_before == pytest.approx(diag.before.gap(diag.ctx))
+
+
+def test_an_effect_the_later_ones_still_need_is_kept(trial):
+    """The same sequence where the skin still earns its parameters given the delay: both stay, in the order found."""
+    model, tr = trial
+    skin, delay = _Tabled("skin"), _Tabled("delay", after="skin")
+    table = {frozenset(): 1000.0, frozenset({"skin"}): 400.0, frozenset({"delay"}): 300.0,
+             frozenset({"skin", "delay"}): 0.0}
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _tabled(monkeypatch, model, tr, [skin, delay], table, max_steps=4)
+    assert [s.name for s in diag.steps] == ["skin", "delay"]
+    assert [s.where["fitted_mm"] for s in diag.steps] == [0.0, 1.0]   # the rebuild that kept both changed nothing
+
+
+def _stepwise(table: dict, names: list, max_steps: int) -> list:
+    """The selection the workflow should make, written out plainly: add the best effect while it lowers the
+    criterion; after each addition, while some earlier effect's removal does not raise it, drop the one whose
+    removal raises it least (never the newest); never add a dropped effect again."""
+    chosen, dropped = [], set()
+    for _ in range(2 * max_steps):
+        if len(chosen) >= max_steps:
+            break
+        options = [n for n in names if n not in chosen and n not in dropped]
+        if not options:
+            break
+        best = min(options, key=lambda n: table[frozenset(chosen + [n])])
+        if table[frozenset(chosen)] - table[frozenset(chosen + [best])] <= 0:
+            break
+        chosen.append(best)
+        while len(chosen) > 1:
+            gains = {n: table[frozenset(chosen) - {n}] - table[frozenset(chosen)] for n in chosen[:-1]}
+            spare = [n for n, g in gains.items() if g <= 0]
+            if not spare:
+                break
+            gone = min(spare, key=lambda n: gains[n])
+            chosen.remove(gone)
+            dropped.add(gone)
+    return chosen
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 1000), min_size=8, max_size=8, unique=True))
+def test_the_selection_is_stepwise_forward_with_the_backward_check(trial, values):
+    """For any criterion values over the subsets of three effects (each proposed every round), the effects named
+    and their order are those of forward selection with the backward check after each addition."""
+    model, tr = trial
+    names = ["a", "b", "c"]
+    subsets = [frozenset(n for i, n in enumerate(names) if k >> i & 1) for k in range(8)]
+    table = dict(zip(subsets, map(float, values)))     # distinct: no ties for either order to break
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _tabled(monkeypatch, model, tr, [_Tabled(n) for n in names], table, max_steps=3)
+    expected = _stepwise(table, names, 3)
+    assert [s.name for s in diag.steps] == expected
+    assert getattr(diag.after, "applied", ()) == tuple(expected)
