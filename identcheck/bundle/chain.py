@@ -161,6 +161,33 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- starting point
+def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
+    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0), its weighted
+    squared norm less the part a refit of the model absorbs (every unknown, per frame and constant, linearised at
+    `fit`): ``vᵀWv − bᵀN⁺b`` with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns
+    eliminated as in the fit (Schur complement).
+
+    What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
+    regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
+    needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
+    a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
+    constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
+    s = fit.state
+    w = np.asarray(weights, dtype=float)
+    R, _t, centre, pred = forward(fit.chain, fit.terms, s)
+    lay, blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
+    out = []
+    for v in fields:
+        v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
+        A, B, C, g, h = normal_equations(lay, blocks, v0, w)
+        A = ridged(A)
+        S, reduced, _back = eliminate_frames(A, B, C, g, h)
+        per_frame = np.einsum("fk,fk->", g, np.linalg.solve(A, g[..., None])[..., 0])
+        constants = float(reduced @ np.linalg.lstsq(S, reduced, rcond=1e-12)[0])
+        out.append(float(np.sum(w[..., None] * v0 * v0) - per_frame - constants))
+    return out
+
+
 def fill_gaps(valid: np.ndarray, arr: np.ndarray) -> np.ndarray:
     """Copy each invalid frame's value from the nearest valid frame (pose continuity)."""
     idx = np.flatnonzero(valid)

@@ -2,7 +2,19 @@
 the effect acts, and an augmentation that adds it to the model with its own parameters and refits."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def seen_mean(x: np.ndarray, axis) -> np.ndarray:
+    """``np.nanmean(x, axis)`` without NumPy's warning for a slice with nothing seen (NaN there): in a diagnosis
+    a frame where every marker of a segment is occluded is ordinary, and the warning reached the user's terminal
+    as ``identcheck: warning: Mean of empty slice``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmean(x, axis=axis)
 
 
 @dataclass

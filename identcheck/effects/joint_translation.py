@@ -17,14 +17,13 @@ says which parts are modelled (``where["modelled"]``).
 """
 from __future__ import annotations
 
-import warnings
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
-from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import explained, last_cluster
 
@@ -116,9 +115,7 @@ class JointTranslation(Effect):
             seen_from_parent = np.einsum("fji,fkj->fki", hyp.fit.seg_R[ch.parent[j]], res[:, idx])
             basis = angle_basis(angles[j], linear=False, cubic=True)
             lin = linear_fields(hyp, j, angles[j])
-            with warnings.catch_warnings():          # frames where every such marker is hidden
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(seen_from_parent, axis=1)
+            mean = seen_mean(seen_from_parent, axis=1)           # NaN in frames where every such marker is hidden
             gain = ctx.bic_gain(len(idx) * explained(mean, basis, lin), 3 * basis.shape[1] + len(lin))
             out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
                                 {"joint": j, "basis": basis, "linear": lin}))
@@ -147,9 +144,7 @@ class JointTranslation(Effect):
         idx = ch.downstream[j]
         def moved(h):  # noqa: E306
             r = np.where((h.weights > 0)[..., None], h.residuals(), np.nan)[:, idx]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                return np.linalg.norm(np.nanmean(r, axis=1), axis=1)
+            return np.linalg.norm(seen_mean(r, axis=1), axis=1)
         x, x_label = main_angle(before, j)
         return {"x": x, "x_label": x_label,
                 "y": moved(before), "y_after": moved(after),

@@ -16,7 +16,7 @@ import numpy as np
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
-from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
 
@@ -95,9 +95,8 @@ class SoftTissue(Effect):
                     # the root's own pose takes up its cluster's common motion whole, which then shows on the
                     # markers below the joint instead (in the root's frame, with the sign turned)
                     seen = ch.downstream[j] if seg == ch.root else cols
-                    with np.errstate(all="ignore"):
-                        mean = np.nanmean(seg_res[:, seen] if seg != ch.root else np.einsum(
-                            "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
+                    mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
+                        "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
                     gain = ctx.bic_gain(len(seen) * explained(mean, basis), 3 * basis.shape[1])
                     if gain > 0:
                         out.append(Proposal(self.name, {"markers": [ch.labels[c] for c in cols], "segment": seg,
@@ -132,7 +131,7 @@ class SoftTissue(Effect):
 
         def moved(h):  # noqa: E306 - the marker's (the cluster's mean) residual on its segment
             with np.errstate(all="ignore"):
-                return np.linalg.norm(np.nanmean(segment_residuals(h)[:, col], axis=1), axis=1)
+                return np.linalg.norm(seen_mean(segment_residuals(h)[:, col], axis=1), axis=1)
         who = proposal.where["markers"][0] if len(col) == 1 else "the cluster's mean"
         return {"x": x, "x_label": x_label,
                 "y": moved(before), "y_after": moved(after),

@@ -3,10 +3,10 @@
 Detector: a lag τ leaves residuals ≈ −τ·velocity on the lagging markers; the least-squares τ and
 the variance it explains rank the segments and the single markers (a marker whose stream lags on its
 own, e.g. one camera's, is a delay too). The velocity is a central difference over ±70 ms
-(:func:`smooth_velocity`): a derivative through the noisy samples would dilute the regression. A single
-marker's lag is partly taken up by its segment's pose (with three markers, most of it): it is regressed, over all
-of the segment's residuals, on the part of its velocity field no rigid motion of the segment absorbs
-(:func:`not_rigid`). Augmentation: the segment's trajectories are shifted back
+(:func:`smooth_velocity`): a derivative through the noisy samples would dilute the regression. A lag's
+displacement is partly taken up by the poses (a single marker's by its segment's pose, with three markers most of
+it; a lagging limb segment's almost whole by the joint angles): the residual is regressed on the part of the
+velocity field the per-frame unknowns do not absorb (:func:`identcheck.bundle.chain.unabsorbed`). Augmentation: the segment's trajectories are shifted back
 by τ (cubic spline through its visible samples), τ refined by Gauss-Newton with the velocity as the
 derivative, and the model refitted (one parameter).
 """
@@ -17,9 +17,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from identcheck.bundle.chain import unabsorbed
 from identcheck.bundle.hypothesis import score
 from identcheck.bundle.model import Terms
-from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, marker_column, pick
 
 NEWTON_STEPS = 6
@@ -74,23 +75,6 @@ def smooth_velocity(data: np.ndarray, rate_hz: float, span_s: float = VELOCITY_S
     return out
 
 
-def not_rigid(field: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """A velocity field on a segment's markers (F, m, 3) less the rigid motion (t + ω × (p − centroid)) of the
-    segment that fits it best at the markers' positions `points` (F, m, 3), frame by frame: the part a rigid pose
-    fit of the segment cannot absorb. NaN in frames where a marker is not seen."""
-    q = points - points.mean(axis=1, keepdims=True)
-    u = field - field.mean(axis=1, keepdims=True)
-    # least-squares ω about the centroid: (Σ |q|² I − q qᵀ) ω = Σ q × u
-    A = np.einsum("fm,ij->fij", np.einsum("fmk,fmk->fm", q, q), np.eye(3)) - np.einsum("fmi,fmj->fij", q, q)
-    b = np.cross(q, u).sum(axis=1)
-    ok = np.isfinite(A).all(axis=(1, 2)) & np.isfinite(b).all(axis=1)
-    omega = np.full((len(field), 3), np.nan)
-    if ok.any():
-        ridge = 1e-12 * np.trace(A[ok], axis1=1, axis2=2)[:, None, None] * np.eye(3)
-        omega[ok] = np.linalg.solve(A[ok] + ridge, b[ok][..., None])[..., 0]
-    return u - np.cross(omega[:, None, :], q)
-
-
 class TimeOffset(Effect):
     name = "time_offset"
     max_proposals = 64
@@ -118,19 +102,19 @@ class TimeOffset(Effect):
         out = []
         groups = [(seg, list(ch.seg_markers[seg])) for seg in ch.segments]
         groups += [(ch.marker_seg[c], [c]) for c in range(ch.n_markers) if len(ch.seg_markers[ch.marker_seg[c]]) > 1]
-        for seg, idx in groups:
+        fields = []
+        for _seg, idx in groups:
+            field = np.zeros_like(vel)
+            field[:, idx] = vel[:, idx]
+            fields.append(field)
+        # a lag's displacement −τ·v is taken up in part by the poses (a lagging limb segment's almost whole by the
+        # joint angles, a single marker's by its segment's pose): the residual is regressed on the rest of it
+        left = unabsorbed(hyp.fit, hyp.weights, fields)
+        for (seg, idx), vv in zip(groups, left):
             v, r = vel[:, idx], res[:, idx]
-            if len(idx) == 1 < len(ch.seg_markers[seg]):
-                # one marker's lag is partly taken up by its segment's pose: what is left of it on the segment's
-                # markers is the lag's velocity field less the rigid motion of the segment that fits it best
-                cols = list(ch.seg_markers[seg])
-                field = np.zeros((len(v), len(cols), 3))
-                field[:, cols.index(idx[0])] = v[:, 0]
-                v, r = not_rigid(field, hyp.data[:, cols]), res[:, cols]
             ok = np.isfinite(v) & np.isfinite(r)
-            vv = float(np.sum(np.where(ok, v * v, 0)))
             rv = float(np.sum(np.where(ok, r * v, 0)))
-            if vv <= 0:
+            if not vv > 1e-9 * float(np.sum(np.where(ok, v * v, 0))):
                 continue
             tau = -rv / vv
             gain = ctx.bic_gain(rv * rv / vv, 1)
@@ -206,5 +190,5 @@ class TimeOffset(Effect):
         v = smooth_velocity(before.data[:, idx], ctx.rate_hz)           # as the detector reads the delay
         r = np.where((before.weights > 0)[:, idx, None], before.residuals()[:, idx], np.nan)
         return {"x": np.nansum(v * r, axis=(1, 2)) / np.maximum(np.nansum(v * v, axis=(1, 2)), 1e-9) * -1000,
-                "x_label": "frame-wise delay estimate (ms)", "y": np.linalg.norm(np.nanmean(v, axis=1), axis=1),
+                "x_label": "frame-wise delay estimate (ms)", "y": np.linalg.norm(seen_mean(v, axis=1), axis=1),
                 "y_label": f"{', '.join(proposal.where.get('markers', [seg]))} speed (mm/s)", "kind": "scatter"}
