@@ -176,15 +176,17 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
     w = np.asarray(weights, dtype=float)
     R, _t, centre, pred = forward(fit.chain, fit.terms, s)
     lay, blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
+    A, B, C, g, h = normal_equations(lay, blocks, np.zeros_like(pred), w)       # the same for every field
+    A = ridged(A)
+    S = eliminate_frames(A, B, C, g, h)[0]
+    S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                     # the gauge stays free
     out = []
     for v in fields:
         v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
-        A, B, C, g, h = normal_equations(lay, blocks, v0, w)
-        A = ridged(A)
-        S, reduced, _back = eliminate_frames(A, B, C, g, h)
-        per_frame = np.einsum("fk,fk->", g, np.linalg.solve(A, g[..., None])[..., 0])
-        constants = float(reduced @ np.linalg.lstsq(S, reduced, rcond=1e-12)[0])
-        out.append(float(np.sum(w[..., None] * v0 * v0) - per_frame - constants))
+        g, h = normal_equations(lay, blocks, v0, w, gradients_only=True)
+        x = np.linalg.solve(A, g[..., None])[..., 0]
+        reduced = h - np.einsum("fkp,fk->p", B, x)
+        out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(g * x) - reduced @ S_plus @ reduced))
     return out
 
 

@@ -25,8 +25,11 @@ def _add(target: np.ndarray, rows: tuple, cols: tuple | None, x: np.ndarray) -> 
             target[..., r0:r1, c0:c1] += x[..., a:a + r1 - r0, b:b + c1 - c0]
 
 
-def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
-    """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module)."""
+def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False,
+                     gradients_only: bool = False):
+    """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module); with
+    `gradients_only`, (g, h) alone (the products A, B and C do not depend on `r`: a caller projecting several
+    fields builds them once)."""
     F, k, P = r.shape[0], lay.k, lay.P
     A, B, C = np.zeros((F, k, k)), np.zeros((F, k, P)), np.zeros((P, P))
     g, h = np.zeros((F, k)), np.zeros((F, P) if per_frame else P)
@@ -42,13 +45,14 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
             rf = r[:, idx].reshape(F, n) * sw
         Jt, Gt = np.ascontiguousarray(Jf.transpose(0, 2, 1)), Gf.transpose(0, 2, 1)   # a contiguous Jᵀ: JᵀJ at BLAS speed
-        _add(A, fr, fr, Jt @ Jf)
-        _add(B, fr, cr, Jt @ Gf)
-        _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
         G2 = Gf.reshape(F * n, pb)
-        _add(C, cr, cr, G2.T @ G2)
+        if not gradients_only:
+            _add(A, fr, fr, Jt @ Jf)
+            _add(B, fr, cr, Jt @ Gf)
+            _add(C, cr, cr, G2.T @ G2)
+        _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
         _add(h, cr, None, (Gt @ rf[..., None])[..., 0] if per_frame else G2.T @ rf.reshape(-1))
-    return A, B, C, g, h
+    return (g, h) if gradients_only else (A, B, C, g, h)
 
 
 def ridged(A: np.ndarray) -> np.ndarray:

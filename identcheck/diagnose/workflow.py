@@ -1,7 +1,8 @@
 """Diagnose a trial: fit the rigid-joint model, and while the gap exceeds the noise floor (or an effect is
 found decisively all the same), let every named effect propose where it acts, fit the proposals, and adopt
-the one that earns its parameters best and keeps the joints identifiable; report the effects in order with
-the gap before and after each.
+the one that earns its parameters best and keeps the joints identifiable; after each adoption, drop an earlier
+effect that the later ones make unnecessary (:mod:`identcheck.diagnose.backward`); report the effects in order
+with the gap before and after each.
 """
 from __future__ import annotations
 
