@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, tangents
-from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
+from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
 from identcheck.errors import InputError
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
@@ -180,13 +180,15 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
     A = ridged(A)
     S = eliminate_frames(A, B, C, g, h)[0]
     S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                     # the gauge stays free
+    Linv = lower_inverse(np.linalg.cholesky(A))                                 # A⁻¹ = L⁻ᵀL⁻¹
+    LB = Linv @ B
     out = []
     for v in fields:
         v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
         g, h = normal_equations(lay, blocks, v0, w, gradients_only=True)
-        x = np.linalg.solve(A, g[..., None])[..., 0]
-        reduced = h - np.einsum("fkp,fk->p", B, x)
-        out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(g * x) - reduced @ S_plus @ reduced))
+        z = np.einsum("fij,fj->fi", Linv, g)
+        reduced = h - np.einsum("fkp,fk->p", LB, z)
+        out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(z * z) - reduced @ S_plus @ reduced))
     return out
 
 

@@ -31,7 +31,8 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
     `gradients_only`, (g, h) alone (the products A, B and C do not depend on `r`: a caller projecting several
     fields builds them once)."""
     F, k, P = r.shape[0], lay.k, lay.P
-    A, B, C = np.zeros((F, k, k)), np.zeros((F, k, P)), np.zeros((P, P))
+    if not gradients_only:
+        A, B, C = np.zeros((F, k, k)), np.zeros((F, k, P)), np.zeros((P, P))
     g, h = np.zeros((F, k)), np.zeros((F, P) if per_frame else P)
     unit = bool(np.all(w == 1.0))        # every sample seen at unit weight (most trials): no weighted copies
     for b in blocks:
@@ -44,9 +45,10 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
             sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
             rf = r[:, idx].reshape(F, n) * sw
-        Jt, Gt = np.ascontiguousarray(Jf.transpose(0, 2, 1)), Gf.transpose(0, 2, 1)   # a contiguous Jᵀ: JᵀJ at BLAS speed
+        Jt, Gt = Jf.transpose(0, 2, 1), Gf.transpose(0, 2, 1)
         G2 = Gf.reshape(F * n, pb)
         if not gradients_only:
+            Jt = np.ascontiguousarray(Jt)            # a contiguous Jᵀ: JᵀJ at BLAS speed
             _add(A, fr, fr, Jt @ Jf)
             _add(B, fr, cr, Jt @ Gf)
             _add(C, cr, cr, G2.T @ G2)
