@@ -17,12 +17,11 @@ from identcheck.simulate.rigid import simulate
 MODEL = Path(__file__).parents[2] / "examples" / "diagnose_leg.toml"
 
 
-class _Candidate:
-    """What a stand-in effect's fit returns: a hypothesis whose score against any other is `gain`."""
+class _OnTheRigidFit:
+    """A stand-in hypothesis with the rigid fit's chain, gap and floor, fitted already."""
 
-    def __init__(self, base, gain: float, name: str, where: dict):
-        self.base, self.gain, self.name, self.where = base, gain, name, where
-        self.chain = base.chain
+    def __init__(self, base):
+        self.base, self.chain = base, base.chain
 
     def polish(self):
         return self
@@ -32,6 +31,14 @@ class _Candidate:
 
     def floor(self, ctx):
         return self.base.floor(ctx)
+
+
+class _Candidate(_OnTheRigidFit):
+    """What a stand-in effect's fit returns: a hypothesis whose score against any other is `gain`."""
+
+    def __init__(self, base, gain: float, name: str, where: dict):
+        super().__init__(base)
+        self.gain, self.name, self.where = gain, name, where
 
 
 class _StandIn(Effect):
@@ -61,9 +68,9 @@ def _run(model, trial, effects, max_steps=1):
         return _patched(monkeypatch, model, trial, effects, max_steps)
 
 
-def _patched(monkeypatch, model, trial, effects, max_steps):
+def _patched(monkeypatch, model, trial, effects, max_steps, score=lambda ctx, cand, h: getattr(cand, "gain", 0.0)):
     monkeypatch.setattr(workflow, "EFFECTS", {e.name: e for e in effects})
-    monkeypatch.setattr(workflow, "score", lambda ctx, cand, h: getattr(cand, "gain", 0.0))
+    monkeypatch.setattr(workflow, "score", score)
     monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
     monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
     monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: 0.0)
@@ -135,21 +142,13 @@ def test_a_place_is_hashable_whatever_where_holds():
 
 
 # ---------------------------------------------------------------------- the backward check
-class _Applied:
+class _Applied(_OnTheRigidFit):
     """A stand-in hypothesis: the rigid fit with the named effects applied in order; its criterion value (lower is
     better) is read from the test's table by the set of effects."""
 
     def __init__(self, base, applied: tuple):
-        self.base, self.applied, self.chain = base, applied, base.chain
-
-    def polish(self):
-        return self
-
-    def gap(self, ctx):
-        return self.base.gap(ctx)
-
-    def floor(self, ctx):
-        return self.base.floor(ctx)
+        super().__init__(base)
+        self.applied = applied
 
 
 class _Tabled(Effect):
@@ -171,13 +170,7 @@ class _Tabled(Effect):
 
 def _tabled(monkeypatch, model, trial, effects, table, max_steps):
     value = lambda h: table[frozenset(getattr(h, "applied", ()))]  # noqa: E731
-    monkeypatch.setattr(workflow, "EFFECTS", {e.name: e for e in effects})
-    monkeypatch.setattr(workflow, "score", lambda ctx, new, old: value(old) - value(new))
-    monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
-    monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
-    monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: 0.0)
-    monkeypatch.setattr(workflow, "consistency", lambda ctx, h: {"consistent": False})
-    return workflow.diagnose(model, trial, max_steps=max_steps)
+    return _patched(monkeypatch, model, trial, effects, max_steps, score=lambda ctx, new, old: value(old) - value(new))
 
 
 def test_an_effect_adopted_before_the_true_one_is_dropped_once_that_one_explains_it(trial):
