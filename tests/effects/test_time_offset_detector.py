@@ -53,7 +53,8 @@ def test_what_the_poses_absorb_is_taken_out_of_a_field_and_nothing_else(seed, ep
     s = fit.state
     R, _t, _c, pred = forward(chain, Terms(), s)
     k = fit.chain.frame_dof()
-    moved = apply_step(chain, Terms(), s, R, eps * rng.normal(size=(data.shape[0], k)), np.zeros(n_const(chain, Terms())))
+    step = eps * rng.normal(size=(data.shape[0], k))
+    moved = apply_step(chain, Terms(), s, R, step, np.zeros(n_const(chain, Terms())))
     pose_field = (forward(chain, Terms(), moved)[3] - pred) / eps
     noise_field = rng.normal(0, 1.0, data.shape)
     marker = int(rng.integers(chain.n_markers))
