@@ -160,7 +160,6 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 
 
-# ---------------------------------------------------------------------- starting point
 def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
     """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0), its weighted
     squared norm less the part a refit of the model absorbs (every unknown, per frame and constant, linearised at
@@ -192,6 +191,7 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
     return out
 
 
+# ---------------------------------------------------------------------- starting point
 def fill_gaps(valid: np.ndarray, arr: np.ndarray) -> np.ndarray:
     """Copy each invalid frame's value from the nearest valid frame (pose continuity)."""
     idx = np.flatnonzero(valid)

@@ -5,22 +5,20 @@ yet modelled, a flexible wrong one can take part of it: skin moving with the hip
 whose samples lag by a few frames, because the lag's residual also follows the motion. Once the delay is adopted,
 the skin terms only repeat it, yet they stay first in the report. So every adopted effect but the newest is judged
 again given all the others, by the forward step's own rule (:func:`identcheck.diagnose.workflow.needed`): the
-hypothesis is rebuilt from the rigid fit with the other
-effects applied in their order, and the effect is kept only if that rule would adopt it there. This is the
-backward half of stepwise selection; it drops nothing the data still need, and what it drops cannot return
-(:func:`identcheck.diagnose.workflow.diagnose` never proposes it at that place again), so the search ends.
+hypothesis is rebuilt from the rigid fit with the other effects applied in their order, and the effect is kept only
+if that rule would adopt it there. This is the backward half of stepwise selection; it drops nothing the data still
+need, and what it drops cannot return (:func:`identcheck.diagnose.workflow.diagnose` never proposes it at that place
+again), so the search ends.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 
 from identcheck.bundle.hypothesis import Hypothesis
 from identcheck.effects.base import Effect, Proposal
-
 
 log = logging.getLogger("identcheck")
 

@@ -17,7 +17,6 @@ says which parts are modelled (``where["modelled"]``).
 """
 from __future__ import annotations
 
-
 import numpy as np
 from scipy.spatial.transform import Rotation
 

@@ -5,10 +5,10 @@ the variance it explains rank the segments and the single markers (a marker whos
 own, e.g. one camera's, is a delay too). The velocity is a central difference over ±70 ms
 (:func:`smooth_velocity`): a derivative through the noisy samples would dilute the regression. A lag's
 displacement is partly taken up by the model (a single marker's by its segment's pose and its own position, with
-three markers most of it; a lagging limb segment's almost whole by the joint angles): the residual is regressed on the part of the
-velocity field a refit of the model does not absorb (:func:`identcheck.bundle.chain.unabsorbed`). Augmentation:
-the segment's trajectories are shifted back by τ (cubic spline through its visible samples), τ refined by
-Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter).
+three markers most of it; a lagging limb segment's almost whole by the joint angles): the residual is regressed
+on the part of the velocity field a refit of the model does not absorb (:func:`identcheck.bundle.chain.unabsorbed`).
+Augmentation: the segment's trajectories are shifted back by τ (cubic spline through its visible samples), τ
+refined by Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter).
 """
 from __future__ import annotations
 
