@@ -104,6 +104,9 @@ class Diagnosis:
         The file's number of the trial's first row (TRC ``Frame#``, the C3D header's first frame): each effect's
         ``where`` gives its frames as row indices and, beside them, in the file's numbering (``file_frame``,
         ``file_frames``), as the capture software shows them.
+    dropped : tuple of (name, where, gain)
+        Effects adopted on the way and dropped once later ones explained what they did
+        (:mod:`identcheck.diagnose.backward`), with what each still gained given the others (criterion units).
     """
 
     ctx: Context
@@ -114,6 +117,7 @@ class Diagnosis:
     test_after: dict
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     first_frame: int = 0
+    dropped: tuple = ()
 
     def numbered(self, where: dict) -> dict:
         """`where` with its row indices also in the file's numbering."""
@@ -155,6 +159,8 @@ class Diagnosis:
                          "indistinguishable_from": [{"name": n, "where": plain(self.numbered(w))}
                                                     for n, w in s.equivalents()]}
                         for s in self.steps],
+            "dropped": [{"name": n, "where": plain(self.numbered(w)), "gain_given_the_others": round(g, 1)}
+                        for n, w, g in self.dropped],
             "joints": joint_report(self.ctx, self.after),
         }
 
@@ -242,7 +248,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     trial, offset = trial.recentred()
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)
-    h, steps, adopted_effects, dropped = base, [], [], set()
+    h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
     for _round in range(2 * max_steps):            # a round adopts one effect and may drop one: bounded
         if len(steps) >= max_steps:
             break
@@ -308,12 +314,14 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 break
             gone = steps[red.index]
             dropped.add(place(gone.name, gone.where))
+            dropped_steps.append((gone.name, gone.where, red.gain))
             if progress:
                 progress(f"dropped {gone.name} {gone.where}: the later effects explain what it did (it gains "
                          f"{red.gain:.0f} given them)")
             steps = restated(ctx, base, red, [st for i, st in enumerate(steps) if i != red.index])
             adopted_effects, h = list(red.kept), red.rebuilt[-1]
-    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)))
+    return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
+                     tuple(dropped_steps))
 
 
 def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, bool]:

@@ -150,6 +150,10 @@ def diagnose_text(diag) -> str:
             for k, e in enumerate(rep["effects"], 1)]
     if rows:
         lines += table(rows, ["step", "effect", "where", "gap before (mm)", "gap after (mm)"], floatfmt=".3g")
+    for d in rep["dropped"]:
+        where = ", ".join(f"{key}={val}" for key, val in d["where"].items() if key != "frames" or len(val) <= 4)
+        lines.append(f"dropped on the way: {d['name']} ({where}): adopted before a later effect that explains what it "
+                     f"did (it gains {d['gain_given_the_others']:.0f} given them)")
     test = rep["consistent_after"]
     lines.append(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
                  f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "

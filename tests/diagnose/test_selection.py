@@ -184,6 +184,7 @@ def test_an_effect_adopted_before_the_true_one_is_dropped_once_that_one_explains
     with pytest.MonkeyPatch.context() as monkeypatch:
         diag = _tabled(monkeypatch, model, tr, [skin, delay], table, max_steps=4)
     assert [s.name for s in diag.steps] == ["delay"]
+    assert [(n, g) for n, _w, g in diag.dropped] == [("skin", -5.0)]      # reported, with what it gained at the end
     assert diag.steps[0].where["fitted_mm"] == 0.0                 # refitted straight after the rigid fit
     assert diag.after.applied == ("delay",)
     assert diag.steps[0].gap_before == pytest.approx(diag.before.gap(diag.ctx))
@@ -197,7 +198,7 @@ def test_an_effect_the_later_ones_still_need_is_kept(trial):
              frozenset({"skin", "delay"}): 0.0}
     with pytest.MonkeyPatch.context() as monkeypatch:
         diag = _tabled(monkeypatch, model, tr, [skin, delay], table, max_steps=4)
-    assert [s.name for s in diag.steps] == ["skin", "delay"]
+    assert [s.name for s in diag.steps] == ["skin", "delay"] and diag.dropped == ()
     assert [s.where["fitted_mm"] for s in diag.steps] == [0.0, 1.0]   # the rebuild that kept both changed nothing
 
 
@@ -241,3 +242,20 @@ def test_the_selection_is_stepwise_forward_with_the_backward_check(trial, values
     expected = _stepwise(table, names, 3)
     assert [s.name for s in diag.steps] == expected
     assert getattr(diag.after, "applied", ()) == tuple(expected)
+
+
+def test_an_effect_dropped_on_the_way_is_reported_in_the_json_and_the_text(trial):
+    """A diagnosis that dropped an effect lists it under ``dropped`` (its where in the file's numbering too) and
+    says so in the text report."""
+    from dataclasses import replace
+
+    from identcheck.report.text import diagnose_text
+
+    model, tr = trial
+    diag = replace(workflow.diagnose(model, tr, max_steps=1),
+                   dropped=(("soft_tissue", {"markers": ["RTHI"], "segment": "thigh", "frame": 3}, -12.04),))
+    doc = diag.to_dict()
+    assert doc["dropped"] == [{"name": "soft_tissue", "gain_given_the_others": -12.0,
+                               "where": {"markers": ["RTHI"], "segment": "thigh", "frame": 3,
+                                         "file_frame": diag.first_frame + 3}}]
+    assert "dropped on the way: soft_tissue (markers=['RTHI'], segment=thigh, frame=3" in diagnose_text(diag)
