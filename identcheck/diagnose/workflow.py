@@ -1,8 +1,8 @@
 """Diagnose a trial: fit the rigid-joint model, and while the gap exceeds the noise floor (or an effect is
 found decisively all the same), let every named effect propose where it acts, fit the proposals, and adopt
-the one that earns its parameters best and keeps the joints identifiable; after each adoption, drop an earlier
-effect that the later ones make unnecessary (:mod:`identcheck.diagnose.backward`); report the effects in order
-with the gap before and after each.
+the one that earns its parameters best and keeps the joints identifiable; when none is left to adopt, drop the
+earlier effects that later ones made unnecessary (:mod:`identcheck.diagnose.backward`) and, if any was dropped, search
+on; report the effects in order with the gap before and after each.
 """
 from __future__ import annotations
 
@@ -249,67 +249,64 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)
     h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
-    for _round in range(2 * max_steps):            # a round adopts one effect and may drop one: bounded
-        if len(steps) >= max_steps:
-            break
-        bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
-        proposals = sorted(((p, eff) for eff in EFFECTS.values() for p in eff.propose(ctx, h)[:eff.max_proposals]),
-                           key=lambda pe: -pe[0].strength)
-        tried, best, leader, drift, placed = [], 0.0, None, None, set()
-        taken = {place(st.name, st.where) for st in steps} | dropped
-        for prop, eff in proposals:
-            if prop.strength <= bar:
-                continue                     # not even its detector's own estimate would clear the bar
-            if place(eff.name, prop.where) in taken:
-                log.debug("%s %s skipped: adopted already", eff.name, prop.where)
-                continue
-            if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader
-                    and not eff.always_fit):
-                # (each effect's first place, other places of the leader, and effects whose strength is no
-                # estimate of their score: always)
-                log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
-                continue
-            placed.add(eff.name)
-            if progress:
-                progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
-            try:
-                cand = eff.apply(ctx, h, prop)
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                log.debug("%s %s failed: %s", eff.name, prop.where, exc)
-                continue
-            drift = creep(ctx, h) if drift is None else drift
-            sc = score(ctx, cand, h) - drift
-            tried.append((sc, eff, prop, cand))
-            if not eff.implausible(prop) and sc > best:
-                best, leader = sc, eff
-        tried.sort(key=lambda x: -x[0])
+    trail = [base]                                 # the hypothesis after each adopted effect, from the rigid fit on
+    # a round adopts an effect or, with none left to adopt, drops what the later effects made unnecessary and, if it
+    # dropped any, lets the search go on; a place is dropped at most once, so the rounds are few
+    for _round in range(4 * max_steps):
         adopted = None
-        limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
-        for sc, eff, prop, cand in tried:
-            if sc <= bar:
-                break
-            why = eff.implausible(prop)
-            if why:
-                log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
-                continue
-            if undetermined(cand) == 0 and worst_sd(ctx, cand) <= limit:
-                adopted = (sc, eff, prop, cand)
-                break
-            log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
-        if adopted is None:
-            break
-        sc, eff, prop, cand = adopted
-        cand = cand.polish()
-        steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
-                          tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8],
-                          tuple(eff.alike(h.chain, prop.where))))
-        if progress:
-            progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
-                     f"(floor {cand.floor(ctx):.3g})")
-        h = cand
-        adopted_effects.append(Adopted(eff, prop))
+        if len(steps) < max_steps:
+            bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
+            proposals = sorted(((p, eff) for eff in EFFECTS.values()
+                                for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
+            tried, best, leader, drift, placed = [], 0.0, None, None, set()
+            taken = {place(st.name, st.where) for st in steps} | dropped
+            for prop, eff in proposals:
+                if prop.strength <= bar:
+                    continue                     # not even its detector's own estimate would clear the bar
+                if place(eff.name, prop.where) in taken:
+                    log.debug("%s %s skipped: adopted already", eff.name, prop.where)
+                    continue
+                if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader
+                        and not eff.always_fit):
+                    # (each effect's first place, other places of the leader, and effects whose strength is no
+                    # estimate of their score: always)
+                    log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)
+                    continue
+                placed.add(eff.name)
+                if progress:
+                    progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
+                try:
+                    cand = eff.apply(ctx, h, prop)
+                except (np.linalg.LinAlgError, ValueError) as exc:
+                    log.debug("%s %s failed: %s", eff.name, prop.where, exc)
+                    continue
+                drift = creep(ctx, h) if drift is None else drift
+                sc = score(ctx, cand, h) - drift
+                tried.append((sc, eff, prop, cand))
+                if not eff.implausible(prop) and sc > best:
+                    best, leader = sc, eff
+            tried.sort(key=lambda x: -x[0])
+            adopted = None
+            limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
+            for sc, eff, prop, cand in tried:
+                if sc <= bar:
+                    break
+                why = eff.implausible(prop)
+                if why:
+                    log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
+                    continue
+                if undetermined(cand) == 0 and worst_sd(ctx, cand) <= limit:
+                    adopted = (sc, eff, prop, cand)
+                    break
+                log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
+        if adopted is not None:
+            h = _adopt(ctx, h, adopted, tried, steps, progress)
+            adopted_effects.append(Adopted(adopted[1], adopted[2]))
+            trail.append(h)
+            continue
+        before = len(dropped_steps)
         while len(adopted_effects) > 1:       # each pass drops one effect or ends: bounded
-            red = redundant(ctx, base, adopted_effects, lambda without: needed(ctx, without, h))
+            red = redundant(ctx, trail, adopted_effects, lambda without: needed(ctx, without, h), CREEP_ITER)
             if red is None:
                 break
             gone = steps[red.index]
@@ -318,10 +315,26 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             if progress:
                 progress(f"dropped {gone.name} {gone.where}: the later effects explain what it did (it gains "
                          f"{red.gain:.0f} given them)")
-            steps = restated(ctx, base, red, [st for i, st in enumerate(steps) if i != red.index])
-            adopted_effects, h = list(red.kept), red.rebuilt[-1]
+            steps, rebuilt = restated(ctx, base, red, [st for i, st in enumerate(steps) if i != red.index])
+            adopted_effects, h, trail = list(red.kept), rebuilt[-1], [base] + rebuilt
+        if len(dropped_steps) == before:
+            break
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
                      tuple(dropped_steps))
+
+
+def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list, progress) -> Hypothesis:
+    """The round's chosen candidate fitted to convergence, recorded as the next step (with the round's other
+    candidates and the effects no data could tell from it), and announced."""
+    sc, eff, prop, cand = adopted
+    cand = cand.polish()
+    steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
+                      tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8],
+                      tuple(eff.alike(h.chain, prop.where))))
+    if progress:
+        progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "
+                 f"(floor {cand.floor(ctx):.3g})")
+    return cand
 
 
 def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, bool]:
@@ -334,17 +347,20 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, 
     return gain, bool(gain > bar or undetermined(without) != 0)
 
 
-def restated(ctx: Context, base: Hypothesis, red: Redundant, kept_steps: list) -> list:
-    """The steps left after dropping an effect, with the gaps before and after each and the evidence taken from the
-    rebuilt hypotheses (each fitted to convergence, as the forward search reports them); each keeps the score and
-    the rival candidates of the round that adopted it."""
-    hyps = [h.polish() for h in red.rebuilt[:-1]] + [red.rebuilt[-1]]
-    out = []
-    for i, (a, hyp, old) in enumerate(zip(red.kept, hyps, kept_steps)):
+def restated(ctx: Context, base: Hypothesis, red: Redundant, kept_steps: list) -> tuple[list, list]:
+    """(the steps left after dropping an effect, the hypothesis after each). Those before it are as they were; those
+    after it have the gaps before and after each and the evidence taken from the rebuilt hypotheses, fitted to
+    convergence as the forward search fits what it adopts, and keep the score and the rival candidates of the round
+    that adopted them."""
+    k = red.index
+    hyps = list(red.rebuilt[:k]) + [h.polish() for h in red.rebuilt[k:]]
+    out = list(kept_steps[:k])
+    for i in range(k, len(red.kept)):
+        a, hyp, old = red.kept[i], hyps[i], kept_steps[i]
         prev = base if i == 0 else hyps[i - 1]
         out.append(Step(old.name, a.proposal.where, prev.gap(ctx), hyp.gap(ctx), old.score,
                         a.effect.evidence(ctx, prev, hyp, a.proposal), old.rejected, old.alike))
-    return out
+    return out, hyps
 
 
 # ---------------------------------------------------------------------- the joints, as `fit` reports them

@@ -23,7 +23,7 @@ class _OnTheRigidFit:
     def __init__(self, base):
         self.base, self.chain = base, base.chain
 
-    def polish(self):
+    def polish(self, max_iter: int = 40):
         return self
 
     def gap(self, ctx):
@@ -203,20 +203,19 @@ def test_an_effect_the_later_ones_still_need_is_kept(trial):
 
 
 def _stepwise(table: dict, names: list, max_steps: int) -> list:
-    """The selection the workflow should make, written out plainly: add the best effect while it lowers the
-    criterion; after each addition, while some earlier effect's removal does not raise it, drop the one whose
-    removal raises it least (never the newest); never add a dropped effect again."""
+    """The selection the workflow should make, written out plainly: add the best effect while one lowers the
+    criterion (at most `max_steps`); then, while some earlier effect's removal does not raise it, drop the one whose
+    removal raises it least (never the newest), and if any was dropped, go on adding; never add a dropped effect
+    again."""
     chosen, dropped = [], set()
-    for _ in range(2 * max_steps):
-        if len(chosen) >= max_steps:
-            break
+    for _ in range(4 * max_steps):
         options = [n for n in names if n not in chosen and n not in dropped]
-        if not options:
-            break
-        best = min(options, key=lambda n: table[frozenset(chosen + [n])])
-        if table[frozenset(chosen)] - table[frozenset(chosen + [best])] <= 0:
-            break
-        chosen.append(best)
+        if len(chosen) < max_steps and options:
+            best = min(options, key=lambda n: table[frozenset(chosen + [n])])
+            if table[frozenset(chosen)] - table[frozenset(chosen + [best])] > 0:
+                chosen.append(best)
+                continue
+        before = len(dropped)
         while len(chosen) > 1:
             gains = {n: table[frozenset(chosen) - {n}] - table[frozenset(chosen)] for n in chosen[:-1]}
             spare = [n for n, g in gains.items() if g <= 0]
@@ -225,6 +224,8 @@ def _stepwise(table: dict, names: list, max_steps: int) -> list:
             gone = min(spare, key=lambda n: gains[n])
             chosen.remove(gone)
             dropped.add(gone)
+        if len(dropped) == before:
+            break
     return chosen
 
 
@@ -232,7 +233,7 @@ def _stepwise(table: dict, names: list, max_steps: int) -> list:
 @given(st.lists(st.integers(0, 1000), min_size=8, max_size=8, unique=True))
 def test_the_selection_is_stepwise_forward_with_the_backward_check(trial, values):
     """For any criterion values over the subsets of three effects (each proposed every round), the effects named
-    and their order are those of forward selection with the backward check after each addition."""
+    and their order are those of forward selection with the backward check whenever nothing is left to add."""
     model, tr = trial
     names = ["a", "b", "c"]
     subsets = [frozenset(n for i, n in enumerate(names) if k >> i & 1) for k in range(8)]
