@@ -4,11 +4,11 @@ The forward search adopts, each round, the effect that explains most of what is 
 yet modelled, a flexible wrong one can take part of it: skin moving with the hip's angles absorbs much of a thigh
 whose samples lag by a few frames, because the lag's residual also follows the motion. Once the delay is adopted,
 the skin terms only repeat it, yet they stay first in the report. So when the search has nothing left to adopt,
-every adopted effect but the newest is judged again given all the others, by the forward step's own rule (:func:`identcheck.diagnose.workflow.needed`): the
-hypothesis is rebuilt without it (from the one before it, the effects after it applied again in their order), and
-the effect is kept only if that rule would adopt it there. This is the backward half of stepwise selection; it drops nothing the data still
-need, and what it drops cannot return (:func:`identcheck.diagnose.workflow.diagnose` never proposes it at that place
-again), so the search ends.
+every adopted effect but the newest is judged again given all the others, by the forward step's own rule
+(:func:`identcheck.diagnose.workflow.needed`): the hypothesis is rebuilt without it (from the one before it, the
+effects after it applied again in their order), and the effect is kept only if that rule would adopt it there. This
+is the backward half of stepwise selection; it drops nothing the data still need, and what it drops cannot return
+(:func:`identcheck.diagnose.workflow.diagnose` never proposes it at that place again), so the search ends.
 """
 from __future__ import annotations
 
