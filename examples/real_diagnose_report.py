@@ -369,6 +369,10 @@ def section(w, r, figs) -> None:
         for k, s in enumerate(d.steps, 1):
             w(f"| {k} | `{s.name}` | {where_text(s.where)} | {s.gap_before:.3f} → {s.gap_after:.3f} | {s.score:.3g} |")
         w("")
+        for name, where, gain in d.dropped:
+            w(f"Dropped on the way: `{name}` ({where_text(where)}), adopted before later effects that explain what "
+              f"it did (it gains {gain:.0f} given them).")
+            w("")
     else:
         w("No effect adopted.")
         w("")

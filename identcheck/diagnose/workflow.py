@@ -341,10 +341,16 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, 
     """The forward step's rule, asked of an adopted effect given the others: (what `full` gains over `without`, the
     hypothesis without the effect; would the search adopt an effect gaining that much there?). Yes when it earns
     its parameters and the gap without it is not consistent with noise, when it gains decisively
-    (:data:`DECISIVE_GAIN`) all the same, or when the joints need it to be determined."""
+    (:data:`DECISIVE_GAIN`) all the same, or when the joints need it to be determined: without it they are not, or
+    their worst standard error grows beyond what the forward step lets an effect cause (:data:`SD_GROWTH`,
+    :data:`MAX_SD_MM`). A knee re-declared a ball joint and then given skin terms driven by its angle is the case:
+    the skin terms explain what the ball did, but as a hinge again the knee was left undetermined (±20 mm)."""
     gain = score(ctx, full, without)
     bar = DECISIVE_GAIN if consistency(ctx, without)["consistent"] else 0.0
-    return gain, bool(gain > bar or undetermined(without) != 0)
+    if gain > bar:
+        return gain, True
+    limit = max(SD_GROWTH * worst_sd(ctx, full), MAX_SD_MM)
+    return gain, bool(undetermined(without) != 0 or worst_sd(ctx, without) > limit)
 
 
 def restated(ctx: Context, base: Hypothesis, red: Redundant, kept_steps: list) -> tuple[list, list]:
