@@ -122,8 +122,9 @@ class TimeOffset(Effect):
             if not whole and (gain <= 0 or abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES):
                 continue                     # explains nothing worth a refit
             if whole and abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES:
-                # the joint angles absorb a lagging limb segment's residual almost whole: its lag is found
-                # only by the refit, started a frame either way of the side the residual leans to
+                # a segment's lag estimated below a fifth of a frame is refitted from a frame either way of the side
+                # the residual leans to (made when the estimate was diluted by what the joint angles absorb, which
+                # the denominator now leaves out; kept, not re-measured since)
                 tau = (1.0 if tau >= 0 else -1.0) / ctx.rate_hz
             where = {"segment": seg, "delay_ms": 1000 * tau}
             if len(idx) == 1 < len(ch.seg_markers[seg]):

@@ -304,9 +304,10 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
     smallest are merged while it is within `tolerance` (ties: the earlier markers first), unless the merged group
     of four or more markers fails the pose test (:func:`~identcheck.infer.body_frames.is_rigid`): a distance sees a
     marker move in one direction, a pose in all three. A marker left in a group of one or two then joins a larger
-    group with which it passes both tests. Then the bodies compete for the markers (:func:`_compete`) until the grouping stops changing (at
-    most :data:`COMPETE_ROUNDS` rounds): with soft tissue, the tolerance can let a marker near a joint pass for
-    rigid with both segments, and it belongs to the one in whose frame it stays stillest. Last, markers left loose
+    group with which it passes both tests. Then the bodies compete for the markers (:func:`_compete`) until the
+    grouping stops changing (at most :data:`COMPETE_ROUNDS` rounds): with soft tissue, the tolerance can let a marker
+    near a joint pass for rigid with both segments, and it belongs to the one in whose frame it stays stillest. Last,
+    markers left loose
     or paired by the one tolerance join groups that stay well apart from everything else
     (:func:`identcheck.infer.separated_groups.widen`): skin markers on the moving segment of a functional trial
     wobble more than the still rest of the body, which sets the tolerance.

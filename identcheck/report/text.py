@@ -135,6 +135,11 @@ def fit_text(result) -> str:
     return "\n".join(lines)
 
 
+def _where_text(where: dict) -> str:
+    """An effect's `where` as ``key=value, ...`` for the text report (a long frame list left out)."""
+    return ", ".join(f"{key}={val}" for key, val in where.items() if key != "frames" or len(val) <= 4)
+
+
 def diagnose_text(diag) -> str:
     """``identcheck diagnose``: the noise, the gap before, each adopted effect, the gap after and the joints."""
     rep = diag.to_dict()
@@ -145,15 +150,13 @@ def diagnose_text(diag) -> str:
         lines.append("no effect found: the rigid-joint model plus noise explains the trial"
                      if rep["consistent_before"]["consistent"]
                      else "no named effect earns its parameters; the gap stays unexplained")
-    rows = [[k, e["name"], ", ".join(f"{key}={val}" for key, val in e["where"].items()
-                                     if key != "frames" or len(val) <= 4), e["gap_before"], e["gap_after"]]
+    rows = [[k, e["name"], _where_text(e["where"]), e["gap_before"], e["gap_after"]]
             for k, e in enumerate(rep["effects"], 1)]
     if rows:
         lines += table(rows, ["step", "effect", "where", "gap before (mm)", "gap after (mm)"], floatfmt=".3g")
     for d in rep["dropped"]:
-        where = ", ".join(f"{key}={val}" for key, val in d["where"].items() if key != "frames" or len(val) <= 4)
-        lines.append(f"dropped on the way: {d['name']} ({where}): adopted before a later effect that explains what it "
-                     f"did (it gains {d['gain_given_the_others']:.0f} given them)")
+        lines.append(f"dropped on the way: {d['name']} ({_where_text(d['where'])}): adopted before a later effect that "
+                     f"explains what it did (it gains {d['gain_given_the_others']:.0f} given them)")
     test = rep["consistent_after"]
     lines.append(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
                  f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "
