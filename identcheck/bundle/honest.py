@@ -17,7 +17,7 @@ import numpy as np
 
 from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
-from identcheck.bundle.practical import TOLERANCE_MM, Z95, judge, single_axis
+from identcheck.bundle.practical import TOLERANCE_MM, Z95, hardly_moved, judge, single_axis
 from identcheck.bundle.profile import profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.skeleton import Skeleton
@@ -103,9 +103,10 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
     those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
 
-    - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`),
-      or the joint hangs below a segment that is not posed by itself
-      (:func:`posed_above`) and is wide or misfitted, or it is misfitted beside a segment that cannot show its
+    - direction free (or a ball joint turned about one axis only, :func:`~identcheck.bundle.practical.single_axis`,
+      or a joint beside a segment not posed by itself that hardly moved,
+      :func:`~identcheck.bundle.practical.hardly_moved`), or the joint hangs below a segment that is not posed by
+      itself (:func:`posed_above`) and is wide or misfitted, or it is misfitted beside a segment that cannot show its
       own skin motion (:func:`skin_unseen`): ``[0, None]`` (the likelihood does not bound it), method
       ``unbounded``;
     - markers moving with the angles (model error, :mod:`identcheck.bundle.misfit`): the widened quadratic
@@ -121,7 +122,8 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     start, out, jobs = time.monotonic(), {}, []
     for j in chain.joints:
         dist = best.distances[j]
-        free = any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
+        free = (any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
+                or hardly_moved(chain, fit, cov.sigma_mm, j) is not None)
         wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
         misfit = j in best.model_error
         if not (free or wide or misfit):
@@ -206,19 +208,20 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     rendered) are the other candidates the likelihood keeps / rejects."""
     chain = best.fit.chain
     dist = best.distances[j]
-    practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alternatives))
     skipped = [k for k, (_, how) in best.intervals.get(j, {}).items() if how == "not_profiled"]
+    unbounded = None
     if any(how == "unbounded" for _, how in best.intervals.get(j, {}).values()):
-        practical = dict(practical, verdict="undetermined", reason=(
+        unbounded = (
             f"the likelihood does not bound {j}: the data leave it free, or it hangs below a segment its own "
             "markers do not pose (a roll in every frame seen only through the joints below), with wide "
             "intervals or markers moving with the angles, or markers move with the angles in this trial and "
-            "a segment beside it has too few markers (under three) to show its own skin motion"))
+            "a segment beside it has too few markers (under three) to show its own skin motion")
     elif skipped:
-        practical = dict(practical, verdict="undetermined", reason=(
+        unbounded = (
             f"the quadratic intervals of {j} are too wide or too curved to trust, and the profile likelihood of "
             f"{', '.join(skipped)} was not computed within the {PROFILE_BUDGET_S:g} s budget: no bound is claimed "
-            "for them (fit fewer frames, or one joint at a time, to have them profiled)"))
+            "for them (fit fewer frames, or one joint at a time, to have them profiled)")
+    practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alternatives), unbounded=unbounded)
     if j in best.model_error:
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         if practical["verdict"] != "determined":

@@ -13,7 +13,11 @@ joint gets a verdict from the covariance of the whole-tree fit:
 - ``determined``: neither.
 
 With it: the weakest direction of the joint centre (or of the hinge's position across its axis) in the
-parent's frame and its standard error, and the motion that would help.
+parent's frame and its standard error, and the motion that would help (:func:`_motion`). What that advice says of
+the motion is only what the markers measure: the fitted angles of a joint beside a segment with fewer than three
+markers of its own follow from the joint's fitted geometry, which is what the data leave open when the advice is
+given (a static knee trial with one shank marker near the fitted axis had "moved 346 deg about its hinge"). There,
+the other segment's markers' movement in the frame of the one posed by its own markers is reported instead, in mm.
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.uncertainty import joint_offsets
+from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
 
 TOLERANCE_MM = 10.0
 """A joint is determined when every marker distance's 95 % interval is within ± this many mm."""
@@ -30,9 +35,19 @@ MIN_HINGE_ROM_DEG = 30.0     # a hinge's range of motion below which more range 
 SECOND_AXIS_NOISE_RATIO = 3.0
 """A ball joint's RMS turn about its second axis must exceed this many times the RMS noise of its fitted
 relative rotation for the second axis to count as motion (:func:`single_axis`)."""
+HARDLY_MOVED_NOISE = 4.0
+"""A joint hardly moved when the markers of one segment stay within this many times their noise of one place in
+the frame of the other (95th percentile of their distance from it, :func:`excursion_mm`; pure noise of σ per
+coordinate reaches 2.8 σ)."""
+HARDLY_MOVED_MM = 5.0
+"""... or within this many mm: a marker that sweeps less than that in the other segment's frame traces too short an
+arc to place a joint, whatever the noise (a knee turning 5 deg moves a marker 50 mm from its axis by 4 mm)."""
+HARDLY_TURNED_DEG = 2.0
+"""A joint between two segments posed by their own markers hardly turned when its RMS rotation about its main axis
+is below this (deg)."""
 
 
-def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0) -> dict:
+def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0, unbounded: str | None = None) -> dict:
     """The ``practical`` JSON object of one joint (see the module docstring).
 
     Parameters
@@ -45,6 +60,10 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0)
         marker -> (distance mm, standard error mm) of the joint's adjacent markers.
     n_alternatives : int
         Other candidates the likelihood ratio could not reject.
+    unbounded : str, optional
+        Why the intervals do not bound the joint, when they do not (the profile likelihood's finding): the joint
+        is then ``undetermined`` for that reason, whatever the quadratic standard errors say, unless a free
+        direction, one axis of rotation or a joint that hardly moved already says why.
     """
     from identcheck.bundle.uncertainty import distance_gradients
 
@@ -52,8 +71,10 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0)
     free = [m for m, (_, g) in grads.items() if cov.free(g)]
     worst_marker, (worst_d, worst_se) = max(distances.items(), key=lambda kv: kv[1][1]) if distances else (None, (0, 0))
     weak = _weakest(chain, fit, cov, joint)
-    motion = _motion(chain, fit, joint, weak)
+    shown = _not_self_posed(chain, fit, joint, cov.sigma_mm)
+    motion = _motion(chain, fit, joint, weak, shown)
     one_axis, second_deg, noise_deg = single_axis(chain, fit, cov.sigma_mm, joint)
+    still = shown[1] if shown and shown[0] == "hardly" else None
     if free:
         verdict = "undetermined"
         why = (f"the data leave {joint} free: the distances of {', '.join(free)} can change without changing "
@@ -63,6 +84,10 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0)
         why = (f"{joint} turned about one axis only: {second_deg:.2f} deg RMS about a second axis, within "
                f"{SECOND_AXIS_NOISE_RATIO:g}x the {noise_deg:.2f} deg noise of its fitted rotation, so its centre is "
                "free along that axis")
+    elif still:
+        verdict = "undetermined"
+        why = (f"{still}: a joint that did not move is not determined by the trial, however narrow the curvature of "
+               "the likelihood (a marker that stays put is fitted best by a small sphere or circle around itself)")
     elif Z95 * worst_se > TOLERANCE_MM:
         verdict = "undetermined"
         why = (f"{worst_marker}'s distance is {worst_d:.1f} ± {Z95 * worst_se:.1f} mm (95 %), wider than "
@@ -73,6 +98,8 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0)
     else:
         verdict = "determined"
         why = f"every marker distance within ±{Z95 * worst_se:.2g} mm (95 %)"
+    if unbounded and not (free or one_axis or still):    # those say why the likelihood does not bound it
+        verdict, why = "undetermined", unbounded
     return {"verdict": verdict, "reason": why, "tolerance_mm": TOLERANCE_MM,
             "weakest_direction_parent": [round(float(x), 4) for x in weak[0]], "weakest_se_mm": round(weak[1], 3),
             "motion_advice": motion if verdict != "determined" else ""}
@@ -92,6 +119,15 @@ def rotation_noise_rad(chain, fit, sigma_mm: float, joint: str) -> float:
     return float(np.sqrt(var))
 
 
+def rotation_spread_rad(fit, joint: str) -> np.ndarray:
+    """A ball joint's fitted relative rotation's RMS spread about its principal axes (rad, ascending): the
+    rotation vectors of each frame's rotation away from their mean, and the square roots of their covariance's
+    eigenvalues."""
+    rel = fit.state.rel_R[joint]
+    rv = Rotation.from_matrix(rel @ Rotation.from_matrix(rel).mean().as_matrix().T).as_rotvec()
+    return np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(rv.T)), 0.0)) if len(rv) > 2 else np.zeros(3)
+
+
 def single_axis(chain, fit, sigma_mm: float, joint: str) -> tuple[bool, float, float]:
     """Whether a ball joint turned about one axis only in this trial: (verdict, RMS turn about its second axis
     in deg, RMS noise of its fitted rotation in deg). Its centre is then not determined along that axis, however
@@ -105,9 +141,7 @@ def single_axis(chain, fit, sigma_mm: float, joint: str) -> tuple[bool, float, f
         # a segment posed through its joints, not by its own markers: its fitted rotation's wobble is not a
         # measurement of the motion, so this test cannot tell (the rules for such segments decide instead)
         return False, float("nan"), float("nan")
-    rel = fit.state.rel_R[joint]
-    rv = Rotation.from_matrix(rel @ Rotation.from_matrix(rel).mean().as_matrix().T).as_rotvec()
-    spread = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(rv.T)), 0.0)) if len(rv) > 2 else np.zeros(3)
+    spread = rotation_spread_rad(fit, joint)
     noise = rotation_noise_rad(chain, fit, sigma_mm, joint)
     second = float(spread[-2])
     return bool(second <= SECOND_AXIS_NOISE_RATIO * noise), float(np.rad2deg(second)), float(np.rad2deg(noise))
@@ -128,23 +162,102 @@ def _weakest(chain, fit, cov, joint: str) -> tuple[np.ndarray, float]:
     return V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
 
 
-def _motion(chain, fit, joint: str, weak) -> str:
-    """What to record to determine the joint better, from the motion the trial shows."""
+def own_pose(chain, segment: str) -> bool:
+    """Whether a segment carries markers enough (three) to be posed in every frame by them alone, so that its
+    motion relative to a neighbour is measured, whatever the joint between them."""
+    return len(chain.seg_markers[segment]) >= MIN_MARKERS
+
+
+def excursion_mm(chain, fit, frame_segment: str, moving_segment: str) -> tuple[np.ndarray, np.ndarray]:
+    """How far each marker of `moving_segment` moves in the frame of `frame_segment` (posed by its own markers): the
+    95th percentile over frames of its distance from its median place there, mm (as fitted, which is the measured
+    markers up to the residual); and the noise of the marker there, as a factor on the markers' noise σ: its own
+    and the frame's pose noise (:func:`identcheck.geometry.poses.pose_noise_factor`), ``sqrt(1 + f²)``; a static
+    trial's markers move by about 2.8 σ times that. Empty arrays for a segment without markers."""
+    idx = chain.seg_markers[moving_segment]
+    if not len(idx):
+        return np.zeros(0), np.zeros(0)
+    R, t = fit.seg_R[frame_segment], fit.seg_t[frame_segment]
+    local = np.einsum("fji,fkj->fki", R, fit.pred[:, idx] - t[:, None])
+    place = np.median(local, axis=0)
+    moved = np.percentile(np.linalg.norm(local - place, axis=2), 95.0, axis=0)
+    own = fit.state.local[chain.seg_markers[frame_segment]]
+    return moved, np.sqrt(1.0 + pose_noise_factor(own, place) ** 2)
+
+
+def hardly_moved(chain, fit, sigma_mm: float, joint: str) -> str | None:
+    """What shows that a joint beside a segment not posed by its own markers hardly moved in the trial, or None.
+
+    Such a joint's fitted rotations are not measured, so neither :func:`single_axis` nor a range of angles can
+    tell; what the markers do show is how far the other segment's markers move in the posed segment's frame
+    (:func:`excursion_mm`). Within :data:`HARDLY_MOVED_NOISE` times their noise there, or :data:`HARDLY_MOVED_MM`,
+    the trial holds the joint still, and no place of it is determined: on a static simulated trial (3 pelvis, 1
+    thigh, 1 shank marker, 1 mm noise) the hip was 'determined' with its thigh marker 5.9 +- 1.2 mm from the centre,
+    510 mm in truth (the incidental roll of the one-marker thigh lets a small sphere absorb the noise)."""
+    found = _not_self_posed(chain, fit, joint, sigma_mm)
+    return found[1] if found and found[0] == "hardly" else None
+
+
+def _not_self_posed(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str] | None:
+    """The advice when one of the joint's segments is not posed by its own markers (:func:`own_pose`), whose
+    relative rotation is then not measured: None when both are, else (kind, what the markers do show), kind one of
+    ``"unmeasured"`` (neither segment posed), ``"hardly"`` (the other segment's markers stay within
+    :data:`HARDLY_MOVED_MM` or :data:`HARDLY_MOVED_NOISE` x the noise of one place in the posed one's frame) and
+    ``"moved"``."""
+    parent, child = chain.parent[joint], chain.child[joint]
+    posed = [s for s in (parent, child) if own_pose(chain, s)]
+    if len(posed) == 2:
+        return None
+    n = {s: len(chain.seg_markers[s]) for s in (parent, child)}
+    counts = f"{parent} carries {n[parent]} marker{'s' * (n[parent] != 1)}, {child} {n[child]}"
+    if not posed:
+        return "unmeasured", (
+            f"{joint}'s rotation is not measured by the markers ({counts}: neither is posed by its own markers, and "
+            f"the fitted angles follow the joint's geometry, which this trial leaves open): add markers to bring "
+            f"{parent} or {child} to three")
+    frame = posed[0]
+    other = child if frame == parent else parent
+    each, amplification = excursion_mm(chain, fit, frame, other)
+    if not len(each):
+        return "unmeasured", (f"{joint}'s rotation is seen only through the joints beyond it ({other} carries no "
+                              f"marker): add markers on {other}")
+    moved = float(np.max(each))
+    if np.all(each <= np.maximum(HARDLY_MOVED_MM, HARDLY_MOVED_NOISE * sigma_mm * amplification)):
+        return "hardly", (f"{joint} hardly moved: {other}'s markers stay within {moved:.2g} mm of one place in "
+                          f"{frame}'s frame")
+    return "moved", (f"{other}'s markers move up to {moved:.0f} mm in {frame}'s frame, but {other} is not posed by "
+                     f"its own markers ({counts}), so how far {joint} turned depends on its geometry, which this "
+                     f"trial leaves open: add markers to bring {other} to three, or markers farther from the joint on "
+                     "it")
+
+
+def _motion(chain, fit, joint: str, weak, unmeasured: tuple | None) -> str:
+    """What to record to determine the joint better, from the motion the trial shows (module docstring: only what
+    the markers measure; `unmeasured` is :func:`_not_self_posed`'s finding)."""
     s = fit.state
+    if unmeasured and unmeasured[0] == "hardly":
+        return "record the joint's movement through its range"
     if chain.types[joint] == "revolute":
+        if unmeasured:
+            return unmeasured[1]
         rom = float(np.rad2deg(np.ptp(np.unwrap(s.theta[joint]))))
         if rom < MIN_HINGE_ROM_DEG:
             return f"flex {joint} through a larger range (this trial: {rom:.0f} deg about the hinge)"
         return (f"{joint} moved {rom:.0f} deg about its hinge: add frames, or markers farther from the hinge axis, "
                 "on the segments that carry few")
-    rel = s.rel_R[joint]
-    rv = Rotation.from_matrix(rel @ Rotation.from_matrix(rel).mean().as_matrix().T).as_rotvec()
-    spread = np.sqrt(np.linalg.eigvalsh(np.cov(rv.T))) if len(rv) > 2 else np.zeros(3)
-    second = float(np.rad2deg(spread[-2]))
     d = ", ".join(f"{x:+.2f}" for x in weak[0])
+    generic = (f"{joint}'s centre is least determined along ({d}) in {chain.parent[joint]}'s frame: a larger range of "
+               "motion, more frames or more markers on the segments that carry few")
+    if unmeasured:
+        kind, text = unmeasured
+        return f"{text}; {generic}" if kind == "moved" else text
+    spread = rotation_spread_rad(fit, joint)
+    first, second = float(np.rad2deg(spread[-1])), float(np.rad2deg(spread[-2]))
+    if first < HARDLY_TURNED_DEG:
+        return (f"{joint} hardly turned ({first:.2g} and {second:.2g} deg RMS about its two main axes): record its "
+                "functional movement (flexion, abduction and circumduction, a star arc)")
     if second < MIN_SECOND_AXIS_DEG:
         return (f"{joint} turned mostly about one axis (second axis {second:.0f} deg RMS): its centre is least "
                 f"determined along ({d}) in {chain.parent[joint]}'s frame; add rotation about the other axes "
                 "(e.g. abduction and circumduction of a hip that only flexed)")
-    return (f"{joint}'s centre is least determined along ({d}) in {chain.parent[joint]}'s frame: a larger range of "
-            "motion, more frames or more markers on the segments that carry few")
+    return generic

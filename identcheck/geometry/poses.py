@@ -208,3 +208,30 @@ def _reference_frame(valid: np.ndarray, ref_frame: int | None) -> int:
         raise ValueError(f"ref_frame {ref_frame} has no valid pose (fewer than three visible, "
                          "non-collinear markers)")
     return ref % len(valid)
+
+
+def pose_noise_factor(local: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """How much a least-squares (Kabsch) pose's own noise moves body-fixed points, per coordinate, in units of the
+    markers' noise σ: ``sqrt(1/n + tr([r]x J^-1 [r]x^T) / 3)`` at ``r`` from the centroid of the n markers at
+    `local`, with J their inertia tensor (the pose's translation error has covariance σ²/n, its rotation error
+    σ² J⁻¹).
+
+    Parameters
+    ----------
+    local : array, shape (n, 3)
+        The body's marker coordinates, mm.
+    points : array, shape (k, 3)
+        Body-fixed points, mm.
+
+    Returns
+    -------
+    numpy.ndarray, shape (k,)
+    """
+    local = np.asarray(local, dtype=float)
+    L = local - local.mean(axis=0)
+    Jinv = np.linalg.pinv(np.sum(L * L) * np.eye(3) - L.T @ L)
+    r = np.atleast_2d(np.asarray(points, dtype=float)) - local.mean(axis=0)
+    X = np.zeros((len(r), 3, 3))                                          # [r]x
+    X[:, 0, 1], X[:, 0, 2], X[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
+    X -= np.transpose(X, (0, 2, 1))
+    return np.sqrt(1.0 / len(L) + np.einsum("kij,jl,kil->k", X, Jinv, X) / 3.0)

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR
-from identcheck.geometry.poses import MIN_MARKERS, segment_poses
+from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor, segment_poses
 
 DEVIATION_PERCENTILE = 95.0
 """A marker's deviation in a body's frame: this percentile over frames of its distance from its median position."""
@@ -69,33 +69,6 @@ def body_deviation(xyz: np.ndarray, body: list, cols: list) -> tuple[np.ndarray,
         out = np.nanpercentile(np.where(ok, dev, np.nan), DEVIATION_PERCENTILE, axis=0)
     out = np.where(ok.sum(axis=0) >= MIN_SAMPLES_PER_PAIR, out, np.inf)
     return out, np.sqrt(1.0 + pose_noise_factor(poses.local, np.nan_to_num(centre)) ** 2)
-
-
-def pose_noise_factor(local: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """How much a least-squares (Kabsch) pose's own noise moves body-fixed points, per coordinate, in units of the
-    markers' noise σ: ``sqrt(1/n + tr([r]x J^-1 [r]x^T) / 3)`` at ``r`` from the centroid of the n markers at
-    `local`, with J their inertia tensor (the pose's translation error has covariance σ²/n, its rotation error
-    σ² J⁻¹).
-
-    Parameters
-    ----------
-    local : array, shape (n, 3)
-        The body's marker coordinates, mm.
-    points : array, shape (k, 3)
-        Body-fixed points, mm.
-
-    Returns
-    -------
-    numpy.ndarray, shape (k,)
-    """
-    local = np.asarray(local, dtype=float)
-    L = local - local.mean(axis=0)
-    Jinv = np.linalg.pinv(np.sum(L * L) * np.eye(3) - L.T @ L)
-    r = np.atleast_2d(np.asarray(points, dtype=float)) - local.mean(axis=0)
-    X = np.zeros((len(r), 3, 3))                                          # [r]x
-    X[:, 0, 1], X[:, 0, 2], X[:, 1, 2] = -r[:, 2], r[:, 1], -r[:, 0]
-    X -= np.transpose(X, (0, 2, 1))
-    return np.sqrt(1.0 / len(L) + np.einsum("kij,jl,kil->k", X, Jinv, X) / 3.0)
 
 
 def is_rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:

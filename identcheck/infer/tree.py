@@ -44,8 +44,7 @@ from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.hierarchy import Hierarchy, infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
-from identcheck.geometry.poses import MIN_MARKERS
-from identcheck.infer.body_frames import pose_noise_factor
+from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
@@ -95,7 +94,7 @@ class SmallFit:
         Why neither fit counts ('' when one does).
     noise_factor : float
         What marker noise σ alone would leave of these fits, in units of σ (the marker's own noise and the
-        posed segment's, :func:`identcheck.infer.body_frames.pose_noise_factor`, at the markers).
+        posed segment's, :func:`identcheck.geometry.poses.pose_noise_factor`, at the markers).
     """
 
     sphere_mm: float
@@ -248,7 +247,7 @@ def noise_residual_mm(poses: dict, parent: str, child: str, fit, sigma_mm: float
     """The RMS O'Brien residual marker noise σ alone would leave for a perfect joint at the fit's location: the
     two posed segments (``poses``: segment -> Poses) carry their pose noise to the joint point,
     ``sqrt(3 σ² (f_P² + f_C²))`` with f the pose noise factors there
-    (:func:`identcheck.infer.body_frames.pose_noise_factor`); NaN without σ."""
+    (:func:`identcheck.geometry.poses.pose_noise_factor`); NaN without σ."""
     if not np.isfinite(sigma_mm):
         return float("nan")
     fp = pose_noise_factor(poses[parent].local, fit.centre_parent)[0]

@@ -7,7 +7,7 @@ settled.
 
 With the marker noise σ known, a rigid group can be checked against it: seen in the pose of some of its markers
 (part A, three or more), each other marker (part B) scatters about its body-fixed place by σ²(1 + f²) per
-coordinate, f being how much A's own pose noise adds there (:func:`identcheck.infer.body_frames.pose_noise_factor`).
+coordinate, f being how much A's own pose noise adds there (:func:`identcheck.geometry.poses.pose_noise_factor`).
 The *motion ratio* of a split is the root of the mean, over B's markers and the frames, of the squared distance from
 that place over 3σ²(1 + f²): about 1 for a rigid group whatever the split (0.85-1.15 for 95 % of 172 rigid groups of
 five or more markers in two development draws of the independent skeleton generator), larger when B turns
@@ -23,8 +23,8 @@ import warnings
 
 import numpy as np
 
-from identcheck.geometry.poses import MIN_MARKERS, refine_local
-from identcheck.infer.body_frames import body_fixed, evenly_spaced, pose_noise_factor
+from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor, refine_local
+from identcheck.infer.body_frames import body_fixed, evenly_spaced
 from identcheck.infer.separated_groups import spread_dendrogram
 
 RATIO_LIMIT = 1.5
