@@ -55,22 +55,30 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     """Fit one generated trial and score its intervals against the truth."""
     stem = entry.get("stem") or entry.get("name") or entry.get("id")
     truth = json.loads((trial_dir / f"{stem}.truth.json").read_text())
+    return fit_and_score(stem, trial_dir / f"{stem}.toml", trial_dir / f"{stem}.trc",
+                         {name: tj["marker_distances"] for name, tj in truth["joints"].items()})
+
+
+def fit_and_score(stem: str, model: Path, trc: Path, truth: dict) -> dict:
+    """``identcheck.fit`` of one trial, each marker distance of each joint scored against ``truth`` (joint ->
+    marker -> exact distance, mm): covered, half-width, error, and confidently wrong (:data:`WRONG_FACTOR`,
+    :data:`WRONG_MIN_MM`); the verdict, the model-misfit warning and the CPU seconds."""
     t0 = time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            res = ic.fit(trial_dir / f"{stem}.toml", trial_dir / f"{stem}.trc").to_dict()
+            res = ic.fit(model, trc).to_dict()
         except ic.InputError as exc:
             return {"stem": stem, "error": str(exc), "seconds": time.process_time() - t0}
     seconds = time.process_time() - t0
     rows = []
-    for name, tj in truth["joints"].items():
+    for name, distances in truth.items():
         j = res["joints"].get(name)
         if j is None:
             continue
         verdict = j.get("practical", {}).get("verdict", "undetermined")
         cands = [j.get("marker_distances_ci95", {})] + [a.get("marker_distances_ci95", {}) for a in j["alternatives"]]
-        for m, true in tj["marker_distances"].items():
+        for m, true in distances.items():
             ci = j.get("marker_distances_ci95", {}).get(m)
             est = j["marker_distances"].get(m)
             if ci is None or est is None:
