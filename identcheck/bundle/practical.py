@@ -185,6 +185,14 @@ def excursion_mm(chain, fit, frame_segment: str, moving_segment: str) -> tuple[n
     return moved, np.sqrt(1.0 + pose_noise_factor(own, place) ** 2)
 
 
+def cross_spread_mm(fit, a: list, b: list) -> np.ndarray:
+    """How much each distance between a marker of `a` and one of `b` varies over the trial: the 95th percentile
+    over frames of its departure from its median, shape (len(a), len(b)), mm (as fitted, which is the measured
+    markers up to the residual; noise of σ per coordinate alone gives about 2.8 σ)."""
+    d = np.linalg.norm(fit.pred[:, list(a)][:, :, None] - fit.pred[:, list(b)][:, None], axis=3)
+    return np.percentile(np.abs(d - np.median(d, axis=0)), 95.0, axis=0)
+
+
 def hardly_moved(chain, fit, sigma_mm: float, joint: str) -> str | None:
     """What shows that a joint beside a segment not posed by its own markers hardly moved in the trial, or None.
 
@@ -193,7 +201,11 @@ def hardly_moved(chain, fit, sigma_mm: float, joint: str) -> str | None:
     (:func:`excursion_mm`). Within :data:`HARDLY_MOVED_NOISE` times their noise there, or :data:`HARDLY_MOVED_MM`,
     the trial holds the joint still, and no place of it is determined: on a static simulated trial (3 pelvis, 1
     thigh, 1 shank marker, 1 mm noise) the hip was 'determined' with its thigh marker 5.9 +- 1.2 mm from the centre,
-    510 mm in truth (the incidental roll of the one-marker thigh lets a small sphere absorb the noise)."""
+    510 mm in truth (the incidental roll of the one-marker thigh lets a small sphere absorb the noise). Between two
+    segments neither of which is posed by its own markers, three or more markers on the two together that keep
+    every distance across the joint (:func:`cross_spread_mm`, within :data:`HARDLY_MOVED_NOISE` times a distance's
+    noise σ√2, or :data:`HARDLY_MOVED_MM`) move as one rigid body: the joint did not move (a static ankle between a
+    two-marker shank and a two-marker foot had been 'determined' 111-196 mm off)."""
     found = _not_self_posed(chain, fit, joint, sigma_mm)
     return found[1] if found and found[0] == "hardly" else None
 
@@ -201,9 +213,8 @@ def hardly_moved(chain, fit, sigma_mm: float, joint: str) -> str | None:
 def _not_self_posed(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str] | None:
     """The advice when one of the joint's segments is not posed by its own markers (:func:`own_pose`), whose
     relative rotation is then not measured: None when both are, else (kind, what the markers do show), kind one of
-    ``"unmeasured"`` (neither segment posed), ``"hardly"`` (the other segment's markers stay within
-    :data:`HARDLY_MOVED_MM` or :data:`HARDLY_MOVED_NOISE` x the noise of one place in the posed one's frame) and
-    ``"moved"``."""
+    ``"unmeasured"`` (neither segment posed, and their markers do not show the joint still), ``"hardly"``
+    (:func:`hardly_moved`) and ``"moved"``."""
     parent, child = chain.parent[joint], chain.child[joint]
     posed = [s for s in (parent, child) if own_pose(chain, s)]
     if len(posed) == 2:
@@ -211,6 +222,11 @@ def _not_self_posed(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str] 
     n = {s: len(chain.seg_markers[s]) for s in (parent, child)}
     counts = f"{parent} carries {n[parent]} marker{'s' * (n[parent] != 1)}, {child} {n[child]}"
     if not posed:
+        if n[parent] and n[child] and n[parent] + n[child] >= MIN_MARKERS:
+            spread = cross_spread_mm(fit, chain.seg_markers[parent], chain.seg_markers[child])
+            if np.all(spread <= max(HARDLY_MOVED_MM, HARDLY_MOVED_NOISE * np.sqrt(2.0) * sigma_mm)):
+                return "hardly", (f"{joint} hardly moved: every distance between {parent}'s and {child}'s markers "
+                                  f"stays within {float(np.max(spread)):.2g} mm of one value")
         return "unmeasured", (
             f"{joint}'s rotation is not measured by the markers ({counts}: neither is posed by its own markers, and "
             f"the fitted angles follow the joint's geometry, which this trial leaves open): add markers to bring "
