@@ -106,27 +106,30 @@ def summarise(results: list, categories: dict) -> dict:
         for key in (f"{cat['noise']}", f"{cat['noise']} x {cat['markerset']}", f"{cat['noise']} x {cat['motion']}",
                     "all"):
             groups[key].append(r)
-    out = {}
-    for key, rs in sorted(groups.items()):
-        rows = [x for r in rs for x in r.get("rows", [])]
-        scored = [x for x in rows if x["covered"] is not None]
-        joints = {(r["stem"], x["joint"]): x["verdict"] for r in rs for x in r.get("rows", [])}
-        verdicts = defaultdict(int)
-        for v in joints.values():
-            verdicts[v] += 1
-        det = [x for x in scored if x["verdict"] == "determined"]
-        out[key] = {
-            "trials": len(rs), "errors": sum("error" in r for r in rs), "distances": len(scored),
-            "coverage": round(float(np.mean([x["covered"] for x in scored])), 4) if scored else None,
-            "coverage_determined": round(float(np.mean([x["covered"] for x in det])), 4) if det else None,
-            "median_half_width_mm": _finite(np.median([x["half"] for x in scored])) if scored else None,
-            "rms_error_mm": round(float(np.sqrt(np.mean([x["err"] ** 2 for x in scored]))), 3) if scored else None,
-            "verdicts": dict(verdicts),
-            "confidently_wrong_joints": len({(r["stem"], x["joint"]) for r in rs for x in r.get("rows", []) if x.get("wrong")}),
-            "misfit_flagged": round(float(np.mean([r.get("misfit_flagged", False) for r in rs])), 3),
-            "median_seconds": round(float(np.median([r["seconds"] for r in rs])), 2),
-        }
-    return out
+    return {key: group_summary(rs) for key, rs in sorted(groups.items())}
+
+
+def group_summary(rs: list) -> dict:
+    """Coverage, sharpness, verdicts, confidently wrong joints and time of a group of :func:`fit_and_score` rows."""
+    rows = [x for r in rs for x in r.get("rows", [])]
+    scored = [x for x in rows if x["covered"] is not None]
+    joints = {(r["stem"], x["joint"]): x["verdict"] for r in rs for x in r.get("rows", [])}
+    verdicts = defaultdict(int)
+    for v in joints.values():
+        verdicts[v] += 1
+    det = [x for x in scored if x["verdict"] == "determined"]
+    return {
+        "trials": len(rs), "errors": sum("error" in r for r in rs), "distances": len(scored),
+        "joints": len(joints),
+        "coverage": round(float(np.mean([x["covered"] for x in scored])), 4) if scored else None,
+        "coverage_determined": round(float(np.mean([x["covered"] for x in det])), 4) if det else None,
+        "median_half_width_mm": _finite(np.median([x["half"] for x in scored])) if scored else None,
+        "rms_error_mm": round(float(np.sqrt(np.mean([x["err"] ** 2 for x in scored]))), 3) if scored else None,
+        "verdicts": dict(verdicts),
+        "confidently_wrong_joints": len({(r["stem"], x["joint"]) for r in rs for x in r.get("rows", []) if x.get("wrong")}),
+        "misfit_flagged": round(float(np.mean([r.get("misfit_flagged", False) for r in rs])), 3),
+        "median_seconds": round(float(np.median([r["seconds"] for r in rs])), 2),
+    }
 
 
 def figure(summary: dict, path: Path) -> None:

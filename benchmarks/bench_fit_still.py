@@ -31,7 +31,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_fit_calibration import fit_and_score  # noqa: E402
+from bench_fit_calibration import fit_and_score, group_summary  # noqa: E402
 from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
 
 
@@ -47,20 +47,7 @@ def summarise(rows: list) -> dict:
     for r in rows:
         for key in ("all", r["motion"], f"{r['motion']} x {r['markerset']}"):
             groups[key].append(r)
-    out = {}
-    for key, rs in sorted(groups.items()):
-        dist = [x for r in rs for x in r.get("rows", []) if x["covered"] is not None]
-        joints = {(r["stem"], x["joint"]): x["verdict"] for r in rs for x in r.get("rows", [])}
-        verdicts = defaultdict(int)
-        for v in joints.values():
-            verdicts[v] += 1
-        out[key] = {"trials": len(rs), "errors": sum("error" in r for r in rs), "joints": len(joints),
-                    "verdicts": dict(verdicts),
-                    "confidently_wrong_joints": len({(r["stem"], x["joint"]) for r in rs for x in r.get("rows", [])
-                                                     if x.get("wrong")}),
-                    "coverage": round(float(np.mean([x["covered"] for x in dist])), 4) if dist else None,
-                    "median_seconds": round(float(np.median([r["seconds"] for r in rs])), 2)}
-    return out
+    return {key: group_summary(rs) for key, rs in sorted(groups.items())}
 
 
 def _json_safe(rows: list) -> list:

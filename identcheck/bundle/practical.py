@@ -42,9 +42,6 @@ coordinate reaches 2.8 σ)."""
 HARDLY_MOVED_MM = 5.0
 """... or within this many mm: a marker that sweeps less than that in the other segment's frame traces too short an
 arc to place a joint, whatever the noise (a knee turning 5 deg moves a marker 50 mm from its axis by 4 mm)."""
-HARDLY_TURNED_DEG = 2.0
-"""A joint between two segments posed by their own markers hardly turned when its RMS rotation about its main axis
-is below this (deg)."""
 
 
 def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0, unbounded: str | None = None) -> dict:
@@ -71,10 +68,10 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0,
     free = [m for m, (_, g) in grads.items() if cov.free(g)]
     worst_marker, (worst_d, worst_se) = max(distances.items(), key=lambda kv: kv[1][1]) if distances else (None, (0, 0))
     weak = _weakest(chain, fit, cov, joint)
-    shown = _not_self_posed(chain, fit, joint, cov.sigma_mm)
-    motion = _motion(chain, fit, joint, weak, shown)
+    seen = _motion_seen(chain, fit, joint, cov.sigma_mm)
+    motion = _motion(chain, fit, joint, weak, seen)
     one_axis, second_deg, noise_deg = single_axis(chain, fit, cov.sigma_mm, joint)
-    still = shown[1] if shown and shown[0] == "hardly" else None
+    still = seen[1] if seen[0] == "hardly" else None
     if free:
         verdict = "undetermined"
         why = (f"the data leave {joint} free: the distances of {', '.join(free)} can change without changing "
@@ -197,43 +194,40 @@ def hardly_moved(chain, fit, sigma_mm: float, joint: str) -> str | None:
     """What shows that a joint hardly moved in the trial, or None.
 
     Beside a segment not posed by its own markers the fitted rotations are not measured, so neither
-    :func:`single_axis` nor a range of angles can tell; what the markers do show is how far the other segment's markers move in the posed segment's frame
-    (:func:`excursion_mm`). Within :data:`HARDLY_MOVED_NOISE` times their noise there, or :data:`HARDLY_MOVED_MM`,
-    the trial holds the joint still, and no place of it is determined: on a static simulated trial (3 pelvis, 1
-    thigh, 1 shank marker, 1 mm noise) the hip was 'determined' with its thigh marker 5.9 +- 1.2 mm from the centre,
-    510 mm in truth (the incidental roll of the one-marker thigh lets a small sphere absorb the noise). Between two
-    segments neither of which is posed by its own markers, three or more markers on the two together that keep
-    every distance across the joint (:func:`cross_spread_mm`, within :data:`HARDLY_MOVED_NOISE` times a distance's
-    noise σ√2, or :data:`HARDLY_MOVED_MM`) move as one rigid body: the joint did not move (a static ankle between a
-    two-marker shank and a two-marker foot had been 'determined' 111-196 mm off). Between two segments both posed
-    by their own markers the same test in the parent's frame applies: a static knee between three-marker thigh and
-    shank had been 'determined' 300 mm off at +-9 mm (AR(1) noise, 405 frames)."""
-    found = _not_self_posed(chain, fit, joint, sigma_mm)
-    return found[1] if found and found[0] == "hardly" else None
+    :func:`single_axis` nor a range of angles can tell; what the markers do show is how far the other segment's
+    markers move in the posed segment's frame (:func:`excursion_mm`). Within :data:`HARDLY_MOVED_NOISE` times their
+    noise there, or :data:`HARDLY_MOVED_MM`, the trial holds the joint still, and no place of it is determined: on
+    a static simulated trial (3 pelvis, 1 thigh, 1 shank marker, 1 mm noise) the hip was 'determined' with its
+    thigh marker 5.9 +- 1.2 mm from the centre, 510 mm in truth (the incidental roll of the one-marker thigh lets a
+    small sphere absorb the noise). Between two segments neither of which is posed by its own markers, three or
+    more markers on the two together that keep every distance across the joint (:func:`cross_spread_mm`, within
+    :data:`HARDLY_MOVED_NOISE` times a distance's noise σ√2, or :data:`HARDLY_MOVED_MM`) move as one rigid body: the
+    joint did not move (a static ankle between a two-marker shank and a two-marker foot had been 'determined'
+    111-196 mm off). Between two segments both posed by their own markers the same test in the parent's frame
+    applies: a static knee between three-marker thigh and shank had been 'determined' 300 mm off at +-9 mm (AR(1)
+    noise, 405 frames)."""
+    kind, text = _motion_seen(chain, fit, joint, sigma_mm)
+    return text if kind == "hardly" else None
 
 
-def _still_in_frame(chain, fit, joint: str, frame: str, other: str, sigma_mm: float) -> str | None:
+def _still_in_frame(joint: str, frame: str, other: str, each: np.ndarray, amplification: np.ndarray,
+                    sigma_mm: float) -> str | None:
     """'joint hardly moved: ...' when every marker of `other` stays within :data:`HARDLY_MOVED_MM` or
-    :data:`HARDLY_MOVED_NOISE` times its noise of one place in the frame of `frame` (:func:`excursion_mm`), else
-    None (also for `other` without markers)."""
-    each, amplification = excursion_mm(chain, fit, frame, other)
-    if len(each) and np.all(each <= np.maximum(HARDLY_MOVED_MM, HARDLY_MOVED_NOISE * sigma_mm * amplification)):
+    :data:`HARDLY_MOVED_NOISE` times its noise of one place in the frame of `frame` (`each`, `amplification`:
+    :func:`excursion_mm`), else None."""
+    if np.all(each <= np.maximum(HARDLY_MOVED_MM, HARDLY_MOVED_NOISE * sigma_mm * amplification)):
         return (f"{joint} hardly moved: {other}'s markers stay within {float(np.max(each)):.2g} mm of one place in "
                 f"{frame}'s frame")
     return None
 
 
-def _not_self_posed(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str] | None:
-    """What the markers show of the joint's motion when one of its segments is not posed by its own markers
-    (:func:`own_pose`), whose relative rotation is then not measured, or when it hardly moved: (kind, text), kind
-    one of ``"unmeasured"`` (neither segment posed, and their markers do not show the joint still), ``"hardly"``
-    (:func:`hardly_moved`; between two posed segments too: a static hinge's curvature is the noise's) and
-    ``"moved"``; None when both segments are posed and the joint moved."""
+def _motion_seen(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str]:
+    """What the markers themselves show of the joint's motion: (kind, text), kind one of ``"measured"`` (both
+    segments posed by their own markers and the joint moved; no text), ``"hardly"`` (:func:`hardly_moved`),
+    ``"moved"`` (one segment posed, the other's markers move in its frame, by how much the text says) and
+    ``"unmeasured"`` (neither posed and not shown still, or the other segment carries no marker)."""
     parent, child = chain.parent[joint], chain.child[joint]
     posed = [s for s in (parent, child) if own_pose(chain, s)]
-    if len(posed) == 2:                     # measured; but a hinge's curvature can still come from noise alone
-        still = _still_in_frame(chain, fit, joint, parent, child, sigma_mm)
-        return ("hardly", still) if still else None
     n = {s: len(chain.seg_markers[s]) for s in (parent, child)}
     counts = f"{parent} carries {n[parent]} marker{'s' * (n[parent] != 1)}, {child} {n[child]}"
     if not posed:
@@ -246,32 +240,33 @@ def _not_self_posed(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str] 
             f"{joint}'s rotation is not measured by the markers ({counts}: neither is posed by its own markers, and "
             f"the fitted angles follow the joint's geometry, which this trial leaves open): add markers to bring "
             f"{parent} or {child} to three")
-    frame = posed[0]
+    frame = posed[0]                        # the parent when both are posed
     other = child if frame == parent else parent
-    each, _ = excursion_mm(chain, fit, frame, other)
+    each, amplification = excursion_mm(chain, fit, frame, other)
     if not len(each):
         return "unmeasured", (f"{joint}'s rotation is seen only through the joints beyond it ({other} carries no "
                               f"marker): add markers on {other}")
-    still = _still_in_frame(chain, fit, joint, frame, other, sigma_mm)
+    still = _still_in_frame(joint, frame, other, each, amplification, sigma_mm)
     if still:
         return "hardly", still
-    moved = float(np.max(each))
-    return "moved", (f"{other}'s markers move up to {moved:.0f} mm in {frame}'s frame, but {other} is not posed by "
-                     f"its own markers ({counts}), so how far {joint} turned depends on its geometry, which this "
-                     f"trial leaves open: add markers to bring {other} to three, or markers farther from the joint on "
-                     "it")
+    if len(posed) == 2:
+        return "measured", ""
+    return "moved", (f"{other}'s markers move up to {float(np.max(each)):.0f} mm in {frame}'s frame, but {other} is "
+                     f"not posed by its own markers ({counts}), so how far {joint} turned depends on its geometry, "
+                     f"which this trial leaves open: add markers to bring {other} to three, or markers farther from "
+                     "the joint on it")
 
 
-def _motion(chain, fit, joint: str, weak, unmeasured: tuple | None) -> str:
+def _motion(chain, fit, joint: str, weak, seen: tuple) -> str:
     """What to record to determine the joint better, from the motion the trial shows (module docstring: only what
-    the markers measure; `unmeasured` is :func:`_not_self_posed`'s finding)."""
-    s = fit.state
-    if unmeasured and unmeasured[0] == "hardly":
+    the markers measure; `seen` is :func:`_motion_seen`'s finding)."""
+    kind, text = seen
+    if kind == "hardly":
         return "record the joint's movement through its range"
     if chain.types[joint] == "revolute":
-        if unmeasured:
-            return unmeasured[1]
-        rom = float(np.rad2deg(np.ptp(np.unwrap(s.theta[joint]))))
+        if kind != "measured":
+            return text
+        rom = float(np.rad2deg(np.ptp(np.unwrap(fit.state.theta[joint]))))
         if rom < MIN_HINGE_ROM_DEG:
             return f"flex {joint} through a larger range (this trial: {rom:.0f} deg about the hinge)"
         return (f"{joint} moved {rom:.0f} deg about its hinge: add frames, or markers farther from the hinge axis, "
@@ -279,14 +274,9 @@ def _motion(chain, fit, joint: str, weak, unmeasured: tuple | None) -> str:
     d = ", ".join(f"{x:+.2f}" for x in weak[0])
     generic = (f"{joint}'s centre is least determined along ({d}) in {chain.parent[joint]}'s frame: a larger range of "
                "motion, more frames or more markers on the segments that carry few")
-    if unmeasured:
-        kind, text = unmeasured
+    if kind != "measured":
         return f"{text}; {generic}" if kind == "moved" else text
-    spread = rotation_spread_rad(fit, joint)
-    first, second = float(np.rad2deg(spread[-1])), float(np.rad2deg(spread[-2]))
-    if first < HARDLY_TURNED_DEG:
-        return (f"{joint} hardly turned ({first:.2g} and {second:.2g} deg RMS about its two main axes): record its "
-                "functional movement (flexion, abduction and circumduction, a star arc)")
+    second = float(np.rad2deg(rotation_spread_rad(fit, joint)[-2]))
     if second < MIN_SECOND_AXIS_DEG:
         return (f"{joint} turned mostly about one axis (second axis {second:.0f} deg RMS): its centre is least "
                 f"determined along ({d}) in {chain.parent[joint]}'s frame; add rotation about the other axes "

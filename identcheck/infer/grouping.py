@@ -307,8 +307,7 @@ def partition(xyz, spread: np.ndarray, tolerance: float, usable=None) -> tuple[l
     group with which it passes both tests. Then the bodies compete for the markers (:func:`_compete`) until the
     grouping stops changing (at most :data:`COMPETE_ROUNDS` rounds): with soft tissue, the tolerance can let a marker
     near a joint pass for rigid with both segments, and it belongs to the one in whose frame it stays stillest. Last,
-    markers left loose
-    or paired by the one tolerance join groups that stay well apart from everything else
+    markers left loose or paired by the one tolerance join groups that stay well apart from everything else
     (:func:`identcheck.infer.separated_groups.widen`): skin markers on the moving segment of a functional trial
     wobble more than the still rest of the body, which sets the tolerance.
 
