@@ -15,6 +15,14 @@ products). Under noise alone, AR(1) with coefficient φ, the regression explains
 noise of any correlation; skin motion of a millimetre or more makes it hundreds. A marker whose ratio exceeds
 :data:`RATIO` moves with the angles.
 
+The ratio has no power when the residual is so smooth that the trial holds only a handful of effectively
+independent frames (lag-1 0.99 leaves ``N_eff`` below the number of angle functions): then AR(1) noise of any
+size could explain any fit, and on the real hip trial with two markers on each segment the greater trochanter's
+residual followed the hip angles by 12 mm at a ratio of 4 (RGT–RLFE, a "rigid" pair, changed length by 96 mm),
+while the joint was reported to ±7.6 mm some 30 mm from every other estimator's. No capture system's noise
+reaches that size, however smooth: a marker whose angle-following part exceeds :data:`NOISE_CEILING_MM` moves
+with the angles whatever its ratio.
+
 What follows for the joints (:func:`model_error_sd`): the bias a rigid fit takes from skin motion is not
 estimable from one trial, but its size is: a marker that moves by ``e`` with the joint's angle is, to first
 order, indistinguishable from a joint centre displaced by ``e / θ`` (θ the joint's RMS excursion in
@@ -38,6 +46,10 @@ from identcheck.bundle.uncertainty import lag1
 RATIO = 10.0
 """Explained mean square over what correlated noise would explain, beyond which a marker moves with the
 joint angles (noise alone gives about 1: 0.7-2.7 over 24 simulated trials of white and AR(1) noise)."""
+NOISE_CEILING_MM = 8.0
+"""Angle-following motion (3-D RMS, mm) that noise does not reach at any correlation: twice what AR(1) noise
+explains on average in the most extreme simulated capture (1.5 mm, lag-1 0.95, 300 frames, a pelvis between two
+ball joints: 18 angle functions, ``σ sqrt(3K / N_eff)`` = 4 mm); optical capture noise is 0.1-1.5 mm."""
 MODEL_ERROR_PER_MM = 1.5
 """Smallest model-error standard deviation (mm) per mm of angle-following motion of a joint's markers."""
 MIN_EXCURSION_RAD = 0.05
@@ -67,8 +79,9 @@ class MarkerMisfit:
 
     @property
     def moves(self) -> bool:
-        """Whether the marker moves with the joint angles (ratio above :data:`RATIO`)."""
-        return self.ratio > RATIO
+        """Whether the marker moves with the joint angles (ratio above :data:`RATIO`, or a motion larger than
+        noise reaches, :data:`NOISE_CEILING_MM`)."""
+        return self.ratio > RATIO or self.explained_mm > NOISE_CEILING_MM
 
 
 def angle_dependence(fit, data) -> dict:

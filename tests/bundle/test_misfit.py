@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.chain import fit_chain, initial_state
-from identcheck.bundle.misfit import RATIO, angle_dependence, model_error_sd
+from identcheck.bundle.misfit import NOISE_CEILING_MM, RATIO, MarkerMisfit, angle_dependence, model_error_sd
 from identcheck.effects.registry import inject_effect
 from identcheck.fit.whole_tree import skeleton_of
 from identcheck.io.model import Model
@@ -59,3 +59,28 @@ def test_skin_motion_is_found_on_its_marker(examples, seed):
     mis = angle_dependence(fit, data)
     assert mis[marker].moves, {k: round(m.ratio, 1) for k, m in mis.items()}
     assert model_error_sd(fit, where["joint"], mis) > 0
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10 ** 5))
+def test_smoothest_simulated_noise_stays_below_the_ceiling(examples, seed):
+    """The most extreme simulated capture the ceiling is set against (1.5 mm AR(1) noise of lag-1 0.95 over 300
+    frames, so few effectively independent frames that the ratio test has little power): no marker's
+    angle-following part reaches :data:`NOISE_CEILING_MM`, and none is said to move."""
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=300, noise_mm=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    noisy = sim.trial.replace(xyz=sim.trial.as_array() + _ar1(rng, sim.trial.as_array().shape, 1.5, 0.95))
+    fit, data = _fit(model, noisy)
+    mis = angle_dependence(fit, data)
+    assert max(m.explained_mm for m in mis.values()) < NOISE_CEILING_MM, {
+        k: round(m.explained_mm, 1) for k, m in mis.items()}
+
+
+
+@given(explained=st.floats(0.0, 50.0), ratio=st.floats(0.0, 100.0))
+def test_a_motion_larger_than_noise_reaches_moves_whatever_its_ratio(explained, ratio):
+    """Above :data:`NOISE_CEILING_MM` a marker moves with the angles even when the ratio test has no power;
+    below it the ratio alone decides."""
+    m = MarkerMisfit("M", "seg", explained, ratio, 0.99)
+    assert m.moves == (ratio > RATIO or explained > NOISE_CEILING_MM)
