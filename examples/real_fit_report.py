@@ -459,30 +459,33 @@ def _joint(results, trial, model, joint):
 def reading(results, summary) -> list[str]:
     """Statements on this run's numbers (the two closing walking paragraphs quote ranges read off the tables above)."""
     out = []
-    hd = _joint(results, HIP, "real_right_hip.toml", "hip_r")
-    if hd:
-        out.append(f"Hip, dense seed 001: the centre is {hd['marker_distances']['RGT']:.0f} mm from RGT and "
-                   f"{hd['marker_distances']['RASIS']:.0f} mm from RASIS, rms residual {hd['rms_residual']:.1f} mm "
-                   f"(soft-tissue motion of the thigh markers, not noise). Its `uncertainty_mm` "
-                   f"({hd['uncertainty_mm']:.2f} mm) is a Gauss-Markov figure for white noise over {1690} frames and is "
-                   f"far below the {summary['hip_spread']:.0f} mm spread between estimators on the same trial: read it as "
-                   "a lower bound.")
+    for model, what in (("real_right_hip.toml", "dense model (cluster + RGT/RLFE/RMFE)"),
+                        ("real_right_hip_s22.toml", "two markers a segment (S22)")):
+        hd = _joint(results, HIP, model, "hip_r")
+        if not hd or hd["marker_distances"].get("RGT") is None:
+            continue
+        lo, hi = hd["marker_distances_ci95"]["RGT"]
+        iv = f"[{lo:.0f}, {hi:.0f}] mm" if hi is not None else "unbounded"
+        err = hd["practical"].get("model_error_sd_mm")
+        out.append(f"Hip, whole-tree fit of the {what}: the centre is {hd['marker_distances']['RGT']:.0f} mm from RGT "
+                   f"(95 % interval {iv}), rms residual {hd['rms_residual']:.1f} mm, `{hd['practical']['verdict']}`"
+                   + (f", with a model-error term of {err:.0f} mm (sd) for markers that move with the hip angles"
+                      if err else "")
+                   + f". The closed-form starts on the same trial spread {summary['hip_spread']:.0f} mm (table below).")
     kd = _joint(results, KNEE, "real_right_knee.toml", "knee_r")
-    if kd and not kd["excitation"]["ok"]:
-        out.append("Knee, dense O'Brien/SARA: `fit` returns no hinge axis (all marker distances null) on a clean "
-                   "110-degree flexion trial: " + kd["excitation"]["reason"] + ". A real knee, seen through skin "
-                   "markers, always rotates a few degrees off its flexion axis; `fit` uses O'Brien's 2-degree "
-                   "tolerance, so the dense model never yields a knee axis on any trial here. Workaround: a posed "
-                   "thigh and one or two shank markers (circle estimator), `real_right_knee_circle.toml`.")
+    if kd:
+        out.append(f"Knee, whole-tree fit of the dense model: `{kd['practical']['verdict']}`, largest standard error "
+                   f"{fmt(kd['uncertainty_mm'], 1)} mm: " + kd["practical"]["reason"])
     kc = summary["knee"].get("posed thigh + 2 malleoli: circle (5,2)")
     if kc:
         out.append(f"Knee, circle (5,2): the axis is {kc[0]:.1f} deg from the epicondyle line and passes "
                    f"{kc[1]:.1f} mm from the mid-epicondyle point.")
     ks = _joint(results, KNEE, "real_right_knee_sparse.toml", "knee_r")
     if ks:
-        out.append(f"Knee, sparse Pham (2,1): {1 + len(ks['alternatives'])} joints fit equally well (rms "
-                   f"{ks['rms_residual']:.2f} mm); excitation {'ok' if ks['excitation']['ok'] else 'flagged'} "
-                   f"(uncertainty {ks['uncertainty_mm']:.0f} mm).")
+        n = 1 + len(ks["alternatives"])
+        out.append(f"Knee, sparse Pham (2,1): {n} candidate joint{'s' if n > 1 else ''} the likelihood keeps (rms "
+                   f"{ks['rms_residual']:.2f} mm); `{ks['practical']['verdict']}` (largest standard error "
+                   f"{ks['uncertainty_mm']:.0f} mm).")
     for m in ("real_right_knee_sparse.toml", "real_right_knee_circle1.toml"):
         js = _joint(results, STATIC, m, "knee_r")
         if js and js["excitation"]["ok"]:
@@ -490,11 +493,11 @@ def reading(results, summary) -> list[str]:
                        f"mm, uncertainty {fmt(js['uncertainty_mm'], 2)} mm, marker distances "
                        + ", ".join(f"{k} {fmt(v)}" for k, v in js["marker_distances"].items())
                        + "): a package problem, see the issue notes.")
-    flagged = [m for m in ("real_right_hip.toml", "real_right_hip_sparse.toml", "real_right_knee.toml",
-                           "real_right_knee_circle.toml") if (_joint(results, STATIC, m, "hip_r") or
-                                                             _joint(results, STATIC, m, "knee_r") or {}).get(
-                                                                 "excitation", {}).get("ok") is False]
-    out.append("Static pose, flagged correctly: " + ", ".join(f"`{m}`" for m in flagged) + ".")
+    static = [m for _, m, role in RUNS if role == "static control"]
+    flagged = [m for m in static if (_joint(results, STATIC, m, "hip_r") or _joint(results, STATIC, m, "knee_r")
+                                     or {}).get("excitation", {}).get("ok") is False]
+    out.append(f"Static pose, flagged correctly: {len(flagged)} of {len(static)} models ("
+               + ", ".join(f"`{m}`" for m in flagged) + ").")
     for (role, jn), v in sorted(summary["vicon"].items(), key=lambda kv: kv[0][1]):
         txt = f"walking2, {role}, {jn}: mean distance to Vicon's centre {v:.1f} mm"
         dv = summary.get("vicon_diff", {}).get((role, jn))
