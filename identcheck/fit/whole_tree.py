@@ -472,6 +472,16 @@ def rep_unique(j: dict) -> bool:
     return not (j.get("twins_undecidable") and j.get("alternatives"))
 
 
+def _closed_form_only(joint: dict, problem: str) -> str:
+    """Why a joint has only its closed-form estimate: its own estimator's excitation finding first (on a static
+    trial a hip's is its own stillness, where the whole-tree fit's problem may be a knee's), then why the
+    whole-tree fit did not run."""
+    tree_why = f"the whole-tree fit did not run: {problem or 'no start'}"
+    own = joint.get("excitation") or {}
+    parts = [own["reason"]] if own.get("ok") is False and own.get("reason") and own["reason"] not in tree_why else []
+    return "closed-form estimate only, no calibrated interval: " + "; ".join(parts + [tree_why])
+
+
 def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
     """The contract's ``fit`` JSON with the whole-tree answer in place of the closed-form one: each joint's
     marker distances, 95 % intervals, uncertainty, alternatives (likelihood ratio), practical verdict and
@@ -511,11 +521,11 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
                                "reason": "ok" if verdict["verdict"] == "determined"
                                else f"{verdict['reason']}. {verdict['motion_advice']}".strip()}
         else:
-            why = j["excitation"]["reason"] if j.get("estimator") is None else \
-                f"closed-form estimate only, no calibrated interval: {tree.problem or 'the whole-tree fit could not start'}"
+            why = j["excitation"]["reason"] if j.get("estimator") is None else _closed_form_only(j, tree.problem)
             j["unique"] = False
-            j["marker_distances_ci95"] = {}
-            j["interval_method"] = {}
+            # the closed form's numbers stay (they are what a user would otherwise compute), but nothing bounds them
+            j["marker_distances_ci95"] = {m: [0.0, None] for m in j.get("marker_distances") or {}}
+            j["interval_method"] = {m: "unbounded" for m in j.get("marker_distances") or {}}
             j["rejected_candidates"] = []
             j["geometry"] = None
             j["uncertainty_mm"] = None

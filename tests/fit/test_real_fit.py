@@ -164,10 +164,27 @@ def test_sparse_knee_estimators_agree_with_the_circle(capsys):
 @pytest.mark.parametrize("model", ["real_right_hip.toml", "real_right_hip_sparse.toml", "real_right_knee.toml",
                                    "real_right_knee_circle.toml"])
 def test_static_trial_is_flagged(model, capsys):
+    """A static pose: the joint is flagged, never unique, exit 1, and no marker distance is bounded (where the
+    whole-tree fit could not start, the closed form's numbers stay but every interval is ``[0, null]``)."""
     rc, j = fit_json(model, STATIC, capsys)
     (joint,) = j.values()
-    assert joint["excitation"]["ok"] is False
+    assert joint["excitation"]["ok"] is False and not joint["unique"] and rc == 1
     assert joint["excitation"]["reason"]
+    assert set(joint["marker_distances_ci95"]) == set(joint["marker_distances"])
+    assert all(hi is None for _, hi in joint["marker_distances_ci95"].values())
+
+
+def test_static_walking_subject_names_each_joints_own_stillness(capsys):
+    """The OpenSim subject's static trial with the walking leg's model: the knee's stillness stops the whole-tree
+    fit, and the hip's answer still gives the hip's own finding (it hardly turned) before the knee's."""
+    path = real_file("opensim_subject01_static.trc")
+    if not path.exists():
+        pytest.skip("opensim_subject01_static.trc not available")
+    rc, j = fit_json("real_walk_leg.toml", path, capsys)
+    assert rc == 1 and not any(x["unique"] for x in j.values())
+    hip = j["hip_r"]["practical"]["reason"]
+    assert "rotation relative to the parent" in hip and hip.index("rotation") < hip.index("whole-tree fit did not run")
+    assert all(hi is None for x in j.values() for _, hi in x["marker_distances_ci95"].values())
 
 
 @pytest.mark.parametrize("model", ["real_right_knee_circle1.toml", "real_right_knee_sparse.toml"])
