@@ -14,6 +14,7 @@ Heavy modules (SymPy, SciPy) are imported by the verbs that need them, when call
 from __future__ import annotations
 
 import functools
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -177,9 +178,15 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
 
             write_osim(export_osim, fit, name=Path(str(model.source)).stem or "identcheck")
 
-    data, model = _frames(trial, frames), load_model(model)
-    res = FitResult.from_dict(fit_trial(model, data, progress=progress, export=export_markers,
-                                        on_fit=keep if report is not None or export_osim is not None else None))
+    with warnings.catch_warnings(record=True) as read:        # the reader's findings belong in the JSON too
+        warnings.simplefilter("always")
+        data = _frames(trial, frames)
+    model = load_model(model)
+    doc = fit_trial(model, data, progress=progress, export=export_markers,
+                    on_fit=keep if report is not None or export_osim is not None else None)
+    doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
+                       if issubclass(w.category, UserWarning)] + doc["warnings"]
+    res = FitResult.from_dict(doc)
     if export_osim is not None and not scene.get("fitted"):
         raise InputError([f"--export-osim {export_osim}: no whole-tree fit to export"], source=data.source)
     if report is not None:

@@ -494,10 +494,10 @@ def preflight(a) -> list:
         path = getattr(a, opt, None)
         if path and not str(path).lower().endswith(".json"):
             problems.append(f"--{opt} {path}: give a .json file name (it is written as JSON)")
-    written = [(opt, os.path.abspath(getattr(a, opt))) for opt in FILE_OUTPUTS.get(a.verb, ()) if getattr(a, opt, None)]
+    written = [(opt, getattr(a, opt)) for opt in FILE_OUTPUTS.get(a.verb, ()) if getattr(a, opt, None)]
     for i, (opt, path) in enumerate(written):
         for other, path2 in written[i + 1:]:
-            if path == path2:
+            if same_file(path, path2):
                 problems.append(f"--{opt.replace('_', '-')} and --{other.replace('_', '-')} are the same file "
                                 f"({getattr(a, opt)}): one would overwrite the other")
     figure = getattr(a, "figure", None)
@@ -515,11 +515,11 @@ def preflight(a) -> list:
             problems.append(f"--export-osim {osim}: give an .osim file name")
         if opensim_missing():
             problems.append(f"--export-osim {osim}: {opensim_missing()}")
-    inputs = {os.path.abspath(p) for p in (model, trial) if p}
     for opt in FILE_OUTPUTS.get(a.verb, ()):
         path = getattr(a, opt, None)
-        if path and os.path.abspath(path) in inputs:
-            problems.append(f"--{opt.replace('_', '-')} {path}: is an input file; it would be overwritten")
+        if path and any(same_file(path, src) for src in _input_files(a)):
+            problems.append(f"--{opt.replace('_', '-')} {path}: is an input file (or a link to one); it would be "
+                            "overwritten")
     if a.verb == "rank" and a.samples is not None and not 1 <= a.samples <= MAX_RANK_SAMPLES:
         problems.append(f"--samples {a.samples}: between 1 and {MAX_RANK_SAMPLES} (the samples' half-angle tangents "
                         "are distinct, drawn from that many rationals)")
@@ -597,6 +597,27 @@ def _unwritable_file(path) -> str:
     return ""
 
 
+def same_file(a, b) -> bool:
+    """Whether two paths name one file: the same path, a symbolic link to it, or a hard link (same device and
+    inode); a path that does not exist yet is compared by where its links lead."""
+    try:
+        if os.path.exists(a) and os.path.exists(b):
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _input_files(a) -> list:
+    """Every file the command reads (model, trial, certificate, segments, a plan's recorded motion, batch inputs)."""
+    files = [getattr(a, k, None) for k in ("model", "trial", "certificate", "segments")]
+    motion = getattr(a, "motion", None)
+    if isinstance(motion, str):
+        files += [m for m in motion.split(",") if m.lower().endswith(TRIAL_SUFFIXES)]
+    files += list(getattr(a, "inputs", None) or [])
+    return [str(f) for f in files if f]
+
+
 def _unwritable_dir(path) -> str:
     """Why a directory cannot be written (created if missing) at `path` ('' when it can)."""
     if os.path.exists(path) and not os.path.isdir(path):
@@ -654,6 +675,10 @@ def main(argv=None) -> int:
         return 1
     except BrokenPipeError:
         raise
+    except OSError as exc:              # the disk is full, a file vanished, a device refused: the machine, not a bug
+        where = exc.filename or _outputs(a) or _inputs(a)
+        print(f"identcheck {a.verb}: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     except Exception:                   # a bug: say so, with the traceback to report (exit 3, docs/contract.md)
         traceback.print_exc(file=sys.stderr)
         print(f"identcheck {a.verb}: internal error (a bug in identcheck {identcheck.__version__}) on "
@@ -662,10 +687,15 @@ def main(argv=None) -> int:
         return 3
 
 
+def _outputs(a) -> str:
+    """The files and folders the command writes, for a message about a failed write."""
+    opts = FILE_OUTPUTS.get(a.verb, ()) + DIR_OUTPUTS.get(a.verb, ())
+    return ", ".join(str(getattr(a, o)) for o in opts if getattr(a, o, None))
+
+
 def _inputs(a) -> str:
     """The input files of the command, for the internal-error message (what to attach to a report)."""
-    files = [getattr(a, k, None) for k in ("model", "trial", "certificate", "segments")] + list(getattr(a, "inputs", None) or [])
-    files = [str(f) for f in files if f]
+    files = _input_files(a)
     return ", ".join(files) if files else "no input file"
 
 

@@ -7,6 +7,7 @@ read it with ``as_array`` / ``marker`` / ``select``; it is never modified in pla
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -55,6 +56,29 @@ def _float_array(xyz, source: str, copy: bool = False) -> np.ndarray:
         return np.array(xyz, dtype=np.float64) if copy else np.asarray(xyz, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise InputError([f"xyz is not a numeric array ({exc})"], source=source) from None
+
+
+def zeros_as_gaps(xyz, labels, source: str) -> np.ndarray:
+    """The positions read from a file with every sample at exactly (0, 0, 0) made occluded (NaN), with a warning
+    naming the markers and how many frames each.
+
+    Exporters write a missing sample as zeros as often as they leave it empty (older Vicon and Motion Analysis
+    TRCs, C3Ds whose residual word was not set); a marker really at the origin to the last digit in all three
+    coordinates does not happen. Read as a position, such a gap became a marker jumping to the lab's origin,
+    which a fit blamed on skin motion and ``diagnose`` on slips and extra joint rotations."""
+    xyz = np.array(xyz, dtype=float)
+    if xyz.ndim != 3 or xyz.shape[-1] != 3:
+        return xyz                     # the Trial reports the shape
+    zero = np.all(xyz == 0.0, axis=2)
+    if zero.any():
+        xyz[zero] = np.nan
+        counts = zero.sum(axis=0)
+        named = ", ".join(f"{labels[m]} ({counts[m]} frame{'s' if counts[m] > 1 else ''})"
+                          for m in np.flatnonzero(counts)[:8])
+        more = f" and {int((counts > 0).sum()) - 8} more markers" if (counts > 0).sum() > 8 else ""
+        warnings.warn(f"{source}: {int(zero.sum())} sample(s) at exactly (0, 0, 0) read as occluded (the usual "
+                      f"placeholder for a missing sample): {named}{more}", UserWarning, stacklevel=3)
+    return xyz
 
 
 class Trial:
@@ -142,15 +166,19 @@ class Trial:
 
     @classmethod
     def from_trc(cls, path) -> "Trial":
-        """Read an OpenSim TRC file (see :func:`identcheck.io.trc.read_trc`)."""
+        """Read an OpenSim TRC file (see :func:`identcheck.io.trc.read_trc`); samples at exactly (0, 0, 0) are
+        occluded (:func:`zeros_as_gaps`)."""
         data = read_trc(path)
-        return cls(data.xyz, data.labels, data.rate_hz, source=str(path), first_frame=data.first_frame)
+        return cls(zeros_as_gaps(data.xyz, data.labels, str(path)), data.labels, data.rate_hz, source=str(path),
+                   first_frame=data.first_frame)
 
     @classmethod
     def from_c3d(cls, path) -> "Trial":
-        """Read the points of a C3D file (see :func:`identcheck.io.c3d.read_c3d`)."""
+        """Read the points of a C3D file (see :func:`identcheck.io.c3d.read_c3d`); samples at exactly (0, 0, 0)
+        are occluded (:func:`zeros_as_gaps`)."""
         data = read_c3d(path)
-        return cls(data.xyz, data.labels, data.rate_hz, source=str(path), first_frame=data.first_frame)
+        return cls(zeros_as_gaps(data.xyz, data.labels, str(path)), data.labels, data.rate_hz, source=str(path),
+                   first_frame=data.first_frame)
 
     @classmethod
     def from_file(cls, path) -> "Trial":
@@ -395,6 +423,9 @@ class Trial:
         if end < start or end < first or start > last:
             raise InputError([f"--frames {spec}: no frame of the trial in that range (the file's frames are "
                               f"{first} to {last})"], source=self._source)
+        if start < first or end > last:
+            warnings.warn(f"{self._source}: --frames {spec} reaches beyond the file's frames ({first} to {last}): "
+                          f"using {max(start, first)}:{min(end, last)}", UserWarning, stacklevel=2)
         lo, hi = max(start, first) - first, min(end, last) - first
         return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, first + lo)
 

@@ -35,7 +35,12 @@ def rational_text(v) -> str:
 
 
 def _rat(text) -> sp.Rational:
-    return sp.Rational(str(text))
+    """The rational a certificate stores as text; a zero denominator is a malformed value (ValueError, which
+    :func:`verify` reports), not a division."""
+    try:
+        return sp.Rational(str(text))
+    except ZeroDivisionError:
+        raise ValueError(f"{text!r} has a zero denominator") from None
 
 
 def half_angle(t) -> tuple:

@@ -71,6 +71,9 @@ def read(path) -> dict:
         raise InputError([f"not JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}"], source=str(path)) from None
     except RecursionError:
         raise InputError(["JSON nested too deeply to be a certificate"], source=str(path)) from None
+    except ValueError as exc:          # an integer beyond Python's 4300-digit limit for reading text
+        raise InputError([f"not a certificate: it holds a number too long to read ({str(exc).split(':')[0]})"],
+                         source=str(path)) from None
     if not isinstance(doc, dict):
         raise InputError(["a certificate is a JSON object"], source=str(path))
     return doc

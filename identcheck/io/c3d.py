@@ -165,6 +165,22 @@ def _walk(raw: bytes, pos: int, end: int, proc: int, records: list) -> str:
     return f"parameter section: more than {_MAX_RECORDS} records (their links loop)"
 
 
+def _stored_frames(raw: bytes) -> int | None:
+    """POINT:FRAMES as the file stores it (None if absent): ezc3d sets the parameter it returns to the frames it
+    could read, so a file cut at a block boundary would seem to agree with itself. Stored as a signed 16-bit
+    integer, a count above 32767 reads negative and is taken modulo 65536."""
+    start = (raw[0] - 1) * 512
+    n_blocks, proc = raw[start + 2], raw[start + 3]
+    records: list[_Record] = []
+    _walk(raw, start + 4, start + 512 * n_blocks, proc, records)
+    groups = {-r.group: r.name.upper() for r in records if r.group < 0}
+    for r in records:
+        if r.group > 0 and groups.get(r.group) == "POINT" and r.name.upper() == "FRAMES" and r.values:
+            value = int(r.values[0])
+            return value + 65536 if r.kind == 2 and value < 0 else value
+    return None
+
+
 def _numbers(data: bytes, kind: int, proc: int) -> tuple:
     """A numeric parameter's values (empty for characters; DEC floats, whose VAX format this does not decode, as
     zeros: only their count is checked)."""
@@ -378,6 +394,8 @@ def read_c3d(path) -> MarkerData:
                                   else layout["start"])
     frames_param = _value(params, "POINT", "FRAMES", problems)
     frames_param = int(frames_param[0]) if frames_param is not None and len(frames_param) else None
+    stored = _stored_frames(raw)
+    frames_param = stored if stored is not None else frames_param
     if announced is not None and n_frames > announced:
         problems.append(f"POINT:FRAMES says {frames_param} frames but the header's frame range says {announced}: "
                         f"the {n_frames - announced} frames past the header's last would be read from padding")

@@ -153,11 +153,32 @@ def test_c3d_round_trip_with_gaps(tmp_path):
        rate=st.sampled_from([50.0, 60.0, 100.0, 148.0, 250.0]),
        ext=st.sampled_from([".trc", ".c3d", ".TRC", ".C3D"]))
 def test_round_trip_property(tmp_path_factory, xyz, rate, ext):
+    """Written and read back, a trial is unchanged, except that a sample at exactly (0, 0, 0) comes back as a gap:
+    in a file that is the exporters' placeholder for a missing sample (:func:`identcheck.trial.zeros_as_gaps`)."""
     xyz[np.isnan(xyz).any(axis=2)] = np.nan  # samples are whole or missing
-    t = Trial.from_array(xyz, [f"m{i}" for i in range(xyz.shape[1])], rate)
+    labels = [f"m{i}" for i in range(xyz.shape[1])]
+    t = Trial.from_array(xyz, labels, rate)
     path = tmp_path_factory.mktemp("rt") / f"trial{ext}"
     t.to_file(path)
-    assert_same(Trial.from_file(path), t)
+    expected = xyz.copy()
+    expected[np.all(xyz == 0, axis=2)] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert_same(Trial.from_file(path), Trial.from_array(expected, labels, rate))
+
+
+def test_zero_samples_in_a_file_are_gaps_with_a_warning(tmp_path):
+    """A marker written as (0, 0, 0) in some frames is read as occluded there, and the warning names it and counts
+    its frames; a coordinate of zero beside non-zero ones is a position."""
+    xyz = np.arange(1.0, 1 + 5 * 2 * 3).reshape(5, 2, 3)
+    xyz[1:3, 1] = 0.0
+    xyz[4, 0, 0] = 0.0
+    path = tmp_path / "zeros.trc"
+    Trial.from_array(xyz, ["A", "B"], 100.0).to_file(path)
+    with pytest.warns(UserWarning, match=r"2 sample\(s\) at exactly \(0, 0, 0\).*B \(2 frames\)"):
+        t = Trial.from_file(path)
+    assert np.isnan(t.xyz[1:3, 1]).all() and not np.isnan(t.xyz[[0, 3, 4], 1]).any()
+    assert t.xyz[4, 0, 0] == 0.0
 
 
 def test_from_file_unknown_extension(tmp_path):
