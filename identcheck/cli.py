@@ -140,7 +140,8 @@ def _cmd_fit(a) -> int:
 
 def _cmd_plan(a) -> int:
     res = api.plan(a.model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest, witness=a.witness,
-                   progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion, frames=a.frames,
+                   progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion or "functional",
+                   frames=PLAN_FRAMES if a.frames is None else a.frames,
                    max_seconds=a.max_seconds)
     if a.figure:
         from identcheck.report.plan_figure import draw
@@ -362,9 +363,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "that reproduces every marker, verified at 50 digits (seconds to a minute)")
     s.add_argument("--noise-mm", type=float, default=None, metavar="SIGMA",
                    help="also predict what a capture with this marker noise would determine (practical verdicts)")
-    s.add_argument("--motion", default="functional", metavar="NAME|TRIAL",
-                   help="the motion of that capture: functional, flexion or small, or a recorded trial")
-    s.add_argument("--frames", type=int, default=1000, metavar="N", help="frames of that capture")
+    s.add_argument("--motion", default=None, metavar="NAME|TRIAL",
+                   help="the motion of that capture (with --noise-mm): functional (default), flexion or small, or a "
+                        "recorded trial")
+    s.add_argument("--frames", type=int, default=None, metavar="N",
+                   help=f"frames of that capture (with --noise-mm; default {PLAN_FRAMES})")
     s.set_defaults(func=_cmd_plan)
 
     s = sub.add_parser("diagnose", formatter_class=_Help, epilog=_epilog("identcheck diagnose examples/diagnose_leg.toml trial.trc --plots figures/", "the residual left is consistent with noise", "a gap stays unexplained"),
@@ -460,6 +463,7 @@ FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 JSON_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("truth",)}
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
+PLAN_FRAMES = 1000                  # frames of the capture plan --noise-mm predicts, unless --frames says
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
 
 
@@ -543,8 +547,13 @@ def preflight(a) -> list:
     if a.verb == "plan" and a.noise_mm is not None:
         if not 0 < a.noise_mm < math.inf:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")
-        if not 10 <= a.frames <= 20000:
+        if a.frames is not None and not 10 <= a.frames <= 20000:
             problems.append(f"--frames {a.frames}: between 10 and 20000 frames")
+    elif a.verb == "plan":
+        given = [f"--{o} {getattr(a, o)}" for o in ("motion", "frames") if getattr(a, o) is not None]
+        if given:
+            problems.append(f"{' and '.join(given)} describe{'s' if len(given) == 1 else ''} the capture that --noise-mm predicts; without "
+                            "--noise-mm nothing uses them (add --noise-mm SIGMA)")
     if a.verb == "batch":
         from identcheck.batch import extra
 

@@ -431,9 +431,12 @@ def _refuse_static(stats: PairStatistics, labels, source: str, usable=None) -> N
     np.fill_diagonal(S, 0.0)
     if not np.isfinite(S).all():
         return
-    a, b = divmod(int(np.argmax(S)), len(cols))
-    largest = float(S[a, b])
     i, j = np.triu_indices(len(cols), 1)
+    if not len(i):
+        return
+    k = int(np.argmax(S[i, j]))                          # a pair of two markers, even when every spread is 0
+    a, b = int(i[k]), int(j[k])
+    largest = float(S[a, b])
     few = evenly_spaced(stats.xyz, 50)[:, cols]
     with warnings.catch_warnings():                      # the markers' size: 50 frames are plenty
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -100,3 +100,24 @@ def test_a_number_too_long_to_read_is_not_a_certificate(run, tmp_path):
     cert.write_text(text)
     res = run(["verify", cert])
     assert res.code == 2 and "too long to read" in res.err
+
+
+@pytest.mark.parametrize("extra", [["--frames", "300"], ["--motion", "flexion"], ["--motion", "small", "--frames", "50"]])
+def test_plan_options_for_the_noise_prediction_need_noise(run, extra):
+    """--motion and --frames describe the capture --noise-mm predicts: without it they were ignored in silence."""
+    res = run(["plan", LEG, "--fast"] + extra)
+    assert res.code == 2 and "--noise-mm" in res.err and extra[1] in res.err
+
+
+def test_a_static_trial_names_two_markers(run, corpus, tmp_path):
+    """The static-trial message names the pair that moved most, two different markers even when none moved."""
+    from identcheck.trial import Trial
+
+    t = Trial.from_file(corpus / "leg.trc")
+    still = Trial(t.as_array()[:1].repeat(50, axis=0), t.labels, t.rate_hz)
+    path = tmp_path / "still.trc"
+    still.to_file(path)
+    res = run(["skeleton", path, "--out", tmp_path / "m.toml"])
+    assert res.code == 2 and "static" in res.err
+    pair = res.err.split("(spread, ")[1].split(")")[0].split("-")
+    assert len(pair) == 2 and pair[0] != pair[1]
