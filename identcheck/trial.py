@@ -276,7 +276,16 @@ class Trial:
             elif not np.isfinite(self._xyz[:, self._index[lab]]).all(axis=1).any():
                 problems.append(f"marker {lab!r}{seg(lab)} is in the model but never visible in the trial (every "
                                 "sample is empty): fix its labelling, or remove it from the model")
-        for a, b in self.coincident([lab for lab in labels if lab in self._index]):
+        present = [lab for lab in labels if lab in self._index]
+        pairs = self.coincident(present)
+        if len(present) >= 3 and len(pairs) == len(present) * (len(present) - 1) // 2:
+            # every marker within a millimetre of every other: one scale error, not many labelling ones
+            span = float(np.nanmax(np.abs(self.select(present).as_array())))
+            raise InputError(problems + [f"all {len(present)} markers of the model lie within {COINCIDENT_MM:g} mm of "
+                                         f"each other in every frame (no coordinate beyond {span:.3g} mm): the "
+                                         "coordinates look like metres in a file that says mm; fix its units field"],
+                             source=self._source)
+        for a, b in pairs:
             problems.append(f"markers {a!r}{seg(a)} and {b!r}{seg(b)} coincide: closer than {COINCIDENT_MM:g} mm in "
                             "every frame where both are seen, which two real markers cannot be; one marker exported "
                             "under two labels? fix the labelling, or remove one from the model")

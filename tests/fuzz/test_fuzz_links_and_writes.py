@@ -121,3 +121,15 @@ def test_a_static_trial_names_two_markers(run, corpus, tmp_path):
     assert res.code == 2 and "static" in res.err
     pair = res.err.split("(spread, ")[1].split(")")[0].split("-")
     assert len(pair) == 2 and pair[0] != pair[1]
+
+
+def test_metres_labelled_mm_is_one_message_about_units(run, corpus, tmp_path):
+    """A file in metres that says mm: every marker within a millimetre of every other, said once as a units
+    problem (it was a list of 45 'markers coincide: one marker under two labels?')."""
+    from identcheck.trial import Trial
+
+    t = Trial.from_file(corpus / "leg.trc")
+    path = tmp_path / "metres.trc"
+    Trial(t.as_array() / 1000.0, t.labels, t.rate_hz).to_file(path)
+    res = run(["fit", LEG, path, "--json"])
+    assert res.code == 2 and "metres in a file that says mm" in res.err and "two labels" not in res.err
