@@ -567,11 +567,14 @@ def preflight(a) -> list:
     if a.verb == "skeleton":
         problems += _skeleton_problems(a)
     if a.verb == "simulate":
-        for opt, ok in (("frames", 2 <= a.frames <= MAX_SIMULATED_FRAMES), ("rate", 0 < a.rate < math.inf),
-                        ("noise_mm", 0 <= a.noise_mm < math.inf), ("occlusion", 0 <= a.occlusion < 1),
-                        ("rom_deg", 0 <= a.rom_deg <= 360)):
+        for opt, ok, allowed in (
+                ("frames", 2 <= a.frames <= MAX_SIMULATED_FRAMES, f"2 to {MAX_SIMULATED_FRAMES:,} frames"),
+                ("rate", 0 < a.rate < math.inf, "a positive, finite rate in Hz"),
+                ("noise_mm", 0 <= a.noise_mm < math.inf, "0 or more mm, finite"),
+                ("occlusion", 0 <= a.occlusion < 1, "a fraction of frames from 0 up to (not including) 1"),
+                ("rom_deg", 0 <= a.rom_deg <= 360, "0 to 360 degrees")):
             if not ok:
-                problems.append(f"--{opt.replace('_', '-')} {getattr(a, opt)}: out of range")
+                problems.append(f"--{opt.replace('_', '-')} {getattr(a, opt)}: out of range ({allowed})")
     return problems
 
 
@@ -583,13 +586,14 @@ def _skeleton_problems(a) -> list:
                         f"with --out (identcheck skeleton TRIAL --out MODEL.toml)")
     if a.out and not str(a.out).lower().endswith(".toml"):
         problems.append(f"--out {a.out}: give a .toml file name (the model file to write)")
-    inputs = {os.path.abspath(p): opt for p, opt in ((a.trial, "the trial"), (a.segments, "--segments")) if p}
+    inputs = [(p, opt) for p, opt in ((a.trial, "the trial"), (a.segments, "--segments")) if p]
     for opt in ("out", "export_markers"):
         path = getattr(a, opt)
-        if path and os.path.abspath(path) in inputs:
-            problems.append(f"--{opt.replace('_', '-')} {path}: is {inputs[os.path.abspath(path)]}; it would be "
+        hit = next((what for p, what in inputs if path and same_file(path, p)), None)
+        if hit:
+            problems.append(f"--{opt.replace('_', '-')} {path}: is {hit} (or a link to it); it would be "
                             "overwritten: give another file name")
-    if a.out and a.export_markers and os.path.abspath(a.out) == os.path.abspath(a.export_markers):
+    if a.out and a.export_markers and same_file(a.out, a.export_markers):
         problems.append(f"--out and --export-markers are the same file {a.out}")
     return problems
 
