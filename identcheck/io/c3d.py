@@ -473,6 +473,10 @@ def _labels(params: dict, n_points: int, problems: list[str]) -> tuple[str, ...]
     return tuple(labels)
 
 
+MAX_LABEL_BYTES = 255
+"""Longest label a C3D parameter can hold (its dimensions are single bytes)."""
+
+
 def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 0) -> None:
     """Write marker trajectories as a C3D file (float storage, ``POINT:UNITS = "mm"``).
 
@@ -490,9 +494,15 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     Raises
     ------
     InputError
-        ezc3d missing (:class:`MissingDependencyError`) or the file cannot be written.
+        ezc3d missing (:class:`MissingDependencyError`), a label C3D cannot store (longer than 255 bytes: a
+        parameter's dimension is one byte, and the file would not read back), or the file cannot be written.
     """
     path = Path(path)
+    long = [lab for lab in labels if len(str(lab).encode("utf-8")) > MAX_LABEL_BYTES]
+    if long:
+        raise InputError([f"marker label {lab[:40]!r}... is {len(lab.encode('utf-8'))} bytes long; a C3D file stores "
+                          f"at most {MAX_LABEL_BYTES}: shorten it, or write a TRC file" for lab in long[:3]],
+                         source=str(path))
     ezc3d = _ezc3d(str(path))
     xyz = np.asarray(xyz, dtype=np.float64)
     n_frames, n_markers = xyz.shape[:2]

@@ -14,6 +14,7 @@ import json
 import os
 import shutil
 
+import numpy as np
 import pytest
 
 from fuzz_support import LEG
@@ -133,3 +134,17 @@ def test_metres_labelled_mm_is_one_message_about_units(run, corpus, tmp_path):
     Trial(t.as_array() / 1000.0, t.labels, t.rate_hz).to_file(path)
     res = run(["fit", LEG, path, "--json"])
     assert res.code == 2 and "metres in a file that says mm" in res.err and "two labels" not in res.err
+
+
+def test_a_label_too_long_for_c3d_is_refused_before_writing(tmp_path):
+    """C3D stores a label in at most 255 bytes: a longer one was written, and the file did not read back."""
+    from identcheck.errors import InputError
+    from identcheck.trial import Trial
+
+    long = "M" * 300
+    t = Trial(np.zeros((3, 2, 3)) + 1.0, ["A", long], 100.0)
+    with pytest.raises(InputError, match="300 bytes long; a C3D file stores at most 255"):
+        t.to_file(tmp_path / "long.c3d")
+    assert not (tmp_path / "long.c3d").exists()
+    t.to_file(tmp_path / "long.trc")
+    assert Trial.from_file(tmp_path / "long.trc").labels == ("A", long)
