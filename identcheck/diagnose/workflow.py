@@ -23,6 +23,7 @@ from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
 from identcheck.diagnose.backward import Adopted, Redundant, redundant
 from identcheck.estimate.noise import noise_floor
+from identcheck.estimate.spikes import without_spikes
 
 log = logging.getLogger("identcheck")
 
@@ -245,6 +246,9 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
 
     The trial is fitted moved near the origin (:meth:`identcheck.trial.Trial.recentred`: float64 sums of squares
     of coordinates 100 m from the origin lose the millimetres); the result carries the move (``offset``)."""
+    trial, spikes = without_spikes(trial)
+    if spikes:
+        warnings.warn(spikes["message"], UserWarning, stacklevel=2)
     trial, offset = trial.recentred()
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)

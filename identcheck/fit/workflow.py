@@ -264,6 +264,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     import warnings as _w
 
     from identcheck.estimate.labels import screen
+    from identcheck.estimate.spikes import without_spikes
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
     from identcheck.fit.whole_tree import merge_report, misfit_warnings
@@ -275,13 +276,15 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
         raise InputError([f"marker {m!r} carries the name fit gives a virtual marker of joint {reserved[m]!r}; rename "
                           "it" for m in clash], source=trial.source)
     trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
+    trial, spikes = without_spikes(trial)
     centred, offset = trial.recentred()
     screened, swaps = screen(model, centred)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
         fitted, points, tree = fit_closed_then_tree(model, screened, progress)
     rep = merge_report(report(model, fitted, points), tree, model, screened)
-    notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + list(swaps)
+    notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + ([spikes] if spikes else [])
+    notes += list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
               if issubclass(c.category, UserWarning)]
     if tree.best is not None:
