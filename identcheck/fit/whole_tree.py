@@ -482,11 +482,29 @@ def _closed_form_only(joint: dict, problem: str) -> str:
     return "closed-form estimate only, no calibrated interval: " + "; ".join(parts + [tree_why])
 
 
-def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
+def _jumped(j: dict, joint: str, deg: float, row: int, trial) -> dict:
+    """A joint's answer when its angle jumps (:mod:`identcheck.bundle.continuity`): undetermined, every interval
+    unbounded, the jump and its frames named (the geometry fitted through it is not the joint's)."""
+    a, b = trial.frame_number(row), trial.frame_number(row + 1)
+    why = (f"{joint}'s angle jumps by {deg:.0f} deg between frames {a} and {b} ({deg * trial.rate_hz:.0f} deg/s, "
+           "faster than any joint turns): markers of its segments exchanged labels there (two markers placed alike "
+           "about the joint swap without changing a distance), or one was lost and another took its label; the "
+           "fit through it is not the joint's: fix the labels from that frame, or fit the frames before it "
+           "(--frames)")
+    j = dict(j, unique=False, marker_distances_ci95={m: [0.0, None] for m in j.get("marker_distances") or {}},
+             interval_method={m: "unbounded" for m in j.get("marker_distances") or {}})
+    j["practical"] = dict(j.get("practical") or {}, verdict="undetermined", reason=why, motion_advice="")
+    j["excitation"] = {"ok": False, "reason": why}
+    return j
+
+
+def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = None) -> dict:
     """The contract's ``fit`` JSON with the whole-tree answer in place of the closed-form one: each joint's
     marker distances, 95 % intervals, uncertainty, alternatives (likelihood ratio), practical verdict and
     ``unique`` (= determined); the closed-form estimate stays as ``start`` (and in ``notes``). Without a
-    whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined."""
+    whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined. A joint in
+    ``jumps`` (:func:`identcheck.bundle.continuity.angle_jumps`) with any interval bounded is undetermined with
+    unbounded intervals (the fit through the jump is not the joint's)."""
     joints = {}
     undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
                    if j.get("marker_distances") and not rep_unique(j)}
@@ -520,6 +538,9 @@ def merge_report(rep: dict, tree: TreeFit, model, trial) -> dict:
             j["excitation"] = {"ok": verdict["verdict"] != "undetermined",
                                "reason": "ok" if verdict["verdict"] == "determined"
                                else f"{verdict['reason']}. {verdict['motion_advice']}".strip()}
+            if jumps and name in jumps and any(hi is not None for _, hi in j["marker_distances_ci95"].values()):
+                # (a joint already bounded by nothing keeps its own reason: a static trial's angles are free to jump)
+                j = _jumped(j, name, *jumps[name], trial)
         else:
             why = j["excitation"]["reason"] if j.get("estimator") is None else _closed_form_only(j, tree.problem)
             j["unique"] = False

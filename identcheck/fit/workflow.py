@@ -263,6 +263,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     figure of the fit needs (:func:`identcheck.fit.scene.fit_scene`)."""
     import warnings as _w
 
+    from identcheck.bundle.continuity import angle_jumps
     from identcheck.estimate.labels import screen
     from identcheck.estimate.spikes import without_spikes
     from identcheck.fit.anatomy import anatomical_report
@@ -282,11 +283,21 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
         fitted, points, tree = fit_closed_then_tree(model, screened, progress)
-    rep = merge_report(report(model, fitted, points), tree, model, screened)
+    jumps = {}
+    if tree.best is not None:
+        jumps = angle_jumps(tree.best.fit, screened.select(tree.best.fit.chain.labels).as_array(), screened.rate_hz)
+    rep = merge_report(report(model, fitted, points), tree, model, screened, jumps)
     notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + ([spikes] if spikes else [])
     notes += list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
               if issubclass(c.category, UserWarning)]
+    for j, (deg, row) in jumps.items():
+        if not rep["joints"][j]["practical"]["reason"].startswith(f"{j}'s angle jumps"):
+            continue                        # undetermined for its own reason already (a static trial's angles jump)
+        notes.append({"kind": "angle_jump", "joints": [j], "frames": [row, row + 1],
+                      "file_frames": [screened.frame_number(row), screened.frame_number(row + 1)],
+                      "markers": list(model.segments[model.joints[j].child].markers),
+                      "message": rep["joints"][j]["practical"]["reason"]})
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
         if not tree.best.fit.converged:
