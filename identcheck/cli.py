@@ -552,8 +552,9 @@ def preflight(a) -> list:
     elif a.verb == "plan":
         given = [f"--{o} {getattr(a, o)}" for o in ("motion", "frames") if getattr(a, o) is not None]
         if given:
-            problems.append(f"{' and '.join(given)} describe{'s' if len(given) == 1 else ''} the capture that --noise-mm predicts; without "
-                            "--noise-mm nothing uses them (add --noise-mm SIGMA)")
+            verb = "describes" if len(given) == 1 else "describe"
+            problems.append(f"{' and '.join(given)} {verb} the capture that --noise-mm predicts; without --noise-mm "
+                            "nothing uses them (add --noise-mm SIGMA)")
     if a.verb == "batch":
         from identcheck.batch import extra
 

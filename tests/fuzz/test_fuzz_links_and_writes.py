@@ -103,7 +103,8 @@ def test_a_number_too_long_to_read_is_not_a_certificate(run, tmp_path):
     assert res.code == 2 and "too long to read" in res.err
 
 
-@pytest.mark.parametrize("extra", [["--frames", "300"], ["--motion", "flexion"], ["--motion", "small", "--frames", "50"]])
+@pytest.mark.parametrize("extra", [["--frames", "300"], ["--motion", "flexion"],
+                                   ["--motion", "small", "--frames", "50"]])
 def test_plan_options_for_the_noise_prediction_need_noise(run, extra):
     """--motion and --frames describe the capture --noise-mm predicts: without it they were ignored in silence."""
     res = run(["plan", LEG, "--fast"] + extra)
