@@ -685,7 +685,10 @@ def main(argv=None) -> int:
         print(f"identcheck {a.verb}: {exc}", file=sys.stderr)
         return 2
     except DegenerateError as exc:
-        print(f"identcheck {a.verb}: degenerate data: {exc}", file=sys.stderr)
+        where = f"{a.trial}: " if getattr(a, "trial", None) and str(a.trial) not in str(exc) else ""
+        print(f"identcheck {a.verb}: degenerate data: {where}{exc}", file=sys.stderr)
+        if getattr(a, "json", False):   # exit 1 is an answer, and --json promises one document for it
+            _print_json({"ok": False, "degenerate": f"{where}{exc}"})
         return 1
     except BrokenPipeError:
         raise

@@ -149,3 +149,19 @@ def test_a_label_too_long_for_c3d_is_refused_before_writing(tmp_path):
     assert not (tmp_path / "long.c3d").exists()
     t.to_file(tmp_path / "long.trc")
     assert Trial.from_file(tmp_path / "long.trc").labels == ("A", long)
+
+
+def test_degenerate_data_with_json_is_still_one_document(run, corpus, tmp_path):
+    """identify on a static knee trial stops on degenerate data (exit 1, a negative answer): with --json it printed
+    nothing on stdout, against the contract's one document; now a document saying so, naming the file."""
+    from fuzz_support import KNEE
+    from identcheck.trial import Trial
+
+    t = Trial.from_file(corpus / "knee.trc")
+    xyz = t.as_array()
+    xyz[:] = xyz[0]
+    path = tmp_path / "still.trc"
+    Trial(xyz, t.labels, t.rate_hz).to_file(path)
+    res = run(["identify", KNEE, path, "--json"])
+    doc = json.loads(res.out)
+    assert res.code == 1 and doc["ok"] is False and str(path) in doc["degenerate"]
