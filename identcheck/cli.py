@@ -580,23 +580,14 @@ def preflight(a) -> list:
 
 
 def _skeleton_problems(a) -> list:
-    """``skeleton``'s own checks: a trial first, a .toml model to write, and no output over an input."""
+    """``skeleton``'s own checks: a trial first, and a .toml model to write."""
     problems = []
     if str(a.trial).lower().endswith(".toml"):
         problems.append(f"{a.trial} is a TOML file; skeleton takes the trial (.trc or .c3d) and writes the model "
                         f"with --out (identcheck skeleton TRIAL --out MODEL.toml)")
     if a.out and not str(a.out).lower().endswith(".toml"):
         problems.append(f"--out {a.out}: give a .toml file name (the model file to write)")
-    inputs = [(p, opt) for p, opt in ((a.trial, "the trial"), (a.segments, "--segments")) if p]
-    for opt in ("out", "export_markers"):
-        path = getattr(a, opt)
-        hit = next((what for p, what in inputs if path and same_file(path, p)), None)
-        if hit:
-            problems.append(f"--{opt.replace('_', '-')} {path}: is {hit} (or a link to it); it would be "
-                            "overwritten: give another file name")
-    if a.out and a.export_markers and same_file(a.out, a.export_markers):
-        problems.append(f"--out and --export-markers are the same file {a.out}")
-    return problems
+    return problems           # an output over an input, or over the other output: preflight's own checks
 
 
 def _unwritable_file(path) -> str:

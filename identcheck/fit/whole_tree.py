@@ -504,8 +504,9 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
     ``unique`` (= determined); the closed-form estimate stays as ``start`` (and in ``notes``). Without a
     whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined. A joint in
     ``jumps`` (:func:`identcheck.bundle.continuity.angle_jumps`) with any interval bounded is undetermined with
-    unbounded intervals (the fit through the jump is not the joint's)."""
-    joints = {}
+    unbounded intervals (the fit through the jump is not the joint's), and ``warnings`` holds an ``angle_jump`` for
+    each such joint."""
+    joints, jumped = {}, []
     undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
                    if j.get("marker_distances") and not rep_unique(j)}
     answers = joint_answers(tree, model, undecidable) if tree.best is not None else {}
@@ -541,6 +542,11 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
             if jumps and name in jumps and any(hi is not None for _, hi in j["marker_distances_ci95"].values()):
                 # (a joint already bounded by nothing keeps its own reason: a static trial's angles are free to jump)
                 j = _jumped(j, name, *jumps[name], trial)
+                deg, row = jumps[name]
+                jumped.append({"kind": "angle_jump", "joints": [name], "frames": [row, row + 1],
+                               "file_frames": [trial.frame_number(row), trial.frame_number(row + 1)],
+                               "markers": list(model.segments[model.joints[name].child].markers),
+                               "message": j["practical"]["reason"]})
         else:
             why = j["excitation"]["reason"] if j.get("estimator") is None else _closed_form_only(j, tree.problem)
             j["unique"] = False
@@ -556,6 +562,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
         joints[name] = j
     out = dict(rep)
     out["joints"] = joints
+    out["warnings"] = jumped
     out["noise"] = noise_report(tree) if tree.best is not None else {
         "sigma_mm": None, "correlation": None, "source": "no whole-tree fit: " + (tree.problem or "no start")}
     return out

@@ -291,13 +291,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     notes += list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
               if issubclass(c.category, UserWarning)]
-    for j, (deg, row) in jumps.items():
-        if not rep["joints"][j]["practical"]["reason"].startswith(f"{j}'s angle jumps"):
-            continue                        # undetermined for its own reason already (a static trial's angles jump)
-        notes.append({"kind": "angle_jump", "joints": [j], "frames": [row, row + 1],
-                      "file_frames": [screened.frame_number(row), screened.frame_number(row + 1)],
-                      "markers": list(model.segments[model.joints[j].child].markers),
-                      "message": rep["joints"][j]["practical"]["reason"]})
+    notes += rep["warnings"]                # the joints whose angle jumped (merge_report)
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
         if not tree.best.fit.converged:
