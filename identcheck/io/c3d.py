@@ -197,7 +197,8 @@ def _numbers(data: bytes, kind: int, proc: int) -> tuple:
 def _meaning_problems(records: list) -> list[str]:
     """Groups and parameters ezc3d would misread: a parameter of no group, two groups with one id or name, a
     parameter twice in its group, a parameter of :data:`REQUIRED` (or of a present group of :data:`IF_GROUP`)
-    missing, one of :data:`NUMERIC` empty, not numeric or not finite, one of :data:`NOT_NEGATIVE` negative."""
+    missing, one of :data:`NUMERIC` empty, not numeric or not finite, one of :data:`NOT_NEGATIVE` negative (but a
+    16-bit POINT:FRAMES, which counts up to 65535 and reads negative above 32767: see :func:`_stored_frames`)."""
     groups: dict[int, str] = {}
     problems = []
     for r in records:
@@ -227,7 +228,7 @@ def _meaning_problems(records: list) -> list[str]:
         if r.kind == -1 or not r.values or not math.isfinite(r.values[0]):
             held = "characters" if r.kind == -1 else "nothing" if not r.values else r.values[0]
             problems.append(f"{where} holds {held}, not a number")
-        elif key in NOT_NEGATIVE and r.values[0] < 0:
+        elif key in NOT_NEGATIVE and r.values[0] < 0 and not (key == ("POINT", "FRAMES") and r.kind == 2):
             problems.append(f"{where} is {r.values[0]:g}: a count, block number or rate, never negative")
     return problems
 
@@ -476,6 +477,9 @@ def _labels(params: dict, n_points: int, problems: list[str]) -> tuple[str, ...]
 MAX_LABEL_BYTES = 255
 """Longest label a C3D parameter can hold (its dimensions are single bytes)."""
 
+MAX_FRAMES = 65535
+"""Most frames a C3D file's header and its 16-bit POINT:FRAMES can count (ezc3d silently keeps only these)."""
+
 
 def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 0) -> None:
     """Write marker trajectories as a C3D file (float storage, ``POINT:UNITS = "mm"``).
@@ -495,9 +499,13 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     ------
     InputError
         ezc3d missing (:class:`MissingDependencyError`), a label C3D cannot store (longer than 255 bytes: a
-        parameter's dimension is one byte, and the file would not read back), or the file cannot be written.
+        parameter's dimension is one byte, and the file would not read back), more than :data:`MAX_FRAMES` frames
+        (ezc3d would write only the first 65535), or the file cannot be written.
     """
     path = Path(path)
+    if len(xyz) > MAX_FRAMES:
+        raise InputError([f"{len(xyz)} frames; a C3D file counts at most {MAX_FRAMES} (its header and POINT:FRAMES "
+                          "are 16-bit): write a TRC file, or fewer frames"], source=str(path))
     long = [lab for lab in labels if len(str(lab).encode("utf-8")) > MAX_LABEL_BYTES]
     if long:
         raise InputError([f"marker label {lab[:40]!r}... is {len(lab.encode('utf-8'))} bytes long; a C3D file stores "

@@ -69,3 +69,24 @@ def test_a_file_cut_inside_its_data_is_an_error(tmp_path):
     (tmp_path / "cut.c3d").write_bytes(cut)
     with pytest.raises(InputError, match="truncated|not a readable"):
         read_c3d(tmp_path / "cut.c3d")
+
+
+@settings(max_examples=4, deadline=None)
+@given(n_frames=st.integers(32768, 65535), seed=st.integers(0, 2**16))
+def test_more_than_32767_frames_read_back(tmp_path_factory, n_frames, seed):
+    """POINT:FRAMES is a 16-bit integer that counts up to 65535: above 32767 it reads negative, and is still a
+    count (the reader had refused every file it wrote of more than 32767 frames)."""
+    xyz = np.random.default_rng(seed).normal(0, 100, (n_frames, 1, 3))
+    path = tmp_path_factory.mktemp("long") / "long.c3d"
+    write_c3d(path, xyz, ["M"], 100.0)
+    back = read_c3d(path)
+    assert back.xyz.shape == xyz.shape
+    np.testing.assert_allclose(back.xyz[[0, -1]], xyz[[0, -1]], atol=1e-3)
+
+
+def test_more_frames_than_a_c3d_counts_are_refused_before_writing(tmp_path):
+    """ezc3d writes only the first 65535 frames of a longer trial, silently: the writer refuses instead."""
+    path = tmp_path / "too_long.c3d"
+    with pytest.raises(InputError, match="65536 frames; a C3D file counts at most 65535"):
+        write_c3d(path, np.zeros((65536, 1, 3)), ["M"], 100.0)
+    assert not path.exists()
