@@ -102,11 +102,14 @@ def _travel_reason(X: np.ndarray, sigma: float) -> str:
     move enough): the joint must be located from their travel, and travel comparable with the noise
     (or a static trial) leaves it undetermined however well a curve fits the scatter."""
     travel = float(max(np.ptp(X[:, i], axis=0).max() for i in range(X.shape[1])))
-    need = max(MIN_TRAVEL_MM, 10.0 * sigma)
-    if travel >= need:
+    if travel < MIN_TRAVEL_MM:
+        need = f"< {MIN_TRAVEL_MM:g} mm"
+    elif travel < 10.0 * sigma:
+        need = f"< 10 times the fit's rms residual, {sigma:.3g} mm"
+    else:
         return ""
     return (f"too little motion: the child markers move at most {travel:.3g} mm relative to the parent "
-            f"(< {need:.3g} mm); a static or nearly static trial does not locate the joint. Record the "
+            f"({need}); a static or nearly static trial does not locate the joint. Record the "
             "joint's functional movement.")
 
 
@@ -250,6 +253,8 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     if len(frames) < revolute21.N_UNKNOWNS:
         raise DegenerateError(f"{case}: only {len(frames)} frames with every marker seen; at least 5 are needed")
     local, _ = pair_frame(a1[frames], a2[frames], child[frames, 0])
+    if np.ptp(local, axis=0).max() < MIN_TRAVEL_MM:     # the least squares would chase the noise to any size
+        raise DegenerateError(f"{case}: {_travel_reason(local[:, None, :], 0.0)}")
     every = max(1, len(local) // SEED_SAMPLES)       # a start for the whole-tree fit: a spread subset will do
     sols = revolute21_fit.fit(local[::every], max_nfev=SEED_NFEV)
     if not sols:
