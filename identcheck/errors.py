@@ -17,9 +17,13 @@ class InputError(ValueError):
         frame it concerns.
     source : str, optional
         The file (or other source) the problems were found in; prefixed to the message.
+    segment : str, optional
+        The segment of a model the problem keeps from being posed or moved, when there is one: a whole-tree
+        fit can leave that segment, and what hangs from it, out and fit the rest.
     """
 
-    def __init__(self, problems, source: str | None = None):
+    def __init__(self, problems, source: str | None = None, segment: str | None = None):
+        self.segment = segment
         if isinstance(problems, str):
             problems = [problems]
         self.problems = list(problems)
@@ -36,11 +40,17 @@ class InputError(ValueError):
 
         For an error raised on arrays below the readers (an estimator knows no file): the verb that read the
         file re-raises it naming the file, and, with `prefix`, the joint or segment it was working on."""
-        return InputError([prefix + p for p in self.problems], source=source)
+        return InputError([prefix + p for p in self.problems], source=source, segment=self.segment)
 
 
 class DegenerateError(ValueError):
-    """The samples do not determine the answer (singular system, coincident markers, α = 0, ...)."""
+    """The samples do not determine the answer (singular system, coincident markers, α = 0, ...).
+
+    ``segment``, when given, names the model segment the samples fail to pose or move (see :class:`InputError`)."""
+
+    def __init__(self, *args, segment: str | None = None):
+        super().__init__(*args)
+        self.segment = segment
 
 
 class DerivationError(RuntimeError):

@@ -74,6 +74,7 @@ class TreeFit:
     starts_left_out: int = 0
     one_joint_starts: int = 0       # the first combination's one-joint changes (each joint's other candidates)
     one_joint_left_out: int = 0     # of which the time budget left this many unfitted
+    left_out: dict = field(default_factory=dict)    # joint -> why the fit left it (and the joints below it) out
 
 
 def skeleton_of(model, trial) -> Skeleton:
@@ -99,13 +100,13 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
             pts = np.concatenate([pts, _roll_point(pts[:, 0], pts[:, 1])[:, None]], axis=1)
         if pts.shape[1] < 3:
             raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
-                                  "pose it (three are needed to start the whole-tree fit)")
+                                  "pose it (three are needed to start the whole-tree fit)", segment=seg)
         try:
             local, poses = refine_local(pts, tol=START_SHAPE_TOL_MM)
         except ValueError as exc:
-            raise DegenerateError(f"segment {seg!r}: {exc}") from None
+            raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
         if poses.valid.sum() < 3:
-            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points")
+            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points", segment=seg)
         out[seg] = Poses(R=fill_gaps(poses.valid, poses.R), t=fill_gaps(poses.valid, poses.t), valid=poses.valid,
                          local=local[:len(idx)], rms=poses.rms)
     return out
@@ -211,16 +212,74 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
     return combos[:cap], max(len(combos) - cap, 0) + unlisted, "", singles
 
 
+def without_subtrees(model, joints) -> tuple:
+    """(the model without `joints` and everything hanging from them, the joints left out, parents first)."""
+    gone: set = set()
+    for j in model.joint_order:                                # parents before children
+        if j in joints or model.joints[j].parent in gone:
+            gone.add(model.joints[j].child)
+    keep = {j: jt for j, jt in model.joints.items() if jt.child not in gone}
+    return (replace(model, segments={n: s for n, s in model.segments.items() if n not in gone}, joints=keep),
+            [j for j in model.joint_order if j not in keep])
+
+
+def _rarely_seen(model, trial, joints) -> str:
+    """The markers of the segments below `joints` that the trial shows in fewer than half its frames, with their
+    counts: the usual reason a segment cannot be posed or seen to move."""
+    data = trial.select([m for m in model.markers if m in trial.labels]).as_array()
+    col = {m: i for i, m in enumerate(m for m in model.markers if m in trial.labels)}
+    segs = {model.joints[j].child for j in joints}
+    rare = []
+    for seg in segs:
+        for m in model.segments[seg].markers:
+            n = int(np.isfinite(data[:, col[m]]).all(axis=1).sum()) if m in col else 0
+            if n < len(data) / 2:
+                rare.append(f"{m} is seen in {n} of {len(data)} frames")
+    return f" ({'; '.join(rare)})" if rare else ""
+
+
 def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
              starts_budget_s: float = STARTS_BUDGET_S) -> TreeFit:
     """Whole-tree maximum likelihood from every combination of closed-form candidates (see module doc); no new
-    start after ``starts_budget_s`` seconds (those left out are counted in ``starts_left_out``)."""
+    start after ``starts_budget_s`` seconds (those left out are counted in ``starts_left_out``).
+
+    A joint no start can be made for (no closed form, a child segment no frame poses, a hinge that never turns) is
+    left out with every joint below it, and the rest of the tree is fitted without their markers: a foot marker
+    seen in five frames no longer keeps the hip and knee from their fit. ``left_out`` says why, per joint."""
+    left_out: dict = {}
+    while True:
+        tree, stuck = _fit_once(model, trial, closed_form, progress, restart, starts_budget_s)
+        stuck = {j for j in stuck if j in model.joints}
+        if tree.best is not None or not stuck:
+            break
+        smaller, gone = without_subtrees(model, stuck)
+        if not smaller.joints:
+            break
+        why = tree.problem + _rarely_seen(model, trial, stuck)
+        for j in gone:
+            above = next(k for k in model.joint_order if k in stuck and (k == j or j in _below(model, k)))
+            left_out[j] = why if j == above else f"it hangs below {above}, which the fit left out: {why}"
+        if progress:
+            progress(f"whole-tree fit without {', '.join(gone)}: {tree.problem}")
+        model, closed_form = smaller, {k: v for k, v in closed_form.items() if k in smaller.joints}
+    tree.left_out = {**left_out, **tree.left_out}
+    return tree
+
+
+def _below(model, joint: str) -> list:
+    return without_subtrees(model, {joint})[1][1:]
+
+
+def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_s: float) -> tuple:
+    """(the whole-tree fit of `model`, the joints that kept it from starting: no closed-form start, or a child
+    segment the start could not pose or move)."""
     chain = skeleton_of(model, trial)
     data = trial.select(chain.labels).as_array()
     combos, left_out, why, singles = _starts(chain, closed_form, restart, data)
     if not combos:
-        return TreeFit(None, problem=why)
+        return TreeFit(None, problem=why), {j for j in chain.joints if j not in candidates(closed_form)}
     minima, problems, tried, singles_cut = [], [], 0, 0
+    stuck: set = set()
     t0 = time.monotonic()
     for k, combo in enumerate(combos):
         if minima and time.monotonic() - t0 > starts_budget_s:
@@ -240,12 +299,13 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
             state = initial_state(chain, data, frames=frames)
         except (DegenerateError, InputError) as exc:
             problems.append(str(exc))
+            stuck |= {j for j in chain.joints if chain.child[j] == exc.segment}
             continue
         fit = converged_fit(chain, data, state, progress)
         minima.append(minimum(fit, data, start=tuple(id(e) for e in combo.values())))
     if not minima:
         return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out,
-                       one_joint_starts=singles, one_joint_left_out=singles_cut)
+                       one_joint_starts=singles, one_joint_left_out=singles_cut), stuck
     minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
     best = minima[0]
     scale = likelihood_scale(best)
@@ -259,7 +319,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     best = _without_incidental_rolls(best, others, data, model_error, scale)
     return TreeFit(best, others, n_starts=tried, starts_left_out=left_out, one_joint_starts=singles,
-                   one_joint_left_out=singles_cut)
+                   one_joint_left_out=singles_cut), set()
 
 
 def converged_fit(chain: Skeleton, data, state, progress=None, weights=None):
@@ -472,11 +532,12 @@ def rep_unique(j: dict) -> bool:
     return not (j.get("twins_undecidable") and j.get("alternatives"))
 
 
-def _closed_form_only(joint: dict, problem: str) -> str:
+def _closed_form_only(joint: dict, problem: str, left_out: str | None = None) -> str:
     """Why a joint has only its closed-form estimate: its own estimator's excitation finding first (on a static
     trial a hip's is its own stillness, where the whole-tree fit's problem may be a knee's), then why the
-    whole-tree fit did not run."""
-    tree_why = f"the whole-tree fit did not run: {problem or 'no start'}"
+    whole-tree fit did not run, or (`left_out`) why it left this joint out."""
+    tree_why = (f"the whole-tree fit left it out: {left_out}" if left_out
+                else f"the whole-tree fit did not run: {problem or 'no start'}")
     own = joint.get("excitation") or {}
     parts = [own["reason"]] if own.get("ok") is False and own.get("reason") and own["reason"] not in tree_why else []
     return "closed-form estimate only, no calibrated interval: " + "; ".join(parts + [tree_why])
@@ -548,7 +609,8 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
                                "markers": list(model.segments[model.joints[name].child].markers),
                                "message": j["practical"]["reason"]})
         else:
-            why = j["excitation"]["reason"] if j.get("estimator") is None else _closed_form_only(j, tree.problem)
+            why = j["excitation"]["reason"] if j.get("estimator") is None else _closed_form_only(
+                j, tree.problem, tree.left_out.get(name))
             j["unique"] = False
             # the closed form's numbers stay (they are what a user would otherwise compute), but nothing bounds them
             j["marker_distances_ci95"] = {m: [0.0, None] for m in j.get("marker_distances") or {}}

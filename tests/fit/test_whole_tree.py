@@ -291,3 +291,32 @@ def test_an_e1_ambiguous_knee_below_an_unposed_thigh_claims_no_interval(examples
     assert knee["practical"]["verdict"] == "ambiguous" and "E1" in knee["practical"]["reason"]
     assert all(v == [0.0, None] for v in knee["marker_distances_ci95"].values())
     assert set(knee["interval_method"].values()) == {"unbounded"}
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.integers(0, 2**16), st.integers(3, 8), st.sampled_from(["RHEE", "RTOE"]))
+def test_a_foot_marker_seen_in_a_few_frames_leaves_the_ankle_out_not_the_hip_and_knee(examples, seed, seen, marker):
+    """A foot marker seen in a handful of frames leaves the foot unposed, so no whole-tree start holds the ankle:
+    the fit leaves the ankle out (with the marker and its frame count in its reason) and fits the hip and knee,
+    whose intervals hold their truth; before, no joint got an interval."""
+    from identcheck.fit.workflow import fit_trial
+
+    model = Model.from_toml(examples / "leg.toml")
+    sim = simulate(model, n_frames=400, noise_mm=0.5, seed=seed)
+    xyz = sim.trial.as_array().copy()
+    start = np.random.default_rng(seed).integers(0, 400 - seen)
+    col = list(sim.trial.labels).index(marker)
+    keep = xyz[start:start + seen, col].copy()
+    xyz[:, col] = np.nan
+    xyz[start:start + seen, col] = keep
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rep = fit_trial(model, Trial(xyz, sim.trial.labels, sim.trial.rate_hz, "rare.trc"))
+    ankle = rep["joints"]["ankle_r"]
+    assert not ankle["unique"] and all(hi is None for _, hi in ankle["marker_distances_ci95"].values())
+    assert f"{marker} is seen in {seen} of 400 frames" in ankle["practical"]["reason"]
+    for j in ("hip_r", "knee_r"):
+        truth = sim.truth.marker_distances(j)
+        ci95 = rep["joints"][j]["marker_distances_ci95"]
+        assert all(hi is not None for _, hi in ci95.values()), rep["joints"][j]["practical"]["reason"]
+        assert sum(lo <= truth[m] <= hi for m, (lo, hi) in ci95.items()) >= len(ci95) - 1
