@@ -6,14 +6,16 @@ import time
 
 
 class Progress:
-    """A throttled progress line: ``line(message)`` reports at most once a second (a ``message`` may be a
-    callable, built only when reported); ``force=True`` reports anyway (the last item). ``first_after_s``:
-    stay silent for that long, so work that ends quickly prints nothing. ``report`` None: silent."""
+    """A throttled progress line: ``line(message)`` reports at most once every ``every_s`` seconds (a ``message``
+    may be a callable, built only when reported); ``force=True`` reports anyway (the last item).
+    ``first_after_s``: stay silent for that long, so work that ends quickly prints nothing. ``report`` None:
+    silent."""
 
-    def __init__(self, report=None, first_after_s: float = 0.0):
+    def __init__(self, report=None, first_after_s: float = 0.0, every_s: float = 1.0):
         self.report = report
         self.start = time.monotonic()
-        self._said = first_after_s - 1.0
+        self.every_s = every_s
+        self._said = first_after_s - every_s
 
     @property
     def elapsed(self) -> float:
@@ -23,6 +25,6 @@ class Progress:
         if not self.report:
             return
         now = self.elapsed
-        if force or now - self._said >= 1.0:
+        if force or now - self._said >= self.every_s:
             self._said = now
             self.report(message() if callable(message) else message)

@@ -9,6 +9,8 @@ few small dense solves.
 """
 from __future__ import annotations
 
+import time
+
 from dataclasses import replace
 
 import numpy as np
@@ -68,7 +70,8 @@ def _extend(chain: Skeleton, terms: Terms, s: State, R, dq, dc, y, w, pen, taken
 
 
 def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, weights=None,
-              max_iter: int = MAX_ITER, tol: float = REL_TOL, penalty=None) -> Fit:
+              max_iter: int = MAX_ITER, tol: float = REL_TOL, penalty=None, on_iteration=None,
+              deadline: float | None = None) -> Fit:
     """Levenberg-Marquardt over every per-frame unknown and every constant, from `state`.
 
     Parameters
@@ -86,6 +89,10 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         ``penalty(state) -> (r (c,), D (c, P))``: extra residuals on the constants alone with their
         Jacobian, added to the cost (a constraint held by a stiff spring: the profile likelihood). The
         returned fit's ``rss`` is the data's alone.
+    on_iteration : callable, optional
+        Called as ``on_iteration(iteration, cost)`` after each iteration: a long fit's progress.
+    deadline : float, optional
+        A ``time.monotonic()`` value after which no new iteration starts (the fit is returned not converged).
     """
     terms = terms or Terms()
     y, w = _prepare(data, weights)
@@ -132,8 +139,12 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 lam = max(lam / 10, 1e-12)
                 break
             lam *= 4
+        if on_iteration:
+            on_iteration(it, cost)
         if not improved or done:
             converged = True
+            break
+        if deadline is not None and time.monotonic() > deadline:
             break
     n_samples = int((w > 0).sum())
     n_params = int(frame_has.sum()) * chain.frame_dof() + n_const(chain, terms) - chain.gauge()

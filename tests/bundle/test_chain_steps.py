@@ -72,3 +72,50 @@ def test_stopping_on_a_fast_rate_leaves_the_cost_within_tolerance(seed, noise, f
     assert early.converged and plain.converged
     assert early.rss <= plain.rss * (1 + 3 * chain_mod.REL_TOL)
     assert early.iterations <= plain.iterations
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_a_past_deadline_stops_after_one_iteration_and_each_iteration_is_reported(seed):
+    """``deadline`` bounds a fit in time (no new iteration after it), ``on_iteration`` hears every iteration with the
+    cost it ended at: a long fit can say where it is, and stop when its budget is spent."""
+    import time
+
+    sim = simulate(MODEL, n_frames=200, noise_mm=0.5, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.trial.as_array()
+    state = initial_state(chain, data)
+    heard = []
+    fit = fit_chain(chain, data, state, max_iter=50, on_iteration=lambda it, cost: heard.append((it, cost)),
+                    deadline=time.monotonic() - 1.0)
+    assert fit.iterations == 1 and [it for it, _ in heard] == [1]
+    assert np.isclose(heard[0][1], fit.rss)
+    full = fit_chain(chain, data, state, max_iter=50, on_iteration=lambda it, cost: heard.append((it, cost)))
+    costs = [c for _, c in heard[1:]]
+    assert len(costs) == full.iterations and all(b <= a for a, b in zip(costs, costs[1:]))
+
+
+def test_converged_fit_keeps_to_its_budget_and_says_where_it_is(monkeypatch):
+    """A start that has not converged after its iterations goes on for at most CONVERGE_BUDGET_S (it had gone on for
+    a whole further batch of iterations, 60 s on the 16-marker body, while saying "at most 10 s more"), and a fit
+    longer than ITERATION_REPORT_S says its iteration and cost."""
+    import time
+
+    import identcheck.fit.whole_tree as W
+
+    sim = simulate(MODEL, n_frames=300, noise_mm=0.5, seed=3)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.trial.as_array()
+    state = initial_state(chain, data)
+    monkeypatch.setattr(W, "MAX_ITER", 1)
+    monkeypatch.setattr(W, "CONVERGE_BUDGET_S", 0.0)
+    monkeypatch.setattr(W, "ITERATION_REPORT_S", 0.0)
+    lines: list = []
+    fit = W.converged_fit(chain, data, state, progress=lines.append)
+    assert fit.iterations == 1 and not fit.converged
+    assert any("whole-tree fit: iteration 1," in line for line in lines), lines
+    monkeypatch.setattr(W, "CONVERGE_BUDGET_S", 0.2)
+    t0 = time.monotonic()
+    W.converged_fit(chain, data, state, progress=lines.append)
+    assert time.monotonic() - t0 < 2.0
+    assert any("going on (at most" in line for line in lines), lines
