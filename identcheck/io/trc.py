@@ -223,13 +223,18 @@ def read_trc(path) -> MarkerData:
         rows.append(cells)
         linenos.append(i + 1)
     problems += _capped(bad_width, "rows with the wrong number of columns")
+    cut_row = None
     if rows and linenos[-1] == len(lines) and not text.endswith(("\n", "\r")):
+        cut_row = linenos[-1]
         warnings.warn(f"{src}: the file ends inside line {linenos[-1]} without a line end, so its last number may "
                       "be cut short; that row is left out", UserWarning, stacklevel=3)
         rows, linenos = rows[:-1], linenos[:-1]
         if n_frames_hdr == len(rows) + 1:        # the row left out was the last one NumFrames announces
             n_frames_hdr = len(rows)
-    if not rows and not bad_width:
+    if not rows and not bad_width and cut_row is not None:
+        problems.append(f"the only data row, line {cut_row}, ends without a line end: the file may be cut inside it, "
+                        "so it is not read and no data rows remain (end the file with a line end if it is whole)")
+    elif not rows and not bad_width:
         problems.append("no data rows after the header (data start on line 6)")
     if n_frames_hdr is not None and rows and not bad_width:
         if len(rows) < n_frames_hdr:
@@ -302,12 +307,21 @@ def _frame_order(rows: list, linenos: list) -> list[str]:
 def _first_frame(rows: list, linenos: list, src: str) -> int:
     """The Frame# of the first data row (the file's numbering); frame numbers must rise one by one, else a
     warning says the row index is used instead."""
-    try:
-        numbers = np.array([int(float(r[0])) for r in rows])
-    except (ValueError, IndexError):
-        warnings.warn(f"{src}: the Frame# column is not numeric (line {linenos[0]}); frames are numbered "
-                      "from 1 by row", UserWarning, stacklevel=4)
+    def number(cell: str) -> float:
+        try:
+            return float(cell)
+        except ValueError:
+            return float("nan")
+
+    numbers = np.array([number(r[0]) if r else float("nan") for r in rows])
+    bad = np.flatnonzero(~np.isfinite(numbers))
+    if len(bad):
+        cell = rows[bad[0]][0] if rows[bad[0]] else ""
+        warnings.warn(f"{src}: the Frame# column is not numeric at line {linenos[bad[0]]} ({cell!r}"
+                      f"{f' and {len(bad) - 1} more rows' if len(bad) > 1 else ''}); frames are numbered from 1 by row",
+                      UserWarning, stacklevel=4)
         return 1
+    numbers = numbers.astype(np.int64)
     steps = np.diff(numbers)
     if len(steps) and np.any(steps != 1):
         k = int(np.flatnonzero(steps != 1)[0])

@@ -223,6 +223,8 @@ def test_trc_crlf_line_endings(tmp_path):
      r"NumFrames = 5 but the file has only 3 data rows \(lines 7-9\); .*truncated"),
     (TRC_OK.replace("DataRate\tCameraRate", "Rate\tCamRate").replace("Units", "U"), "is this a TRC file"),
     (TRC_OK.split("\n\n")[0] + "\n", "no data rows"),
+    (TRC_OK.split("\n2\t")[0].replace("\t3\t2\tmm", "\t1\t2\tmm"),
+     "the only data row, line 7, ends without a line end"),
 ])
 def test_bad_trc_files(tmp_path, text, message):
     path = write(tmp_path, text, "bad.trc")
@@ -242,6 +244,16 @@ def test_trc_lists_every_bad_cell_at_once(tmp_path):
 def test_trc_more_rows_than_header_warns(tmp_path):
     path = write(tmp_path, TRC_OK.replace("\t3\t2\tmm", "\t2\t2\tmm"))
     with pytest.warns(UserWarning, match="NumFrames = 2 but the file has 3 data rows"):
+        t = Trial.from_trc(path)
+    assert t.n_frames == 3
+
+
+@pytest.mark.parametrize("cell", ["", "x", "nan"])
+def test_a_frame_number_that_is_no_number_is_named_by_its_line(tmp_path, cell):
+    """A Frame# cell that is empty or not a number: the warning names that row's line (it had named the first
+    data row's line, whatever row held the bad cell)."""
+    path = write(tmp_path, TRC_OK.replace("2\t0.01\t", f"{cell}\t0.01\t"))
+    with pytest.warns(UserWarning, match=f"Frame# column is not numeric at line 8 \\({cell!r}\\)"):
         t = Trial.from_trc(path)
     assert t.n_frames == 3
 
