@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from identcheck.errors import InputError
+from identcheck.io.model import JOINT_TYPES
 
 # sample coordinates of a child marker in the frame F of the parent's markers
 x, y, z = sp.symbols("x y z", real=True)
@@ -142,7 +143,6 @@ _CASES = {
     ),
 }
 
-JOINT_TYPES = ("revolute", "spherical")
 
 
 def case(joint: str, p: int, q: int) -> Case:

@@ -401,7 +401,9 @@ def _parse_joints(raw, segments, scale: float, problems: list[str]) -> tuple[dic
             elif not isinstance(v, str):
                 problems.append(f"{key}.{k}: expected a string, got {v!r}")
         jtype = values["type"]
-        if isinstance(jtype, str) and jtype not in JOINT_TYPES:
+        if isinstance(jtype, str) and jtype.strip().lower() in JOINT_TYPES:
+            jtype = jtype.strip().lower()       # "Revolute" as `identcheck rank` and `table` take it
+        elif isinstance(jtype, str):
             problems.append(f"{key}.type: unknown joint type {jtype!r} (allowed: {', '.join(JOINT_TYPES)})")
         # a joint with good ends stays in the tree whatever else is wrong with it, so that
         # its segments are not also reported as disconnected

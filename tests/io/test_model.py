@@ -164,6 +164,15 @@ def test_unknown_joint_type_lists_allowed(tmp_path):
     assert len(err.problems) == 1
 
 
+@pytest.mark.parametrize("spelled", ["Spherical", "SPHERICAL", " spherical "])
+def test_a_joint_type_in_any_case_is_the_type(tmp_path, spelled):
+    """The model takes a joint type in any case, as ``identcheck rank`` and ``table`` do (``rank Revolute 2 1``
+    ran while ``type = "Revolute"`` in a model was refused), and stores it lower case."""
+    model = Model.from_toml(write(tmp_path, MINIMAL.replace('"spherical"', f'"{spelled}"')))
+    assert model.joints["hip_r"].type == "spherical"
+    assert Model.from_dict(model.to_dict()).joints["hip_r"].type == "spherical"
+
+
 def test_duplicate_marker_names_both_segments(tmp_path):
     err = load_error(tmp_path, MINIMAL.replace('"RGT", "RTHI"', '"RASI", "RTHI"'))
     assert "duplicate marker 'RASI'" in str(err)
