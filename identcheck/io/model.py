@@ -310,9 +310,20 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def _vec3(value, key: str, problems: list[str], scale: float = 1.0) -> Vec3 | None:
+LARGEST_MM = 1e5
+"""No length, marker position or joint centre of a model may exceed 100 m: no body or prop comes near, and a larger
+number is a typo or a unit mistake that would overflow what is computed from it (1e300 mm did, in ``simulate``)."""
+
+
+def _vec3(value, key: str, problems: list[str], scale: float = 1.0, bounded: bool = True) -> Vec3 | None:
+    """Three finite numbers times `scale`; `bounded`: a position, within :data:`LARGEST_MM` (an axis is not)."""
     if (isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value)):
-        return tuple(float(v) * scale for v in value)
+        out = tuple(float(v) * scale for v in value)
+        if not bounded or max(map(abs, out)) <= LARGEST_MM:
+            return out
+        problems.append(f"{key}: {value!r} is more than {LARGEST_MM / 1000:g} m from the origin (a typo or a unit "
+                        "mistake?)")
+        return None
     problems.append(f"{key}: expected 3 finite numbers [x, y, z], got {value!r}")
     return None
 
@@ -351,8 +362,9 @@ def _parse_segments(raw, scale: float, problems: list[str]) -> dict[str, Segment
             kept.append(m)
         positions = _parse_positions(table.get("positions"), key, kept, scale, problems)
         length = table.get("length_mm")
-        if length is not None and not (_is_number(length) and length > 0):
-            problems.append(f"{key}.length_mm: expected a positive number of mm, got {length!r}")
+        if length is not None and not (_is_number(length) and 0 < length <= LARGEST_MM):
+            problems.append(f"{key}.length_mm: expected a positive number of mm up to {LARGEST_MM:g} (100 m), got "
+                            f"{length!r}")
             length = None
         segments[name] = Segment(name=name, markers=tuple(kept), positions=positions,
                                  length_mm=None if length is None else float(length))
@@ -420,7 +432,7 @@ def _parse_joints(raw, segments, scale: float, problems: list[str]) -> tuple[dic
             ok = False
         axis = None
         if "axis" in table:
-            axis = _vec3(table["axis"], f"{key}.axis", problems)
+            axis = _vec3(table["axis"], f"{key}.axis", problems, bounded=False)
             if axis is not None and math.hypot(*axis) < 1e-12:
                 problems.append(f"{key}.axis: must not be the zero vector")
                 axis = None

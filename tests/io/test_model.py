@@ -398,3 +398,20 @@ def test_subject_unknown_key_and_both_leg_spellings_are_errors():
                          "subject": {"leg_lenght_mm": 900, "leg_length_mm": 900, "right_leg_length_mm": 880}})
     text = str(e.value)
     assert "subject.leg_lenght_mm: unknown key" in text and "leg_length_mm" in text and "not both" in text
+
+
+@pytest.mark.parametrize("line, key", [
+    ("length_mm = 1e300", "segments.pelvis.length_mm"),
+    ("positions.LASI = [0.0, 2e5, 0.0]", "segments.pelvis.positions.LASI"),
+])
+def test_lengths_and_positions_beyond_100_m_are_refused(tmp_path, line, key):
+    """A length or position beyond 100 m is a typo or a unit mistake: refused naming its key (1e300 mm had
+    overflowed in simulate, which then blamed the samples)."""
+    err = load_error(tmp_path, MINIMAL.replace('markers = ["LASI", "RASI", "SACR"]',
+                                               f'markers = ["LASI", "RASI", "SACR"]\n{line}'))
+    assert key in str(err) and ("100 m" in str(err) or "100000" in str(err))
+
+
+def test_an_axis_is_a_direction_of_any_length(tmp_path):
+    model = Model.from_toml(write(tmp_path, MINIMAL.replace('"spherical"', '"revolute"\naxis = [0.0, 0.0, 1e9]')))
+    assert model.joints["hip_r"].axis == (0.0, 0.0, 1.0)
