@@ -322,12 +322,20 @@ def _files(specs, suffixes, what, problems) -> list:
             seen.add(real)
             out.append(str(path))
 
+    def broken(paths) -> None:
+        """Links among `paths` whose target is missing: named, never skipped in silence."""
+        for f in paths:
+            if os.path.islink(f) and not os.path.exists(f):
+                problems.append(f"{f}: a link to {os.readlink(f)}, which does not exist")
+
     for spec in specs:
         p = Path(spec)
         if p.is_dir():
-            found = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in suffixes
-                           and not any(part.startswith(".") for part in f.relative_to(p).parts))
-            if not found:
+            named = [f for f in p.rglob("*") if f.suffix.lower() in suffixes
+                     and not any(part.startswith(".") for part in f.relative_to(p).parts)]
+            broken(named)
+            found = sorted(f for f in named if f.is_file())
+            if not found and not any(os.path.islink(f) for f in named):
                 problems.append(f"{spec}: a folder without {what.split(' ')[0]} files ({', '.join(suffixes)})")
             for f in found:
                 take(f)
@@ -337,12 +345,15 @@ def _files(specs, suffixes, what, problems) -> list:
             else:
                 problems.append(f"{spec}: not a {what}")
         elif any(c in spec for c in GLOB_CHARS):
-            found = sorted(Path(f) for f in glob.glob(spec, recursive=True)
-                           if os.path.isfile(f) and Path(f).suffix.lower() in suffixes)
-            if not found:
+            named = [f for f in glob.glob(spec, recursive=True) if Path(f).suffix.lower() in suffixes]
+            broken(named)
+            found = sorted(Path(f) for f in named if os.path.isfile(f))
+            if not found and not any(os.path.islink(f) for f in named):
                 problems.append(f"{spec}: no {what.split(' ')[0]} file ({', '.join(suffixes)}) matches")
             for f in found:
                 take(f)
+        elif os.path.islink(spec):
+            broken([spec])
         else:
             problems.append(f"{spec}: no such file or folder")
     return out

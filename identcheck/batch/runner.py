@@ -50,11 +50,17 @@ def run(verb: str, inputs_, out, *, verbs, model=None, frames=None, noise_mm=Non
     if workers is not None and scheduler:
         raise InputError(["--workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                           "jobs: give one of them"])
+    store = Store(out)
+    with store.locked():
+        return _run_locked(verb, todo, store, verbs, workers, scheduler, dashboard, progress)
+
+
+def _run_locked(verb, todo, store, verbs, workers, scheduler, dashboard, progress):
+    """:func:`run` once the output folder is held by this run alone."""
     say = _say if progress else (lambda msg: None)
     import identcheck
 
     version = identcheck.__version__
-    store = Store(out)
     rows: dict = {}                   # job name -> its summary rows
     pending = []                      # (job, input hash) to run
     for job in todo:                  # reading only: what an earlier run of this batch has done

@@ -15,12 +15,15 @@ still has the bytes recorded; the record is written after the JSON, so a JSON wi
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import shutil
 import uuid
 from pathlib import Path
+
+from identcheck.errors import InputError
 
 STATE = ".identcheck-batch"
 TMP_PREFIX = ".tmp-"
@@ -76,6 +79,37 @@ class Store:
     def __init__(self, out):
         self.out = Path(out)
         self.state = self.out / STATE
+
+    @contextlib.contextmanager
+    def locked(self):
+        """Hold the output folder for this run alone (an advisory lock on ``.identcheck-batch/lock``, released when
+        the run ends or dies): two runs into one folder would each clean the other's temporary files and write a
+        summary of their own jobs only, losing the other's rows without a word.
+
+        Raises
+        ------
+        InputError
+            Another run holds the folder (its process id named)."""
+        try:
+            import fcntl
+        except ImportError:             # no advisory locks here (Windows): one run at a time is the user's care
+            yield
+            return
+        self.state.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.state / "lock", os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
+                raise InputError([f"another identcheck batch (process {holder}) is writing to this folder; two runs "
+                                  "into one output folder would overwrite each other's summary: wait for it to "
+                                  "end, or give another --out"], source=str(self.out)) from None
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, str(os.getpid()).encode(), 0)
+            yield
+        finally:
+            os.close(fd)                # closing releases the lock
 
     def clean(self) -> None:
         """Remove what a killed run left: temporary files, the local cluster's scratch space (creates nothing)."""

@@ -183,3 +183,15 @@ def test_names_that_coincide_get_a_short_hash(tmp_path):
     assert len(jobs) == 2 and jobs[0].name != jobs[1].name
     assert all(j.name.startswith("walk.trc--diagnose_leg-") and j.name.endswith(".fit") for j in jobs)
     assert inputs._slug("a b/c:d") == "a_b_c_d"
+
+
+@pytest.mark.parametrize("how", ["folder", "glob", "path"])
+def test_a_link_to_a_missing_trial_is_named_not_skipped(tmp_path, how):
+    """A trial that is a link to a missing file is an error naming the link and its target, given in a folder, a
+    glob or by path (a folder's and a glob's had been skipped without a word)."""
+    (tmp_path / "t").mkdir()
+    (tmp_path / "t" / "a.trc").write_bytes(b"")
+    os.symlink(tmp_path / "gone.trc", tmp_path / "t" / "b.trc")
+    spec = {"folder": tmp_path / "t", "glob": tmp_path / "t" / "*.trc", "path": tmp_path / "t" / "b.trc"}[how]
+    with pytest.raises(InputError, match=r"b\.trc: a link to .*gone\.trc, which does not exist"):
+        resolve("fit", [str(MODEL), str(spec)])

@@ -9,6 +9,7 @@ import pytest
 from identcheck.batch import store as store_mod
 from identcheck.batch.inputs import resolve
 from identcheck.batch.store import Store, atomic_write, input_hash
+from identcheck.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "examples" / "diagnose_leg.toml"
@@ -81,3 +82,16 @@ def test_prepare_removes_what_a_killed_run_left(tmp_path):
     Store(tmp_path / "none").clean()                       # nothing there: nothing created
     assert not (tmp_path / "none").exists()
     json.loads((out / "keep.json").read_text())
+
+
+def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(tmp_path):
+    """Two runs into one output folder would clean each other's temporary files and each write a summary of its own
+    jobs only: while one holds the folder, another is refused with the holder's process id; once it ends, the
+    folder is free again."""
+    out = tmp_path / "out"
+    with Store(out).locked():
+        with pytest.raises(InputError, match=rf"another identcheck batch \(process {os.getpid()}\) is writing"):
+            with Store(out).locked():
+                pass
+    with Store(out).locked():
+        pass
