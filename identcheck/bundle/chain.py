@@ -71,7 +71,7 @@ def _extend(chain: Skeleton, terms: Terms, s: State, R, dq, dc, y, w, pen, taken
 
 def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, weights=None,
               max_iter: int = MAX_ITER, tol: float = REL_TOL, penalty=None, on_iteration=None,
-              deadline: float | None = None) -> Fit:
+              deadline: float | None = None, fast_tol: float | None = None) -> Fit:
     """Levenberg-Marquardt over every per-frame unknown and every constant, from `state`.
 
     Parameters
@@ -93,6 +93,10 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         Called as ``on_iteration(iteration, cost)`` after each iteration: a long fit's progress.
     deadline : float, optional
         A ``time.monotonic()`` value after which no new iteration starts (the fit is returned not converged).
+    tol, fast_tol : float
+        Stop when an iteration lowers the cost by at most ``tol`` times the cost, or when the drops shrink
+        fast (each at most :data:`FAST_RATE` of the one before) and what they promise to remove is at most
+        ``fast_tol`` (default ``tol``) times the cost.
     """
     terms = terms or Terms()
     y, w = _prepare(data, weights)
@@ -130,7 +134,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 drop = cost - new
                 rate = drop / last_drop if last_drop else 1.0
                 fast = rate <= FAST_RATE and attempt == 0     # a drop made small by raised damping says nothing
-                done = drop <= tol * max(cost, 1e-300) or (fast and drop * rate / (1 - rate) <= tol * max(new, 1e-300))
+                done = drop <= tol * max(cost, 1e-300) or (
+                    fast and drop * rate / (1 - rate) <= (tol if fast_tol is None else fast_tol) * max(new, 1e-300))
                 if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
                                                          (trial, R2, t2, c2, p2, new))

@@ -244,6 +244,17 @@ SEED_NFEV = 100
 for the basin of a minimum; the whole-tree fit converges from there."""
 
 
+START_FRAMES = 500
+"""Frames (evenly spread) a closed form that only starts the whole-tree fit is computed from, and the start's
+segment shapes are averaged over (:mod:`identcheck.fit.whole_tree`): on a 1500-frame leg seed 001's centre took a
+quarter of ``fit``; the whole-tree fit, from any start in the right basin, uses every frame."""
+
+
+def start_stride(n_frames: int) -> int:
+    """Every how many frames a start uses (:data:`START_FRAMES` of them at most)."""
+    return max(1, n_frames // START_FRAMES)
+
+
 def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) -> JointEstimate:
     """Pham III-A on noisy samples (geometric least squares seeded by the closed form): every joint
     that explains the samples as well as the best, never one picked silently."""
@@ -300,15 +311,35 @@ def pair_spherical(a1, a2, b1, b2, case: str) -> JointEstimate:
 
 
 # -- both links posed --------------------------------------------------------------------------------
+def _fixed_in(parent: np.ndarray, world_some: np.ndarray, every: int) -> np.ndarray | None:
+    """A point fixed in the parent cluster, known in every `every`-th frame (world_some), in every frame: its
+    mean position in the parent's frame, carried by the parent's poses (None when no spread frame poses it)."""
+    if every == 1:
+        return world_some
+    poses = segment_poses(parent)
+    some = np.full((len(parent), 1, 3), np.nan)
+    some[::every, 0] = world_some
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)               # frames without a pose: NaN
+        local = np.nanmean(poses.to_local(some)[:, 0], axis=0)
+    return poses.to_world(local[None])[:, 0] if np.isfinite(local).all() else None
+
+
 def posed_pair(parent: np.ndarray, child: np.ndarray, kind: str, case: str) -> JointEstimate:
     """Seed 001 (spherical) or SARA (revolute) from two posed clusters."""
     if kind == "spherical":
         from identcheck.estimate.seed001 import fit_centre
 
+        every = start_stride(len(parent))
         with warnings.catch_warnings(record=True) as caught:     # kept as notes: they judge seed 001's own
             warnings.simplefilter("always", IdentifiabilityWarning)  # covariance, which fit no longer reports
-            fit = fit_centre(parent, child)
-        centre = fit.parent.to_world(fit.centre_parent[None])[:, 0]
+            fit = fit_centre(parent[::every], child[::every])
+        centre = _fixed_in(parent, fit.parent.to_world(fit.centre_parent[None])[:, 0], every)
+        if centre is None:                      # no pose of the parent in the spread frames: take them all
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", IdentifiabilityWarning)
+                fit = fit_centre(parent, child)
+            centre = fit.parent.to_world(fit.centre_parent[None])[:, 0]
         est = JointEstimate("spherical", "seed 001 two-stage centre with Gauss-Markov covariance", case,
                             centre=centre, rms_residual=float(fit.rms_residual), uncertainty_mm=float(fit.uncertainty_mm),
                             excitation_ok=bool(fit.excitation_ok), excitation_reason=fit.excitation_reason,

@@ -2,15 +2,19 @@
 where diagnose adopts nothing, both report the same marker distances, 95 % intervals (and how each was made),
 standard errors and practical verdicts. Hips turned about two or three axes: a hip turned about one leaves its
 centre free along that axis, where the two fits stop at different points of the valley and the joints below
-move with it by ~0.1 mm (both call the hip unbounded: tests/bundle/test_single_axis.py)."""
+move with it by ~0.1 mm (both call the hip unbounded: tests/bundle/test_single_axis.py). Agreement is to within
+the fit's own convergence tolerance: ``fit`` stops when what is left to gain is at most FAST_CHI2_TOL in chi² units,
+within 0.045 standard errors of the minimum, so two fits may differ by 0.09 of a standard error (and 5e-3 mm)."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from hypothesis import assume, given, settings, strategies as st
 
 import identcheck as ic
 from identcheck.diagnose.workflow import diagnose
+from identcheck.fit.whole_tree import FAST_CHI2_TOL
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 
@@ -32,9 +36,11 @@ def test_fit_and_diagnose_answer_alike_when_no_effect_is_adopted(seed, noise, fr
         for m, d in a["marker_distances"].items():
             if a["interval_method"][m] == "unbounded":
                 continue                 # a flat valley: any point of it is the estimate (checked: both unbounded)
-            assert abs(d - b["marker_distances"][m]) <= 5e-3, (j, m)
+            lo, hi = a["marker_distances_ci95"][m]
+            near = 5e-3 + 2 * math.sqrt(2 * FAST_CHI2_TOL) * (hi - lo) / 3.92     # 0.09 standard errors
+            assert abs(d - b["marker_distances"][m]) <= near, (j, m)
             for x, y in zip(a["marker_distances_ci95"][m], b["marker_distances_ci95"][m]):
-                assert (x is None and y is None) or abs(x - y) <= 5e-3, (j, m, a["marker_distances_ci95"][m],
-                                                                         b["marker_distances_ci95"][m])
+                assert (x is None and y is None) or abs(x - y) <= near, (j, m, a["marker_distances_ci95"][m],
+                                                                          b["marker_distances_ci95"][m])
         if "unbounded" not in a["interval_method"].values():
             assert abs(a["uncertainty_mm"] - b["uncertainty_mm"]) <= 1e-3 * max(1.0, a["uncertainty_mm"]), j
