@@ -57,6 +57,9 @@ CONVERGE_BUDGET_S = 10.0
 """Seconds a start that has not converged after MAX_ITER iterations may go on (LM restarted from where it stopped,
 its damping reset: a fit crawling along the valley of a segment posed by two markers needed ~1200 iterations).
 A best fit still not converged answers nothing: its joints are undetermined and a warning says why."""
+START_BUDGET_S = 120.0
+"""Seconds a start's first MAX_ITER iterations may take: a 40-segment chain's 1000-frame fit had not ended after
+180 s. A start stopped by it is not converged (its joints undetermined, a warning saying why)."""
 FAST_CHI2_TOL = 1e-3
 """A whole-tree fit whose drops shrink fast stops when they promise to remove at most this much more of the cost in
 chi² units (σ² each): the estimate is then within √(2·0.001) ≈ 0.045 standard errors of the minimum along any
@@ -347,7 +350,8 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
 
 def converged_fit(chain: Skeleton, data, state, progress=None, weights=None):
     """The whole-chain fit from `state`, restarted (damping reset) while it has not converged, for at most
-    :data:`CONVERGE_BUDGET_S` seconds after its first :data:`MAX_ITER` iterations. Measured on a held-out 2+2 gait
+    :data:`CONVERGE_BUDGET_S` seconds after its first :data:`MAX_ITER` iterations (which stop after
+    :data:`START_BUDGET_S` seconds, with no restart then). Measured on a held-out 2+2 gait
     trial: stopped at 200 iterations the hip was 7 mm off at ±2.3 mm and the truth's distances fitted better by
     Δχ² 100; converged, that gap was gone."""
     line = Progress(progress, first_after_s=ITERATION_REPORT_S, every_s=ITERATION_REPORT_S)
@@ -359,9 +363,12 @@ def converged_fit(chain: Skeleton, data, state, progress=None, weights=None):
         line(lambda: f"whole-tree fit: iteration {done + it}, {cost / max(len(data), 1):.4g} mm² a frame, "
                      f"{line.elapsed:.0f} s")
 
-    fit = fit_chain(chain, data, state, weights=weights, max_iter=MAX_ITER, on_iteration=said, fast_tol=fast_tol)
+    first = time.monotonic() + START_BUDGET_S
+    fit = fit_chain(chain, data, state, weights=weights, max_iter=MAX_ITER, on_iteration=said, fast_tol=fast_tol,
+                    deadline=first)
+    out_of_time = time.monotonic() > first
     deadline = time.monotonic() + CONVERGE_BUDGET_S
-    while not fit.converged and time.monotonic() < deadline:
+    while not fit.converged and not out_of_time and time.monotonic() < deadline:
         done += fit.iterations
         if progress:
             progress(f"whole-tree fit not converged after {done} iterations: going on (at most "

@@ -119,3 +119,7 @@ def test_converged_fit_keeps_to_its_budget_and_says_where_it_is(monkeypatch):
     W.converged_fit(chain, data, state, progress=lines.append)
     assert time.monotonic() - t0 < 2.0
     assert any("going on (at most" in line for line in lines), lines
+    monkeypatch.setattr(W, "MAX_ITER", 500)          # the first batch stops at its time budget, with no restart
+    monkeypatch.setattr(W, "START_BUDGET_S", 0.0)
+    fit = W.converged_fit(chain, data, state)
+    assert fit.iterations == 1 and not fit.converged
