@@ -314,7 +314,8 @@ def _first_frame(rows: list, linenos: list, src: str) -> int:
             return float("nan")
 
     numbers = np.array([number(r[0]) if r else float("nan") for r in rows])
-    bad = np.flatnonzero(~np.isfinite(numbers))
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(~(np.abs(numbers) < 2.0 ** 53))        # no number, or none a frame can have
     if len(bad):
         cell = rows[bad[0]][0] if rows[bad[0]] else ""
         warnings.warn(f"{src}: the Frame# column is not numeric at line {linenos[bad[0]]} ({cell!r}"

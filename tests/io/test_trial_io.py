@@ -258,6 +258,14 @@ def test_a_frame_number_that_is_no_number_is_named_by_its_line(tmp_path, cell):
     assert t.n_frames == 3
 
 
+def test_a_frame_number_no_frame_can_have_is_named_not_wrapped(tmp_path):
+    """A Frame# of 1e30 (rising, so in order) is named as no frame number, not cast to an integer no frame has."""
+    path = write(tmp_path, TRC_OK.replace("3\t0.02\t", "1e30\t0.02\t"))
+    with pytest.warns(UserWarning, match=r"Frame# column is not numeric at line 9 \('1e30'\)"):
+        t = Trial.from_trc(path)
+    assert t.n_frames == 3
+
+
 def test_trc_partial_sample_is_occluded_with_warning(tmp_path):
     path = write(tmp_path, TRC_OK.replace("1.5\t2.5\t3.5", "1.5\t\t3.5"))
     with pytest.warns(UserWarning, match="only some of X/Y/Z .* line 8, marker 'A'"):
