@@ -250,9 +250,9 @@ segment shapes are averaged over (:mod:`identcheck.fit.whole_tree`): on a 1500-f
 quarter of ``fit``; the whole-tree fit, from any start in the right basin, uses every frame."""
 
 
-def start_stride(n_frames: int) -> int:
-    """Every how many frames a start uses (:data:`START_FRAMES` of them at most)."""
-    return max(1, n_frames // START_FRAMES)
+def start_stride(n_frames: int, most: int = START_FRAMES) -> int:
+    """Every how many frames a start uses (`most` of them at most)."""
+    return max(1, n_frames // most)
 
 
 def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) -> JointEstimate:
@@ -266,7 +266,7 @@ def pair_revolute(a1: np.ndarray, a2: np.ndarray, child: np.ndarray, case: str) 
     local, _ = pair_frame(a1[frames], a2[frames], child[frames, 0])
     if np.ptp(local, axis=0).max() < MIN_TRAVEL_MM:     # the least squares would chase the noise to any size
         raise DegenerateError(f"{case}: {_travel_reason(local[:, None, :], 0.0)}")
-    every = max(1, len(local) // SEED_SAMPLES)       # a start for the whole-tree fit: a spread subset will do
+    every = start_stride(len(local), SEED_SAMPLES)   # a start for the whole-tree fit: a spread subset will do
     sols = revolute21_fit.fit(local[::every], max_nfev=SEED_NFEV)
     if not sols:
         raise DegenerateError(f"{case}: no revolute joint fits these samples")

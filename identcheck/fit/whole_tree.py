@@ -239,14 +239,17 @@ def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, st
 
 
 def without_subtrees(model, joints) -> tuple:
-    """(the model without `joints` and everything hanging from them, the joints left out, parents first)."""
-    gone: set = set()
+    """(the model without `joints` and everything hanging from them, {each joint left out: the one of `joints` it
+    is or hangs below}, parents first)."""
+    cut: dict = {}                                             # segment left out -> the joint of `joints` above it
+    gone: dict = {}
     for j in model.joint_order:                                # parents before children
-        if j in joints or model.joints[j].parent in gone:
-            gone.add(model.joints[j].child)
-    keep = {j: jt for j, jt in model.joints.items() if jt.child not in gone}
-    return (replace(model, segments={n: s for n, s in model.segments.items() if n not in gone}, joints=keep),
-            [j for j in model.joint_order if j not in keep])
+        jt = model.joints[j]
+        if j in joints or jt.parent in cut:
+            cut[jt.child] = j if j in joints else cut[jt.parent]
+            gone[j] = cut[jt.child]
+    keep = {j: jt for j, jt in model.joints.items() if j not in gone}
+    return replace(model, segments={n: s for n, s in model.segments.items() if n not in cut}, joints=keep), gone
 
 
 def _rarely_seen(model, trial, joints) -> str:
@@ -282,18 +285,13 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
         if not smaller.joints:
             break
         why = tree.problem + _rarely_seen(model, trial, stuck)
-        for j in gone:
-            above = next(k for k in model.joint_order if k in stuck and (k == j or j in _below(model, k)))
+        for j, above in gone.items():
             left_out[j] = why if j == above else f"it hangs below {above}, which the fit left out: {why}"
         if progress:
             progress(f"whole-tree fit without {', '.join(gone)}: {tree.problem}")
         model, closed_form = smaller, {k: v for k, v in closed_form.items() if k in smaller.joints}
     tree.left_out = {**left_out, **tree.left_out}
     return tree
-
-
-def _below(model, joint: str) -> list:
-    return without_subtrees(model, {joint})[1][1:]
 
 
 def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_s: float) -> tuple:
