@@ -285,13 +285,13 @@ def _between_if_far(s: State, joint: str, P: Poses, C: Poses, axis_parent) -> No
     if not min(near) > FAR_CENTRE_MM:
         return
     mid = (world(P, P.local.mean(axis=0)) + world(C, C.local.mean(axis=0))) / 2
-    cp = np.nanmedian(P.to_local(mid[:, None])[:, 0], axis=0)
+    cp = P.body_fixed(mid, robust=True)
     if axis_parent is not None:                        # onto the hinge axis through O'Brien's point
         a = axis_parent / np.linalg.norm(axis_parent)
         cp = s.c_parent[joint] + a * float(a @ (cp - s.c_parent[joint]))
     mid = world(P, cp)
     s.c_parent[joint] = cp
-    s.c_child[joint] = np.nanmedian(C.to_local(mid[:, None])[:, 0], axis=0)
+    s.c_child[joint] = C.body_fixed(mid, robust=True)
 
 
 def initial_state(chain: Skeleton, data, frames: dict | None = None) -> State:

@@ -317,11 +317,9 @@ def _fixed_in(parent: np.ndarray, world_some: np.ndarray, every: int) -> np.ndar
     if every == 1:
         return world_some
     poses = segment_poses(parent)
-    some = np.full((len(parent), 1, 3), np.nan)
-    some[::every, 0] = world_some
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)               # frames without a pose: NaN
-        local = np.nanmean(poses.to_local(some)[:, 0], axis=0)
+    some = np.full((len(parent), 3), np.nan)
+    some[::every] = world_some
+    local = poses.body_fixed(some)
     return poses.to_world(local[None])[:, 0] if np.isfinite(local).all() else None
 
 

@@ -29,7 +29,6 @@ from __future__ import annotations
 import itertools
 import math
 import time
-import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -177,10 +176,7 @@ def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
     moved = [anchor + k * (est.centre - anchor) for k in RADIAL_FACTORS]
     if len(rich) >= 3:
         poses = segment_poses(data[:, rich])
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)       # all-NaN frames: no pose there
-            c_loc = np.nanmean(poses.to_local(est.centre[:, None])[:, 0], axis=0)
-            a_loc = np.nanmean(poses.to_local(anchor[:, None])[:, 0], axis=0)
+        c_loc, a_loc = poses.body_fixed(est.centre), poses.body_fixed(anchor)
         if np.isfinite(c_loc).all() and np.isfinite(a_loc).all():
             moved = [poses.to_world((a_loc + k * (c_loc - a_loc))[None])[:, 0] for k in RADIAL_FACTORS]
     return [replace(est, centre=c, estimator=f"{est.estimator}, distance ×{k:g}", alternatives=[], ranked_out=[],

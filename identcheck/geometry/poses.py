@@ -45,6 +45,17 @@ class Poses:
         w = np.asarray(world_points, dtype=float) - self.t[:, None, :]
         return w @ self.R
 
+    def body_fixed(self, world_track, robust: bool = False) -> np.ndarray:
+        """The body-fixed point (3,) that a world trajectory (F, 3) follows: its segment coordinates averaged over
+        the frames that pose the segment and see the point (the median with `robust`, else the mean); NaN when
+        no frame does. Carried back by :meth:`to_world`, it is the trajectory made rigid in this segment (a joint
+        centre estimated in some frames, known in all)."""
+        local = self.to_local(np.asarray(world_track, dtype=float)[:, None])[:, 0]
+        seen = np.all(np.isfinite(local), axis=1)
+        if not seen.any():
+            return np.full(3, np.nan)
+        return (np.median if robust else np.mean)(local[seen], axis=0)
+
 
 def reference_shape(points) -> np.ndarray:
     """Body-fixed coordinates from the first frame in which every marker is visible.

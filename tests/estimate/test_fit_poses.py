@@ -151,3 +151,26 @@ def test_refine_local_bad_input():
         refine_local(pts, ref_frame=8)
     with pytest.warns(RuntimeWarning, match="still moved"):
         refine_local(pts + rng.normal(0, 1, pts.shape), n_iter=1, tol=0.0)
+
+
+# ---------------------------------------------------------------------- Poses.body_fixed
+@given(seed=seeds, n=st.integers(5, 60), robust=st.booleans(), hidden=st.floats(0.0, 0.8))
+@settings(max_examples=40, deadline=None)
+def test_a_point_carried_by_the_poses_is_found_fixed_in_the_body(seed, n, robust, hidden):
+    """A body-fixed point seen through the poses (some frames unposed, some points unseen) is recovered, and carried
+    back by to_world it is the trajectory again; a trajectory seen in no posed frame gives NaN."""
+    rng = np.random.default_rng(seed)
+    R, d = motion(rng, n)
+    point = rng.uniform(-400, 400, 3)
+    track = observe(R, d, point[None])[:, 0]
+    unposed = rng.uniform(size=n) < hidden
+    poses = Poses(np.where(unposed[:, None, None], np.nan, R), np.where(unposed[:, None], np.nan, d), ~unposed,
+                  cluster(rng, 3), np.zeros(n))
+    unseen = rng.uniform(size=n) < hidden
+    seen_track = np.where(unseen[:, None], np.nan, track)
+    found = poses.body_fixed(seen_track, robust=robust)
+    if np.any(~unposed & ~unseen):
+        assert np.allclose(found, point, atol=1e-6)
+        assert np.allclose(poses.to_world(found[None])[~unposed, 0], track[~unposed], atol=1e-6)
+    else:
+        assert np.isnan(found).all()
