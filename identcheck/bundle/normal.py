@@ -80,6 +80,12 @@ def lower_inverse(L: np.ndarray) -> np.ndarray:
     return X
 
 
+CHUNK_ENTRIES = 1 << 19
+"""Entries of L⁻¹B (float64, 4 MiB) formed at a time when the frames are eliminated: the Schur complement sums
+over frames, so it is built chunk by chunk and L⁻¹B (as large as B: 93 MB for a 42-marker body at 1500 frames) is
+never held whole."""
+
+
 def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.ndarray, h: np.ndarray):
     """The per-frame unknowns eliminated (Schur complement): ``S = C − Σ_f B_fᵀ A_f⁻¹ B_f`` (P, P) and the reduced
     gradient ``h − Σ_f B_fᵀ A_f⁻¹ g_f`` ((P,), or per frame (F, P) when `h` is), with `A_damped` (F, k, k) the
@@ -87,25 +93,34 @@ def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.n
     (F, k) that goes with a step `dc` of the constants.
 
     Through each block's Cholesky factor L (A = LLᵀ): X = L⁻¹[B g], so that S = C − XᵀX is one symmetric
-    product. A block that is not numerically positive definite (a pose the markers leave free, held by a tiny
-    ridge) is solved as a general system instead."""
+    product, summed over chunks of frames (:data:`CHUNK_ENTRIES`); ``back`` applies L⁻¹ to ``B dc`` rather than
+    keeping L⁻¹B. A block that is not numerically positive definite (a pose the markers leave free, held by a
+    tiny ridge) is solved as a general system instead."""
     F, k, P = B.shape
     try:
         Linv = lower_inverse(np.linalg.cholesky(A_damped))
     except np.linalg.LinAlgError:
         Linv = None
-    if Linv is not None:                                 # A⁻¹ = L⁻ᵀL⁻¹: both sides of each product are L⁻¹ times
-        left = Linv @ B                                   # (F, k, P), contiguous: XᵀX below is one symmetric product
-        right, right_g = left, (Linv @ g[..., None])[..., 0]
-        back = lambda dc: (Linv.transpose(0, 2, 1) @ (right_g + left @ dc)[..., None])[..., 0]  # noqa: E731
-    else:
-        left, right = B, np.linalg.solve(A_damped, B)
+    if Linv is None:
+        right = np.linalg.solve(A_damped, B)
         right_g = np.linalg.solve(A_damped, g[..., None])[..., 0]
-        back = lambda dc: right_g + right @ dc  # noqa: E731
-    L2 = left.reshape(F * k, P)
-    S = C - L2.T @ (L2 if right is left else right.reshape(F * k, P))
-    if h.ndim == 2:
-        reduced = h - (left.transpose(0, 2, 1) @ right_g[..., None])[..., 0]
-    else:
-        reduced = h - L2.T @ right_g.reshape(-1)
+        S = C - B.reshape(F * k, P).T @ right.reshape(F * k, P)
+        if h.ndim == 2:
+            reduced = h - (B.transpose(0, 2, 1) @ right_g[..., None])[..., 0]
+        else:
+            reduced = h - B.reshape(F * k, P).T @ right_g.reshape(-1)
+        return 0.5 * (S + S.T), reduced, lambda dc: right_g + right @ dc
+    right_g = (Linv @ g[..., None])[..., 0]              # L⁻¹g (F, k)
+    S, reduced = C.copy(), h.copy()
+    step = max(1, CHUNK_ENTRIES // max(k * P, 1))
+    for f0 in range(0, F, step):
+        X = Linv[f0:f0 + step] @ B[f0:f0 + step]          # L⁻¹B of these frames (c, k, P), contiguous
+        X2 = X.reshape(-1, P)
+        S -= X2.T @ X2
+        if h.ndim == 2:
+            reduced[f0:f0 + step] -= (X.transpose(0, 2, 1) @ right_g[f0:f0 + step, :, None])[..., 0]
+        else:
+            reduced -= X2.T @ right_g[f0:f0 + step].reshape(-1)
+    Linv_t = Linv.transpose(0, 2, 1)
+    back = lambda dc: (Linv_t @ (right_g + (Linv @ (B @ dc)[..., None])[..., 0])[..., None])[..., 0]  # noqa: E731
     return 0.5 * (S + S.T), reduced, back
