@@ -119,7 +119,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     lam, it, converged, last_drop = 1e-3, 0, False, None
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
-        A = B = back = None            # free the last iteration's blocks before the next are built (B: 93 MB, a
+        A = B = Ad = back = None       # free the last iteration's blocks before the next are built (B: 93 MB, a
         A, B, C, g, h = _normal(chain, terms, s, R, centre, pred, y, w)     # 42-marker body at 1500 frames)
         if penalty:
             r_p, D = penalty(s)

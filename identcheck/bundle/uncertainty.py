@@ -117,6 +117,7 @@ def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.nd
     lay, blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
     r = np.where(w[..., None] > 0, pred - y, 0.0)
     A, B, C, Jr, Gr = normal_equations(lay, blocks, r, w, per_frame=True)
+    del blocks                              # the derivatives are not held while the frames are eliminated
     S, g, _ = eliminate_frames(ridged(A), B, C, Jr, Gr)
     return g, S, r
 
