@@ -20,8 +20,8 @@ Each fit starts from :func:`identcheck.bundle.chain.initial_state` and runs ``--
 if it converges first; both versions take the same steps up to rounding). Reported: CPU seconds per iteration
 (median of ``--repeats`` processes) and the process's peak resident memory.
 
-``fit_body42`` rows: ``identcheck fit`` on a simulated ``body42`` trial, baseline and current taking turns: wall, CPU
-and the peak resident memory of each process.
+``body42_end_to_end`` rows: ``identcheck fit`` and ``identcheck diagnose`` on a simulated ``body42`` trial, baseline and
+current taking turns: wall, CPU and the peak resident memory of each process, and a digest of its JSON.
 
 End to end (``end_to_end`` rows; ``--no-end-to-end`` skips them): ``identcheck fit`` on both legs of walking2
 with the baseline, and with this tree on one thread and on its default threads (``IDENTCHECK_THREADS``): wall
@@ -173,9 +173,10 @@ def fit_command(path: Path, version: str, threads: str | None) -> dict:
     return row
 
 
-def fit_body42(path: Path, version: str, folder: Path) -> dict:
-    """``identcheck fit`` on the simulated ``body42`` trial (1500 frames, 0.7 mm) with the package at `path`: wall
-    and CPU seconds and the peak resident memory of that one process (``os.wait4``), and a digest of its JSON."""
+def run_body42(path: Path, version: str, folder: Path, verb: str = "fit") -> dict:
+    """``identcheck fit`` (or `verb`: ``diagnose``) on the simulated ``body42`` trial (1500 frames, 0.7 mm) with the
+    package at `path`: wall and CPU seconds and the peak resident memory of that one process (``os.wait4``), and a
+    digest of its JSON."""
     model, trial = folder / "body42.toml", folder / "body42.trc"
     if not trial.exists():
         model.write_text(body42())
@@ -184,16 +185,16 @@ def fit_body42(path: Path, version: str, folder: Path) -> dict:
                        cwd=ROOT, capture_output=True, check=True)
     env = dict(os.environ, PYTHONPATH=str(path), IDENTCHECK_THREADS="1")
     t0 = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "identcheck", "fit", str(model), str(trial), "--json"], env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "identcheck", verb, str(model), str(trial), "--json"], env=env,
                             cwd=path, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
     stdout = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
-    row = {"command": "identcheck fit body42.toml body42.trc --json", "version": version,
+    row = {"command": f"identcheck {verb} body42.toml body42.trc --json", "version": version,
            "wall_s": time.perf_counter() - t0, "cpu_s": usage.ru_utime + usage.ru_stime,
            "max_rss_mib": usage.ru_maxrss / 1024, "exit_code": proc.returncode,
            "json_sha256": hashlib.sha256(stdout).hexdigest()[:16]}
-    print(f"fit body42   {version:9s} {row['wall_s']:6.1f} s wall {row['cpu_s']:6.1f} s CPU  peak "
+    print(f"{verb:8s} body42 {version:9s} {row['wall_s']:6.1f} s wall {row['cpu_s']:6.1f} s CPU  peak "
           f"{row['max_rss_mib']:.0f} MiB  JSON {row['json_sha256']}", flush=True)
     return row
 
@@ -234,8 +235,8 @@ def main(argv=None) -> int:
         end_to_end = [] if a.no_end_to_end else [
             fit_command(base, "baseline", None), fit_command(ROOT, "current", "1"), fit_command(ROOT, "current", None)]
         with tempfile.TemporaryDirectory() as tmp:
-            body = [fit_body42(p, v, Path(tmp)) for _ in range(a.repeats) for v, p in (("baseline", base),
-                                                                                     ("current", ROOT))]
+            body = [run_body42(p, v, Path(tmp), verb) for verb in ("fit", "diagnose") for _ in range(a.repeats)
+                    for v, p in (("baseline", base), ("current", ROOT))]
     speedup = {}
     for name in a.chains:
         pick = {(r["version"], r["allocator"]): r["s_per_iteration"] for r in rows if r["chain"] == name}
@@ -245,7 +246,7 @@ def main(argv=None) -> int:
               f"{speedup[name]['current_kept_vs_baseline_default']:.2f}x (with the command line's allocator)")
     write_json(a.out, a.key, {"machine": machine_info(), "baseline": a.baseline, "current": head.strip(),
                             "iterations": a.iterations, "repeats": a.repeats, "rows": rows, "speedup": speedup,
-                            "end_to_end": end_to_end, "fit_body42": body,
+                            "end_to_end": end_to_end, "body42_end_to_end": body,
                             "date": time.strftime("%Y-%m-%dT%H:%M:%S")})
     return 0
 

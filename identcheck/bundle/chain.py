@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, tangents
-from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
+from identcheck.bundle.normal import CHUNK_ENTRIES, eliminate_frames, lower_inverse, normal_equations, ridged
 from identcheck.errors import InputError
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
@@ -184,8 +184,9 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 
 
-def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
-    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0), its weighted
+def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
+    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
+    so that a caller with many fields can make each as it is used), its weighted
     squared norm less the part a refit of the model absorbs (every unknown, per frame and constant, linearised at
     `fit`): ``vᵀWv − bᵀN⁺b`` with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns
     eliminated as in the fit (Schur complement).
@@ -204,11 +205,15 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields: list) -> list:
     S = eliminate_frames(A, B, C, g, h)[0]
     S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                     # the gauge stays free
     Linv = lower_inverse(np.linalg.cholesky(A))                                 # A⁻¹ = L⁻ᵀL⁻¹
-    LB = Linv @ B
+    # L⁻¹B written over B (not needed again) a chunk of frames at a time: L⁻¹B is as large as B
+    LB, step = B, max(1, CHUNK_ENTRIES // max(B.shape[1] * B.shape[2], 1))
+    for f0 in range(0, len(LB), step):
+        LB[f0:f0 + step] = Linv[f0:f0 + step] @ LB[f0:f0 + step]
     out = []
     for v in fields:
         v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
-        g, h = normal_equations(lay, blocks, v0, w, gradients_only=True)
+        moved = np.any(v0 != 0, axis=(0, 2))            # a block whose markers the field leaves still adds zeros
+        g, h = normal_equations(lay, [b for b in blocks if moved[b.group.cols].any()], v0, w, gradients_only=True)
         z = np.einsum("fij,fj->fi", Linv, g)
         reduced = h - np.einsum("fkp,fk->p", LB, z)
         out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(z * z) - reduced @ S_plus @ reduced))

@@ -75,6 +75,13 @@ def smooth_velocity(data: np.ndarray, rate_hz: float, span_s: float = VELOCITY_S
     return out
 
 
+def _only(vel: np.ndarray, idx: list) -> np.ndarray:
+    """`vel` (F, M, 3) on the markers `idx`, zero on the others: the displacement of a lag of those markers alone."""
+    out = np.zeros_like(vel)
+    out[:, idx] = vel[:, idx]
+    return out
+
+
 class TimeOffset(Effect):
     name = "time_offset"
     max_proposals = 64
@@ -102,14 +109,10 @@ class TimeOffset(Effect):
         out = []
         groups = [(seg, list(ch.seg_markers[seg])) for seg in ch.segments]
         groups += [(ch.marker_seg[c], [c]) for c in range(ch.n_markers) if len(ch.seg_markers[ch.marker_seg[c]]) > 1]
-        fields = []
-        for _seg, idx in groups:
-            field = np.zeros_like(vel)
-            field[:, idx] = vel[:, idx]
-            fields.append(field)
         # a lag's displacement −τ·v is taken up in part by the poses (a lagging limb segment's almost whole by the
-        # joint angles, a single marker's by its segment's pose): the residual is regressed on the rest of it
-        left = unabsorbed(hyp.fit, hyp.weights, fields)
+        # joint angles, a single marker's by its segment's pose): the residual is regressed on the rest of it. The
+        # fields are made one at a time (one per segment and per marker: 85 MB at once on a 42-marker body)
+        left = unabsorbed(hyp.fit, hyp.weights, (_only(vel, idx) for _seg, idx in groups))
         for (seg, idx), vv in zip(groups, left):
             v, r = vel[:, idx], res[:, idx]
             ok = np.isfinite(v) & np.isfinite(r)
