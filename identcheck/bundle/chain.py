@@ -119,8 +119,9 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     lam, it, converged, last_drop = 1e-3, 0, False, None
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
-        A = B = Ad = back = None       # free the last iteration's blocks before the next are built (B: 93 MB, a
-        A, B, C, g, h = _normal(chain, terms, s, R, centre, pred, y, w)     # 42-marker body at 1500 frames)
+        # the last iteration's blocks are let go before the next are built (B alone: 93 MB for 42 markers)
+        A = B = Ad = back = None
+        A, B, C, g, h = _normal(chain, terms, s, R, centre, pred, y, w)
         if penalty:
             r_p, D = penalty(s)
             C, h = C + D.T @ D, h + D.T @ r_p
@@ -186,10 +187,10 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
-    so that a caller with many fields can make each as it is used), its weighted
-    squared norm less the part a refit of the model absorbs (every unknown, per frame and constant, linearised at
-    `fit`): ``vᵀWv − bᵀN⁺b`` with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns
-    eliminated as in the fit (Schur complement).
+    so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
+    refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
+    with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
+    (Schur complement).
 
     What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
     regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
