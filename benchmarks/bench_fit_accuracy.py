@@ -204,9 +204,11 @@ def main(argv=None) -> int:
         summary[name] = s
     print("CPU seconds of the whole-tree row: the whole fit_trial call divided by the number of joints "
           "(closed-form starts included, whose own time is not separated here).")
-    entry = {"summary" if a.allocator == "kept" else "summary_default_allocator": summary,
-             "trials": a.trials, "frames": a.frames, "noise_mm": a.noise_mm, "allocator": a.allocator,
-             "machine": machine_info()}
+    if a.allocator == "kept":
+        entry = {"summary": summary, "trials": a.trials, "frames": a.frames, "noise_mm": a.noise_mm,
+                 "allocator": a.allocator, "machine": machine_info()}
+    else:                                 # beside the main run's entry, whose settings it shares but for this one
+        entry = {"summary_default_allocator": summary}
     if a.baseline:
         speed = speed_vs_baseline(a.baseline, [a.first_seed + k for k in range(a.trials)], a.frames, a.noise_mm, a.rounds)
         print(f"CPU s per joint, least of {a.rounds} turns, median over trials: current {speed['current_seconds_per_joint']}"
