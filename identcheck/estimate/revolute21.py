@@ -205,7 +205,7 @@ def scattered_seed(R, z, scale: float, seed: int = 0) -> np.ndarray | None:
     of them are refined there for :data:`SCATTERED_NFEV` evaluations (None with fewer samples than that).
 
     With noise, the closed form's roots are biased, and on a minimal marker set (one thigh and one shank
-    marker) every one of its slots can lie in the basin of a wrong minimum: on a held-out trial with 0.38 mm of
+    marker) every one of its slots can lie in the basin of a wrong minimum: on a generated trial with 0.38 mm of
     noise they all refined to an RMS distance of 2.0 mm, while a joint 0.66 mm from the samples existed. The
     random joints cover the constants' plausible range (the hinge within one sample scale of the samples, α in
     (0, π/2], the other half being the mirror images); the generator is seeded, so the answer depends on the
