@@ -93,7 +93,9 @@ class Fit:
     pred: np.ndarray             # (F, M, 3)
     rss: float                   # Σ w |x̂ − y|², mm²
     n_samples: int               # visible (weight > 0) marker samples
-    n_params: int                # free parameters net of the gauge
+    n_params: int                # free parameters net of the gauge: every unknown of a frame with samples
+    #                              (the residual's degrees of freedom count only the determined ones:
+    #                              uncertainty.frame_rank)
     iterations: int
     converged: bool
     seg_R: dict = field(default_factory=dict)
