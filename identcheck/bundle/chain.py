@@ -185,18 +185,12 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 
 
-def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
-    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
-    so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
-    refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
-    with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
-    (Schur complement).
-
-    What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
-    regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
-    needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
-    a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
-    constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
+def _refit_projection(fit: Fit, weights: np.ndarray):
+    """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
+    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement): a function taking
+    a field v (F, M, 3) to ``(vᵀWv, z, reduced)`` with ``vᵀWv − z·z − reducedᵀ S⁺ reduced`` its unabsorbed
+    squared norm, and ``S⁺`` (the gauge left free) beside it, so that cross products of fields come from the
+    same pieces."""
     s = fit.state
     w = np.asarray(weights, dtype=float)
     R, _t, centre, pred = forward(fit.chain, fit.terms, s)
@@ -210,15 +204,51 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     LB, step = B, max(1, CHUNK_ENTRIES // max(B.shape[1] * B.shape[2], 1))
     for f0 in range(0, len(LB), step):
         LB[f0:f0 + step] = Linv[f0:f0 + step] @ LB[f0:f0 + step]
-    out = []
-    for v in fields:
+
+    def pieces(v):
         v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
         moved = np.any(v0 != 0, axis=(0, 2))            # a block whose markers the field leaves still adds zeros
         g, h = normal_equations(lay, [b for b in blocks if moved[b.group.cols].any()], v0, w, gradients_only=True)
         z = np.einsum("fij,fj->fi", Linv, g)
         reduced = h - np.einsum("fkp,fk->p", LB, z)
+        return v0, z, reduced
+    return pieces, S_plus, w
+
+
+def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
+    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
+    so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
+    refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
+    with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
+    (Schur complement).
+
+    What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
+    regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
+    needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
+    a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
+    constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
+    pieces, S_plus, w = _refit_projection(fit, weights)
+    out = []
+    for v in fields:
+        v0, z, reduced = pieces(v)
         out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(z * z) - reduced @ S_plus @ reduced))
     return out
+
+
+def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
+    """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
+    :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
+    explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
+    pieces, S_plus, w = _refit_projection(fit, weights)
+    parts = [pieces(v) for v in fields]
+    k = len(parts)
+    G = np.empty((k, k))
+    for i, (vi, zi, ri) in enumerate(parts):
+        for j in range(i, k):
+            vj, zj, rj = parts[j]
+            G[i, j] = G[j, i] = (float(np.sum(w[..., None] * vi * vj)) - float(np.sum(zi * zj))
+                                 - float(ri @ S_plus @ rj))
+    return G
 
 
 # ---------------------------------------------------------------------- starting point
