@@ -187,10 +187,11 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 def _refit_projection(fit: Fit, weights: np.ndarray):
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
-    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement): a function taking
-    a field v (F, M, 3) to ``(vᵀWv, z, reduced)`` with ``vᵀWv − z·z − reducedᵀ S⁺ reduced`` its unabsorbed
-    squared norm, and ``S⁺`` (the gauge left free) beside it, so that cross products of fields come from the
-    same pieces."""
+    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement), as
+    ``(pieces, S⁺, w)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and
+    unweighted samples set to 0, and its unabsorbed squared norm is ``v0ᵀWv0 − z·z − reducedᵀ S⁺ reduced``
+    (S⁺ the pseudo-inverse of the constants' Schur complement, the gauge left free; w the weights as an array). Two
+    fields' inner product after the projection comes from the same pieces, with one factor from each."""
     s = fit.state
     w = np.asarray(weights, dtype=float)
     R, _t, centre, pred = forward(fit.chain, fit.terms, s)

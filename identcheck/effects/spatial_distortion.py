@@ -104,10 +104,9 @@ def explained(data: np.ndarray, seen: np.ndarray, res: np.ndarray) -> dict:
 def where_fields_act(hyp) -> np.ndarray:
     """The positions the fields are evaluated at: the markers as hypothesis `hyp` predicts them (NaN where not
     seen), not as measured. A field evaluated at measured positions carries the noise itself (a linear field
-    ``E x`` of ``x + e`` adds ``E e``), and over a volume much longer than high (walking overground: 10 m by 1 m
-    in normalised units) its fit shrinks the vertical noise: on a held-out gait trial with serially correlated
-    noise and nothing a distortion could explain, the strain scored 82 at measured positions and −47 at the
-    noise-free ones."""
+    ``E x`` of ``x + e`` adds ``E e``), which its fit can use to take some of the noise out: on a held-out gait
+    trial walked overground (a volume much longer than high) with serially correlated noise and nothing a
+    distortion could explain, the strain scored 82 at measured positions and −47 at the noise-free ones."""
     return np.where((hyp.weights > 0)[..., None], hyp.fit.pred, np.nan)
 
 
