@@ -188,10 +188,10 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 def _refit_projection(fit: Fit, weights: np.ndarray):
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
     per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement), as
-    ``(pieces, S⁺, w)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and
-    unweighted samples set to 0, and its unabsorbed squared norm is ``v0ᵀWv0 − z·z − reducedᵀ S⁺ reduced``
-    (S⁺ the pseudo-inverse of the constants' Schur complement, the gauge left free; w the weights as an array). Two
-    fields' inner product after the projection comes from the same pieces, with one factor from each."""
+    ``(pieces, inner)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and
+    unweighted samples set to 0; ``inner`` takes two fields' pieces to the inner product of their unabsorbed
+    parts, ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur
+    complement, the gauge left free)."""
     s = fit.state
     w = np.asarray(weights, dtype=float)
     R, _t, centre, pred = forward(fit.chain, fit.terms, s)
@@ -213,7 +213,11 @@ def _refit_projection(fit: Fit, weights: np.ndarray):
         z = np.einsum("fij,fj->fi", Linv, g)
         reduced = h - np.einsum("fkp,fk->p", LB, z)
         return v0, z, reduced
-    return pieces, S_plus, w
+
+    def inner(a, b) -> float:
+        (va, za, ra), (vb, zb, rb) = a, b
+        return float(np.sum(w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ S_plus @ rb)
+    return pieces, inner
 
 
 def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
@@ -228,11 +232,11 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
     a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
-    pieces, S_plus, w = _refit_projection(fit, weights)
+    pieces, inner = _refit_projection(fit, weights)
     out = []
     for v in fields:
-        v0, z, reduced = pieces(v)
-        out.append(float(np.sum(w[..., None] * v0 * v0) - np.sum(z * z) - reduced @ S_plus @ reduced))
+        p = pieces(v)
+        out.append(inner(p, p))
     return out
 
 
@@ -240,15 +244,12 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
     """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
-    pieces, S_plus, w = _refit_projection(fit, weights)
+    pieces, inner = _refit_projection(fit, weights)
     parts = [pieces(v) for v in fields]
-    k = len(parts)
-    G = np.empty((k, k))
-    for i, (vi, zi, ri) in enumerate(parts):
-        for j in range(i, k):
-            vj, zj, rj = parts[j]
-            G[i, j] = G[j, i] = (float(np.sum(w[..., None] * vi * vj)) - float(np.sum(zi * zj))
-                                 - float(ri @ S_plus @ rj))
+    G = np.empty((len(parts), len(parts)))
+    for i in range(len(parts)):
+        for j in range(i, len(parts)):
+            G[i, j] = G[j, i] = inner(parts[i], parts[j])
     return G
 
 

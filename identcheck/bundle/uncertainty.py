@@ -99,14 +99,27 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None) -> tuple[np.ndar
     the number of directions left out beyond ``gauge`` (the data leave those undetermined); and those
     directions, (P, k) unit columns. Directions the data barely determine stay in, with the large
     variances they deserve."""
-    d = np.sqrt(np.maximum(np.diag(S), 1e-300))
-    w, V = np.linalg.eigh(S / np.outer(d, d))
-    keep = w > RANK_TOL * max(w.max(), 1e-300)
+    scaled, d = jacobi_scaled(S)
+    w, V = np.linalg.eigh(scaled)
+    keep = determined_directions(w)
     inv = (V[:, keep] / w[keep]) @ V[:, keep].T
     dropped = int((~keep).sum())
     null = V[:, ~keep] / d[:, None]
     null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
     return inv / np.outer(d, d), (max(dropped - gauge, 0) if gauge is not None else dropped), null
+
+
+def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric matrices M (..., k, k) scaled to unit diagonal, so that millimetres and radians compare, and the
+    scale d (..., k): ``M / (d dᵀ)`` (a zero diagonal entry leaves its row and column 0)."""
+    d = np.sqrt(np.maximum(np.einsum("...ii->...i", M), 1e-300))
+    return M / (d[..., :, None] * d[..., None, :]), d
+
+
+def determined_directions(w: np.ndarray) -> np.ndarray:
+    """Which eigenvalues w (..., k) of a Jacobi-scaled information count as determined: above :data:`RANK_TOL`
+    of the largest (of each matrix)."""
+    return w > RANK_TOL * np.maximum(w.max(axis=-1, keepdims=True), 1e-300)
 
 
 def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -133,10 +146,7 @@ def frame_rank(A: np.ndarray) -> int:
     :mod:`identcheck.fit.whole_tree`), or the pose of a segment hidden in that frame. Each such unknown took a
     degree of freedom from the residual that it never used, and σ̂² came out too large by up to the ratio of
     the two counts: twice, for that hip (σ̂ 0.47 mm against 0.33 simulated, intervals 1.4 times too wide)."""
-    d = np.sqrt(np.einsum("fii->fi", A))
-    scaled = A / np.maximum(d[:, :, None] * d[:, None, :], 1e-300)
-    ev = np.linalg.eigvalsh(scaled)
-    return int(np.sum(ev > RANK_TOL * np.maximum(ev.max(axis=1, keepdims=True), 1e-300)))
+    return int(np.sum(determined_directions(np.linalg.eigvalsh(jacobi_scaled(A)[0]))))
 
 
 def lag1(x: np.ndarray) -> float:
