@@ -24,12 +24,9 @@ in every frame, and the markers that stay still in a triple's frame (within the 
 95th-percentile deviation from its body-fixed position, which for isotropic scatter matches a pair's spread)
 join it, largest body first. Markers left over pair up by their distances; a marker rigid with no other is left
 alone (``loose``): the tree step tries to attach it as a one-marker segment, and otherwise reports it
-unassigned. Then markers left loose or paired join groups held apart from everything else
+unassigned. Last, markers left loose or paired join groups held apart from everything else
 (:mod:`identcheck.infer.separated_groups`): skin markers on the moving segment of a functional trial wobble more
-than the one tolerance, which the still rest of the body sets. Last, a group one part of which turns as a rigid
-body in the pose of the rest is split in two (:func:`identcheck.infer.two_segments.split_coherent`): a tolerance
-wide enough for noise and skin wobble holds two segments together when their joint moves their markers by a few
-millimetres only, and what tells the two apart is that the motion is one body's, not each marker's own.
+than the one tolerance, which the still rest of the body sets.
 
 A static trial (no pair's spread reaches :data:`STATIC_MM` and :data:`STATIC_SHARE` of the markers' size) is
 refused rather than grouped by noise.
@@ -47,7 +44,6 @@ from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR, frame_to_frame_sd
 from identcheck.geometry.poses import MIN_MARKERS
 from identcheck.infer.body_frames import body_deviation, evenly_spaced, is_rigid
 from identcheck.infer.separated_groups import widen
-from identcheck.infer.two_segments import SURE_COHERENCE, split_coherent
 
 SPREAD_PERCENTILES = (2.5, 97.5)
 """A pair's spread: half the distance between these percentiles of its distance over the frames."""
@@ -173,19 +169,6 @@ class Tolerance:
                 "wobble_mm": _num(self.wobble_mm), "rule": self.rule}
 
 
-def computed_points(spread: np.ndarray) -> np.ndarray:
-    """The columns whose nearest partner's spread is below :data:`COMPUTED_MM`: points computed from the markers
-    (virtual joint centres, duplicates), rigid with their segment beyond any measurement."""
-    S = np.asarray(spread, dtype=float).copy()
-    np.fill_diagonal(S, np.nan)
-    has = np.isfinite(S).any(axis=1)
-    nearest = np.full(len(S), np.inf)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        nearest[has] = np.nanmin(S[has], axis=1)
-    return np.flatnonzero(nearest < COMPUTED_MM)
-
-
 def rigidity_tolerance(stats: PairStatistics) -> Tolerance:
     """The rigid-pair tolerance from the data (module docstring).
 
@@ -205,8 +188,8 @@ def rigidity_tolerance(stats: PairStatistics) -> Tolerance:
                          f"{MIN_SAMPLES_PER_PAIR}+ frames: the floor, {FLOOR_MM:g} mm")
     rows = np.flatnonzero(has)
     nearest = np.nanargmin(S[rows], axis=1)
-    measured = ~np.isin(rows, computed_points(stats.spread_mm))   # computed points (a joint centre exported beside
-    if measured.any():                                            # its markers) are rigid beyond any measurement
+    measured = S[rows, nearest] >= COMPUTED_MM                # computed points (a joint centre exported beside
+    if measured.any():                                        # its markers) are rigid beyond any measurement
         rows, nearest = rows[measured], nearest[measured]
     w = float(np.median(S[rows, nearest]))
     noise = [frame_to_frame_sd(stats.distance(i, j))[0] for i, j in zip(rows, nearest)]
@@ -408,15 +391,11 @@ class Grouping:
     widened: dict = field(default_factory=dict)
     spread_mm: np.ndarray = field(default=None, repr=False, compare=False)
     """Every pair's spread (:class:`PairStatistics`), marker columns in trial order."""
-    split: tuple = ()
-    """Inferred only: the groups split in two because one part turns as a rigid body in the other's pose
-    (:func:`identcheck.infer.two_segments.split_coherent`): ``{"parts", "segments", "coherence", "sure", "note"}``
-    each, ``segments`` the groups their markers ended in."""
 
     def to_dict(self) -> dict:
         return {"source": self.source, **self.tolerance.to_dict(),
                 "internal_spread_mm": {k: _num(v) for k, v in self.internal_spread_mm.items()},
-                "widened": self.widened, "split": list(self.split)}
+                "widened": self.widened}
 
 
 def _num(x):
@@ -501,8 +480,6 @@ def group_markers(trial) -> Grouping:
     _refuse_static(stats, labels, trial.source, usable)
     tol = rigidity_tolerance(stats)
     cols, loose, widened = partition(trial.xyz, stats.spread_mm, tol.tolerance_mm, usable)
-    cols, splits = split_coherent(trial.xyz, stats.spread_mm, cols, computed_points(stats.spread_mm))
-    cols = sorted(cols, key=lambda g: g[0])
     if len(cols) == 1 and len(cols[0]) == len(labels):
         raise InputError([f"all {len(labels)} markers move as one rigid body (every pair's distance stays within "
                           f"{tol.tolerance_mm:.3g} mm): there is no joint to infer; record a trial in which the "
@@ -524,19 +501,7 @@ def group_markers(trial) -> Grouping:
                          f"{entry['separation_mm']:.3g} mm relative to them: skin markers wobbling on one segment, or "
                          "segments joined by a joint that hardly moves in this trial")
     return Grouping(groups, tuple(labels[i] for i in loose), unused, tol, internal, "inferred", widened=wide,
-                    spread_mm=stats.spread_mm, split=tuple(_split_entry(v, a, b, labels, home) for v, a, b in splits))
-
-
-def _split_entry(value: float, a: list, b: list, labels, home: dict) -> dict:
-    """One split made by :func:`identcheck.infer.two_segments.split_coherent`, for ``grouping.split``."""
-    parts = [[labels[i] for i in a], [labels[i] for i in b]]
-    sure = value >= SURE_COHERENCE
-    return {"parts": parts, "segments": sorted({home[i] for i in a + b}, key=lambda g: int(g[3:])),
-            "coherence": float(value), "sure": bool(sure),
-            "note": f"{', '.join(parts[1])} turn as one body in the pose of {', '.join(parts[0])}: posed as two bodies "
-                    f"they fit {value:.3g} times better per parameter than their own non-rigidity (1 for one rigid "
-                    "body), so they are two segments" + ("" if sure else
-                    f"; below {SURE_COHERENCE:g}, skin moving with one joint's angle could do this too")}
+                    spread_mm=stats.spread_mm)
 
 
 def given_grouping(trial, segments: dict, source: str = "--segments") -> Grouping:

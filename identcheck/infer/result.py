@@ -53,13 +53,11 @@ class SkeletonResult:
     def ok(self) -> bool:
         """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
         group held together beyond the rigidity tolerance (``grouping.widened``) or moving inside beyond the noise
-        (``may_be_two_segments``), and no group split in two on evidence skin motion could also give
-        (``grouping.split`` not ``sure``). A marker that moves with both segments of a joint (``markers_on_joints``)
-        leaves it settled: whichever segment carries it, it moves the same."""
-        grouping = self.other.get("grouping") or {}
-        unsure = [s for s in grouping.get("split") or () if not s.get("sure")]
+        (``may_be_two_segments``). A marker that moves with both segments of a joint (``markers_on_joints``) leaves it
+        settled: whichever segment carries it, it moves the same."""
+        widened = (self.other.get("grouping") or {}).get("widened")
         return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
-                and not grouping.get("widened") and not unsure and not self.other.get("may_be_two_segments"))
+                and not widened and not self.other.get("may_be_two_segments"))
 
     @classmethod
     def from_dict(cls, doc: dict) -> "SkeletonResult":

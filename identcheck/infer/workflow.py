@@ -120,8 +120,6 @@ def _header(doc: dict, grouping, excess: bool) -> list:
         lines.append(f"Left out, cannot place {c['segment']} {c['markers']}: {c['reason']}")
     for w in (doc["grouping"].get("widened") or {}).values():
         lines.append(f"WOBBLING GROUP: {w['note']}")
-    for t in doc["grouping"].get("split") or ():
-        lines.append(f"SPLIT {' | '.join(t['segments'])}{'' if t['sure'] else ' (OPEN)'}: {t['note']}")
     for t in doc["may_be_two_segments"]:
         lines.append(f"MAY BE TWO SEGMENTS: {t['note']}")
     for m in doc["markers_on_joints"]:

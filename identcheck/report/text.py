@@ -356,8 +356,6 @@ def skeleton_text(result) -> str:
         lines.append(f"cannot place {c['segment']} ({', '.join(c['markers'])}): {c['reason']}")
     for w in (g.get("widened") or {}).values():
         lines.append(f"wobbling group: {w['note']}")
-    for t in g.get("split") or []:
-        lines.append(f"split {' | '.join(t['segments'])}{'' if t['sure'] else ' (open)'}: {t['note']}")
     for t in doc.get("may_be_two_segments", []):
         lines.append(f"may be two segments: {t['note']}")
     for m in doc.get("markers_on_joints", []):
