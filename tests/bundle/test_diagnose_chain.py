@@ -13,9 +13,9 @@ from identcheck import cli
 from identcheck.skeleton import Skeleton
 from identcheck.bundle.chain import convert_joint, fit_chain, initial_state
 from identcheck.bundle.model import Terms
-from identcheck.bundle.hypothesis import Hypothesis, centre_world
+from identcheck.bundle.hypothesis import Hypothesis, centre_world, score
 from identcheck.estimate.noise import noise_floor
-from identcheck.diagnose.workflow import MAX_SD_MM, SD_GROWTH, start, undetermined, worst_sd
+from identcheck.diagnose.workflow import SD_GROWTH, start, undetermined, worst_sd
 from identcheck.effects.registry import inject_effect
 from identcheck.errors import InputError
 from identcheck.io.model import Model
@@ -79,14 +79,19 @@ def test_a_step_term_at_the_slip_frame_recovers_the_slip_exactly(seed):
 
 
 def test_a_hinge_redeclared_as_a_ball_is_flagged_undetermined_under_hinge_motion():
-    """A pure hinge motion cannot place a ball joint's centre along the axis: the guard that keeps
-    extra_dof from being adopted without a second rotation must see it."""
+    """A pure hinge motion cannot place a ball joint's centre along the axis: only the noise its extra angles fit
+    places it. Converged, that still leaves the ball's worst marker distance many times less determined than the
+    hinge's (beyond the guard's growth factor; about 5 mm here, against 0.36), and the extra angles do not earn
+    their parameters, so extra_dof is not adopted without a second rotation. (The fit stopped short once, on
+    frames posed about origins metres away, and its standard error then read above the guard's 10 mm too.)"""
     sim = simulate(MODEL, n_frames=300, noise_mm=0.3, seed=5)
     ctx, h = start(MODEL, sim.trial)
     assert undetermined(h) == 0 and worst_sd(ctx, h) < 1.0
     chain, state = convert_joint(h.chain, h.fit.state, "knee", "spherical")
-    ball = h.refit(chain=chain, state=state, max_iter=20)
-    assert worst_sd(ctx, ball) > max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
+    ball = h.refit(chain=chain, state=state, max_iter=60)
+    assert ball.fit.converged
+    assert worst_sd(ctx, ball) > SD_GROWTH * worst_sd(ctx, h)
+    assert score(ctx, ball, h) < 0
 
 
 def test_diagnose_needs_three_markers_on_every_segment(tmp_path):
