@@ -78,7 +78,7 @@ def test_a_step_term_at_the_slip_frame_recovers_the_slip_exactly(seed):
     assert np.linalg.norm(fit.state.term_params[0]) == pytest.approx(eff["params"]["step_mm"], rel=1e-6)
 
 
-def test_a_hinge_redeclared_as_a_ball_is_flagged_undetermined_under_hinge_motion():
+def test_a_hinge_redeclared_as_a_ball_is_far_less_determined_and_earns_nothing_under_hinge_motion():
     """A pure hinge motion cannot place a ball joint's centre along the axis: only the noise its extra angles fit
     places it. Converged, that still leaves the ball's worst marker distance many times less determined than the
     hinge's (beyond the guard's growth factor; about 5 mm here, against 0.36), and the extra angles do not earn
