@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.model import cross3, tangents
-from identcheck.bundle.uncertainty import joint_offsets
+from identcheck.bundle.model import cross3, joint_offsets, tangents
 from identcheck.geometry.rotations import rotvec_matrix
 
 STEP = 1e-4     # mm (or rad) central-difference step

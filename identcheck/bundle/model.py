@@ -238,3 +238,13 @@ def n_const(chain: Skeleton, terms: Terms) -> int:
     axis), and the effect terms' parameters, in that order."""
     return 3 * chain.n_markers + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints) \
         + terms.size()
+
+
+def joint_offsets(chain) -> dict:
+    """Column where each joint's constants start (centre in parent, centre in child, then for a hinge the
+    rest rotation and the axis' two tangent directions), after the 3M marker coordinates."""
+    offsets, c = {}, 3 * chain.n_markers
+    for j in chain.joints:
+        offsets[j] = c
+        c += 6 + (5 if chain.types[j] == "revolute" else 0)
+    return offsets

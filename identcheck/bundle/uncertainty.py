@@ -28,11 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from identcheck.bundle.chain import _prepare
+from identcheck.bundle.gauge import gauge_basis
 from identcheck.bundle.jacobian import jacobian_blocks
-from identcheck.bundle.model import forward, tangents
+from identcheck.bundle.model import forward, joint_offsets, tangents
 from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
+GAUGE_TOL = 1e-4       # largest entry of the scaled information times a written-out gauge direction: the
+#                        Schur complement's roundoff reaches 1e-6 on a 600-frame leg, a wrong direction gives O(1)
 
 
 @dataclass(frozen=True)
@@ -94,12 +97,29 @@ def moves_along_free(grad: np.ndarray, null: np.ndarray, undetermined: int, tol:
     return bool(n > 0 and np.max(np.abs(grad @ null)) > tol * n)
 
 
-def gauge_free_inverse(S: np.ndarray, gauge: int | None = None) -> tuple[np.ndarray, int, np.ndarray]:
+def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
+                       basis: np.ndarray | None = None) -> tuple[np.ndarray, int, np.ndarray]:
     """Pseudo-inverse of the information, Jacobi-scaled first so that millimetres and radians compare;
     the number of directions left out beyond ``gauge`` (the data leave those undetermined); and those
     directions, (P, k) unit columns. Directions the data barely determine stay in, with the large
-    variances they deserve."""
+    variances they deserve.
+
+    With ``basis`` (P, g), the gauge written out (:func:`identcheck.bundle.gauge.gauge_basis`), those directions
+    are left out exactly and the eigenvalue cutoff judges only the rest (see that module for why); a basis the
+    information does not annihilate (to :data:`GAUGE_TOL` of its scaled diagonal) is not a gauge, and the cutoff
+    alone decides as without one."""
     scaled, d = jacobi_scaled(S)
+    if basis is not None and basis.shape[1]:
+        N = np.linalg.qr(basis * d[:, None])[0]
+        if np.max(np.abs(scaled @ N)) <= GAUGE_TOL:
+            rest = np.linalg.svd(N, full_matrices=True)[0][:, N.shape[1]:]    # orthonormal complement
+            w, V = np.linalg.eigh(rest.T @ scaled @ rest)
+            keep = determined_directions(w)
+            U = rest @ V
+            inv = (U[:, keep] / w[keep]) @ U[:, keep].T
+            null = np.column_stack([N, U[:, ~keep]]) / d[:, None]
+            null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
+            return inv / np.outer(d, d), int((~keep).sum()), null
     w, V = np.linalg.eigh(scaled)
     keep = determined_directions(w)
     inv = (V[:, keep] / w[keep]) @ V[:, keep].T
@@ -210,7 +230,7 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
 def covariance(fit, data, weights=None) -> Covariance:
     """The constants' covariance of `fit` (see the module docstring), with the noise model behind it."""
     g, S, r, determined = frame_scores(fit, data, weights)
-    Sinv, undetermined, null = gauge_free_inverse(S, fit.chain.gauge())
+    Sinv, undetermined, null = gauge_free_inverse(S, fit.chain.gauge(), gauge_basis(fit.chain, fit.state, len(S)))
     # residual degrees of freedom: samples less the unknowns they determine, per frame and constant (rank of S)
     nu = max(3 * fit.n_samples - determined - (len(S) - null.shape[1]), 1)
     sigma = float(np.sqrt(fit.rss / nu))
@@ -223,16 +243,6 @@ def covariance(fit, data, weights=None) -> Covariance:
     H *= (3 * fit.n_samples) / max(3 * fit.n_samples - constants, 1)
     return Covariance(S, sigma ** 2 * Sinv, Sinv @ H @ Sinv, sigma, float(np.median(lags)) if lags else 0.0, L,
                       undetermined, null)
-
-
-def joint_offsets(chain) -> dict:
-    """Column where each joint's constants start (centre in parent, centre in child, then for a hinge the
-    rest rotation and the axis' two tangent directions), after the 3M marker coordinates."""
-    offsets, c = {}, 3 * chain.n_markers
-    for j in chain.joints:
-        offsets[j] = c
-        c += 6 + (5 if chain.types[j] == "revolute" else 0)
-    return offsets
 
 
 def distance_gradients(chain, state, n_params: int) -> dict:

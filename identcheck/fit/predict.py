@@ -21,6 +21,7 @@ import numpy as np
 from scipy.special import chndtr
 
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
+from identcheck.bundle.gauge import gauge_basis
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.errors import InputError
 from identcheck.fit.whole_tree import REJECT_CHI2, _same, posed_by_itself
@@ -80,7 +81,7 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
     best = tree.best
     chain = best.fit.chain
     S = best.cov.information
-    Sinv, _, _ = gauge_free_inverse(S, chain.gauge())
+    Sinv, _, _ = gauge_free_inverse(S, chain.gauge(), gauge_basis(chain, best.fit.state, len(S)))
     grads = distance_gradients(chain, best.fit.state, len(S))
     out = {}
     for j in chain.joints:

@@ -1,0 +1,58 @@
+"""The gauge of a whole-chain fit, written out: the directions of the constants that change no fitted marker.
+
+Each segment's body frame is a choice: moving it by t and turning it by ω moves the markers on it, the joint
+points it carries and the hinge axes it holds by ``t + ω × x`` (axes by ``ω × a``), and the per-frame poses
+undo it. A hinge adds two: sliding its point along its axis (both sides), and turning its rest rotation about
+the axis while its angles take the turn back. That is :meth:`identcheck.skeleton.Skeleton.gauge` directions.
+
+Why write them out rather than read them off the information's smallest eigenvalues: on sparse marker sets the
+Schur complement's roundoff lifts gauge directions to 1e-8 of the largest (scaled) eigenvalue, among directions
+the data determine poorly but do determine, and a cutoff between them falls on either side from one choice of
+frames to the next (a one-marker thigh's knee had its weakest standard error move from 13 to 19 mm when the thigh's
+frame was turned). Written out, the gauge is left out exactly, and the cutoff judges only what the data decide.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.model import Terms, joint_offsets, n_const, tangents
+
+
+def gauge_basis(chain, state, n_params: int) -> np.ndarray | None:
+    """The gauge directions (P, :meth:`~identcheck.skeleton.Skeleton.gauge`) of the rigid chain's constants in the
+    fit's own update coordinates (:func:`identcheck.bundle.model.apply_step`: markers, then per joint the centre in
+    parent and child, and for a hinge the rest rotation's left rotation vector and the axis' two tangent steps);
+    None when the fit carries effect terms, whose own gauge is not written out here."""
+    offsets = joint_offsets(chain)
+    if n_const(chain, Terms()) != n_params:
+        return None
+    columns = []
+    for seg in chain.segments:
+        for k in range(6):
+            v = np.zeros(n_params)
+            t, w = (np.eye(3)[k], np.zeros(3)) if k < 3 else (np.zeros(3), np.eye(3)[k - 3])
+            for m in chain.seg_markers[seg]:
+                v[3 * m:3 * m + 3] = t + np.cross(w, state.local[m])
+            for j in chain.joints:
+                o = offsets[j]
+                if chain.parent[j] == seg:
+                    v[o:o + 3] = t + np.cross(w, state.c_parent[j])
+                    if chain.types[j] == "revolute":
+                        v[o + 6:o + 9] = w                     # rest' = Rot(ω) rest
+                        turn = np.cross(w, state.axis[j])
+                        v[o + 9:o + 11] = [float(b @ turn) for b in tangents(state.axis[j])]
+                if chain.child[j] == seg:
+                    v[o + 3:o + 6] = t + np.cross(w, state.c_child[j])
+                    if chain.types[j] == "revolute":
+                        v[o + 6:o + 9] = -state.rest[j] @ w     # rest' = rest Rot(−ω) = Rot(−rest ω) rest
+            columns.append(v)
+    for j in chain.joints:
+        if chain.types[j] != "revolute":
+            continue
+        o, a = offsets[j], state.axis[j]
+        slide = np.zeros(n_params)
+        slide[o:o + 3], slide[o + 3:o + 6] = a, state.rest[j].T @ a
+        offset = np.zeros(n_params)
+        offset[o + 6:o + 9] = a                                # rest' = Rot(a, ε) rest, θ' = θ − ε
+        columns += [slide, offset]
+    return np.stack(columns, axis=1)
