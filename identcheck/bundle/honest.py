@@ -72,9 +72,14 @@ def posed_by_itself(chain: Skeleton, segment: str) -> bool:
     segment's roll in every frame is a free unknown seen only through the joints below it: an incidental
     parameter per frame, which biases the likelihood towards joints whose marker orbits absorb noise (on
     simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820)."""
+    return len(chain.seg_markers[segment]) + points_fixed_from_above(chain, segment) >= 3
+
+
+def points_fixed_from_above(chain: Skeleton, segment: str) -> int:
+    """How many of a segment's points its parent joint fixes once the parent is posed: a ball's centre one, a
+    hinge's axis two, none for the root."""
     up = [j for j in chain.joints if chain.child[j] == segment]
-    fixed = 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
-    return len(chain.seg_markers[segment]) + fixed >= 3
+    return 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
 
 
 def posed_above(chain: Skeleton, joint: str) -> bool:

@@ -100,3 +100,35 @@ def test_a_hinge_below_a_segment_not_posed_by_itself_is_not_judged():
     fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"knee": theta}, rel_R={"hip": np.tile(np.eye(3),
                                                                                                   (F, 1, 1))}))
     assert angle_jumps(fit, np.zeros((F, 5, 3)), 100.0) == {}
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), hidden=st.sampled_from(["parent", "child", "none"]),
+       left=st.integers(0, 2), width=st.integers(2, 30))
+def test_a_jump_where_the_markers_do_not_pose_both_segments_is_not_judged(seed, hidden, left, width):
+    """A ball joint between a four-marker pelvis and a three-marker thigh turns half a turn in one frame. Where the
+    markers seen there pose both segments, that is a jump; where either segment keeps fewer than three of its markers
+    (with the hip's centre: two of the thigh's) on either side of it, the fitted angle follows the joints, not the
+    markers, and no jump is claimed (the bundled walking2 trial's hip had 'jumped' 174 deg where its pelvis had no
+    marker seen)."""
+    from types import SimpleNamespace
+
+    from identcheck.bundle.continuity import angle_jumps
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    F, k = 120, 60
+    rel = Rotation.from_rotvec(rng.normal(0, 0.01, (F, 3))).as_matrix()
+    rel[k + 1:] = Rotation.from_rotvec([0.0, np.pi * 0.95, 0.0]).as_matrix() @ rel[k + 1:]
+    chain = SimpleNamespace(joints=["hip"], types={"hip": "spherical"}, parent={"hip": "pelvis"},
+                            child={"hip": "thigh"},
+                            seg_markers={"pelvis": np.array([0, 1, 2, 3]), "thigh": np.array([4, 5, 6])})
+    fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={}, rel_R={"hip": rel}))
+    data = rng.normal(size=(F, 7, 3))
+    gap = slice(k + 1 - width // 2, k + 1 + width // 2)
+    if hidden == "parent":              # the pelvis keeps `left` of its four markers: fewer than three
+        data[gap, left:4] = np.nan
+    elif hidden == "child":             # the thigh keeps `left - 1` or fewer: with the hip's centre, under three
+        data[gap, 4 + max(left - 1, 0):7] = np.nan
+    found = angle_jumps(fit, data, 100.0)
+    assert (set(found) == {"hip"}) == (hidden == "none")
