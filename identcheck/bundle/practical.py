@@ -186,7 +186,6 @@ def centre_in_parent(chain, state, joint: str, n_params: int) -> tuple[np.ndarra
     with δt the points' mean change and δω their least-squares turn about their centroid p̄; a turn the points do
     not fix (about their line, or any turn about a single point) moves the centre along ``n × (c − p̄)``, which no
     data can tell, and those directions are returned to be left out. None when the parent carries no point."""
-    
     offsets = joint_offsets(chain)
     seg = chain.parent[joint]
     cols = [3 * m for m in chain.seg_markers[seg]]
