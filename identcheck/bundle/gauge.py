@@ -3,11 +3,12 @@
 Each segment's body frame is a choice: moving it by t and turning it by ω moves the markers on it, the joint
 points it carries and the hinge axes it holds by ``t + ω × x`` (axes by ``ω × a``), and the per-frame poses
 undo it. A hinge adds two: sliding its point along its axis (both sides), and turning its rest rotation about
-the axis while its angles take the turn back. That is :meth:`identcheck.skeleton.Skeleton.gauge` directions.
+the axis while its angles take the turn back: :meth:`identcheck.skeleton.Skeleton.gauge` directions in all.
+Effect terms (``diagnose``) turn with the frame they are written in: a marker's or a joint centre's offsets.
 
 Why write them out rather than read them off the information's smallest eigenvalues: on sparse marker sets the
 Schur complement's roundoff lifts gauge directions to 1e-8 of the largest (scaled) eigenvalue, among directions
-the data determine poorly but do determine, and a cutoff between them falls on either side from one choice of
+the data determine poorly or not at all, and a cutoff between them falls on either side from one choice of
 frames to the next (a one-marker thigh's knee had its weakest standard error move from 13 to 19 mm when the thigh's
 frame was turned). Written out, the gauge is left out exactly, and the cutoff judges only what the data decide.
 """
@@ -18,13 +19,17 @@ import numpy as np
 from identcheck.bundle.model import Terms, joint_offsets, n_const, tangents
 
 
-def gauge_basis(chain, state, n_params: int) -> np.ndarray | None:
-    """The gauge directions (P, :meth:`~identcheck.skeleton.Skeleton.gauge`) of the rigid chain's constants in the
-    fit's own update coordinates (:func:`identcheck.bundle.model.apply_step`: markers, then per joint the centre in
-    parent and child, and for a hinge the rest rotation's left rotation vector and the axis' two tangent steps);
-    None when the fit carries effect terms, whose own gauge is not written out here."""
+def gauge_basis(chain, state, n_params: int, terms: Terms | None = None) -> np.ndarray | None:
+    """The gauge directions (P, :meth:`~identcheck.skeleton.Skeleton.gauge`) of the chain's constants in the fit's
+    own update coordinates (:func:`identcheck.bundle.model.apply_step`: markers, then per joint the centre in parent
+    and child, and for a hinge the rest rotation's left rotation vector and the axis' two tangent steps, then the
+    effect terms' parameters). Of the effect terms, a marker's or a centre's offsets turn with their segment's frame
+    (rows of B or D: ``ω × row``) and a world field's scale does not move; None when the fit carries a hinge's second
+    rotation (its angle is measured from a tangent of the axis, whose gauge is not written out here) or when
+    ``n_params`` is not the constants' count."""
+    terms = terms or Terms()
     offsets = joint_offsets(chain)
-    if n_const(chain, Terms()) != n_params:
+    if terms.rotations or n_const(chain, terms) != n_params:
         return None
     columns = []
     for seg in chain.segments:
@@ -45,6 +50,7 @@ def gauge_basis(chain, state, n_params: int) -> np.ndarray | None:
                     v[o + 3:o + 6] = t + np.cross(w, state.c_child[j])
                     if chain.types[j] == "revolute":
                         v[o + 6:o + 9] = -state.rest[j] @ w     # rest' = rest Rot(−ω) = Rot(−rest ω) rest
+            _turn_offsets(chain, state, terms, seg, w, v)
             columns.append(v)
     for j in chain.joints:
         if chain.types[j] != "revolute":
@@ -56,3 +62,15 @@ def gauge_basis(chain, state, n_params: int) -> np.ndarray | None:
         offset[o + 6:o + 9] = a                                # rest' = Rot(a, ε) rest, θ' = θ − ε
         columns += [slide, offset]
     return np.stack(columns, axis=1)
+
+
+def _turn_offsets(chain, state, terms: Terms, segment: str, w: np.ndarray, v: np.ndarray) -> None:
+    """Write into v the change ``ω × row`` of the offsets that a turn ω of `segment`'s frame brings to its markers'
+    and its child joints' centres' effect terms (a world field's scale is not moved by any frame)."""
+    c = n_const(chain, Terms())
+    owners = [chain.marker_seg[int(np.atleast_1d(col)[0])] for col, _ in terms.markers]
+    owners += [chain.parent[j] for j, _ in terms.centres]
+    for owner, p in zip(owners, state.term_params):
+        if owner == segment:
+            v[c:c + p.size] = np.cross(w, p).ravel()
+        c += p.size

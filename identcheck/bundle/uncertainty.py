@@ -230,7 +230,8 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
 def covariance(fit, data, weights=None) -> Covariance:
     """The constants' covariance of `fit` (see the module docstring), with the noise model behind it."""
     g, S, r, determined = frame_scores(fit, data, weights)
-    Sinv, undetermined, null = gauge_free_inverse(S, fit.chain.gauge(), gauge_basis(fit.chain, fit.state, len(S)))
+    basis = gauge_basis(fit.chain, fit.state, len(S), fit.terms)
+    Sinv, undetermined, null = gauge_free_inverse(S, fit.chain.gauge(), basis)
     # residual degrees of freedom: samples less the unknowns they determine, per frame and constant (rank of S)
     nu = max(3 * fit.n_samples - determined - (len(S) - null.shape[1]), 1)
     sigma = float(np.sqrt(fit.rss / nu))

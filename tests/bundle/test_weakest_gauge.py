@@ -15,20 +15,23 @@ from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.gauge import gauge_basis
-from identcheck.bundle.model import forward, tangents
+from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.model import Terms, forward, tangents
 from identcheck.bundle.practical import weakest
 from identcheck.bundle.uncertainty import GAUGE_TOL, covariance, jacobi_scaled
 from identcheck.fit.whole_tree import fit_tree
 from identcheck.fit.workflow import fit_model
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
+from identcheck.skeleton import Skeleton
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-def regauge(chain, state, segment: str, R0: np.ndarray, t0: np.ndarray):
+def regauge(chain, state, segment: str, R0: np.ndarray, t0: np.ndarray, terms: Terms = Terms()):
     """The same fit with `segment`'s body coordinates x replaced by R0 x + t0: its markers, the joint points and
-    hinge axes it carries, and the rotations that pose it, so that every segment sits where it sat."""
+    hinge axes it carries, the rotations that pose it and its effect terms' offsets, so that every segment sits
+    where it sat."""
     s = state.copy()
     cols = chain.seg_markers[segment]
     s.local[cols] = s.local[cols] @ R0.T + t0
@@ -49,6 +52,11 @@ def regauge(chain, state, segment: str, R0: np.ndarray, t0: np.ndarray):
     if segment == chain.root:
         s.root_R = s.root_R @ R0.T
         s.root_t = s.root_t - s.root_R @ t0
+    owners = [chain.marker_seg[int(np.atleast_1d(col)[0])] for col, _ in terms.markers]
+    owners += [chain.parent[j] for j, _ in terms.centres]
+    for k, owner in enumerate(owners):      # a marker's or a centre's offsets are vectors in its segment's frame
+        if owner == segment:
+            s.term_params[k] = s.term_params[k] @ R0.T
     return s
 
 
@@ -126,3 +134,58 @@ def test_the_weakest_direction_does_not_depend_on_the_gauge(fitted, seed, offset
             assert se1 is None
         else:
             assert se1 == pytest.approx(se0, rel=1e-3 if white else 0.03)
+
+
+@pytest.fixture(scope="module")
+def with_terms():
+    """A whole-chain fit carrying effect terms of the three kinds whose gauge is written out: a thigh marker's
+    offset and the knee's centre offset following smooth functions of time, and a world field on the ankle marker."""
+    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
+    trial = simulate(model, n_frames=400, noise_mm=0.7, seed=5).trial
+    data = trial.select(model.markers).as_array()
+    chain = Skeleton.from_model(model)
+    F = len(data)
+    time = np.linspace(0.0, 1.0, F)
+    smooth = np.stack([np.sin(2 * np.pi * time), np.cos(3 * np.pi * time)], axis=1)
+    ankle = chain.labels.index("RANK")
+    field = np.zeros((F, 1, 3))
+    field[:, 0] = np.stack([time, time ** 2, np.sin(time)], axis=1) * 10.0
+    terms = Terms(markers=[(chain.labels.index("RTHI"), smooth)], centres=[("knee", smooth[:, :1])],
+                  world=[(np.array([ankle]), field)])
+    w = np.ones(data.shape[:2])
+    rigid = fit_chain(chain, data, initial_state(chain, data), weights=w)
+    start = rigid.state.copy()
+    start.term_params = [np.zeros(shape) for shape in terms.shapes()]
+    return chain, data, w, fit_chain(chain, data, start, terms=terms, weights=w), terms
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 2**16), st.floats(0.0, 1000.0))
+def test_effect_terms_turn_with_their_segment_in_the_written_out_gauge(with_terms, seed, offset_mm):
+    """With marker, centre and world terms: a move of any segment's frame lies in the written-out gauge, which the
+    information annihilates, and the weakest direction's standard error is the same in the moved frame (under
+    white noise, to 1e-3)."""
+    chain, data, w, fit, terms = with_terms
+    cov = covariance(fit, data, weights=w)
+    B = gauge_basis(chain, fit.state, len(cov.information), terms)
+    assert B is not None and B.shape[1] == chain.gauge()
+    rng = np.random.default_rng(seed)
+    segment = chain.segments[seed % len(chain.segments)]
+    eps = 1e-6
+    small = regauge(chain, fit.state, segment, Rotation.from_rotvec(eps * rng.normal(size=3)).as_matrix(),
+                    eps * rng.normal(size=3) * 100.0, terms)
+    step = np.concatenate([update_coordinates(chain, fit.state, small)]
+                          + [(b - a).ravel() for a, b in zip(fit.state.term_params, small.term_params)]) / eps
+    coef = np.linalg.lstsq(B, step, rcond=None)[0]
+    assert np.linalg.norm(B @ coef - step) <= 1e-4 * np.linalg.norm(step)
+    scaled, d = jacobi_scaled(cov.information)
+    assert np.max(np.abs(scaled @ np.linalg.qr(B * d[:, None])[0])) <= GAUGE_TOL
+    joint = chain.joints[seed % 2]
+    R0 = Rotation.random(random_state=seed).as_matrix()
+    t0 = offset_mm * Rotation.random(random_state=seed + 1).apply([1.0, 0.0, 0.0])
+    moved = replace(fit, state=regauge(chain, fit.state, chain.parent[joint], R0, t0, terms))
+    assert np.allclose(forward(chain, terms, moved.state)[3], fit.pred, atol=1e-6)
+    c0, c1 = cov, covariance(moved, data, weights=w)
+    (d0, se0), (d1, se1) = (weakest(chain, f, replace(c, sandwich=c.naive), joint) for f, c in ((fit, c0), (moved, c1)))
+    assert se1 == pytest.approx(se0, rel=1e-3)
+    assert abs(float(d1 @ (R0 @ d0))) == pytest.approx(1.0, abs=1e-4)
