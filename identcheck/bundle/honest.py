@@ -235,10 +235,13 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
                                     "diagnose` models that motion)")
     interval = ci(dist)
     method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
+    grads = distance_gradients(chain, best.fit.state, len(best.cov.information))[j]
+    # a distance the data leave free has no standard error: the quadratic one is computed without that direction
+    free = any(best.cov.free(g) for _, g in grads.values())
     for k, (iv, how) in best.intervals.get(j, {}).items():
         interval[k], method[k] = iv, how
     return {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
             "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
             "marker_distances_ci95": interval, "interval_method": method,
-            "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist else None,
+            "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist and not free else None,
             "alternatives": list(alternatives), "rejected_candidates": list(rejected), "practical": practical}

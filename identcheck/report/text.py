@@ -114,10 +114,10 @@ def fit_text(result) -> str:
         if not j["identifiable"]:
             lines.append(f"{head}: NOT IDENTIFIABLE. {j['excitation']['reason']}")
             continue
-        unc = "-" if j["uncertainty_mm"] is None else f"{j['uncertainty_mm']:.3g}"
+        unc = ("no standard error bounds every marker distance" if j["uncertainty_mm"] is None
+               else f"uncertainty {j['uncertainty_mm']:.3g} mm (largest standard error of a marker distance)")
         rms = "-" if j["rms_residual"] is None else f"{j['rms_residual']:.3g}"
-        lines.append(f"{head}; {j['practical']['verdict']}; unique: {j['unique']}; rms residual {rms} mm; "
-                     f"uncertainty {unc} mm (largest standard error of a marker distance)")
+        lines.append(f"{head}; {j['practical']['verdict']}; unique: {j['unique']}; rms residual {rms} mm; {unc}")
         what = "centre" if j["type"] == "spherical" else "hinge axis"
         lines.append(f"   distances to the {what} (mm), one row per joint the data admit:")
         lines += _candidate_table(j)

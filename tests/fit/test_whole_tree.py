@@ -85,6 +85,29 @@ def test_minimal_leg_knee_is_never_a_confident_wrong_answer(examples):
         assert knee["practical"]["verdict"] != "determined" or covered
 
 
+def test_a_joint_the_data_leave_free_claims_no_standard_error(examples):
+    """3 pelvis, 1 thigh, 1 shank marker, 600 frames: the knee's thigh marker, axis and shank marker trade off along
+    a direction the information does not determine beyond the gauge (moving 3.6 mm along it cost Δχ² 0.002). A
+    standard error computed without that direction would be a number about nothing (6 mm for walking2's sparse left
+    knee): ``uncertainty_mm`` and the weakest direction's error are null exactly for the joints whose distances move
+    along a free direction, and those joints' intervals are unbounded."""
+    from identcheck.bundle.uncertainty import distance_gradients
+
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    tree, ans = _answers(model, simulate(model, n_frames=600, noise_mm=0.7, seed=3).trial)
+    best = tree.best
+    free = {j: any(best.cov.free(g) for _, g in per.values())
+            for j, per in distance_gradients(best.fit.chain, best.fit.state, len(best.cov.information)).items()}
+    assert free["knee_r"] and not free["hip_r"]
+    for j, a in ans.items():
+        assert (a["uncertainty_mm"] is None) == free[j]
+        if free[j]:
+            assert a["practical"]["weakest_se_mm"] is None and a["practical"]["verdict"] == "undetermined"
+            assert all(hi is None for _, hi in a["marker_distances_ci95"].values())
+        else:
+            assert a["uncertainty_mm"] > 0 and a["practical"]["weakest_se_mm"] > 0
+
+
 @settings(max_examples=15, deadline=None)
 @given(phi=st.floats(0.0, 0.9), seed=st.integers(0, 10 ** 6))
 def test_long_run_variance_of_ar1_scores(phi, seed):
