@@ -17,7 +17,7 @@ import numpy as np
 
 from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
-from identcheck.bundle.practical import TOLERANCE_MM, Z95, hardly_moved, judge, single_axis
+from identcheck.bundle.practical import TOLERANCE_MM, Z95, free_markers, hardly_moved, judge, single_axis
 from identcheck.bundle.profile import profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.skeleton import Skeleton
@@ -127,7 +127,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     start, out, jobs = time.monotonic(), {}, []
     for j in chain.joints:
         dist = best.distances[j]
-        free = (any(cov.free(g) for _, g in grads[j].values()) or single_axis(chain, fit, cov.sigma_mm, j)[0]
+        free = (free_markers(cov, grads[j]) or single_axis(chain, fit, cov.sigma_mm, j)[0]
                 or hardly_moved(chain, fit, cov.sigma_mm, j) is not None)
         wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
         misfit = j in best.model_error
@@ -235,9 +235,8 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
                                     "diagnose` models that motion)")
     interval = ci(dist)
     method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
-    grads = distance_gradients(chain, best.fit.state, len(best.cov.information))[j]
     # a distance the data leave free has no standard error: the quadratic one is computed without that direction
-    free = any(best.cov.free(g) for _, g in grads.values())
+    free = bool(free_markers(best.cov, distance_gradients(chain, best.fit.state, len(best.cov.information))[j]))
     for k, (iv, how) in best.intervals.get(j, {}).items():
         interval[k], method[k] = iv, how
     return {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),

@@ -236,8 +236,7 @@ def apply_step(chain: Skeleton, terms: Terms, s: State, R, dq: np.ndarray, dc: n
 def n_const(chain: Skeleton, terms: Terms) -> int:
     """Number of constants: each marker's position, each joint's centres (and a hinge's rest rotation and
     axis), and the effect terms' parameters, in that order."""
-    return 3 * chain.n_markers + sum(6 + (5 if chain.types[j] == "revolute" else 0) for j in chain.joints) \
-        + terms.size()
+    return 3 * chain.n_markers + sum(_joint_width(chain, j) for j in chain.joints) + terms.size()
 
 
 def joint_offsets(chain) -> dict:
@@ -246,5 +245,10 @@ def joint_offsets(chain) -> dict:
     offsets, c = {}, 3 * chain.n_markers
     for j in chain.joints:
         offsets[j] = c
-        c += 6 + (5 if chain.types[j] == "revolute" else 0)
+        c += _joint_width(chain, j)
     return offsets
+
+
+def _joint_width(chain, joint: str) -> int:
+    """How many constants a joint has: its centre in parent and child, and a hinge's rest rotation and axis."""
+    return 6 + (5 if chain.types[joint] == "revolute" else 0)

@@ -66,8 +66,7 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0,
     """
     from identcheck.bundle.uncertainty import distance_gradients
 
-    grads = distance_gradients(chain, fit.state, len(cov.information))[joint]
-    free = [m for m, (_, g) in grads.items() if cov.free(g)]
+    free = free_markers(cov, distance_gradients(chain, fit.state, len(cov.information))[joint])
     worst_marker, (worst_d, worst_se) = max(distances.items(), key=lambda kv: kv[1][1]) if distances else (None, (0, 0))
     weak = weakest(chain, fit, cov, joint)
     seen = _motion_seen(chain, fit, joint, cov.sigma_mm)
@@ -103,6 +102,13 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0,
             "weakest_direction_parent": None if weak[0] is None else [round(float(x), 4) for x in weak[0]],
             "weakest_se_mm": None if weak[1] is None else round(weak[1], 3),
             "motion_advice": motion if verdict != "determined" else ""}
+
+
+def free_markers(cov, grads: dict) -> list:
+    """Which of a joint's adjacent markers (``grads``: marker -> (distance, gradient), one joint's entry of
+    :func:`~identcheck.bundle.uncertainty.distance_gradients`) have distances that move along a direction the data
+    leave free (beyond the gauge): no standard error means anything for them, and no interval bounds them."""
+    return [m for m, (_, g) in grads.items() if cov.free(g)]
 
 
 def rotation_noise_rad(chain, fit, sigma_mm: float, joint: str) -> float:
@@ -166,9 +172,8 @@ def weakest(chain, fit, cov, joint: str) -> tuple[np.ndarray | None, float | Non
         P = np.eye(3) - u @ u.T
         block = P @ block @ P
         grad = P @ grad
-    along = grad @ cov.null
-    if cov.undetermined and np.max(np.abs(along), initial=0.0) > 1e-3 * np.max(np.linalg.norm(grad, axis=1)):
-        return np.linalg.svd(along)[0][:, 0], None            # free along a direction the data leave open
+    if any(cov.free(row) for row in grad):                   # free along a direction the data leave open
+        return np.linalg.svd(grad @ cov.null)[0][:, 0], None
     w, V = np.linalg.eigh(block)
     return V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
 

@@ -109,24 +109,24 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
     information does not annihilate (to :data:`GAUGE_TOL` of its scaled diagonal) is not a gauge, and the cutoff
     alone decides as without one."""
     scaled, d = jacobi_scaled(S)
+    N = np.zeros((len(S), 0))
     if basis is not None and basis.shape[1]:
-        N = np.linalg.qr(basis * d[:, None])[0]
-        if np.max(np.abs(scaled @ N)) <= GAUGE_TOL:
-            rest = np.linalg.svd(N, full_matrices=True)[0][:, N.shape[1]:]    # orthonormal complement
-            w, V = np.linalg.eigh(rest.T @ scaled @ rest)
-            keep = determined_directions(w)
-            U = rest @ V
-            inv = (U[:, keep] / w[keep]) @ U[:, keep].T
-            null = np.column_stack([N, U[:, ~keep]]) / d[:, None]
-            null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
-            return inv / np.outer(d, d), int((~keep).sum()), null
-    w, V = np.linalg.eigh(scaled)
+        written = np.linalg.qr(basis * d[:, None])[0]
+        N = written if np.max(np.abs(scaled @ written)) <= GAUGE_TOL else N
+    if N.shape[1]:
+        rest = np.linalg.svd(N, full_matrices=True)[0][:, N.shape[1]:]      # orthonormal complement of the gauge
+        w, V = np.linalg.eigh(rest.T @ scaled @ rest)
+        U = rest @ V
+    else:
+        w, U = np.linalg.eigh(scaled)
     keep = determined_directions(w)
-    inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+    inv = (U[:, keep] / w[keep]) @ U[:, keep].T
     dropped = int((~keep).sum())
-    null = V[:, ~keep] / d[:, None]
+    null = np.column_stack([N, U[:, ~keep]]) / d[:, None]
     null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
-    return inv / np.outer(d, d), (max(dropped - gauge, 0) if gauge is not None else dropped), null
+    if N.shape[1] or gauge is None:
+        return inv / np.outer(d, d), dropped, null
+    return inv / np.outer(d, d), max(dropped - gauge, 0), null
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
