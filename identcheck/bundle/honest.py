@@ -46,6 +46,10 @@ class Minimum:
     rivals: dict = field(default_factory=dict)
     """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded
     joint (``fit.whole_tree._without_incidental_rolls``), for the joints refitted so; others use ``TreeFit.others``."""
+    upstream: dict = field(default_factory=dict)
+    """joint -> (fit, covariance) its answer comes from when that is not this minimum's own: the refit without the
+    markers below a segment not posed by itself (``fit.whole_tree._without_incidental_rolls``). Its distances, centre,
+    axis, covariance and verdict all come from that one refit, never a mix of two fits."""
 
 
 def with_model_error(m: Minimum, model_error: dict) -> Minimum:
@@ -212,6 +216,7 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     was made, the largest standard error, the practical verdict; ``alternatives`` / ``rejected`` (already
     rendered) are the other candidates the likelihood keeps / rejects."""
     chain = best.fit.chain
+    fit, cov = best.upstream.get(j, (best.fit, best.cov))
     dist = best.distances[j]
     skipped = [k for k, (_, how) in best.intervals.get(j, {}).items() if how == "not_profiled"]
     unbounded = None
@@ -226,7 +231,7 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
             f"the quadratic intervals of {j} are too wide or too curved to trust, and the profile likelihood of "
             f"{', '.join(skipped)} was not computed within the {PROFILE_BUDGET_S:g} s budget: no bound is claimed "
             "for them (fit fewer frames, or one joint at a time, to have them profiled)")
-    practical = judge(chain, best.fit, best.cov, j, dist, n_alternatives=len(alternatives), unbounded=unbounded)
+    practical = judge(chain, fit, cov, j, dist, n_alternatives=len(alternatives), unbounded=unbounded)
     if j in best.model_error:
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         if practical["verdict"] != "determined":
@@ -236,10 +241,10 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     interval = ci(dist)
     method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
     # a distance the data leave free has no standard error: the quadratic one is computed without that direction
-    free = bool(free_markers(best.cov, distance_gradients(chain, best.fit.state, len(best.cov.information))[j]))
+    free = bool(free_markers(cov, distance_gradients(chain, fit.state, len(cov.information))[j]))
     for k, (iv, how) in best.intervals.get(j, {}).items():
         interval[k], method[k] = iv, how
-    return {"geometry": joint_geometry(chain, best.fit.state, best.cov, j),
+    return {"geometry": joint_geometry(chain, fit.state, cov, j),
             "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
             "marker_distances_ci95": interval, "interval_method": method,
             "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist and not free else None,

@@ -438,6 +438,7 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     redone = honest_intervals(judged, data, scale, weights=w)
     intervals = {j: v for j, v in best.intervals.items() if j not in keep} | {j: redone[j] for j in keep if j in redone}
     return replace(best, distances=dist, intervals=intervals, rivals={j: rivals for j in keep},
+                   upstream={j: (upstream.fit, upstream.cov) for j in keep},
                    model_error=errors, misfit={**best.misfit, **{k: v for k, v in misfit.items()}})
 
 
