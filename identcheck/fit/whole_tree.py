@@ -515,6 +515,8 @@ def _undecided_twins(answer: dict, rejected: list, case: str, start_alternatives
     if not bounded:
         out["marker_distances_ci95"] = {m: [0.0, None] for m in answer["marker_distances_ci95"]}
         out["interval_method"] = {m: "unbounded" for m in answer["interval_method"]}
+        out["uncertainty_mm"] = None
+        out["practical"]["weakest_se_mm"] = None
     return out
 
 
@@ -590,8 +592,9 @@ def _jumped(j: dict, joint: str, deg: float, row: int, trial) -> dict:
            "fit through it is not the joint's: fix the labels from that frame, or fit the frames before it "
            "(--frames)")
     j = dict(j, unique=False, marker_distances_ci95={m: [0.0, None] for m in j.get("marker_distances") or {}},
-             interval_method={m: "unbounded" for m in j.get("marker_distances") or {}})
-    j["practical"] = dict(j.get("practical") or {}, verdict="undetermined", reason=why, motion_advice="")
+             interval_method={m: "unbounded" for m in j.get("marker_distances") or {}}, uncertainty_mm=None)
+    j["practical"] = dict(j.get("practical") or {}, verdict="undetermined", reason=why, motion_advice="",
+                          weakest_se_mm=None)
     j["excitation"] = {"ok": False, "reason": why}
     return j
 

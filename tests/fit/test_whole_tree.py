@@ -120,7 +120,8 @@ def test_a_joint_the_data_leave_free_claims_no_standard_error(examples):
             for j, per in distance_gradients(best.fit.chain, best.fit.state, len(best.cov.information)).items()}
     assert free["knee_r"] and not free["hip_r"]
     for j, a in ans.items():
-        assert (a["uncertainty_mm"] is None) == free[j]
+        bounded = all(hi is not None for _, hi in a["marker_distances_ci95"].values())
+        assert (a["uncertainty_mm"] is None) == (free[j] or not bounded)
         if free[j]:
             assert a["practical"]["weakest_se_mm"] is None and a["practical"]["verdict"] == "undetermined"
             assert all(hi is None for _, hi in a["marker_distances_ci95"].values())
@@ -241,7 +242,8 @@ child = "shank_r"
 def test_skin_motion_seen_elsewhere_unbounds_joints_beside_a_one_marker_segment(tmp_path):
     """One thigh marker cannot show its own skin motion. On a rigid trial the hip is determined; with a shank
     marker moving with the knee angle (misfit seen), both joints beside the thigh are unbounded, never a
-    number whose interval ignores the thigh marker's possible motion."""
+    number whose interval ignores the thigh marker's possible motion: no standard error either, neither the
+    distances' (``uncertainty_mm``) nor the weakest direction's (the quadratic errors the rule distrusts)."""
     import identcheck as ic
     from identcheck.effects.registry import inject_effect
 
@@ -259,6 +261,8 @@ def test_skin_motion_seen_elsewhere_unbounds_joints_beside_a_one_marker_segment(
     for j in ("hip_r", "knee_r"):
         assert moved[j]["practical"]["verdict"] == "undetermined", j
         assert set(moved[j]["interval_method"].values()) == {"unbounded"}, j
+        assert moved[j]["uncertainty_mm"] is None and moved[j]["practical"]["weakest_se_mm"] is None, j
+    assert rigid["hip_r"]["uncertainty_mm"] > 0 and rigid["hip_r"]["practical"]["weakest_se_mm"] > 0
 
 
 def test_candidates_compared_through_an_unposed_segment_are_not_trusted(examples):
