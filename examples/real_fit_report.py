@@ -483,9 +483,10 @@ def reading(results, summary) -> list[str]:
     ks = _joint(results, KNEE, "real_right_knee_sparse.toml", "knee_r")
     if ks:
         n = 1 + len(ks["alternatives"])
+        se = ("no standard error: its intervals claim no bound" if ks["uncertainty_mm"] is None
+              else f"largest standard error {ks['uncertainty_mm']:.0f} mm")
         out.append(f"Knee, sparse Pham (2,1): {n} candidate joint{'s' if n > 1 else ''} the likelihood keeps (rms "
-                   f"{ks['rms_residual']:.2f} mm); `{ks['practical']['verdict']}` (largest standard error "
-                   f"{ks['uncertainty_mm']:.0f} mm).")
+                   f"{ks['rms_residual']:.2f} mm); `{ks['practical']['verdict']}` ({se}).")
     for m in ("real_right_knee_sparse.toml", "real_right_knee_circle1.toml"):
         js = _joint(results, STATIC, m, "knee_r")
         if js and js["excitation"]["ok"]:
@@ -517,13 +518,14 @@ def reading(results, summary) -> list[str]:
     knees = [_joint(results, WALK2, "real_walking2_legs_sparse.toml", k) for k in ("knee_l", "knee_r")]
     knees = [k for k in knees if k]
     if knees:
-        unc = ", ".join(fmt(k["uncertainty_mm"], 0) for k in knees)
+        unc = ("no standard error, intervals unbounded" if all(k["uncertainty_mm"] is None for k in knees) else
+               "uncertainty " + ", ".join(fmt(k["uncertainty_mm"], 0) for k in knees) + " mm")
         flagged_all = all(not k["excitation"]["ok"] for k in knees)
         vic = [v for (role, jn), v in summary["vicon"].items() if "sparse" in role and jn.startswith("knee")]
         vtxt = (f", and {min(vic):.0f}-{max(vic):.0f} mm from Vicon's knee centres" if vic else "")
         out.append("Sparse walking knees, Pham (2,1) on (hip centre, thigh marker | shank marker): "
                    + ("flagged" if flagged_all else "not all flagged")
-                   + f" as poorly determined (uncertainty {unc} mm){vtxt}: "
+                   + f" as poorly determined ({unc}){vtxt}: "
                    + ("the JSON's flag is right, the distances must not be used." if flagged_all else
                       "check the flags."))
     return out
