@@ -245,8 +245,10 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     # no standard error for a distance the data leave free (the quadratic one is computed without that direction),
     # nor for a joint with an interval that claims no bound: the quadratic error there is the one found
     # untrustworthy (held-out minimal gait hips: ±0.9-4.2 mm while 8-32 mm off)
-    no_se = (bool(free_markers(cov, distance_gradients(chain, fit.state, len(cov.information))[j]))
-             or any(hi is None for _, hi in interval.values()))
+    open_ended = any(hi is None for _, hi in interval.values())
+    no_se = bool(free_markers(cov, distance_gradients(chain, fit.state, len(cov.information))[j])) or open_ended
+    if open_ended:
+        practical["weakest_se_mm"] = None
     return {"geometry": joint_geometry(chain, fit.state, cov, j),
             "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
             "marker_distances_ci95": interval, "interval_method": method,

@@ -100,7 +100,7 @@ def judge(chain, fit, cov, joint: str, distances: dict, n_alternatives: int = 0,
         verdict, why = "undetermined", unbounded
     return {"verdict": verdict, "reason": why, "tolerance_mm": TOLERANCE_MM,
             "weakest_direction_parent": None if weak[0] is None else [round(float(x), 4) for x in weak[0]],
-            "weakest_se_mm": None if weak[1] is None or unbounded else round(weak[1], 3),
+            "weakest_se_mm": None if weak[1] is None else round(weak[1], 3),
             "motion_advice": motion if verdict != "determined" else ""}
 
 
