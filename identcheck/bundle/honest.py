@@ -211,6 +211,17 @@ def ci(dist: dict) -> dict:
     return {k: [round(max(d - Z95 * se, 0.0), 3), round(d + Z95 * se, 3)] for k, (d, se) in dist.items()}
 
 
+def without_bounds(answer: dict) -> dict:
+    """A joint's answer claiming nothing: every interval ``[0, None]`` (method ``unbounded``) and no standard error
+    (``uncertainty_mm`` and ``practical.weakest_se_mm`` null), for a joint that nothing in the trial bounds."""
+    names = answer.get("marker_distances") or {}
+    out = dict(answer, marker_distances_ci95={m: [0.0, None] for m in names},
+               interval_method={m: "unbounded" for m in names}, uncertainty_mm=None)
+    if out.get("practical") is not None:
+        out["practical"] = dict(out["practical"], weakest_se_mm=None)
+    return out
+
+
 def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list = ()) -> dict:
     """The contract's per-joint keys from a judged minimum: geometry, marker distances, 95 % intervals and how each
     was made, the largest standard error, the practical verdict; ``alternatives`` / ``rejected`` (already

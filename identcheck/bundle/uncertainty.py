@@ -46,6 +46,9 @@ class Covariance:
     ----------
     information : ndarray, shape (P, P)
         Schur complement S (per unit noise variance), mm⁻² in the markers' coordinates.
+    inverse : ndarray, shape (P, P)
+        ``S⁺``, the gauge and the undetermined directions left out (:func:`chain_inverse`): the covariance per unit
+        noise variance.
     naive : ndarray, shape (P, P)
         ``σ̂² S⁺``: white noise, model exact.
     sandwich : ndarray, shape (P, P)
@@ -61,6 +64,7 @@ class Covariance:
     """
 
     information: np.ndarray
+    inverse: np.ndarray
     naive: np.ndarray
     sandwich: np.ndarray
     sigma_mm: float
@@ -127,6 +131,12 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
     if N.shape[1] or gauge is None:
         return inv / np.outer(d, d), dropped, null
     return inv / np.outer(d, d), max(dropped - gauge, 0), null
+
+
+def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, int, np.ndarray]:
+    """:func:`gauge_free_inverse` of a chain's information ``S`` at ``state``, its gauge written out
+    (:func:`identcheck.bundle.gauge.gauge_basis`; ``terms``: the fit's effect terms)."""
+    return gauge_free_inverse(S, chain.gauge(), gauge_basis(chain, state, len(S), terms))
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -230,8 +240,7 @@ def long_run_covariance(scores: np.ndarray, bandwidth: int) -> np.ndarray:
 def covariance(fit, data, weights=None) -> Covariance:
     """The constants' covariance of `fit` (see the module docstring), with the noise model behind it."""
     g, S, r, determined = frame_scores(fit, data, weights)
-    basis = gauge_basis(fit.chain, fit.state, len(S), fit.terms)
-    Sinv, undetermined, null = gauge_free_inverse(S, fit.chain.gauge(), basis)
+    Sinv, undetermined, null = chain_inverse(fit.chain, fit.state, S, fit.terms)
     # residual degrees of freedom: samples less the unknowns they determine, per frame and constant (rank of S)
     nu = max(3 * fit.n_samples - determined - (len(S) - null.shape[1]), 1)
     sigma = float(np.sqrt(fit.rss / nu))
@@ -242,7 +251,7 @@ def covariance(fit, data, weights=None) -> Covariance:
     # unknowns': the scores are projected off those already, see the module docstring)
     constants = max(len(S) - null.shape[1], 1) if null.size else len(S)
     H *= (3 * fit.n_samples) / max(3 * fit.n_samples - constants, 1)
-    return Covariance(S, sigma ** 2 * Sinv, Sinv @ H @ Sinv, sigma, float(np.median(lags)) if lags else 0.0, L,
+    return Covariance(S, Sinv, sigma ** 2 * Sinv, Sinv @ H @ Sinv, sigma, float(np.median(lags)) if lags else 0.0, L,
                       undetermined, null)
 
 

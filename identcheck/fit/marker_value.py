@@ -23,8 +23,7 @@ import numpy as np
 from identcheck.bundle.chain import information
 from identcheck.bundle.model import Fit, forward
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
-from identcheck.bundle.gauge import gauge_basis
-from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse, moves_along_free
+from identcheck.bundle.uncertainty import chain_inverse, distance_gradients, moves_along_free
 from identcheck.skeleton import Skeleton
 
 OFFSET_MM = 60.0
@@ -47,7 +46,7 @@ def added_point(chain: Skeleton, state, segment: str) -> np.ndarray:
 def standard_errors(chain: Skeleton, state, S: np.ndarray, noise_mm: float) -> dict:
     """joint -> marker -> predicted standard error of its distance, mm, from the information ``S`` (per unit noise
     variance); ``inf`` for a distance the information leaves free."""
-    Sinv, undetermined, null = gauge_free_inverse(S, chain.gauge(), gauge_basis(chain, state, len(S)))
+    Sinv, undetermined, null = chain_inverse(chain, state, S)
     return {j: {m: (np.inf if moves_along_free(g, null, undetermined)
                     else noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0)))) for m, (_, g) in by.items()}
             for j, by in distance_gradients(chain, state, len(S)).items()}

@@ -21,8 +21,7 @@ import numpy as np
 from scipy.special import chndtr
 
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
-from identcheck.bundle.gauge import gauge_basis
-from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
+from identcheck.bundle.uncertainty import distance_gradients
 from identcheck.errors import InputError
 from identcheck.fit.whole_tree import REJECT_CHI2, _same, posed_by_itself
 from identcheck.fit.workflow import fit_closed_then_tree
@@ -80,9 +79,8 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
                 for j in model.joints}
     best = tree.best
     chain = best.fit.chain
-    S = best.cov.information
-    Sinv, _, _ = gauge_free_inverse(S, chain.gauge(), gauge_basis(chain, best.fit.state, len(S)))
-    grads = distance_gradients(chain, best.fit.state, len(S))
+    Sinv = best.cov.inverse                      # per unit noise variance: scaled below by the noise asked about
+    grads = distance_gradients(chain, best.fit.state, len(Sinv))
     out = {}
     for j in chain.joints:
         se = {m: noise_mm * float(np.sqrt(max(g @ Sinv @ g, 0.0))) for m, (_, g) in grads[j].items()}

@@ -36,7 +36,8 @@ from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
-                                      minimum, posed_above, posed_by_itself, with_misfit, with_model_error)
+                                      minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
+                                      without_bounds)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -512,12 +513,7 @@ def _undecided_twins(answer: dict, rejected: list, case: str, start_alternatives
         motion_advice="add a marker on the one-marker segment, or one beyond it (ERRATA E8)")
     out["alternatives"] = [dict(r, p_value=None) for r in rejected] or \
         _distinct_alternatives(start_alternatives, answer["marker_distances"])
-    if not bounded:
-        out["marker_distances_ci95"] = {m: [0.0, None] for m in answer["marker_distances_ci95"]}
-        out["interval_method"] = {m: "unbounded" for m in answer["interval_method"]}
-        out["uncertainty_mm"] = None
-        out["practical"]["weakest_se_mm"] = None
-    return out
+    return out if bounded else without_bounds(out)
 
 
 def noise_report(tree: TreeFit) -> dict:
@@ -591,10 +587,8 @@ def _jumped(j: dict, joint: str, deg: float, row: int, trial) -> dict:
            "about the joint swap without changing a distance), or one was lost and another took its label; the "
            "fit through it is not the joint's: fix the labels from that frame, or fit the frames before it "
            "(--frames)")
-    j = dict(j, unique=False, marker_distances_ci95={m: [0.0, None] for m in j.get("marker_distances") or {}},
-             interval_method={m: "unbounded" for m in j.get("marker_distances") or {}}, uncertainty_mm=None)
-    j["practical"] = dict(j.get("practical") or {}, verdict="undetermined", reason=why, motion_advice="",
-                          weakest_se_mm=None)
+    j = without_bounds(dict(j, unique=False))
+    j["practical"] = dict(j.get("practical") or {}, verdict="undetermined", reason=why, motion_advice="")
     j["excitation"] = {"ok": False, "reason": why}
     return j
 
@@ -653,11 +647,9 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
                 j, tree.problem, tree.left_out.get(name))
             j["unique"] = False
             # the closed form's numbers stay (they are what a user would otherwise compute), but nothing bounds them
-            j["marker_distances_ci95"] = {m: [0.0, None] for m in j.get("marker_distances") or {}}
-            j["interval_method"] = {m: "unbounded" for m in j.get("marker_distances") or {}}
+            j = without_bounds(j)
             j["rejected_candidates"] = []
             j["geometry"] = None
-            j["uncertainty_mm"] = None
             j["practical"] = {"verdict": "undetermined", "reason": why, "tolerance_mm": None,
                               "weakest_direction_parent": None, "weakest_se_mm": None, "motion_advice": ""}
             j["excitation"] = {"ok": False, "reason": why}
