@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from identcheck.bundle.bootstrap import sampling_spread, t95
 from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.practical import TOLERANCE_MM, Z95, free_markers, hardly_moved, judge, single_axis
@@ -49,7 +50,13 @@ class Minimum:
     upstream: dict = field(default_factory=dict)
     """joint -> (fit, covariance) its answer comes from when that is not this minimum's own: the refit without the
     markers below a segment not posed by itself (``fit.whole_tree._without_incidental_rolls``). Its distances, centre,
-    axis, covariance and verdict all come from that one refit, never a mix of two fits."""
+    axis, covariance and verdict all come from that one refit, never a mix of two fits (a covariance the
+    bootstrap widened, :func:`with_sampling_spread`, is put here too)."""
+    upstream_weights: np.ndarray | None = None
+    """The sample weights of the refit in ``upstream`` (the markers below the cut weighted 0)."""
+    spread: dict = field(default_factory=dict)
+    """joint -> {"draws": n, "ratio": largest bootstrap-over-linear standard error} where the sampling spread was
+    measured (:func:`with_sampling_spread`)."""
 
 
 def with_model_error(m: Minimum, model_error: dict) -> Minimum:
@@ -162,6 +169,58 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     return out
 
 
+SPREAD_TRIGGER = 1.1
+"""A joint's sampling spread is measured (:mod:`identcheck.bundle.bootstrap`) when the noise in the per-frame
+unknowns widened one of its distances' standard errors by more than this factor
+(:meth:`~identcheck.bundle.uncertainty.Covariance.frame_noise_ratio`): the linearisation is then off by over 10 %
+and the estimator's second-order response to that noise, which no linear correction sees, is of the same order."""
+
+
+def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, weights=None) -> Minimum:
+    """The minimum with each joint whose standard errors the per-frame noise stretched by over
+    :data:`SPREAD_TRIGGER` given its distances' sampling spread by smoothed parametric bootstrap
+    (:func:`identcheck.bundle.bootstrap.sampling_spread`, one run per fit the joints answer from): each distance's
+    standard error becomes the larger of its own and ``t₉₅ · spread / 1.96`` (model error added in quadrature), a
+    quadratic interval becomes ``d ± 1.96 SE`` with the method ``bootstrap``, a profile interval is widened to hold
+    ``d ± t₉₅ · spread`` (``profile+bootstrap``), an interval that claims no bound stays; the joint's covariance
+    (centre, axis, weakest direction) grows by the largest variance ratio among its distances. ``weights``: the
+    sample weights of ``best.fit`` (the upstream refit's are ``best.upstream_weights``)."""
+    groups: dict = {}
+    for j in best.fit.chain.joints:
+        if any(how in NO_BOUND for _, how in best.intervals.get(j, {}).values()):
+            continue
+        fit, cov = best.upstream.get(j, (best.fit, best.cov))
+        grads = distance_gradients(fit.chain, fit.state, len(cov.information))[j]
+        if grads and max(cov.frame_noise_ratio(g) for _, g in grads.values()) > SPREAD_TRIGGER ** 2:
+            groups.setdefault(id(fit), (fit, cov, j in best.upstream, []))[3].append(j)
+    if not groups:
+        return best
+    distances, intervals, upstream, spread = dict(best.distances), dict(best.intervals), dict(best.upstream), {}
+    for fit, cov, up, joints in groups.values():
+        found, draws = sampling_spread(fit, data, joints, cov.sigma_mm, cov.lag1, rate_hz,
+                                       weights=best.upstream_weights if up else weights, progress=progress,
+                                       threads=profile_threads())
+        for j, per in found.items():
+            dist, ivs, ratio = dict(distances[j]), dict(intervals.get(j, {})), 1.0
+            for m, rms in per.items():
+                d, se = dist[m]
+                boot = float(np.hypot(t95(draws) * rms / Z95, best.model_error.get(j, 0.0)))
+                if boot <= se:
+                    continue
+                ratio = max(ratio, boot / se)
+                dist[m] = (d, boot)
+                if m in ivs:
+                    (lo, hi), _ = ivs[m]
+                    ivs[m] = ([round(max(min(lo, d - Z95 * boot), 0.0), 3),
+                               None if hi is None else round(max(hi, d + Z95 * boot), 3)], "profile+bootstrap")
+                else:
+                    ivs[m] = ([round(max(d - Z95 * boot, 0.0), 3), round(d + Z95 * boot, 3)], "bootstrap")
+            distances[j], intervals[j] = dist, ivs
+            upstream[j] = (fit, cov.scaled(ratio ** 2))
+            spread[j] = {"draws": draws, "ratio": round(ratio, 3)}
+    return replace(best, distances=distances, intervals=intervals, upstream=upstream, spread=spread)
+
+
 def profile_threads() -> int:
     """Threads for the profile likelihoods: ``$IDENTCHECK_THREADS``, else the cores this process may use, at most
     4. Each profile is independent and NumPy releases the GIL in its array work: on 2 cores, four of walking2's
@@ -199,11 +258,13 @@ def with_misfit(m: Minimum, data) -> Minimum:
     return with_model_error(replace(m, misfit=misfit), {j: sd for j, sd in errors.items() if sd > 0})
 
 
-def assess(fit, data, weights=None, progress=None) -> Minimum:
-    """One fit judged by every rule: covariance, model error, honest intervals (what ``diagnose`` reports; ``fit``
-    does the same for its best minimum, then weighs the other candidates)."""
+def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None) -> Minimum:
+    """One fit judged by every rule: covariance, model error, honest intervals, and with the trial's frame rate the
+    sampling spread where the linearisation is off (what ``diagnose`` reports; ``fit`` does the same for its best
+    minimum, then weighs the other candidates)."""
     best = with_misfit(minimum(fit, data, weights), data)
-    return replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
+    best = replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
+    return best if rate_hz is None else with_sampling_spread(best, data, rate_hz, progress, weights)
 
 
 def ci(dist: dict) -> dict:
@@ -260,8 +321,11 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
     no_se = bool(free_markers(cov, distance_gradients(chain, fit.state, len(cov.information))[j])) or open_ended
     if open_ended:
         practical["weakest_se_mm"] = None
-    return {"geometry": joint_geometry(chain, fit.state, cov, j),
-            "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
-            "marker_distances_ci95": interval, "interval_method": method,
-            "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist and not no_se else None,
-            "alternatives": list(alternatives), "rejected_candidates": list(rejected), "practical": practical}
+    out = {"geometry": joint_geometry(chain, fit.state, cov, j),
+           "marker_distances": {k: round(v[0], 3) for k, v in dist.items()},
+           "marker_distances_ci95": interval, "interval_method": method,
+           "uncertainty_mm": round(max(v[1] for v in dist.values()), 4) if dist and not no_se else None,
+           "alternatives": list(alternatives), "rejected_candidates": list(rejected), "practical": practical}
+    if j in best.spread:
+        out["sampling_spread"] = dict(best.spread[j])
+    return out

@@ -398,7 +398,7 @@ def joint_report(ctx: Context, h: Hypothesis) -> dict:
     wide, unbounded where the data leave the joint free; the largest standard error; the practical verdict;
     and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion."""
     ch = h.chain
-    judged = assess(h.fit, h.data, h.weights)
+    judged = assess(h.fit, h.data, h.weights, rate_hz=ctx.rate_hz)
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:

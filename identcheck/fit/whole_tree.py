@@ -37,7 +37,7 @@ from scipy.special import chdtrc
 from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
-                                      without_bounds)
+                                      with_sampling_spread, without_bounds)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -339,6 +339,7 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
     others = [(with_model_error(m, model_error), delta, p) for m, delta, p in others]
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
     best = _without_incidental_rolls(best, others, data, model_error, scale)
+    best = with_sampling_spread(best, data, trial.rate_hz, progress)
     return TreeFit(best, others, n_starts=tried, starts_left_out=left_out, one_joint_starts=singles,
                    one_joint_left_out=singles_cut), set()
 
@@ -439,7 +440,7 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     redone = honest_intervals(judged, data, scale, weights=w)
     intervals = {j: v for j, v in best.intervals.items() if j not in keep} | {j: redone[j] for j in keep if j in redone}
     return replace(best, distances=dist, intervals=intervals, rivals={j: rivals for j in keep},
-                   upstream={j: (upstream.fit, upstream.cov) for j in keep},
+                   upstream={j: (upstream.fit, upstream.cov) for j in keep}, upstream_weights=w,
                    model_error=errors, misfit={**best.misfit, **{k: v for k, v in misfit.items()}})
 
 
@@ -627,6 +628,8 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
             j["rejected_candidates"] = a["rejected_candidates"]
             j["practical"] = a["practical"]
             j["geometry"] = a["geometry"]
+            if "sampling_spread" in a:
+                j["sampling_spread"] = a["sampling_spread"]
             j["unique"] = j["practical"]["verdict"] == "determined"
             res = [residual[m] for m in a["marker_distances"] if m in residual]
             j["rms_residual"] = round(float(np.sqrt(np.nanmean(np.square(res)))), 4) if res else None
