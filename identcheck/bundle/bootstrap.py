@@ -30,7 +30,6 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from scipy.signal import butter, filtfilt
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.chain import REL_TOL, fit_chain
@@ -59,6 +58,8 @@ def _low_pass(x: np.ndarray, rate_hz: float) -> np.ndarray:
     trial is too short or its rate too low for the filter."""
     if not (rate_hz > 2.5 * CUTOFF_HZ) or len(x) <= 30:
         return x
+    from scipy.signal import butter, filtfilt     # 0.34 s of imports that only a bootstrap needs
+
     b, a = butter(4, CUTOFF_HZ / (rate_hz / 2))
     return filtfilt(b, a, x, axis=0)
 

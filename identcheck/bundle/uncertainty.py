@@ -49,7 +49,7 @@ from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 SIMEX_LEFT = 0.01       # least share of a direction's information taken as real (module docstring)
-SIMEX_DRAWS = 4        # draws of the per-frame estimation error (S̄ averages over frames: four are plenty)
+SIMEX_DRAWS = 2        # draws of the per-frame error (S̄ averages over frames; a weak direction's ratio: ±6 %)
 GAUGE_TOL = 1e-4       # largest entry of the scaled information times a written-out gauge direction: the
 #                        Schur complement's roundoff reaches 1e-6 on a 600-frame leg, a wrong direction gives O(1)
 
