@@ -88,12 +88,11 @@ def noise_draw(rng: np.random.Generator, shape: tuple, sigma: float, phi: float)
     e = rng.standard_normal(shape)
     if phi <= 0:
         return sigma * e
-    out = np.empty(shape)
-    out[0] = e[0]
-    innovation = np.sqrt(1 - phi ** 2)
-    for f in range(1, shape[0]):
-        out[f] = phi * out[f - 1] + innovation * e[f]
-    return sigma * out
+    from scipy.signal import lfilter
+
+    w = np.sqrt(1 - phi ** 2) * e
+    w[0] = e[0]                                   # the first frame at the stationary variance
+    return sigma * lfilter([1.0], [1.0, -phi], w, axis=0)
 
 
 def sampling_spread(fit, data, joints, sigma: float, phi: float, rate_hz: float, weights=None,

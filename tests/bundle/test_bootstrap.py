@@ -2,18 +2,14 @@
 where the linearised standard error is right."""
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.bootstrap import noise_draw, sampling_spread, smoothed_state, t95
-from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.model import apply_step, forward, n_const
 from identcheck.bundle.uncertainty import covariance, distance_gradients
-from identcheck.fit.whole_tree import skeleton_of
-from identcheck.simulate.rigid import simulate
 from tests.bundle.test_noise_dof import LEG
+from tests.bundle.test_profile import _fit
 
 
 @settings(max_examples=20, deadline=None)
@@ -34,13 +30,9 @@ def test_t95_falls_with_the_draws():
     assert t95(8) > t95(20) > 1.96 and t95(100) == 1.96
 
 
-def _leg_fit(seed: int, noise: float, n_frames: int = 400):
-    sim = simulate(LEG, n_frames=n_frames, noise_mm=noise, seed=seed)
-    chain = skeleton_of(LEG, sim.trial)
-    data = sim.trial.select(chain.labels).as_array()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fit = fit_chain(chain, data, initial_state(chain, data), max_iter=200)
+def _leg_fit(seed: int, noise: float):
+    """The three-markers-a-segment leg simulated over 400 frames and fitted (:func:`tests.bundle.test_profile._fit`)."""
+    sim, chain, data, fit, _ = _fit(LEG, seed, frames=400, noise=noise)
     return chain, data, fit, sim.trial.rate_hz
 
 
