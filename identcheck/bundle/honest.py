@@ -181,11 +181,13 @@ def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, wei
     :data:`SPREAD_TRIGGER` given its distances' sampling spread by smoothed parametric bootstrap
     (:func:`identcheck.bundle.bootstrap.sampling_spread`, one run per fit the joints answer from): each distance's
     standard error becomes the larger of its own and ``t₉₅ · spread / 1.96`` (model error added in quadrature), a
-    quadratic interval becomes ``d ± 1.96 SE`` with the method ``bootstrap``, a profile interval is widened to hold
-    ``d ± t₉₅ · spread`` (``profile+bootstrap``), an interval that claims no bound stays; the joint's covariance
-    (centre, axis, weakest direction) grows by the largest variance ratio among its distances. ``weights``: the
-    sample weights of ``best.fit`` (the upstream refit's are ``best.upstream_weights``)."""
+    quadratic interval becomes ``d ± 1.96 SE`` with the method ``bootstrap`` (``bootstrap+model_error``), a profile
+    interval is widened to hold ``d ± t₉₅ · spread`` (``profile+bootstrap``), an interval that claims no bound stays;
+    the joint's covariance (centre, axis, weakest direction) grows by the largest variance ratio among its distances.
+    ``weights``: the sample weights of ``best.fit`` (the upstream refit's are ``best.upstream_weights``)."""
     groups: dict = {}
+    if not best.fit.converged:                    # no maximum of the likelihood: its intervals are withdrawn anyway
+        return best
     for j in best.fit.chain.joints:
         if any(how in NO_BOUND for _, how in best.intervals.get(j, {}).values()):
             continue
@@ -214,7 +216,8 @@ def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, wei
                     ivs[m] = ([round(max(min(lo, d - Z95 * boot), 0.0), 3),
                                None if hi is None else round(max(hi, d + Z95 * boot), 3)], "profile+bootstrap")
                 else:
-                    ivs[m] = ([round(max(d - Z95 * boot, 0.0), 3), round(d + Z95 * boot, 3)], "bootstrap")
+                    ivs[m] = ([round(max(d - Z95 * boot, 0.0), 3), round(d + Z95 * boot, 3)],
+                              "bootstrap" + ("+model_error" if j in best.model_error else ""))
             distances[j], intervals[j] = dist, ivs
             upstream[j] = (fit, cov.scaled(ratio ** 2))
             spread[j] = {"draws": draws, "ratio": round(ratio, 3)}
