@@ -49,7 +49,7 @@ from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 SIMEX_LEFT = 0.01       # least share of a direction's information taken as real (module docstring)
-SIMEX_DRAWS = 2        # draws of the per-frame error (S̄ averages over frames; a weak direction's ratio: ±6 %)
+SIMEX_DRAWS = 2        # draws of the per-frame error: one antithetic pair (simex_information)
 GAUGE_TOL = 1e-4       # largest entry of the scaled information times a written-out gauge direction: the
 #                        Schur complement's roundoff reaches 1e-6 on a 600-frame leg, a wrong direction gives O(1)
 
@@ -211,7 +211,9 @@ def simex_information(fit, A: np.ndarray, w: np.ndarray, sigma: float, draws: in
                       seed: int = 0) -> np.ndarray:
     """S̄: the information averaged over `draws` copies of the fit's state whose per-frame unknowns are moved by
     draws of their estimation error, ``σ² A_f⁻¹`` over the directions the frame's samples determine (see the
-    module docstring). Seeded: the same fit always gets the same S̄."""
+    module docstring). The draws come in antithetic pairs (δ and −δ): the part of S that is linear in the move,
+    zero on average but the largest part of any one draw, cancels exactly, and what is left is the second-order
+    part SIMEX wants (an odd count ends with one unpaired draw). Seeded: the same fit always gets the same S̄."""
     chain, terms, s = fit.chain, fit.terms, fit.state
     scaled, d = jacobi_scaled(A)
     wv, V = np.linalg.eigh(scaled)
@@ -219,10 +221,13 @@ def simex_information(fit, A: np.ndarray, w: np.ndarray, sigma: float, draws: in
     R = forward(chain, terms, s)[0]
     rng = np.random.default_rng(seed)
     P = n_const(chain, terms)
-    total = None
-    for _ in range(draws):
-        z = np.where(keep, rng.standard_normal(wv.shape) / np.sqrt(np.maximum(wv, 1e-300)), 0.0)
-        dq = sigma * np.einsum("fij,fj->fi", V, z) / d
+    total, dq = None, None
+    for k in range(draws):
+        if k % 2 == 0:
+            z = np.where(keep, rng.standard_normal(wv.shape) / np.sqrt(np.maximum(wv, 1e-300)), 0.0)
+            dq = sigma * np.einsum("fij,fj->fi", V, z) / d
+        else:
+            dq = -dq
         S = information_at(chain, terms, apply_step(chain, terms, s, R, dq, np.zeros(P)), w)
         total = S if total is None else total + S
     return total / draws
