@@ -216,8 +216,7 @@ def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, wei
                     ivs[m] = ([round(max(min(lo, d - Z95 * boot), 0.0), 3),
                                None if hi is None else round(max(hi, d + Z95 * boot), 3)], "profile+bootstrap")
                 else:
-                    ivs[m] = ([round(max(d - Z95 * boot, 0.0), 3), round(d + Z95 * boot, 3)],
-                              "bootstrap" + ("+model_error" if j in best.model_error else ""))
+                    ivs[m] = (ci({m: (d, boot)})[m], "bootstrap" + ("+model_error" if j in best.model_error else ""))
             distances[j], intervals[j] = dist, ivs
             upstream[j] = (fit, cov.scaled(ratio ** 2))
             spread[j] = {"draws": draws, "ratio": round(ratio, 3)}

@@ -250,6 +250,7 @@ def widening(S: np.ndarray, S_bar: np.ndarray, inverse: np.ndarray) -> np.ndarra
     M = (U * (t / (1.0 - t))) @ U.T
     return L.T @ M @ L
 
+
 def frame_rank(A: np.ndarray) -> int:
     """The per-frame unknowns the samples determine: the summed numerical ranks of the frames' blocks A (F, k, k),
     each Jacobi-scaled (a column without samples counts as undetermined), to :data:`RANK_TOL`.
@@ -336,6 +337,8 @@ def covariance(fit, data, weights=None) -> Covariance:
     H *= (3 * fit.n_samples) / max(3 * fit.n_samples - constants, 1)
     naive, sandwich = sigma ** 2 * Sinv, Sinv @ H @ Sinv
     hidden = widening(S, simex_information(fit, A, w, sigma), Sinv)
+    # the sandwich's share: the correlation inflation overall (traces, which the markers' millimetres dominate),
+    # never below the white-noise share
     tau = float(np.trace(sandwich) / np.trace(naive)) if np.trace(naive) > 0 else 1.0
     return Covariance(S, Sinv, naive + sigma ** 2 * hidden, sandwich + max(tau, 1.0) * sigma ** 2 * hidden, sigma,
                       float(np.median(lags)) if lags else 0.0, L, undetermined, null, hidden)

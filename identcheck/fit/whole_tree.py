@@ -39,6 +39,7 @@ from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, j
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
+from identcheck.bundle.model import n_const
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.joint import start_stride
@@ -323,11 +324,13 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
             stuck |= {j for j in chain.joints if chain.child[j] == exc.segment}
             continue
         fit = converged_fit(chain, data, state, progress)
-        minima.append(minimum(fit, data, start=tuple(id(e) for e in combo.values())))
+        minima.append(_located(fit, tuple(id(e) for e in combo.values())))
     if not minima:
         return TreeFit(None, problem="; ".join(dict.fromkeys(problems)), n_starts=tried, starts_left_out=left_out,
                        one_joint_starts=singles, one_joint_left_out=singles_cut), stuck
-    minima = _distinct(sorted(minima, key=lambda m: m.fit.rss))
+    # only the distinct minima are judged: a covariance for every start (its SIMEX draws included) had been
+    # computed and thrown away for each start that ended where another had
+    minima = [minimum(m.fit, data, start=m.start) for m in _distinct(sorted(minima, key=lambda m: m.fit.rss))]
     best = minima[0]
     scale = likelihood_scale(best)
     others = []
@@ -442,6 +445,14 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     return replace(best, distances=dist, intervals=intervals, rivals={j: rivals for j in keep},
                    upstream={j: (upstream.fit, upstream.cov) for j in keep}, upstream_weights=w,
                    model_error=errors, misfit={**best.misfit, **{k: v for k, v in misfit.items()}})
+
+
+def _located(fit, start: tuple) -> Minimum:
+    """A minimum known by its marker distances alone (no covariance, standard errors NaN): enough for
+    :func:`_distinct` to tell it from the others before any is judged (:func:`identcheck.bundle.honest.minimum`)."""
+    grads = distance_gradients(fit.chain, fit.state, n_const(fit.chain, fit.terms))
+    return Minimum(fit, None, {j: {m: (d, float("nan")) for m, (d, _) in per.items()} for j, per in grads.items()},
+                   start)
 
 
 def _distinct(minima: list) -> list:
