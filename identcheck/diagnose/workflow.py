@@ -260,10 +260,15 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         adopted = None
         if len(steps) < max_steps:
             bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
-            proposals = sorted(((p, eff) for eff in EFFECTS.values()
-                                for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
+            try:
+                proposals = sorted(((p, eff) for eff in EFFECTS.values()
+                                    for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
+            finally:
+                h.release()
             tried, best, leader, drift, placed = [], 0.0, None, None, set()
-            taken = {place(st.name, st.where) for st in steps} | dropped
+            # an adopted effect's place, and the places of the effects no data could tell from it (its ``alike``:
+            # both adopted would model one motion twice)
+            taken = {place(n, w) for st in steps for n, w in [(st.name, st.where), *st.alike]} | dropped
             for prop, eff in proposals:
                 if prop.strength <= bar:
                     continue                     # not even its detector's own estimate would clear the bar
