@@ -16,6 +16,7 @@ parabola. A side that stays below the threshold up to :data:`MAX_SPAN_MM` is *op
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,10 @@ STEP_CHI2 = 1e-3
 1e-8 of the RSS is thousands of times finer than a 95 % bound needs on long trials). Measured on walking2's
 right knee (three marker distances, 12 refits): 213 iterations at the fit's tolerance, 70 at this one, bounds
 within 0.04 mm of the intervals' ±13 mm."""
+
+
+class OutOfTime(Exception):
+    """A profile's refits passed the caller's deadline before both sides were found."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +63,7 @@ def distance_penalty(chain, joint: str, marker: str, target: float, weight: floa
 
 
 def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float, n_params: int,
-                     weights=None) -> ProfileInterval:
+                     weights=None, deadline: float | None = None) -> ProfileInterval:
     """The 95 % profile interval of `marker`'s distance to `joint` around the minimum `fit`.
 
     Parameters
@@ -74,6 +79,9 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
         The quadratic standard error, to size the first step.
     n_params : int
         Number of constants (the information's size).
+    deadline : float, optional
+        ``time.monotonic()`` after which no refit is started or continued: :class:`OutOfTime` is raised (a
+        half-walked side would be a bound the data did not give).
     """
     chain = fit.chain
     d0 = distance_gradients(chain, fit.state, n_params)[joint][marker][0]
@@ -88,8 +96,13 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
         bound = None
         for _ in range(MAX_POINTS):
             target = max(prev_d + side * step, 0.0)
+            if deadline is not None and time.monotonic() > deadline:
+                raise OutOfTime(f"{marker}'s distance to {joint}")
             f = fit_chain(chain, data, state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
-                          penalty=distance_penalty(chain, joint, marker, target, weight, n_params))
+                          penalty=distance_penalty(chain, joint, marker, target, weight, n_params),
+                          deadline=deadline)
+            if deadline is not None and time.monotonic() > deadline:
+                raise OutOfTime(f"{marker}'s distance to {joint}")
             refits += 1
             lowest = min(lowest, f.rss)
             d = distance_gradients(chain, f.state, n_params)[joint][marker][0]

@@ -134,3 +134,26 @@ def test_profiles_on_threads_equal_profiles_one_by_one(tmp_path_factory, monkeyp
     assert results["1"] == results["3"]
     monkeypatch.setenv("IDENTCHECK_THREADS", "many")
     assert 1 <= honest.profile_threads() <= 4
+
+
+@settings(max_examples=3, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), late_s=st.floats(0.0, 100.0))
+def test_a_profile_past_its_deadline_stops(tmp_path_factory, seed, late_s):
+    """A deadline already passed (by 0-100 s): the profile raises OutOfTime instead of walking a side, and one in
+    the future changes nothing."""
+    import time
+
+    import pytest
+    from identcheck.bundle.profile import OutOfTime
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, cov = _fit(model, seed)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    marker = next(iter(distance_gradients(chain, fit.state, P)[joint]))
+    scale, se = cov.sigma_mm ** 2, 1.0                 # (the standard error only sizes the first step)
+    with pytest.raises(OutOfTime):
+        profile_interval(fit, data, joint, marker, scale, se, P, deadline=time.monotonic() - late_s)
+    free = profile_interval(fit, data, joint, marker, scale, se, P)
+    timed = profile_interval(fit, data, joint, marker, scale, se, P, deadline=time.monotonic() + 3600)
+    assert (free.lo, free.hi, free.refits) == (timed.lo, timed.hi, timed.refits)
