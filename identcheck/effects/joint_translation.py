@@ -25,7 +25,7 @@ from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
-from identcheck.effects.soft_tissue import explained, last_cluster
+from identcheck.effects.soft_tissue import carried_fields, explained, same_motion_clusters
 
 
 MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
@@ -83,17 +83,14 @@ def displacement_fields(hyp, joint: str, basis: np.ndarray, linear: list) -> lis
     """The marker displacements (each (F, M, 3), world frame) of the joint's centre moving in its parent by one unit
     of each term: each column of `basis` times each of the parent's axes, and each of the `linear` fields
     (:func:`linear_fields`); every marker below the joint moves with the centre, the rest stay."""
-    ch = hyp.chain
-    idx = ch.downstream[joint]
-    R = hyp.fit.seg_R[ch.parent[joint]]                                  # parent frame -> world, (F, 3, 3)
-    n_frames, n_markers = hyp.data.shape[:2]
-
-    def moving(world):  # noqa: E306 - (F, 3) carried by every marker below the joint
-        v = np.zeros((n_frames, n_markers, 3))
-        v[:, idx] = world[:, None, :]
-        return v
-    out = [moving(R[:, :, i] * basis[:, [k]]) for k in range(basis.shape[1]) for i in range(3)]
-    return out + [moving(np.einsum("fij,fj->fi", R, np.nan_to_num(g))) for g in linear]
+    idx = hyp.chain.downstream[joint]
+    R = hyp.fit.seg_R[hyp.chain.parent[joint]]                           # parent frame -> world, (F, 3, 3)
+    out = carried_fields(hyp.data.shape, R, idx, basis)
+    for g in linear:
+        v = np.zeros(hyp.data.shape)
+        v[:, idx] = np.einsum("fij,fj->fi", R, np.nan_to_num(g))[:, None, :]
+        out.append(v)
+    return out
 
 
 class JointTranslation(Effect):
@@ -148,10 +145,10 @@ class JointTranslation(Effect):
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
-        """Above a last segment, that segment's cluster moving as one
-        (:func:`identcheck.effects.soft_tissue.last_cluster`)."""
-        cluster = last_cluster(chain, where["joint"])
-        return [] if cluster is None else [("soft_tissue", cluster)]
+        """The clusters moving as one that are the same motion
+        (:func:`identcheck.effects.soft_tissue.same_motion_clusters`: a last segment's below the joint, the root's
+        above it)."""
+        return [("soft_tissue", c) for c in same_motion_clusters(chain, where["joint"])]
 
     def apply(self, ctx, hyp, proposal):
         j = proposal.payload["joint"]

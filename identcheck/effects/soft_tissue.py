@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from identcheck.bundle.chain import score_statistic
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
 from identcheck.effects.base import Effect, Proposal, seen_mean
@@ -42,16 +43,41 @@ def explained(resid: np.ndarray, basis: np.ndarray, fields: list = ()) -> float:
     return float(np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
 
 
-def last_cluster(chain, joint: str) -> dict | None:
-    """Where a joint's child is a last segment (every marker below the joint is on it, two or more), that
-    segment's cluster moving as one, as a soft-tissue ``where``; else None. Its markers then move exactly as they
-    would if the joint's centre moved in the parent: a centre moving by D(θ) is the cluster moving by Rot(θ)ᵀ D(θ)
-    on its segment, and nothing but a marker further down could tell the two apart (both effects' ``alike``)."""
-    child = chain.child[joint]
+def same_motion_clusters(chain, joint: str) -> list:
+    """The clusters moving as one (soft-tissue ``where``s) whose motion no data could tell from `joint`'s centre
+    moving in its parent with the joint's angles (both effects' ``alike``):
+
+    - the child's, where the child is a last segment (every marker below the joint is on it, two or more): a centre
+      moving by D(θ) is the cluster moving by Rot(θ)ᵀ D(θ) on its segment, and only a marker further down could
+      tell the two apart;
+    - the parent's, where the parent is the root and every other marker is below the joint (two or more on the
+      root): the root's pose moved by D(θ) with its cluster moved back by −D(θ) on it carries the centre, and with
+      it everything below, by D(θ) while leaving the root's markers where they were (a hip pistoning in the pelvis
+      was named as the pelvis's cluster moving with the hip, and nothing said the two were one)."""
+    out = []
+    child, parent = chain.child[joint], chain.parent[joint]
+    below = set(chain.downstream[joint])
     cols = chain.seg_markers[child]
-    if len(cols) < 2 or set(chain.downstream[joint]) != set(cols):
-        return None
-    return {"markers": [chain.labels[c] for c in cols], "segment": child, "joint": joint, "together": True}
+    if len(cols) >= 2 and below == set(cols):
+        out.append({"markers": [chain.labels[c] for c in cols], "segment": child, "joint": joint, "together": True})
+    cols = chain.seg_markers[parent]
+    if parent == chain.root and len(cols) >= 2 and below | set(cols) == set(range(len(chain.labels))):
+        out.append({"markers": [chain.labels[c] for c in cols], "segment": parent, "joint": joint, "together": True})
+    return out
+
+
+def carried_fields(shape: tuple, rotation: np.ndarray, cols, basis: np.ndarray) -> list:
+    """Marker displacements (each of `shape` (F, M, 3), world frame) that markers `cols` make together when moved by
+    one unit of each term: each column of `basis` (F, K) times each axis of the frame `rotation` (F, 3, 3, frame
+    -> world). A cluster moving as one on its segment (the segment's frame; the term :meth:`SoftTissue.apply` adds),
+    and a joint centre moving in its parent (the parent's frame, every marker below the joint)."""
+    out = []
+    for k in range(basis.shape[1]):
+        for i in range(3):
+            v = np.zeros(shape)
+            v[:, cols] = (rotation[:, :, i] * basis[:, [k]])[:, None, :]
+            out.append(v)
+    return out
 
 
 class SoftTissue(Effect):
@@ -83,9 +109,16 @@ class SoftTissue(Effect):
                        clean=clean)
 
     def propose(self, ctx, hyp) -> list:
+        """Each marker, and each segment's cluster moving as one, with each adjacent joint's angles. A cluster is
+        scored by what a refit with it would explain (:func:`~identcheck.bundle.chain.score_statistic`, or the
+        regression of the cluster's mean residual when that is larger): the segment's pose and the joint take up
+        much of a cluster's common motion, so the regression understates it, and a joint translation, scored
+        that way, would otherwise win on its detector alone (a thigh cluster moving with the knee in gait was
+        named as two joint translations, hip and knee, which together move the thigh's markers alike)."""
         seg_res = segment_residuals(hyp)
         angles = joint_angles(hyp)
         ch = hyp.chain
+        res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
         out = []
         for j in ch.joints:
             basis = angle_basis(angles[j])
@@ -97,7 +130,11 @@ class SoftTissue(Effect):
                     seen = ch.downstream[j] if seg == ch.root else cols
                     mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
                         "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
-                    gain = ctx.bic_gain(len(seen) * explained(mean, basis), 3 * basis.shape[1])
+                    found = max(len(seen) * explained(mean, basis),
+                                score_statistic(hyp.fit, hyp.weights, res,
+                                                carried_fields(hyp.data.shape, hyp.fit.seg_R[seg], cols, basis),
+                                                hyp.projection()))
+                    gain = ctx.bic_gain(found, 3 * basis.shape[1])
                     if gain > 0:
                         out.append(Proposal(self.name, {"markers": [ch.labels[c] for c in cols], "segment": seg,
                                                         "joint": j, "together": True},
@@ -110,12 +147,12 @@ class SoftTissue(Effect):
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
-        """A cluster moving as one on a last segment, with its own joint's angles, is that joint's centre moving
-        in the parent (:func:`last_cluster`)."""
+        """A cluster moving as one with its joint's angles, where that is the joint's centre moving in the parent
+        (:func:`same_motion_clusters`)."""
         j = where.get("joint")
-        if not where.get("together") or j is None or chain.child.get(j) != where.get("segment"):
+        if not where.get("together") or j is None or j not in chain.child:
             return []
-        if last_cluster(chain, j) is None:
+        if where.get("segment") not in [c["segment"] for c in same_motion_clusters(chain, j)]:
             return []
         from identcheck.effects.joint_translation import MODELLED     # (that module builds on this one)
 

@@ -112,8 +112,9 @@ def test_an_adopted_place_is_not_proposed_again(trial):
 
 def test_a_translating_joint_above_a_last_segment_is_reported_alike_its_cluster_moving_as_one():
     """Above a last segment, a centre moving in the parent by D(θ) and the segment's cluster moving as one by
-    Rot(θ)ᵀ D(θ) move every marker alike: each names the other as indistinguishable, whatever the scores; a
-    joint with a segment below its child (markers further down) has no such twin."""
+    Rot(θ)ᵀ D(θ) move every marker alike: each names the other as indistinguishable, whatever the scores; so do a
+    root's only joint and the root's cluster moving as one (the root's pose takes the centre's motion); a
+    joint with a segment below its child (markers further down) and another joint on the root has no such twin."""
     from identcheck.effects.registry import EFFECTS
     from identcheck.skeleton import Skeleton
 
@@ -122,7 +123,14 @@ def test_a_translating_joint_above_a_last_segment_is_reported_alike_its_cluster_
     knee = jt.alike(chain, {"joint": "knee"})
     assert knee == [("soft_tissue", {"markers": list(Model.from_toml(MODEL).segments["shank"].markers),
                                      "segment": "shank", "joint": "knee", "together": True})]
-    assert jt.alike(chain, {"joint": "hip"}) == []
+    model = Model.from_toml(MODEL)
+    assert jt.alike(chain, {"joint": "hip"}) == [("soft_tissue", {"markers": list(model.segments["pelvis"].markers),
+                                                                  "segment": "pelvis", "joint": "hip",
+                                                                  "together": True})]
+    two_legs = Skeleton.from_model(Model.from_toml(MODEL.parent / "real_walking2_legs.toml"))
+    assert jt.alike(two_legs, {"joint": "hip_r"}) == []                 # the other leg does not follow the centre
+    pelvis = {"markers": ["x"], "segment": "pelvis", "joint": "hip_r", "together": True}
+    assert st_.alike(two_legs, pelvis) == []
     (name, where), = st_.alike(chain, knee[0][1])
     assert name == "joint_translation" and where["joint"] == "knee"
     assert st_.alike(chain, {"markers": ["RTIB"], "segment": "shank", "joint": "knee"}) == []      # one marker
