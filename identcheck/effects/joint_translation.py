@@ -1,9 +1,9 @@
 """``joint_translation``: the joint's centre (or hinge) moves in its parent as the joint turns.
 
 Detector: what a refit with the centre moving would explain of the residual of every marker below the joint (the
-score statistic, the joint's angles and shifted centre taking up their part first). Augmentation: the centre in the parent becomes
-``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree, plus the part of a
-translation linear in the angles that a rigid joint cannot absorb.
+score statistic, the joint's angles and shifted centre taking up their part first). Augmentation: the centre in
+the parent becomes ``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree,
+plus the part of a translation linear in the angles that a rigid joint cannot absorb.
 
 A translation linear in the angles, ``M ω`` (ω the joint's rotation from its median pose), is to first order a
 rigid joint about a shifted centre when M is skew-symmetric: moving the centre by δ in both segments adds
