@@ -185,7 +185,7 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
 
 
 
-def refit_projection(fit: Fit, weights: np.ndarray):
+def _refit_projection(fit: Fit, weights: np.ndarray):
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
     per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement), as
     ``(pieces, inner)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and
@@ -220,19 +220,19 @@ def refit_projection(fit: Fit, weights: np.ndarray):
     return pieces, inner
 
 
-def unabsorbed(fit: Fit, weights: np.ndarray, fields, projection=None) -> list:
+def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
     so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
     refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
     with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
-    (Schur complement). `projection`: :func:`refit_projection` of the same fit and weights, when the caller has it.
+    (Schur complement).
 
     What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
     regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
     needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
     a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
-    pieces, inner = projection or refit_projection(fit, weights)
+    pieces, inner = _refit_projection(fit, weights)
     out = []
     for v in fields:
         p = pieces(v)
@@ -240,11 +240,11 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields, projection=None) -> list:
     return out
 
 
-def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, projection=None) -> np.ndarray:
+def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
     """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
-    pieces, inner = projection or refit_projection(fit, weights)
+    pieces, inner = _refit_projection(fit, weights)
     parts = [pieces(v) for v in fields]
     G = np.empty((len(parts), len(parts)))
     for i in range(len(parts)):
@@ -253,7 +253,7 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, projection=None
     return G
 
 
-def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields: list, projection=None) -> float:
+def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields: list) -> float:
     """What a refit with `fields` (each (F, M, 3) marker displacements per unit coefficient) added to the model
     would explain of `residual` (F, M, 3, the fit's; NaN and weight-0 samples count as 0), to first order: the
     score statistic ``nᵀ G⁺ n``, ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts
@@ -265,7 +265,7 @@ def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields:
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
-    G = unabsorbed_gram(fit, weights, fields, projection)
+    G = unabsorbed_gram(fit, weights, fields)
     return float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)
 
 

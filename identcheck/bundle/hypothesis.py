@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.skeleton import Skeleton
 from identcheck.bundle.anatomical_angles import anatomical_angles
-from identcheck.bundle.chain import fit_chain, refit_projection
+from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.model import Fit, State, Terms, forward
 from identcheck.estimate.noise import NoiseFloor
 
@@ -63,19 +63,6 @@ class Hypothesis:
     fit: Fit
     extra_params: int = 0        # discrete choices and set-aside samples, counted as parameters
     effects: list = field(default_factory=list)
-    _projection: tuple | None = field(default=None, init=False, repr=False, compare=False)
-
-    def projection(self):
-        """:func:`~identcheck.bundle.chain.refit_projection` of this fit, made once and kept until
-        :meth:`release`: the detectors that score fields by what a refit would explain share it (it holds a
-        matrix as large as the frames' coupling block, 93 MB for a 42-marker body, so it is not kept longer)."""
-        if self._projection is None:
-            self._projection = refit_projection(self.fit, self.weights)
-        return self._projection
-
-    def release(self) -> None:
-        """Forget :meth:`projection`."""
-        self._projection = None
 
     @property
     def rss(self) -> float:

@@ -260,11 +260,8 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         adopted = None
         if len(steps) < max_steps:
             bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
-            try:
-                proposals = sorted(((p, eff) for eff in EFFECTS.values()
-                                    for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
-            finally:
-                h.release()
+            proposals = sorted(((p, eff) for eff in EFFECTS.values()
+                                for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
             tried, best, leader, drift, placed = [], 0.0, None, None, set()
             # an adopted effect's place, and the places of the effects no data could tell from it (its ``alike``:
             # both adopted would model one motion twice)

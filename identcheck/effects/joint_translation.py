@@ -1,9 +1,9 @@
 """``joint_translation``: the joint's centre (or hinge) moves in its parent as the joint turns.
 
-Detector: what a refit with the centre moving would explain of the residual of every marker below the joint (the
-score statistic, the joint's angles and shifted centre taking up their part first). Augmentation: the centre in
-the parent becomes ``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree,
-plus the part of a translation linear in the angles that a rigid joint cannot absorb.
+Detector: the residuals of every marker below the joint, seen from the parent segment, regressed on
+smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
+``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree, plus the part of a
+translation linear in the angles that a rigid joint cannot absorb.
 
 A translation linear in the angles, ``M ω`` (ω the joint's rotation from its median pose), is to first order a
 rigid joint about a shifted centre when M is skew-symmetric: moving the centre by δ in both segments adds
@@ -20,12 +20,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from identcheck.bundle.chain import score_statistic
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle
 from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
-from identcheck.effects.soft_tissue import carried_fields, explained, same_motion_clusters
+from identcheck.effects.soft_tissue import explained, same_motion_clusters
 
 
 MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
@@ -79,20 +78,6 @@ def _not_a_shift(fields: list, omega: np.ndarray) -> list:
     return [full @ (B @ v) for v in V[:, share >= ABSORBED_SHARE].T]
 
 
-def displacement_fields(hyp, joint: str, basis: np.ndarray, linear: list) -> list:
-    """The marker displacements (each (F, M, 3), world frame) of the joint's centre moving in its parent by one unit
-    of each term: each column of `basis` times each of the parent's axes, and each of the `linear` fields
-    (:func:`linear_fields`); every marker below the joint moves with the centre, the rest stay."""
-    idx = hyp.chain.downstream[joint]
-    R = hyp.fit.seg_R[hyp.chain.parent[joint]]                           # parent frame -> world, (F, 3, 3)
-    out = carried_fields(hyp.data.shape, R, idx, basis)
-    for g in linear:
-        v = np.zeros(hyp.data.shape)
-        v[:, idx] = np.einsum("fij,fj->fi", R, np.nan_to_num(g))[:, None, :]
-        out.append(v)
-    return out
-
-
 class JointTranslation(Effect):
     name = "joint_translation"
     max_proposals = 3
@@ -121,12 +106,6 @@ class JointTranslation(Effect):
                        clean=clean)
 
     def propose(self, ctx, hyp) -> list:
-        """Each joint's centre moving with its angles, scored by what a refit with it would explain
-        (:func:`~identcheck.bundle.chain.score_statistic`; the regression of the markers' mean residual when that
-        is larger, short of a converged fit). The regression alone misses most of it: a refit takes up the part
-        of the translation linear in the angles (a shifted centre or axis) and, through the angles, part of the
-        rest, and the residual keeps only what is left; a knee rolling back 8 mm scored 1 by the regression and
-        375 by the score statistic on a held-out trial."""
         ch, angles = hyp.chain, joint_angles(hyp)
         res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
         out = []
@@ -136,10 +115,7 @@ class JointTranslation(Effect):
             basis = angle_basis(angles[j], linear=False, cubic=True)
             lin = linear_fields(hyp, j, angles[j])
             mean = seen_mean(seen_from_parent, axis=1)           # NaN in frames where every such marker is hidden
-            found = max(len(idx) * explained(mean, basis, lin),
-                        score_statistic(hyp.fit, hyp.weights, res, displacement_fields(hyp, j, basis, lin),
-                                        hyp.projection()))
-            gain = ctx.bic_gain(found, 3 * basis.shape[1] + len(lin))
+            gain = ctx.bic_gain(len(idx) * explained(mean, basis, lin), 3 * basis.shape[1] + len(lin))
             out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
                                 {"joint": j, "basis": basis, "linear": lin}))
         return sorted(out, key=lambda p: -p.strength)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import score_statistic
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
 from identcheck.effects.base import Effect, Proposal, seen_mean
@@ -66,20 +65,6 @@ def same_motion_clusters(chain, joint: str) -> list:
     return out
 
 
-def carried_fields(shape: tuple, rotation: np.ndarray, cols, basis: np.ndarray) -> list:
-    """Marker displacements (each of `shape` (F, M, 3), world frame) that markers `cols` make together when moved by
-    one unit of each term: each column of `basis` (F, K) times each axis of the frame `rotation` (F, 3, 3, frame
-    -> world). A cluster moving as one on its segment (the segment's frame; the term :meth:`SoftTissue.apply` adds),
-    and a joint centre moving in its parent (the parent's frame, every marker below the joint)."""
-    out = []
-    for k in range(basis.shape[1]):
-        for i in range(3):
-            v = np.zeros(shape)
-            v[:, cols] = (rotation[:, :, i] * basis[:, [k]])[:, None, :]
-            out.append(v)
-    return out
-
-
 class SoftTissue(Effect):
     name = "soft_tissue"
     max_proposals = 3
@@ -109,16 +94,9 @@ class SoftTissue(Effect):
                        clean=clean)
 
     def propose(self, ctx, hyp) -> list:
-        """Each marker, and each segment's cluster moving as one, with each adjacent joint's angles. A cluster is
-        scored by what a refit with it would explain (:func:`~identcheck.bundle.chain.score_statistic`, or the
-        regression of the cluster's mean residual when that is larger): the segment's pose and the joint take up
-        much of a cluster's common motion, so the regression understates it, and a joint translation, scored
-        that way, would otherwise win on its detector alone (a thigh cluster moving with the knee in gait was
-        named as two joint translations, hip and knee, which together move the thigh's markers alike)."""
         seg_res = segment_residuals(hyp)
         angles = joint_angles(hyp)
         ch = hyp.chain
-        res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), np.nan)
         out = []
         for j in ch.joints:
             basis = angle_basis(angles[j])
@@ -130,11 +108,7 @@ class SoftTissue(Effect):
                     seen = ch.downstream[j] if seg == ch.root else cols
                     mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
                         "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
-                    found = max(len(seen) * explained(mean, basis),
-                                score_statistic(hyp.fit, hyp.weights, res,
-                                                carried_fields(hyp.data.shape, hyp.fit.seg_R[seg], cols, basis),
-                                                hyp.projection()))
-                    gain = ctx.bic_gain(found, 3 * basis.shape[1])
+                    gain = ctx.bic_gain(len(seen) * explained(mean, basis), 3 * basis.shape[1])
                     if gain > 0:
                         out.append(Proposal(self.name, {"markers": [ch.labels[c] for c in cols], "segment": seg,
                                                         "joint": j, "together": True},

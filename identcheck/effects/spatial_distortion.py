@@ -121,7 +121,7 @@ def strain_explained(hyp, res: np.ndarray, at: np.ndarray | None = None) -> floa
     the residual. On a held-out trial a single-axis scale error of 4 mm read as 0 this way, while the refit with
     the strain gained 491 in the criterion's units."""
     flds = fields(where_fields_act(hyp) if at is None else at, 1)
-    return score_statistic(hyp.fit, hyp.weights, res, flds, hyp.projection())
+    return score_statistic(hyp.fit, hyp.weights, res, flds)
 
 
 class SpatialDistortion(Effect):

@@ -26,9 +26,6 @@ class _OnTheRigidFit:
     def polish(self, max_iter: int = 40):
         return self
 
-    def release(self):
-        """(Nothing kept to forget.)"""
-
     def gap(self, ctx):
         return self.base.gap(ctx)
 
