@@ -177,10 +177,15 @@ def information(fit: "Fit", data, weights=None) -> np.ndarray:
     """The constants' information matrix with the per-frame unknowns profiled out (Schur complement
     of the Gauss-Newton normal matrix at the solution), (P, P); σ² times its pseudo-inverse is the
     constants' covariance, and its null space beyond the gauge is what the data leave undetermined."""
-    y, w = _prepare(data, weights)
-    s = fit.state
-    R, t, centre, pred = forward(fit.chain, fit.terms, s)
-    A, B, C, g, h = _normal(fit.chain, fit.terms, s, R, centre, pred, y, w)
+    return information_at(fit.chain, fit.terms, fit.state, _prepare(data, weights)[1])
+
+
+def information_at(chain, terms, state, w: np.ndarray) -> np.ndarray:
+    """:func:`information` at any `state` with sample weights w (F, M): it depends on where the model is, not on
+    the residual."""
+    R, _t, centre, pred = forward(chain, terms, state)
+    lay, blocks = jacobian_blocks(chain, terms, state, R, centre, pred)
+    A, B, C, g, h = normal_equations(lay, blocks, np.zeros_like(pred), w)
     return eliminate_frames(ridged(A), B, C, g, h)[0]
 
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from identcheck.bundle.chain import _prepare
+from identcheck.bundle.chain import _prepare, information_at
 from identcheck.bundle.gauge import gauge_basis
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import apply_step, forward, joint_offsets, n_const, tangents
@@ -198,14 +198,6 @@ def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.nd
     determined = frame_rank(A)
     S, g, _ = eliminate_frames(ridged(A), B, C, Jr, Gr)
     return g, S, r, determined, A, w
-
-
-def information_at(chain, terms, state, w: np.ndarray) -> np.ndarray:
-    """The constants' information S (per unit noise variance) at `state` with sample weights w (F, M)."""
-    R, _t, centre, pred = forward(chain, terms, state)
-    lay, blocks = jacobian_blocks(chain, terms, state, R, centre, pred)
-    A, B, C, g, h = normal_equations(lay, blocks, np.zeros_like(pred), w)
-    return eliminate_frames(ridged(A), B, C, g, h)[0]
 
 
 def simex_information(fit, A: np.ndarray, w: np.ndarray, sigma: float, draws: int = SIMEX_DRAWS,

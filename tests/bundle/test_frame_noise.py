@@ -8,10 +8,10 @@ import warnings
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.chain import fit_chain, information_at, initial_state
 from identcheck.bundle.model import Fit, apply_step, forward
 from identcheck.bundle.uncertainty import (SIMEX_LEFT, chain_inverse, determined_directions, distance_gradients,
-                                           frame_scores, information_at, jacobi_scaled, simex_information, widening)
+                                           frame_scores, jacobi_scaled, simex_information, widening)
 from identcheck.fit.whole_tree import skeleton_of
 from identcheck.simulate.rigid import simulate
 from tests.bundle.test_noise_dof import LEG, SEEN_WITHOUT_ROLL
