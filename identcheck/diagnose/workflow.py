@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -24,6 +25,7 @@ from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
 from identcheck.diagnose.backward import Adopted, Redundant, redundant
 from identcheck.estimate.noise import noise_floor
 from identcheck.estimate.spikes import without_spikes
+from identcheck.progress import Progress
 
 log = logging.getLogger("identcheck")
 
@@ -108,6 +110,8 @@ class Diagnosis:
     dropped : tuple of (name, where, gain)
         Effects adopted on the way and dropped once later ones explained what they did
         (:mod:`identcheck.diagnose.backward`), with what each still gained given the others (criterion units).
+    progress : callable, optional
+        Where the joints' judgment (:attr:`joints`) reports its stages.
     """
 
     ctx: Context
@@ -119,6 +123,14 @@ class Diagnosis:
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
     first_frame: int = 0
     dropped: tuple = ()
+    progress: object = field(default=None, compare=False, repr=False)
+
+    @cached_property
+    def joints(self) -> dict:
+        """Each joint as ``fit`` reports it, from the model with the adopted effects (:func:`joint_report`).
+        Judged once, when first asked for: profile likelihoods and bootstrap refits can take up to a minute each
+        for a weakly determined joint, and the JSON, the text and the HTML report all read the same answer."""
+        return joint_report(self.ctx, self.after, self.progress)
 
     def numbered(self, where: dict) -> dict:
         """`where` with its row indices also in the file's numbering."""
@@ -162,7 +174,7 @@ class Diagnosis:
                         for s in self.steps],
             "dropped": [{"name": n, "where": plain(self.numbered(w)), "gain_given_the_others": round(g, 1)}
                         for n, w, g in self.dropped],
-            "joints": joint_report(self.ctx, self.after),
+            "joints": self.joints,
         }
 
 
@@ -326,7 +338,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         if len(dropped_steps) == before:
             break
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
-                     tuple(dropped_steps))
+                     tuple(dropped_steps), progress)
 
 
 def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list, progress) -> Hypothesis:
@@ -393,14 +405,17 @@ def worst_sd(ctx: Context, h: Hypothesis) -> float:
     return max(sd for per in marker_distances(ctx, h).values() for _, sd in per.values())
 
 
-def joint_report(ctx: Context, h: Hypothesis) -> dict:
+def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
     """Each joint as ``fit`` reports it, from the final model and by fit's rules (one estimator, one set of
     rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
     covariance (correlated noise allowed), widened for markers that still move with the angles, profiled where
     wide, unbounded where the data leave the joint free; the largest standard error; the practical verdict;
-    and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion."""
+    and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion.
+    `progress` hears of the profiles and bootstrap refits, at most once a second."""
     ch = h.chain
-    judged = assess(h.fit, h.data, h.weights, rate_hz=ctx.rate_hz)
+    if progress:
+        progress("judging the joints of the model with the effects (covariance, intervals)")
+    judged = assess(h.fit, h.data, h.weights, progress=Progress(progress), rate_hz=ctx.rate_hz)
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:

@@ -1,0 +1,53 @@
+"""`diagnose` judges the joints of its final model once, and says so: the profiles and bootstrap refits of a weakly
+determined joint can take minutes, and the JSON, the text and the HTML report all read that one answer."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from identcheck import cli
+import identcheck as ic
+import identcheck.diagnose.workflow as workflow
+from identcheck.report.text import diagnose_text
+
+ROOT = Path(__file__).resolve().parents[2]
+MODEL = str(ROOT / "examples" / "diagnose_leg.toml")
+
+
+def _trial(tmp_path):
+    trial = tmp_path / "slip.trc"
+    assert cli.main(["simulate", MODEL, "--out", str(trial), "--seed", "5", "--noise-mm", "0.4", "--frames", "400",
+                     "--effect", "marker_slip"]) == 0
+    return trial
+
+
+def test_the_joints_are_judged_once_whatever_reads_them(tmp_path, monkeypatch):
+    calls = []
+    real = workflow.assess
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("progress"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(workflow, "assess", counted)
+    heard = []
+    diag = ic.diagnose(MODEL, _trial(tmp_path), progress=heard.append)
+    assert calls == []                                  # not judged before anything asks
+    first = diag.to_dict()
+    text = diagnose_text(diag)
+    again = diag.to_dict()
+    assert len(calls) == 1
+    assert first["joints"] is again["joints"] is diag.joints
+    assert set(first["joints"]) == set(diag.ctx.model.joints)
+    assert all(name in text for name in first["joints"])
+    assert any(line.startswith("judging the joints") for line in heard)
+
+
+def test_the_cli_reports_the_judgment_on_stderr(tmp_path, capsys):
+    trial = _trial(tmp_path)
+    capsys.readouterr()
+    cli.main(["diagnose", MODEL, str(trial), "--json", "--report", str(tmp_path / "page.html")])
+    out = capsys.readouterr()
+    assert "identcheck diagnose: judging the joints" in out.err
+    assert out.err.count("judging the joints") == 1
+    assert set(json.loads(out.out)["joints"]) == {"hip", "knee"}
