@@ -13,7 +13,8 @@ Two hypotheses, both for a hinge (a ball joint has nothing to add):
   Augmentation: :class:`~identcheck.bundle.chain.Terms` ``rotations``, the angle's coefficients and the
   axis direction fitted with everything else, about the hinge's point nearest the markers
   (:func:`pivot_at_markers`). ``where`` gives the axis's angle to the child's long axis and the range.
-  A second proposal for the same joint takes the axis across the first (two smooth axes of play).
+  A second proposal for the same joint takes the axis across the first (two smooth axes of play: ``needs`` a
+  third rotation, a place of its own).
 - **a ball joint**: the joint re-declared as the next type up, keeping its fitted motion as the starting
   point (two more angles per frame: it earns them only when the extra rotation is too rough for a smooth
   profile).
@@ -123,7 +124,10 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     k = int(np.argmax(explained))
     beta = float(betas[k])
     gain = ctx.bic_gain(float(explained[k]) * phi_discount(ctx), basis.shape[1] + 1)
-    where = {"joint": joint, "declared": ch.types[joint], "needs": "a second rotation"}
+    # the rotation across one already adopted is a third: a place of its own (named alike, the two had been one
+    # place, and a ball knee's third rotation was never tried once an oblique second had been adopted)
+    where = {"joint": joint, "declared": ch.types[joint],
+             "needs": "a third rotation" if taken else "a second rotation"}
     where.update(axis_description(ch, s, joint, beta))
     return [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta})] if gain > 0 else []
 

@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.model import Terms, forward
 from identcheck.bundle.hypothesis import Hypothesis, score, time_basis
-from identcheck.diagnose.workflow import diagnose, start
+from identcheck.diagnose.workflow import diagnose, place, start
 from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers
 from identcheck.effects.time_offset import interpolation_loss, shifted
 from identcheck.io.model import Model
@@ -24,9 +24,11 @@ from identcheck.trial import Trial
 MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
 
 
-def played_knee(seed: int, beta: float, peak_deg: float, n_frames: int = 600, noise: float = 0.3):
+def played_knee(seed: int, beta: float, peak_deg: float, n_frames: int = 600, noise: float = 0.3,
+                axes: int = 1):
     """A simulated leg whose hinge also turns by a smooth ψ(t) about the axis at angle β across it (through
-    the point of the hinge nearest the markers); the trial and the true (β, ψ)."""
+    the point of the hinge nearest the markers), and with ``axes=2`` by a second such profile about the axis
+    across both (the knee then turns like a ball); the trial and the first rotation's range."""
     sim = simulate(MODEL, n_frames=n_frames, seed=seed)
     data = sim.clean.as_array()
     chain = Skeleton.from_model(MODEL)
@@ -36,8 +38,10 @@ def played_knee(seed: int, beta: float, peak_deg: float, n_frames: int = 600, no
     coef = np.random.default_rng(seed).normal(size=(basis.shape[1], 1))
     psi = basis @ coef
     coef *= np.deg2rad(peak_deg) / np.abs(psi).max()
-    terms = Terms(rotations=[("knee", basis, beta)])
-    state.term_params = [np.vstack([coef, [[0.0]]])]
+    terms = Terms(rotations=[("knee", basis, beta + k * np.pi / 2) for k in range(axes)])
+    state.term_params = [np.vstack([coef * (1.0 - 0.4 * k), [[0.0]]]) if k == 0 else
+                         np.vstack([np.random.default_rng(seed + k).normal(size=coef.shape) * np.abs(coef).max(),
+                                    [[0.0]]]) for k in range(axes)]
     pred = forward(chain, terms, state)[3]
     noisy = pred + np.random.default_rng(seed + 7).normal(scale=noise, size=pred.shape)
     return Trial(noisy, chain.labels, sim.clean.rate_hz), np.rad2deg(np.ptp(basis @ coef))
@@ -58,6 +62,25 @@ def test_a_second_rotation_is_proposed_and_its_fit_recovers_the_axis_and_range(s
     assert abs(np.sin(fitted_beta - beta)) < np.sin(np.deg2rad(10))          # the same axis (either sense)
     assert props[0].where["range_deg"] == pytest.approx(true_range, rel=0.3)
     assert cand.gap(ctx) < 1.2 * ctx.noise.floor(ctx.n_samples, cand.n_params())
+
+
+@settings(max_examples=3, deadline=None)
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, np.pi), peak=st.floats(6.0, 12.0))
+def test_a_knee_turning_about_two_axes_across_its_hinge_is_offered_a_third_rotation(seed, beta, peak):
+    """Once a second rotation is adopted, the one across it is proposed as a third: a place of its own (the two
+    had been one place whenever both axes got the same name, and the third was never tried)."""
+    trial, _ = played_knee(seed, beta, peak, axes=2)
+    ctx, h = start(MODEL, trial)
+    h = h.polish(60)
+    eff = ExtraDof()
+    first = next(p for p in eff.propose(ctx, h) if "basis" in p.payload)
+    h1 = eff.apply(ctx, h, first).polish(60)
+    third = [p for p in eff.propose(ctx, h1) if "basis" in p.payload]
+    assert [p.where["needs"] for p in third] == ["a third rotation"]
+    assert place(eff.name, third[0].where) != place(eff.name, first.where)
+    h2 = eff.apply(ctx, h1, third[0]).polish(60)
+    assert score(ctx, h2, h1) > 10
+    assert h2.gap(ctx) < 1.2 * ctx.noise.floor(ctx.n_samples, h2.n_params())
 
 
 @pytest.mark.slow
