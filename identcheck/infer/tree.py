@@ -33,8 +33,9 @@ that fits a joint with both goes between them; without one, the joint is reporte
 
 A single marker that *drifts* is placed nowhere (:func:`drift_reason`): in the frame of the segment where it moves
 least, it goes one way through the whole trial (its place along its path ranks with time, Spearman's |ρ| at least
-:data:`DRIFT_RHO`). A joint's motion goes and returns; a marker sliding on the skin or coming loose does not, and a
-sphere or a circle of large radius passes within the noise of a short straight path.
+:data:`~identcheck.infer.body_frames.DRIFT_RHO`). A joint's motion goes and returns; a marker sliding on the skin
+or coming loose does not, and a sphere or a circle of large radius passes within the noise of a short straight
+path.
 """
 from __future__ import annotations
 
@@ -44,13 +45,13 @@ from collections import deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import spearmanr
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.hierarchy import Hierarchy, infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
+from identcheck.infer.body_frames import DRIFT_RHO, path_monotone
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
@@ -79,11 +80,6 @@ POOR_FLOOR_MM = 20.0
 """... and more than this (mm): skin markers leave real joints residuals of several to 15 mm."""
 STILL_DEG = 10.0
 """Two segments whose relative rotation spreads less than this hardly move relative to each other."""
-DRIFT_RHO = 0.9
-"""A single marker whose place along its path in the frame where it moves least ranks with time at least this well
-(|Spearman's ρ|) drifts (:func:`drift_reason`). On three development draws of the independent random-skeleton
-generator: 0.95-1.00 for its 16 markers drifting 20-83 mm on a segment, at most 0.79 (in any segment's frame) for its
-49 one-marker segments, whose joints go and return."""
 
 
 # ---------------------------------------------------------------------- results
@@ -375,7 +371,7 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
         return SmallFit(np.nan, np.nan, np.nan, np.nan, n, f"seen with this segment's pose in only {n} frame(s)")
     X = local[ok]
     travel = float(max(np.ptp(X[:, i], axis=0).max() for i in range(X.shape[1])))
-    monotone = _monotone(X[:, 0]) if X.shape[1] == 1 else float("nan")
+    monotone = path_monotone(X[:, 0]) if X.shape[1] == 1 else float("nan")
     if travel < MIN_TRAVEL_MM:
         return SmallFit(np.nan, np.nan, travel, np.nan, n,
                         f"moves only {travel:.3g} mm in this segment's frame: nearly rigid with it, but beyond the "
@@ -413,15 +409,6 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
     reach = reach_s if np.isfinite(sphere) and (not np.isfinite(circ) or sphere <= circ) else reach_c
     factor = float(np.mean(np.sqrt(1.0 + pose_noise_factor(poses.local, np.median(X, axis=0)) ** 2)))
     return SmallFit(sphere, circ, travel, float(reach), n, noise_factor=factor, monotone=monotone)
-
-
-def _monotone(path: np.ndarray) -> float:
-    """|Spearman's ρ| between time and a point's place along its path (its positions (n, 3), in time order,
-    projected on their first principal direction)."""
-    centred = path - path.mean(axis=0)
-    along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0]
-    rho = spearmanr(np.arange(len(along)), along)[0]
-    return float(abs(rho)) if np.isfinite(rho) else 0.0
 
 
 def drift_reason(group: str, fits: dict) -> str:
