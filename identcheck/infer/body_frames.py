@@ -20,7 +20,7 @@ DRIFT_RHO = 0.9
 :func:`path_monotone`) drifts on that body: it slides on the skin or comes loose, where a joint's motion and skin
 moving with a joint's angles go and return. On three development draws of the independent random-skeleton
 generator: 0.95-1.00 for its 16 markers drifting 20-83 mm on a segment (in the frame where each moves least), at most
-0.79 (in any segment's frame) for its 49 one-marker segments."""
+0.79 (in any segment's frame) for its 35 one-marker segments."""
 DEVIATION_PERCENTILE = 95.0
 """A marker's deviation in a body's frame: this percentile over frames of its distance from its median position."""
 

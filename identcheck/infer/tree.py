@@ -411,9 +411,9 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
     return SmallFit(sphere, circ, travel, float(reach), n, noise_factor=factor, monotone=monotone)
 
 
-def drift_reason(group: str, fits: dict) -> str:
+def drift_reason(fits: dict) -> str:
     """Why a one-marker group is no joint's child, or '': it drifts (module docstring) in the frame of the segment
-    where it moves least."""
+    where it moves least. `fits`: the group's :class:`SmallFit` in each posed segment's frame."""
     moving = [(f.travel_mm, s, f) for s, f in fits.items() if np.isfinite(f.travel_mm) and np.isfinite(f.monotone)]
     if not moving:
         return ""
@@ -627,7 +627,7 @@ def infer_tree(trial, grouping, root: str | None = None, sigma_mm: float = float
         top, root_rule = posed[0], "given" if root else "only segment with a pose"
     accept = grouping.tolerance.tolerance_mm
     fits = {g: {s: small_fit(poses[s], pts) for s in posed} for g, pts in small.items()}
-    drifting = {g: why for g, f in fits.items() if (why := drift_reason(g, f))}
+    drifting = {g: why for g, f in fits.items() if (why := drift_reason(f))}
     fits = {g: f for g, f in fits.items() if g not in drifting}
     edges, inserted, poor = _insert(edges, fits, accept)
     placed, unplaced, amb_small = _place([g for g in fits if g not in inserted], fits, accept, sigma_mm)
