@@ -77,9 +77,13 @@ class Step:
         the trial as well, within :data:`EQUIVALENT_GAIN` of its score (a skin cluster moving on the root segment
         with the hip's angles is the hip centre moving in the root, to the last marker), and those no data could
         tell from it (``alike``, :meth:`identcheck.effects.base.Effect.alike`: a knee's centre moving in the thigh
-        moves the markers of a last segment as its skin cluster moving as one does)."""
+        moves the markers of a last segment as its skin cluster moving as one does). The same effect counts too
+        where it acts on another segment, joint or set of markers (a thigh delayed 38 ms scored above the shank
+        advanced 40 ms that was adopted, and the report had not said so), not where only its frames or sizes
+        differ (a slip one frame later)."""
         out = [(n, w) for n, w, sc in self.rejected
-               if n != self.name and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
+               if (n != self.name or acts_on(w) != acts_on(self.where))
+               and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
         return out + [(n, w) for n, w in self.alike
                       if n != self.name and place(n, w) not in {place(k, v) for k, v in out}]
 
@@ -237,6 +241,11 @@ def creep(ctx: Context, h: Hypothesis) -> float:
     criterion's units (≥ 0): the rigid fit of data an effect corrupts creeps on for long, and every candidate's
     refit takes that gain too, so each candidate's score is counted net of it."""
     return max(score(ctx, h.refit(max_iter=CREEP_ITER), h), 0.0)
+
+
+def acts_on(where: dict) -> tuple:
+    """What an effect's `where` acts on: its segment, joint and markers (not its frames, nor any fitted size)."""
+    return where.get("segment"), where.get("joint"), tuple(where.get("markers") or ())
 
 
 def place(name: str, where: dict) -> tuple:

@@ -268,3 +268,21 @@ def test_an_effect_dropped_on_the_way_is_reported_in_the_json_and_the_text(trial
                                "where": {"markers": ["RTHI"], "segment": "thigh", "frame": 3,
                                          "file_frame": diag.first_frame + 3}}]
     assert "dropped on the way: soft_tissue (markers=['RTHI'], segment=thigh, frame=3" in diagnose_text(diag)
+
+
+@settings(max_examples=60, deadline=None)
+@given(score=st.floats(100.0, 1e6), rel=st.floats(-0.5, 0.5), segment=st.sampled_from(["pelvis", "thigh", "shank"]),
+       frame=st.integers(0, 1000))
+def test_the_same_effect_elsewhere_is_named_with_the_step_when_it_explains_as_well(score, rel, segment, frame):
+    """The same effect acting on another segment counts as an equivalent when its score is within the margin of the
+    step's (or above it: it was blocked, or the step is its twin); the same effect on the same segment and markers at
+    another frame, or with another size, never does."""
+    where = {"segment": "shank", "delay_ms": -39.75}
+    other = {"segment": segment, "delay_ms": 38.4}
+    later = {"segment": "shank", "delay_ms": -10.0, "frame": frame}
+    sc = score * (1 + rel)
+    step = workflow.Step("time_offset", where, 2.0, 1.0, score,
+                         rejected=(("time_offset", other, sc), ("time_offset", later, sc)))
+    close = sc >= score - max(workflow.EQUIVALENT_GAIN, workflow.EQUIVALENT_FRACTION * score)
+    expected = [("time_offset", other)] if close and segment != "shank" else []
+    assert step.equivalents() == expected
