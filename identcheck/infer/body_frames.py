@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 from scipy.stats import spearmanr
 
+from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor, segment_poses
 
@@ -90,6 +91,28 @@ def path_monotone(path: np.ndarray) -> float:
     along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0]
     rho = spearmanr(np.arange(len(along)), along)[0]
     return float(abs(rho)) if np.isfinite(rho) else 0.0
+
+
+def is_drift(travel_mm: float, monotone: float) -> bool:
+    """Whether a single marker that moves `travel_mm` (its largest coordinate range) in a body's frame, with
+    :func:`path_monotone` `monotone` there, drifts on that body (:data:`DRIFT_RHO`): it goes one way through the
+    trial, over at least :data:`~identcheck.estimate.joint.MIN_TRAVEL_MM`."""
+    return bool(travel_mm >= MIN_TRAVEL_MM and monotone >= DRIFT_RHO)
+
+
+def drifts_on(xyz: np.ndarray, body: list, marker: int) -> bool:
+    """Whether the column `marker` drifts (:func:`is_drift`) in the frame of `body` (3 or more columns); False when
+    the body is never seen whole or the marker is seen with it in fewer than
+    :data:`~identcheck.estimate.noise.MIN_SAMPLES_PER_PAIR` frames (nothing to judge it by)."""
+    if len(body) < MIN_MARKERS:
+        return False
+    try:
+        path = body_fixed(xyz, body, [marker])[1][:, 0]
+    except ValueError:
+        return False
+    seen = path[np.isfinite(path).all(axis=1)]
+    return (len(seen) >= MIN_SAMPLES_PER_PAIR
+            and is_drift(float(np.ptp(seen, axis=0).max()), path_monotone(seen)))
 
 
 def is_rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:

@@ -29,8 +29,7 @@ and lets them gather what the tolerance left loose:
   too (biobuddy's hip trial: pelvis markers whose distances spread 3.2 mm move 7-10 mm in the frame of the other
   three), so the pose test can tell neither a skin marker's slide nor a marker near a hinge's axis from rigid.
 - a loose marker that *drifts* in the body's frame (goes one way through the trial:
-  :func:`~identcheck.infer.body_frames.path_monotone` at least :data:`~identcheck.infer.body_frames.DRIFT_RHO`,
-  over at least :data:`~identcheck.estimate.joint.MIN_TRAVEL_MM`) does not join it: skin moving with a joint's
+  :func:`~identcheck.infer.body_frames.drifts_on`) does not join it: skin moving with a joint's
   angles goes and returns, a marker sliding or coming loose does not, and it is left loose (the tree then
   reports why it is placed nowhere).
 """
@@ -42,9 +41,8 @@ import numpy as np
 from scipy.cluster.hierarchy import linkage
 from scipy.spatial.distance import squareform
 
-from identcheck.estimate.joint import MIN_TRAVEL_MM
-from identcheck.geometry.poses import MIN_MARKERS, segment_poses
-from identcheck.infer.body_frames import DRIFT_RHO, is_rigid, path_monotone
+from identcheck.geometry.poses import MIN_MARKERS
+from identcheck.infer.body_frames import drifts_on, is_rigid
 
 SEPARATION_FACTOR = 2.0
 """A node is held apart from the rest when its parent's height is at least this many times its own."""
@@ -185,7 +183,7 @@ def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of
         added.append(m)
     body = next(iter(bodies)) if bodies else None
     base = list(grown.get(body, groups[body])) if body is not None else []
-    added = [m for m in added if m in pair_of or not _drifts(xyz, base, m)]
+    added = [m for m in added if m in pair_of or not drifts_on(xyz, base, m)]
     if not added:
         return ()
     full = sorted(set(base) | set(added))
@@ -199,16 +197,3 @@ def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of
         if m in pair_of:
             taken_pairs.add(pair_of[m])
     return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h))
-
-
-def _drifts(xyz, body: list, marker: int) -> bool:
-    """Whether `marker` goes one way through the trial in the frame of `body` (3 or more columns; module docstring)."""
-    if len(body) < MIN_MARKERS:
-        return False
-    try:
-        path = segment_poses(xyz[:, body]).to_local(xyz[:, [marker]])[:, 0]
-    except ValueError:                              # the body never seen whole: no frame to judge the marker in
-        return False
-    seen = path[np.isfinite(path).all(axis=1)]
-    return (len(seen) >= MIN_MARKERS and float(np.ptp(seen, axis=0).max()) >= MIN_TRAVEL_MM
-            and path_monotone(seen) >= DRIFT_RHO)

@@ -51,7 +51,7 @@ from identcheck.estimate.hierarchy import Hierarchy, infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
-from identcheck.infer.body_frames import DRIFT_RHO, path_monotone
+from identcheck.infer.body_frames import is_drift, path_monotone
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
@@ -418,7 +418,7 @@ def drift_reason(fits: dict) -> str:
     if not moving:
         return ""
     travel, s, f = min(moving, key=lambda x: x[0])
-    if travel < MIN_TRAVEL_MM or f.monotone < DRIFT_RHO:
+    if not is_drift(travel, f.monotone):
         return ""
     return (f"drifts one way through the trial in {s}'s frame, where it moves least ({travel:.3g} mm; its place "
             f"along its path ranks with time, |Spearman's rho| {f.monotone:.2f}): a marker sliding on the skin or "

@@ -2,14 +2,16 @@
 the likelihood is a parabola and holds the truth, and segments that are not posed by themselves are found."""
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.chain import fit_chain, initial_state
-from identcheck.bundle.profile import distance_penalty, profile_interval
+from identcheck.bundle.profile import OutOfTime, distance_penalty, profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.fit.whole_tree import posed_by_itself, skeleton_of
 from identcheck.io.model import Model
@@ -141,11 +143,6 @@ def test_profiles_on_threads_equal_profiles_one_by_one(tmp_path_factory, monkeyp
 def test_a_profile_past_its_deadline_stops(tmp_path_factory, seed, late_s):
     """A deadline already passed (by 0-100 s): the profile raises OutOfTime instead of walking a side, and one in
     the future changes nothing."""
-    import time
-
-    import pytest
-    from identcheck.bundle.profile import OutOfTime
-
     model = _hip33(tmp_path_factory)
     _, chain, data, fit, cov = _fit(model, seed)
     P = len(cov.information)
