@@ -14,6 +14,7 @@ import logging
 import math
 import os
 import sys
+import threading
 import traceback
 import warnings
 
@@ -47,9 +48,18 @@ class _EffectNames:
 EFFECT_NAMES = _EffectNames()
 
 
+_STDERR_LOCK = threading.Lock()
+
+
 def _progress(verb: str):
-    """A progress callback printing ``identcheck VERB: message`` on stderr."""
-    return lambda msg: print(f"identcheck {verb}: {msg}", file=sys.stderr)
+    """A progress callback printing ``identcheck VERB: message`` on stderr, one whole line per call even when
+    worker threads report at once (``print`` writes the text and its newline separately: two draws of a bootstrap
+    running in parallel had run into one line)."""
+    def say(msg) -> None:
+        with _STDERR_LOCK:
+            sys.stderr.write(f"identcheck {verb}: {msg}\n")
+            sys.stderr.flush()
+    return say
 
 
 def _print_json(result) -> None:

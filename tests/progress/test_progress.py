@@ -35,3 +35,41 @@ def test_reports_are_a_second_apart_and_the_forced_one_always_comes(gaps, first_
 
 def test_silent_without_a_callback():
     P.Progress(None)(lambda: 1 / 0, force=True)          # the message is never built
+
+
+def test_cli_progress_lines_stay_whole_when_threads_report_at_once(monkeypatch):
+    """Bootstrap draws report from worker threads: every line must come out whole, one message per line."""
+    import re
+    import sys
+    import threading
+    import time
+
+    from identcheck import cli
+
+    class SlowStream:                    # yields between writes, as a terminal or pipe may
+        def __init__(self):
+            self.parts = []
+
+        def write(self, text):
+            time.sleep(0)
+            self.parts.append(text)
+            time.sleep(0)
+
+        def flush(self):
+            pass
+    stream = SlowStream()
+    monkeypatch.setattr(sys, "stderr", stream)
+    say = cli._progress("fit")
+
+    def worker(w):
+        for i in range(40):
+            say(f"worker {w} item {i}")
+    threads = [threading.Thread(target=worker, args=(w,)) for w in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    lines = "".join(stream.parts).split("\n")
+    assert lines[-1] == ""
+    assert len(lines[:-1]) == 240
+    assert all(re.fullmatch(r"identcheck fit: worker \d item \d+", line) for line in lines[:-1])
