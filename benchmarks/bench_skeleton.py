@@ -13,7 +13,8 @@ runs on the TRC alone (no model, no grouping), and:
   joints, as unordered pairs, equal the true joints (``tree_exact``); also the fraction of true joints found
   (``joints_found``), and whether every wrong or missing joint was reported (ambiguous, a loop, a group that cannot
   be placed, an unassigned marker, a group held together beyond the rigidity tolerance, or one that may be two
-  segments: ``wrong_but_reported``);
+  segments: ``wrong_but_reported``); for a wrong grouping, whether every misplaced marker is one the report
+  puts in doubt (``grouping_wrong_but_reported``, :func:`misplaced_markers`, :func:`named_in_reports`);
 - **types**: among true joints found, the fraction typed right;
 - **honesty**: how often the tool calls a trial settled (``ok``, exit 0) when its tree is right, and when it is
   wrong (the second should be near 0);
@@ -62,6 +63,39 @@ def _owner(truth: dict) -> dict:
     return {m: s for s, ms in truth["segments"].items() for m in ms}
 
 
+def misplaced_markers(truth: dict, doc: dict) -> set:
+    """The markers the inferred grouping puts in the wrong place: an unattached marker put in a segment, an attached
+    one left unassigned, one in a group whose majority belongs to another true segment (a merge, or a marker taken by
+    the neighbour), and one apart from the group holding most of its own segment (a split)."""
+    owner = _owner(truth)
+    unattached = set(truth.get("unattached_markers", []))
+    where = {m: g for g, ms in doc["segments"].items() for m in ms}
+    out = {m for m in unattached if m in where} | {m for m in owner if m not in where}
+    majority = {}
+    for g, ms in doc["segments"].items():
+        votes = [owner[m] for m in ms if m in owner]
+        majority[g] = max(sorted(set(votes)), key=votes.count) if votes else None
+    for seg, ms in truth["segments"].items():
+        placed = [where[m] for m in ms if m in where]
+        home = max(sorted(set(placed)), key=placed.count) if placed else None
+        out |= {m for m in ms if m in where and (where[m] != home or majority[where[m]] != seg)}
+    return out
+
+
+def named_in_reports(doc: dict) -> set:
+    """The markers whose place the report puts in doubt: unassigned, in a group it cannot place, in a group held
+    together beyond the rigidity tolerance or one that may be two segments, or on a joint."""
+    named = set(doc["unassigned_markers"])
+    for c in doc["cannot_place"]:
+        named |= set(c.get("markers") or doc["segments"].get(c.get("segment"), ()))
+    for g in (doc.get("grouping") or {}).get("widened") or {}:
+        named |= set(doc["segments"].get(g, ()))
+    for t in doc.get("may_be_two_segments") or []:
+        named |= set(doc["segments"].get(t["segment"], ())) | {m for part in t.get("parts", ()) for m in part}
+    named |= {m["marker"] for m in doc.get("markers_on_joints") or []}
+    return named
+
+
 def evaluate(trial_dir: Path, entry: dict) -> dict:
     """Run ``skeleton`` on one trial and compare it with the truth."""
     truth = json.loads((trial_dir / entry["truth"]).read_text())
@@ -82,6 +116,9 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     unattached = set(truth.get("unattached_markers", []))
     row["grouping_exact"] = found_sets == true_sets and set(doc["unassigned_markers"]) == unattached
     row["segments_found"] = len(true_sets & found_sets) / len(true_sets)
+    misplaced = misplaced_markers(truth, doc)
+    row["misplaced"] = sorted(misplaced)
+    row["grouping_wrong_but_reported"] = None if row["grouping_exact"] else misplaced <= named_in_reports(doc)
     row["unattached_found"] = (len(unattached & set(doc["unassigned_markers"])) / len(unattached)) if unattached else None
     owner = _owner(truth)
     name = {}
@@ -144,6 +181,8 @@ def summarise(rows: list) -> dict:
                 "types_right": (sum(r["types_right"] for r in rs) / types_checked) if types_checked else None,
                 "wrong_but_reported": _rate([r for r in rs if r["wrong_but_reported"] is not None],
                                             "wrong_but_reported"),
+                "grouping_wrong_but_reported": _rate([r for r in rs if r.get("grouping_wrong_but_reported")
+                                                     is not None], "grouping_wrong_but_reported"),
                 "ok_when_tree_right": _rate([r for r in rs if r["tree_exact"]], "ok"),
                 "ok_when_tree_wrong": _rate([r for r in rs if not r["tree_exact"]], "ok"), **seconds_summary(rs)}
 
@@ -165,7 +204,7 @@ def summarise(rows: list) -> dict:
 
 def table(summary: dict) -> str:
     head = (f"{'trials':<26}{'n':>4} {'group%':>7} {'seg%':>6} {'tree%':>6} {'joint%':>7} {'type%':>6} "
-            f"{'reported%':>10} {'ok|right':>9} {'ok|wrong':>9} {'med s':>6} {'max s':>6}")
+            f"{'reported%':>10} {'g.rep%':>7} {'ok|right':>9} {'ok|wrong':>9} {'med s':>6} {'max s':>6}")
     lines = [head, "-" * len(head)]
     rows = ([("all", summary["all"])] + list(summary["by_category"].items())
             + [(f"noise {k}", b) for k, b in summary.get("by_noise", {}).items()]
@@ -173,7 +212,8 @@ def table(summary: dict) -> str:
     for name, b in rows:
         lines.append(f"{name:<26}{b['trials']:>4} {percent(b['grouping_exact']):>7} {percent(b['segments_found']):>6} "
                      f"{percent(b['tree_exact']):>6} {percent(b['joints_found']):>7} {percent(b['types_right']):>6} "
-                     f"{percent(b['wrong_but_reported']):>10} {percent(b['ok_when_tree_right']):>9} "
+                     f"{percent(b['wrong_but_reported']):>10} {percent(b.get('grouping_wrong_but_reported')):>7} "
+                     f"{percent(b['ok_when_tree_right']):>9} "
                      f"{percent(b['ok_when_tree_wrong']):>9} {b['median_seconds'] or 0:6.2f} "
                      f"{b['max_seconds'] or 0:6.2f}")
     st = summary["speed_target"]
@@ -183,7 +223,9 @@ def table(summary: dict) -> str:
     lines += errors_line(summary["errors"])
     lines.append("group%: segments and unassigned markers exactly right; seg%: true segments found; tree%: every "
                  "joint right; joint%: true joints found; type%: joints found typed right; reported%: trials with a "
-                 "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; ok|right, ok|wrong: "
+                 "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; g.rep%: trials with a wrong "
+                 "grouping whose every misplaced marker the report puts in doubt (unassigned, unplaced, in a wobbling "
+                 "group or one that may be two segments, or on a joint); ok|right, ok|wrong: "
                  "trials the tool calls settled (exit 0) among those whose tree is right, wrong")
     return "\n".join(lines)
 
