@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import chdtrc
 
-from identcheck.bundle.chain import fill_gaps, fit_chain, initial_state
+from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
@@ -121,8 +121,7 @@ def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
             raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
         if poses.valid.sum() < 3:
             raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points", segment=seg)
-        out[seg] = Poses(R=fill_gaps(poses.valid, poses.R), t=fill_gaps(poses.valid, poses.t), valid=poses.valid,
-                         local=local[:len(idx)], rms=poses.rms)
+        out[seg] = filled_poses(pts, local, poses, n_markers=len(idx))
     return out
 
 
