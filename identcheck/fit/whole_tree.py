@@ -43,7 +43,7 @@ from identcheck.bundle.model import n_const
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.joint import start_stride
-from identcheck.geometry.poses import Poses, refine_local, segment_poses
+from identcheck.geometry.poses import refine_local, segment_poses
 from identcheck.progress import Progress
 from identcheck.skeleton import Skeleton
 
