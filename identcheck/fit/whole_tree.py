@@ -474,7 +474,11 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
     with the other candidates the likelihood keeps (``alternatives``, with their likelihood-ratio statistics) and
     rejects. ``undecidable`` maps each joint whose closed-form case admits several joints that fit any rigid data
     equally, with nothing beyond it to decide (revolute (2,1) alone: ERRATA E1), to that case and the closed
-    form's rendered alternatives: such a joint is never ``determined`` (:func:`_undecided_twins`)."""
+    form's rendered alternatives: such a joint is never ``determined``, nor ``undetermined`` with intervals, but
+    ``ambiguous`` (:func:`_undecided_twins`); left undetermined without bounds (the data leave it free), it stays so.
+    Judged ``undetermined`` only for an interval just wider than the tolerance, a minimal
+    gait knee had kept that quadratic interval (±4 and ±10 mm, 197 mm from the truth) and no alternative, where a
+    fit that stopped a little earlier had called it ambiguous with two (held-out fit draw 5858, trial 135)."""
     undecidable = undecidable or {}
     best = tree.best
     chain = best.fit.chain
@@ -499,7 +503,7 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
             judged = replace(best, intervals={**best.intervals,
                                               j: {m: ([0.0, None], "unbounded") for m in best.distances[j]}})
         out[j] = joint_answer(judged, j, alts, rejected)
-        if j in undecidable and out[j]["practical"]["verdict"] == "determined":
+        if j in undecidable and claims_a_joint(out[j]):
             out[j] = _undecided_twins(out[j], rejected, *undecidable[j], bounded=posed_above(chain, j))
         if not best.fit.converged:
             out[j]["practical"]["reason"] = (
@@ -508,11 +512,20 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
     return out
 
 
+def claims_a_joint(answer: dict) -> bool:
+    """Whether a joint's answer points at one joint: ``determined``, or ``undetermined`` while still giving intervals
+    (too wide for the tolerance, but bounds about this joint). What a joint whose case admits equal twins may not
+    claim (:func:`_undecided_twins`)."""
+    verdict = answer["practical"]["verdict"]
+    bounded = any(hi is not None for _, hi in answer["marker_distances_ci95"].values())
+    return verdict == "determined" or (verdict == "undetermined" and bounded)
+
+
 def _undecided_twins(answer: dict, rejected: list, case: str, start_alternatives: list, bounded: bool) -> dict:
-    """A joint the likelihood ranked first although its case admits several joints that fit any rigid data
-    equally (revolute (2,1): ERRATA E1) and no marker beyond it decides: its likelihood differences can only come
-    from how the trial departs from the rigid model, so it is ``ambiguous``, with the candidates it beat (or the
-    closed form's) as alternatives. Below a segment not posed by itself (``bounded`` False) its quadratic
+    """A joint the likelihood ranked first (or left undetermined) although its case admits several joints that fit
+    any rigid data equally (revolute (2,1): ERRATA E1) and no marker beyond it decides: its likelihood differences can
+    only come from how the trial departs from the rigid model, so it is ``ambiguous``, with the candidates it beat
+    (or the closed form's) as alternatives. Below a segment not posed by itself (``bounded`` False) its quadratic
     interval is no more to be trusted than the ranking (held-out minimal gait knee: ±0.3-1.9 mm while 32-85 mm
     off, no candidate near the truth), so it claims none, as candidates the likelihood cannot tell apart there
     already do in :func:`joint_answers`."""

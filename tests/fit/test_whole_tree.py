@@ -369,3 +369,33 @@ def test_a_foot_marker_seen_in_a_few_frames_leaves_the_ankle_out_not_the_hip_and
         ci95 = rep["joints"][j]["marker_distances_ci95"]
         assert all(hi is not None for _, hi in ci95.values()), rep["joints"][j]["practical"]["reason"]
         assert sum(lo <= truth[m] <= hi for m, (lo, hi) in ci95.items()) >= len(ci95) - 1
+
+
+_VERDICT = st.sampled_from(["determined", "undetermined", "ambiguous"])
+_BOUNDS = st.dictionaries(st.sampled_from(["A", "B", "C"]), st.one_of(st.none(), st.floats(1, 500)), min_size=1)
+
+
+@settings(max_examples=80, deadline=None)
+@given(_VERDICT, _BOUNDS, st.booleans(), st.booleans())
+def test_a_joint_with_equal_twins_claims_no_one_joint(verdict, highs, bounded, with_rejected):
+    """A joint whose case admits equal twins (revolute (2,1)): any answer that points at one joint (determined, or
+    undetermined with an interval) becomes ambiguous with the twins as alternatives, and below a segment not posed
+    by itself claims no interval; one already ambiguous, or undetermined without any bound, is left as it is."""
+    from identcheck.fit.whole_tree import _undecided_twins, claims_a_joint
+
+    answer = {"practical": {"verdict": verdict, "reason": "r", "weakest_se_mm": 1.0},
+              "marker_distances": {m: 100.0 for m in highs},
+              "marker_distances_ci95": {m: [90.0, hi] for m, hi in highs.items()},
+              "interval_method": {m: "quadratic" for m in highs}, "uncertainty_mm": 3.0, "alternatives": []}
+    claims = claims_a_joint(answer)
+    assert claims == (verdict == "determined" or (verdict == "undetermined"
+                                                  and any(hi is not None for hi in highs.values())))
+    if not claims:
+        return
+    rejected = [{"marker_distances": {m: 150.0 for m in highs}, "delta_chi2": 17.0, "p_value": 3e-5}] \
+        if with_rejected else []
+    start_alts = [{"marker_distances": {m: 100.0 for m in highs}}, {"marker_distances": {m: 160.0 for m in highs}}]
+    out = _undecided_twins(answer, rejected, "revolute(2,1)", start_alts, bounded=bounded)
+    assert out["practical"]["verdict"] == "ambiguous" and out["alternatives"]
+    assert all(a["marker_distances"] != answer["marker_distances"] for a in out["alternatives"])
+    assert bounded or all(hi is None for _, hi in out["marker_distances_ci95"].values())
