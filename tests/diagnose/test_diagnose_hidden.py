@@ -17,7 +17,9 @@ from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.trial import Trial
 
-pytestmark = pytest.mark.slow      # the fast lane (pytest -m 'not slow') leaves these out
+# the fast lane (pytest -m 'not slow') leaves these out; one worker runs them all, so that the module's 40-trial
+# fixture (2.5 minutes) is built once, not once on each worker (`--dist loadgroup` in .ci/run)
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("diagnose_hidden")]
 
 MODEL = Path(__file__).parents[2] / "examples" / "diagnose_leg.toml"
 CASES = ("none",) + EFFECTS
