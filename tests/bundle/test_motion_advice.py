@@ -58,7 +58,10 @@ def test_a_static_sparse_leg_is_said_to_have_hardly_moved_and_no_angle_is_claime
     hip = joints["hip_r"]
     # before: 'determined', RTHI 5.9 +- 1.2 mm from the centre (510 mm in truth) at seed 0, 1 mm noise
     assert hip["practical"]["verdict"] == "undetermined" and not hip["unique"], hip["practical"]
-    assert hip["practical"]["reason"].startswith("hip_r hardly moved"), hip["practical"]
+    # a static trial leaves the fit crawling along its free directions: where the restarts' 10 s budget runs out
+    # first (seed 3694 at 0.4 mm, on two busy cores), the answer says so instead, and claims no interval either
+    assert (hip["practical"]["reason"].startswith("hip_r hardly moved")
+            or "did not converge" in hip["practical"]["reason"]), hip["practical"]
     assert all(hi is None for _, hi in hip["marker_distances_ci95"].values())
     # neither thigh (1 marker) nor shank (1 marker) is posed by its own markers: no range of angles is claimed
     assert joints["knee_r"]["practical"]["verdict"] != "determined"
