@@ -223,8 +223,8 @@ def table(summary: dict) -> str:
     lines += errors_line(summary["errors"])
     lines.append("group%: segments and unassigned markers exactly right; seg%: true segments found; tree%: every "
                  "joint right; joint%: true joints found; type%: joints found typed right; reported%: trials with a "
-                 "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; g.rep%: trials with a wrong "
-                 "grouping whose every misplaced marker the report puts in doubt (unassigned, unplaced, in a wobbling "
+                 "wrong tree that report an ambiguity, loop, unplaced group or unassigned marker; g.rep%: trials "
+                 "with a wrong grouping whose every misplaced marker the report puts in doubt (unassigned, unplaced, in a wobbling "
                  "group or one that may be two segments, or on a joint); ok|right, ok|wrong: "
                  "trials the tool calls settled (exit 0) among those whose tree is right, wrong")
     return "\n".join(lines)
