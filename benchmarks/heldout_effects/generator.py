@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""heldout-effects v1: independent synthetic right-lower-limb trials with known effects.
+"""heldout-effects v1/v2: independent synthetic right-lower-limb trials with known effects.
 
 World: Y up, lab X/Z horizontal, mm, 100 Hz.  Segment frames: x anterior, y proximal
 (along the bone, pointing up), z lateral (right).  Everything is a closed-form function of
@@ -8,6 +8,11 @@ continuous time, so a delayed segment is simply re-evaluated at t - d.
 Only numpy / scipy / stdlib.  `build_spec` draws every random choice of a trial into a
 JSON-serialisable dict; `simulate(spec, active=..., noise=...)` turns it into marker
 trajectories with any subset of the effects switched on and noise on/off.
+
+`--version 2` (see README.md, "v2") adds occlusion gaps (NaN / empty TRC cells), a
+`sit_to_stand` motion, an anatomical marker layout, noise up to 1.5 mm and new effect
+shapes.  Every v2 draw comes from its own random stream ([seed, index, 7919, 2]); the
+v1 code paths and streams are unchanged, so v1 output is byte-for-byte what it was.
 """
 import argparse
 import json
@@ -18,6 +23,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 GENERATOR = "heldout-effects v1"
+GENERATOR_V2 = "heldout-effects v2"
 RATE = 100.0
 EFFECTS = ["soft_tissue", "marker_slip", "marker_swap", "joint_translation",
            "extra_dof", "time_offset", "outliers", "spatial_distortion"]
@@ -78,7 +84,9 @@ def dist_to_line(x, p, d):
     return float(np.linalg.norm(v - (v @ d) * d))
 
 
-def make_geometry(rng):
+def draw_joint_geometry(rng):
+    """Segment lengths, ASIS width, hip centre, knee centre / hinge axis and the shank's
+    misalignment: the rigid-joint part of a subject (shared by both marker layouts)."""
     g = {}
     Lt = rng.uniform(370, 470)
     Ls = rng.uniform(350, 440)
@@ -96,7 +104,11 @@ def make_geometry(rng):
     g["knee_centre_in_thigh"] = knee
     g["knee_axis_in_thigh"] = axis
     g["shank_R0"] = Rs0
-    # ---- markers
+    return g
+
+
+def draw_pelvis_markers(rng, w):
+    """RASI, LASI and SACR (+RILC) or RPSI (+LPSI) in the pelvis frame (origin mid-ASIS)."""
     pel = {}
     jit = lambda: rng.normal(0, 6, 3)
     pel["RASI"] = np.array([0, 0, w / 2]) + jit()
@@ -113,6 +125,16 @@ def make_geometry(rng):
             del pel["LPSI"]
     if len(pel) > 4:
         pel.pop(list(pel)[-1])
+    return pel
+
+
+def make_geometry(rng):
+    """v1 subject: joint geometry, pelvis markers and RTH1..4 / RSH1..4 clusters off the bone line."""
+    g = draw_joint_geometry(rng)
+    Ls, w = g["shank_length"], g["asis_width"]
+    knee, axis, Rs0 = g["knee_centre_in_thigh"], g["knee_axis_in_thigh"], g["shank_R0"]
+    # ---- markers
+    pel = draw_pelvis_markers(rng, w)
 
     def limb_markers(prefix, n, p0, p1, axis_pt, axis_dir, frac_lo, frac_hi, other_pt=None):
         out = {}
@@ -150,6 +172,74 @@ def make_geometry(rng):
     ax_s = Rs0.T @ axis
     ankle = np.array([0, -Ls, 0.0])
     shank = limb_markers("RSH", ns, np.zeros(3), ankle, np.zeros(3), ax_s, 0.10, 0.90)
+    g["markers"] = {"pelvis": pel, "thigh": thigh, "shank": shank}
+    return g
+
+
+def bone_basis(lng):
+    """Unit (lateral, anterior) directions perpendicular to a bone's long axis `lng`
+    (as v1's cluster placement: lateral ~ +z, anterior ~ +x)."""
+    lat = unit(np.cross(np.array([1.0, 0, 0]), lng))
+    if lat[2] < 0:
+        lat = -lat
+    ant = unit(np.cross(lng, lat))
+    if ant[0] < 0:
+        ant = -ant
+    return lat, ant
+
+
+def perp_jitter(rng, d, max_mm):
+    """A random vector perpendicular to unit `d`, of length uniform in [0, max_mm]."""
+    v = rng.normal(size=3)
+    v = unit(v - (v @ d) * d)
+    return v * rng.uniform(0, max_mm)
+
+
+def make_geometry_anatomical(rng):
+    """v2 "anatomical" subject: v1 joint geometry and pelvis, but thigh / shank markers at
+    anatomical landmarks instead of clusters (2-4 markers per segment):
+
+    thigh: RTHI (lateral mid-thigh, 50-80 mm off the bone line), RKNE (lateral femoral
+    epicondyle: 45-55 mm lateral of the knee centre along the hinge axis, <= 4 mm off the axis),
+    optional RKNM (medial epicondyle, 40-55 mm medial, <= 4 mm off the axis) and 0-1 extra
+    marker (RGT, greater trochanter, or RTHA, anterior thigh);
+    shank: RTIB (lateral mid-shank), RANK (lateral malleolus, 30-40 mm lateral of the shank's
+    distal end), optional RMED (medial malleolus) and optional RTT (tibial tuberosity).
+    """
+    g = draw_joint_geometry(rng)
+    Ls, w = g["shank_length"], g["asis_width"]
+    knee, axis = g["knee_centre_in_thigh"], g["knee_axis_in_thigh"]
+    pel = draw_pelvis_markers(rng, w)
+    # ---- thigh (origin: hip centre; bone line hip -> knee centre)
+    lng = unit(knee)
+    lat, ant = bone_basis(lng)
+    thigh = {}
+    psi = rng.uniform(-20, 20) * D2R
+    thigh["RTHI"] = rng.uniform(0.40, 0.65) * knee + rng.uniform(50, 80) * (math.cos(psi) * lat + math.sin(psi) * ant)
+    thigh["RKNE"] = knee + rng.uniform(45, 55) * axis + perp_jitter(rng, axis, 4.0)
+    if rng.random() < 0.5:
+        thigh["RKNM"] = knee - rng.uniform(40, 55) * axis + perp_jitter(rng, axis, 4.0)
+    u = rng.random()
+    if u < 0.25:        # greater trochanter: lateral, a little distal of the hip centre
+        thigh["RGT"] = rng.uniform(0.12, 0.2) * knee + rng.uniform(60, 80) * lat + rng.uniform(-10, 10) * ant
+    elif u < 0.5:       # anterior thigh
+        psi = rng.uniform(70, 110) * D2R
+        thigh["RTHA"] = rng.uniform(0.25, 0.55) * knee + rng.uniform(55, 75) * (math.cos(psi) * lat + math.sin(psi) * ant)
+    # ---- shank (origin: knee centre on the axis; bone line along -y to the ankle)
+    ankle = np.array([0, -Ls, 0.0])
+    lat, ant = bone_basis(unit(ankle))
+    shank = {}
+    psi = rng.uniform(-20, 20) * D2R
+    shank["RTIB"] = rng.uniform(0.40, 0.65) * ankle + rng.uniform(45, 70) * (math.cos(psi) * lat + math.sin(psi) * ant)
+    shank["RANK"] = ankle + rng.uniform(30, 40) * lat + perp_jitter(rng, lat, 5.0)
+    if rng.random() < 0.5:
+        shank["RMED"] = ankle - rng.uniform(30, 40) * lat + perp_jitter(rng, lat, 5.0)
+    if rng.random() < 0.5:
+        shank["RTT"] = np.array([rng.uniform(30, 45), -rng.uniform(35, 60), rng.uniform(0, 15)])
+    # sanity: markers of a segment >= 30 mm apart (true by construction; guard anyway)
+    for seg in (thigh, shank):
+        pts = list(seg.values())
+        assert all(np.linalg.norm(p - q) >= 30 for i, p in enumerate(pts) for q in pts[i + 1:])
     g["markers"] = {"pelvis": pel, "thigh": thigh, "shank": shank}
     return g
 
@@ -197,8 +287,79 @@ def truth_distances(g):
             "knee": {"type": "revolute", "parent": "thigh", "child": "shank", "marker_distances": kd}}
 
 
+# ----------------------------------------------------------------------------- occlusion gaps (v2)
+MIN_VISIBLE = 0.70          # every marker visible in >= 70 % of frames
+
+
+def gap_missing(N, names, gaps):
+    """(N,M) bool: True where a gap (list of {marker, frames:[first,last]}) hides a marker."""
+    miss = np.zeros((N, len(names)), bool)
+    for gp in gaps:
+        miss[gp["frames"][0]:gp["frames"][1] + 1, names.index(gp["marker"])] = True
+    return miss
+
+
+def swap_columns(miss, names, swap):
+    """The same mask seen through a marker_swap's labels: inside the swap span the two label
+    columns exchange their (physical) markers, gaps included."""
+    out = miss.copy()
+    if swap is not None:
+        i, j = names.index(swap["markers"][0]), names.index(swap["markers"][1])
+        s0, s1 = swap["frames"][0], swap["frames"][1] + 1
+        out[s0:s1, i], out[s0:s1, j] = miss[s0:s1, j], miss[s0:s1, i]
+    return out
+
+
+def gaps_ok(miss, names, pelvis):
+    """The v2 occlusion rules: every marker visible in >= 70 % of the frames and at most one
+    pelvis marker missing at any frame."""
+    N = miss.shape[0]
+    if (miss.sum(0) > (1 - MIN_VISIBLE) * N).any():
+        return False
+    pc = [names.index(m) for m in pelvis]
+    return bool(miss[:, pc].sum(1).max(initial=0) <= 1)
+
+
+def make_gaps(rng, g, N):
+    """1-6 occlusion gaps, each one marker over 5-60 frames (12 %: 61-150), 5 % touching the
+    trial's start and 5 % its end; gaps on one marker never touch or overlap; the v2 rules of
+    `gaps_ok` hold.  Returned sorted by first frame."""
+    names = [m for _, m in marker_order(g)]
+    pelvis = list(g["markers"]["pelvis"])
+    n_gaps = int(rng.integers(1, 7))
+    gaps = []
+    miss = np.zeros((N, len(names)), bool)
+    tries = 0
+    while len(gaps) < n_gaps and tries < 2000:
+        tries += 1
+        j = int(rng.integers(0, len(names)))
+        L = int(rng.integers(61, 151)) if rng.random() < 0.12 else int(rng.integers(5, 61))
+        u = rng.random()
+        f0 = 0 if u < 0.05 else N - L if u < 0.10 else int(rng.integers(1, N - L))
+        f1 = f0 + L - 1
+        if miss[max(0, f0 - 1):f1 + 2, j].any():        # keep gaps on one marker apart
+            continue
+        trial = miss.copy()
+        trial[f0:f1 + 1, j] = True
+        if not gaps_ok(trial, names, pelvis):
+            continue
+        miss = trial
+        gaps.append({"marker": names[j], "frames": [f0, f1]})
+    return sorted(gaps, key=lambda gp: (gp["frames"][0], gp["marker"]))
+
+
+def visible(spec, active=None):
+    """(N,M) bool visibility of the written trial's columns (labels): the gaps, relabelled by
+    the trial's marker_swap when that effect is active (active=None: all effects)."""
+    names = [m for _, m in marker_order(spec["_geom"])]
+    miss = gap_missing(spec["n_frames"], names, spec.get("gaps", []))
+    sw = [e for e in spec["effects"] if e["name"] == "marker_swap" and (active is None or "marker_swap" in active)]
+    return ~swap_columns(miss, names, sw[0] if sw else None)
+
+
 # ----------------------------------------------------------------------------- motion
 def make_motion(rng, kind, g, n_frames, force_treadmill=False):
+    """Draw the parameters of a closed-form motion: "functional", "gait" or (v2) "sit_to_stand"."""
     m = {"kind": kind}
     leg = g["thigh_length"] + g["shank_length"] + rng.uniform(60, 90)
     pel_h = leg - g["hip_centre_in_pelvis"][1]          # hip centre y is negative
@@ -222,6 +383,9 @@ def make_motion(rng, kind, g, n_frames, force_treadmill=False):
         m["pelvis_pos0"] = [float(rng.uniform(-800, 800)), float(pel_h), float(rng.uniform(-800, 800))]
         m["pelvis_sway"] = [rand_comps(rng, 3, 0.05, 0.5, rng.uniform(3, 15)) for _ in range(3)]
         m["pelvis_rot"] = [rand_comps(rng, 3, 0.05, 0.5, rng.uniform(1, 3)) for _ in range(3)]
+        m["treadmill"] = None
+    elif kind == "sit_to_stand":
+        m.update(make_sit_to_stand(rng, pel_h, n_frames))
         m["treadmill"] = None
     else:
         T = rng.uniform(1.0, 1.2)
@@ -261,6 +425,97 @@ def make_motion(rng, kind, g, n_frames, force_treadmill=False):
     return m
 
 
+def make_sit_to_stand(rng, pel_h, n_frames):
+    """v2 motion: 3-6 sit-to-stand cycles of 2.5-4 s that fill the trial.
+
+    A cycle is: seated pause, rise, standing pause, sit down.  The standing fraction of cycle k
+    is s_k(t) = ramp((t - a_k)/r_k) - ramp((t - b_k)/q_k) (quintic smoothstep ramps), and a
+    forward-lean bump sin^2(pi u) runs over each rise and each sit.  Every angle and the pelvis
+    position blend a seated value with the cycle's standing value through s_k, plus lean
+    bumps; the thigh's world pitch goes ~90 -> ~3 deg, the knee ~90 -> ~5 deg, the pelvis rises
+    250-350 mm, moves forward 100-200 mm and tilts forward during the rise.
+    """
+    D = n_frames / RATE
+    n_lo, n_hi = max(3, math.ceil(D / 4.0)), min(6, math.floor(D / 2.5))
+    n = int(rng.integers(n_lo, n_hi + 1))
+    T = None
+    for _ in range(100):
+        Tc = np.clip(D / n * rng.uniform(0.88, 1.12, n), 2.5, 4.0)
+        if Tc.sum() <= D:
+            T = Tc
+            break
+    if T is None:
+        T = np.full(n, D / n)
+    rise = T * rng.uniform(0.24, 0.32, n)
+    sit = T * rng.uniform(0.26, 0.34, n)
+    stand = T * rng.uniform(0.12, 0.20, n)
+    seated = T - rise - sit - stand
+    start = -rng.uniform(0.0, 0.5) * seated[0] + np.concatenate([[0.0], np.cumsum(T)[:-1]])
+    a = start + seated                      # rise onset
+    b = a + rise + stand                    # sit-down onset
+    m = {"n_cycles": n, "cycle_s": T.tolist(), "rise_start_s": a.tolist(), "rise_s": rise.tolist(),
+         "sit_start_s": b.tolist(), "sit_s": sit.tolist()}
+    m["thigh_seat_deg"] = float(rng.uniform(87, 97))           # world pitch of the thigh (flexion +)
+    m["thigh_stand_deg"] = rng.uniform(0, 6, n).tolist()
+    m["shank_seat_deg"] = float(rng.uniform(-5, 8))             # world pitch of the shank
+    m["knee_stand_deg"] = rng.uniform(3, 8, n).tolist()
+    m["shank_lean_deg"] = rng.uniform(8, 18, n).tolist()        # shank forward rotation at rise / sit
+    m["tilt_seat_deg"] = float(rng.uniform(-3, 5))              # pelvis tilt (Rz; negative = anterior)
+    m["tilt_stand_deg"] = rng.uniform(-2, 4, n).tolist()
+    m["lean_rise_deg"] = rng.uniform(15, 25, n).tolist()        # forward (anterior) pelvis tilt at rise
+    m["lean_sit_deg"] = rng.uniform(8, 18, n).tolist()
+    m["lean_skew"] = float(rng.uniform(0.65, 0.9))              # rise lean peaks early (seat-off)
+    m["abd_seat_deg"] = float(rng.uniform(-3, 6)); m["abd_stand_deg"] = rng.uniform(-3, 3, n).tolist()
+    m["rot_seat_deg"] = float(rng.uniform(-8, 8)); m["rot_stand_deg"] = rng.uniform(-5, 5, n).tolist()
+    m["abd_lean_deg"] = rng.uniform(-3, 3, n).tolist()
+    m["rise_mm"] = rng.uniform(250, 350, n).tolist()
+    m["forward_mm"] = rng.uniform(100, 200, n).tolist()
+    m["forward_lean_mm"] = rng.uniform(10, 50, n).tolist()      # transient forward shift at seat-off
+    m["pelvis_pos0"] = [float(rng.uniform(-800, 800)), float(pel_h - 300 - rng.uniform(10, 30)),
+                        float(rng.uniform(-800, 800))]
+    m["pelvis_sway"] = [rand_comps(rng, 2, 0.05, 0.4, rng.uniform(1, 4)) for _ in range(3)]
+    m["pelvis_rot"] = [rand_comps(rng, 2, 0.05, 0.4, rng.uniform(0.3, 1)) for _ in range(3)]
+    return m
+
+
+def _smootherstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (10 - 15 * x + 6 * x * x)
+
+
+def sit_to_stand_phases(m, t):
+    """(N,K) arrays: standing fraction s_k, rise lean bump and sit lean bump of each cycle."""
+    t = np.asarray(t, float)[:, None]
+    a, r = np.asarray(m["rise_start_s"])[None], np.asarray(m["rise_s"])[None]
+    b, q = np.asarray(m["sit_start_s"])[None], np.asarray(m["sit_s"])[None]
+    ur = np.clip((t - a) / r, 0, 1)
+    us = np.clip((t - b) / q, 0, 1)
+    s = _smootherstep(ur) - _smootherstep(us)
+    lean_r = np.sin(np.pi * ur ** m["lean_skew"]) ** 2
+    lean_s = np.sin(np.pi * us ** (1.0 / m["lean_skew"])) ** 2
+    return s, lean_r, lean_s
+
+
+def eval_sit_to_stand(m, t):
+    """Angles [deg] and pelvis translation in the heading frame (N,3) of a sit_to_stand motion."""
+    s, lr, ls = sit_to_stand_phases(m, t)
+
+    def blend(seat, stand):
+        return seat + s @ (np.asarray(stand) - seat)
+    thigh = blend(m["thigh_seat_deg"], m["thigh_stand_deg"])
+    shank_stand = np.asarray(m["thigh_stand_deg"]) - np.asarray(m["knee_stand_deg"])
+    shank = blend(m["shank_seat_deg"], shank_stand) + (lr + ls) @ np.asarray(m["shank_lean_deg"])
+    tilt = blend(m["tilt_seat_deg"], m["tilt_stand_deg"]) - lr @ np.asarray(m["lean_rise_deg"]) \
+        - ls @ np.asarray(m["lean_sit_deg"])
+    out = {"tilt": tilt, "hip_flex": thigh - tilt, "knee": thigh - shank,
+           "hip_abd": blend(m["abd_seat_deg"], m["abd_stand_deg"]) + lr @ np.asarray(m["abd_lean_deg"]),
+           "hip_rot": blend(m["rot_seat_deg"], m["rot_stand_deg"])}
+    fwd = s @ np.asarray(m["forward_mm"]) + lr @ np.asarray(m["forward_lean_mm"])
+    up = s @ np.asarray(m["rise_mm"])
+    out["loc"] = np.stack([fwd, up, np.zeros_like(fwd)], 1)
+    return out
+
+
 def _osc(o, t):
     ph = 2 * np.pi * o["f0"] * t + o["phi0"]
     for a, f, p in o["pm"]:
@@ -285,6 +540,16 @@ def eval_motion(m, t):
         pos = np.stack([m["pelvis_pos0"][i] + sinsum(t, m["pelvis_sway"][i]) for i in range(3)], 1)
         yaw = hd + sinsum(t, m["pelvis_rot"][0]) * D2R
         tilt = sinsum(t, m["pelvis_rot"][1]) * D2R
+        obl = sinsum(t, m["pelvis_rot"][2]) * D2R
+    elif m["kind"] == "sit_to_stand":
+        st = eval_sit_to_stand(m, t)
+        for k in ANGLES:
+            out[k] = st[k] * D2R
+        loc = st["loc"] + np.stack([sinsum(t, m["pelvis_sway"][i]) for i in range(3)], 1)
+        Rh = rodrigues([0, 1, 0], np.array([hd]))[0]
+        pos = np.asarray(m["pelvis_pos0"])[None] + loc @ Rh.T
+        yaw = hd + sinsum(t, m["pelvis_rot"][0]) * D2R
+        tilt = st["tilt"] * D2R + sinsum(t, m["pelvis_rot"][1]) * D2R
         obl = sinsum(t, m["pelvis_rot"][2]) * D2R
     else:
         p = t / m["stride_s"] + sinsum(t, m["stride_pm"])
@@ -335,6 +600,9 @@ def st_features(e, ang):
         for i in range(len(ks)):
             for j in range(i, len(ks)):
                 cols.append(d[ks[i]] * d[ks[j]])
+    elif sh == "other_joint":                       # v2: driven by the other joint's angle only
+        for k in e["drivers"]:
+            cols += [np.sin(d[k]), 1 - np.cos(d[k])]
     return np.stack(cols, 1)
 
 
@@ -371,7 +639,7 @@ def slip_profile(e, t):
     if e["shape"] == "step":
         return (t >= ts).astype(float)
     s = np.clip((t - ts) / e["drift_s"], 0, 1)
-    if e["shape"] == "linear_drift":
+    if e["shape"] in ("linear_drift", "fast_ramp"):        # fast_ramp (v2): 0.05-0.15 s
         return s
     if e["shape"] == "smoothstep_drift":
         return s * s * (3 - 2 * s)
@@ -456,8 +724,12 @@ def kinematics(spec, t, active):
     return X, geom, ang
 
 
-def simulate(spec, active=None, noise=True):
-    """Marker array (N,M,3) in marker_order; active=None -> all effects of the trial."""
+def simulate(spec, active=None, noise=True, gaps=True):
+    """Marker array (N,M,3) in marker_order; active=None -> all effects of the trial.
+
+    v2 occlusion gaps (spec["gaps"]) hide the physical marker: its samples are NaN.  They are
+    applied after time_offset and before marker_swap, so inside a swap span a gap follows its
+    marker to the other label.  gaps=False returns the trajectories without the gaps."""
     if "_geom" not in spec:
         spec["_geom"] = geometry_from_json(spec["geometry"])
     if active is None:
@@ -474,6 +746,8 @@ def simulate(spec, active=None, noise=True):
         for m in e["markers"]:
             j = names.index(m)
             X[:, j] = Xd[:, j]
+    if gaps and spec.get("gaps"):
+        X[gap_missing(N, names, spec["gaps"])] = np.nan
     if "marker_swap" in eff:
         e = eff["marker_swap"]
         i, j = names.index(e["markers"][0]), names.index(e["markers"][1])
@@ -504,9 +778,11 @@ def simulate(spec, active=None, noise=True):
 
 # ----------------------------------------------------------------------------- effect builders
 def peak_disp(spec, name):
+    """Realised peak 3-D displacement of one effect alone, noise-free, vs the rigid trial,
+    over the samples visible in both (NaN-aware; identical to a plain max without gaps)."""
     A, _, _, _ = simulate(spec, [], noise=False)
     B, _, _, _ = simulate(spec, [name], noise=False)
-    return float(np.linalg.norm(B - A, axis=2).max())
+    return float(np.nanmax(np.linalg.norm(B - A, axis=2)))
 
 
 def tangentish(rng, n, normal_weight=0.3):
@@ -515,12 +791,34 @@ def tangentish(rng, n, normal_weight=0.3):
     return v
 
 
+def is_v2(spec):
+    return spec.get("version", 1) == 2
+
+
+def marker_index(spec):
+    return {m: j for j, (_, m) in enumerate(marker_order(spec["_geom"]))}
+
+
+def st_peak(spec, parts, ang):
+    """Peak soft-tissue offset over the samples where each marker is visible (all in v1)."""
+    vis, idx = visible(spec, active=[]), marker_index(spec)
+    peak = 0.0
+    for e in parts:
+        for m, v in st_offsets(e, ang).items():
+            peak = max(peak, float(np.linalg.norm(v, axis=1)[vis[:, idx[m]]].max()))
+    return peak
+
+
 def build_soft_tissue(rng, spec, ang):
+    """soft_tissue: see README.  v2 adds the shape `other_joint` (build_st_other_joint)."""
     g = spec["_geom"]
     seg_choice = rng.choice(["thigh", "shank", "thigh+shank", "pelvis"], p=[0.45, 0.25, 0.2, 0.1])
     segs = seg_choice.split("+")
-    shape = str(rng.choice(["angle_harmonics", "long_axis_slide", "coherent_cluster", "bilinear_bulge"]))
+    shapes = ["angle_harmonics", "long_axis_slide", "coherent_cluster", "bilinear_bulge"]
+    shape = str(rng.choice(shapes + (["other_joint"] if is_v2(spec) else [])))
     target = loguniform(rng, 2.0, 15.0)
+    if shape == "other_joint":
+        return build_st_other_joint(rng, spec, ang, target)
     parts = []
     all_markers = []
     for s in segs:
@@ -564,10 +862,7 @@ def build_soft_tissue(rng, spec, ang):
         parts.append(e)
         all_markers += mk
     # scale all parts jointly to the target peak
-    peak = 0.0
-    for e in parts:
-        for v in st_offsets(e, ang).values():
-            peak = max(peak, float(np.linalg.norm(v, axis=1).max()))
+    peak = st_peak(spec, parts, ang)
     for e in parts:
         e["scale"] = target / peak
     where = {"segment": segs[0] if len(segs) == 1 else segs, "segments": segs, "markers": all_markers,
@@ -576,13 +871,57 @@ def build_soft_tissue(rng, spec, ang):
             "target_peak_mm": target, "where": where}
 
 
+def build_st_other_joint(rng, spec, ang, target):
+    """v2 soft_tissue `other_joint`: a thigh marker or the whole thigh cluster driven by the
+    KNEE angle only, or one shank marker driven by the HIP flexion angle only.  Offsets are
+    C @ [sin d, 1 - cos d] of that angle's deviation d from the median posture; a whole cluster
+    moves with one common C (a rigid translation of the cluster)."""
+    g = spec["_geom"]
+    if rng.random() < 0.5:
+        s, drivers = "thigh", ["knee"]
+        mk = list(g["markers"]["thigh"])
+        cluster = bool(rng.random() < 0.5)
+        if not cluster:
+            mk = [str(rng.choice(mk))]
+        jpt = g["knee_centre_in_thigh"]
+    else:
+        s, drivers, cluster = "shank", ["hip_flex"], False
+        mk = [str(rng.choice(list(g["markers"]["shank"])))]
+        jpt = np.zeros(3)
+    ref = {k: float(np.median(ang[k])) for k in ANGLES}
+    e = {"segment": s, "shape": "other_joint", "drivers": drivers, "ref_angles": ref, "coef": {},
+         "scale": 1.0, "cluster": cluster}
+    Cc = rng.normal(size=(2, 3))
+    for m in mk:
+        p = g["markers"][s][m]
+        C = Cc if cluster else np.stack([tangentish(rng, unit(p - jpt)) * rng.uniform(0.3, 1) for _ in range(2)])
+        e["coef"][m] = C.tolist()
+    e["scale"] = target / st_peak(spec, [e], ang)
+    where = {"segment": s, "segments": [s], "markers": mk, "joint": "knee", "drivers": drivers}
+    return {"name": "soft_tissue", "shape": "other_joint_" + s, "parts": [e],
+            "target_peak_mm": target, "where": where}
+
+
 def build_marker_slip(rng, spec, ang):
+    """marker_slip: see README.  v2 adds `fast_ramp` (a linear ramp over 0.05-0.15 s) and puts
+    the onset where the marker is visible from the frame before onset to the one after the end."""
     g = spec["_geom"]; N = spec["n_frames"]
     s = str(rng.choice(SEGMENTS, p=[0.2, 0.4, 0.4]))
     m = str(rng.choice(list(g["markers"][s])))
-    shape = str(rng.choice(["step", "step", "linear_drift", "smoothstep_drift", "cosine_creep"]))
-    drift = 0.0 if shape == "step" else float(rng.uniform(0.2, 1.0))
-    f0 = int(rng.integers(int(0.15 * N), int(0.85 * N) - int(drift * RATE) - 2))
+    shapes = ["step", "step", "linear_drift", "smoothstep_drift", "cosine_creep"]
+    shape = str(rng.choice(shapes + (["fast_ramp"] if is_v2(spec) else [])))
+    if shape == "fast_ramp":
+        drift = float(rng.uniform(0.05, 0.15))
+    else:
+        drift = 0.0 if shape == "step" else float(rng.uniform(0.2, 1.0))
+    if is_v2(spec):
+        vis = visible(spec, active=[])[:, marker_index(spec)[m]]
+        w = int(math.ceil(drift * RATE)) + 2
+        cands = [f for f in range(int(0.15 * N), int(0.85 * N) - int(drift * RATE) - 2)
+                 if vis[f - 1:f + w].all()]
+        f0 = int(cands[int(rng.integers(0, len(cands)))])
+    else:
+        f0 = int(rng.integers(int(0.15 * N), int(0.85 * N) - int(drift * RATE) - 2))
     mag = float(rng.uniform(4, 15))
     dirn = unit(rng.normal(size=3))
     if rng.random() < 0.5:       # along the skin: suppress the component normal to the skin
@@ -600,6 +939,9 @@ def build_marker_slip(rng, spec, ang):
 
 
 def build_marker_swap(rng, spec, ang):
+    """marker_swap: see README (v2: build_marker_swap_v2)."""
+    if is_v2(spec):
+        return build_marker_swap_v2(rng, spec, ang)
     g = spec["_geom"]; N = spec["n_frames"]
     if rng.random() < 0.55:
         s = str(rng.choice(SEGMENTS))
@@ -622,6 +964,65 @@ def build_marker_swap(rng, spec, ang):
     e["where"] = {"markers": [a, b], "segments": segs, "frames": [s0, s0 + L - 1],
                   "frame_numbers": [s0 + 1, s0 + L]}
     return e
+
+
+NEIGHBOURS = {"pelvis": ["thigh"], "thigh": ["pelvis", "shank"], "shank": ["thigh"]}
+
+
+def build_marker_swap_v2(rng, spec, ang):
+    """v2 marker_swap.  When the trial has gaps, half the swaps are `*_in_gap`: the span starts
+    strictly inside an occlusion gap of one of the two markers (the gapped marker is listed
+    first; `where.gap` names that gap).  Gaps belong to the physical marker, so after the swap
+    the gapped label reappears early carrying the other marker, and the other label goes
+    missing until the gap ends.  Every swap keeps the occlusion rules in the label view and
+    is visible on at least one sample."""
+    g = spec["_geom"]; N = spec["n_frames"]
+    order = marker_order(g)
+    names = [m for _, m in order]
+    seg_of = {m: s for s, m in order}
+    pelvis = list(g["markers"]["pelvis"])
+    miss = gap_missing(N, names, spec["gaps"])
+    want_gap = bool(spec["gaps"]) and rng.random() < 0.5
+    for attempt in range(1000):
+        in_gap = want_gap and attempt < 500
+        if in_gap:
+            gp = spec["gaps"][int(rng.integers(0, len(spec["gaps"])))]
+            a, (g0, g1) = gp["marker"], gp["frames"]
+            sa = seg_of[a]
+            sb = sa if rng.random() < 0.55 else str(rng.choice(NEIGHBOURS[sa]))
+            b = str(rng.choice([m for m in g["markers"][sb] if m != a]))
+            kind = "same_segment" if sa == sb else "neighbour_segments"
+            s0 = int(rng.integers(g0 + 1, g1 + 1))
+            if N - s0 < 50:
+                continue
+            L = int(rng.integers(50, min(400, N - s0) + 1))
+        else:
+            if rng.random() < 0.55:
+                sa = sb = str(rng.choice(SEGMENTS))
+                a, b = rng.choice(list(g["markers"][sa]), 2, replace=False).tolist()
+                kind = "same_segment"
+            else:
+                sa, sb = [("pelvis", "thigh"), ("thigh", "shank")][int(rng.integers(0, 2))]
+                a = str(rng.choice(list(g["markers"][sa]))); b = str(rng.choice(list(g["markers"][sb])))
+                kind = "neighbour_segments"
+            L = int(rng.integers(50, 401))
+            u = rng.random()
+            s0 = 0 if u < 0.1 else N - L if u < 0.2 else int(rng.integers(1, N - L))
+        span = [s0, s0 + L - 1]
+        lab = swap_columns(miss, names, {"markers": [a, b], "frames": span})
+        if not gaps_ok(lab, names, pelvis):
+            continue
+        both = (~miss & ~lab)[s0:s0 + L][:, [names.index(a), names.index(b)]]
+        if not both.any():
+            continue
+        suffix = "_in_gap" if in_gap else "_at_start" if s0 == 0 else "_at_end" if s0 == N - L else ""
+        e = {"name": "marker_swap", "shape": kind + suffix, "markers": [a, b], "frames": span}
+        e["where"] = {"markers": [a, b], "segments": [sa, sb], "frames": span,
+                      "frame_numbers": [s0 + 1, s0 + L]}
+        if in_gap:
+            e["where"]["gap"] = {"marker": a, "frames": [g0, g1], "frame_numbers": [g0 + 1, g1 + 1]}
+        return e
+    raise RuntimeError("no admissible marker swap")
 
 
 def build_joint_translation(rng, spec, ang):
@@ -652,7 +1053,11 @@ def build_joint_translation(rng, spec, ang):
         e = {"name": "joint_translation", "joint": "hip", "shape": "hip_pistoning"}
         C = rng.normal(size=(3, 3))
     e["coef"] = C.tolist(); e["scale"] = 1.0
-    peak = float(np.linalg.norm(jt_offset(e, ang), axis=1).max())
+    off = np.linalg.norm(jt_offset(e, ang), axis=1)
+    if is_v2(spec):     # peak over frames where a moved (thigh / shank) marker is visible
+        moved = [j for j, (s, _) in enumerate(marker_order(g)) if s == "shank" or (joint == "hip" and s == "thigh")]
+        off = off[visible(spec, active=[])[:, moved].any(1)]
+    peak = float(off.max())
     e["scale"] = target / peak
     e["target_peak_mm"] = target
     e["where"] = {"joint": joint}
@@ -699,11 +1104,23 @@ def build_time_offset(rng, spec, ang):
     return e
 
 
+def outlier_cells_ok(spec):
+    """(N,M) bool: samples an outlier may hit (v2): visible in the rigid trial and in the
+    written trial (relabelled by a marker_swap built before), so every outlier shows."""
+    return visible(spec, active=[]) & visible(spec)
+
+
 def build_outliers(rng, spec, ang):
+    """outliers: see README.  v2 adds `heavy_tailed` (build_outliers_heavy) and keeps every
+    outlier sample visible."""
     g = spec["_geom"]; N = spec["n_frames"]
     names = [m for _, m in marker_order(g)]
     peak = loguniform(rng, 5.0, 60.0)
-    style = str(rng.choice(["isolated_spikes", "short_bursts", "axis_jumps", "mixed"]))
+    styles = ["isolated_spikes", "short_bursts", "axis_jumps", "mixed"]
+    style = str(rng.choice(styles + (["heavy_tailed"] if is_v2(spec) else [])))
+    if style == "heavy_tailed":
+        return build_outliers_heavy(rng, spec, peak)
+    ok = outlier_cells_ok(spec) if is_v2(spec) else None
     n_ev = int(rng.integers(3, 26))
     used = set(); events = []
     while len(events) < n_ev:
@@ -713,6 +1130,8 @@ def build_outliers(rng, spec, ang):
         f = int(rng.integers(0, N - L))
         cells = {(m, f + i) for i in range(L)}
         if cells & used:
+            continue
+        if ok is not None and not ok[f:f + L, names.index(m)].all():
             continue
         used |= cells
         if st == "axis_jumps":
@@ -730,9 +1149,42 @@ def build_outliers(rng, spec, ang):
     return e
 
 
+def outliers_where(events):
+    """`where` of an outliers effect from its events (markers, frames, every sample)."""
+    used = {(ev["marker"], ev["frame"] + i) for ev in events for i in range(ev["length"])}
+    frames = sorted({f for _, f in used})
+    return {"markers": sorted({m for m, _ in used}), "frames": frames,
+            "frame_numbers": [f + 1 for f in frames],
+            "samples": [{"marker": ev["marker"], "frames": list(range(ev["frame"], ev["frame"] + ev["length"]))}
+                        for ev in events]}
+
+
+def build_outliers_heavy(rng, spec, peak):
+    """v2 outliers `heavy_tailed`: 30-200 single-sample deviations on distinct visible samples,
+    random directions, magnitudes |t| (Student-t, nu 1.5-3) scaled so the largest equals the drawn
+    peak (5-60 mm, log-uniform), floored at 1 mm."""
+    g = spec["_geom"]
+    names = [m for _, m in marker_order(g)]
+    nu = float(rng.uniform(1.5, 3.0))
+    n_ev = int(rng.integers(30, 201))
+    cells = np.argwhere(outlier_cells_ok(spec))
+    pick = cells[np.sort(rng.choice(len(cells), n_ev, replace=False))]
+    tv = np.abs(rng.standard_t(nu, n_ev))
+    mags = np.maximum(peak * tv / tv.max(), 1.0)
+    mags[int(np.argmax(tv))] = peak
+    events = []
+    for (f, j), mag in zip(pick, mags):
+        d = unit(rng.normal(size=3))
+        events.append({"marker": names[int(j)], "frame": int(f), "length": 1, "vector_mm": (float(mag) * d).tolist()})
+    e = {"name": "outliers", "shape": "heavy_tailed", "nu": nu, "events": events, "target_peak_mm": peak}
+    e["where"] = outliers_where(events)
+    return e
+
+
 def build_spatial_distortion(rng, spec, ang):
+    """spatial_distortion: see README (v2: NaN-aware centre and smooth_warp scaling)."""
     X, _, _, _ = simulate(spec, [], noise=False)
-    mean = X.reshape(-1, 3).mean(0)
+    mean = np.nanmean(X.reshape(-1, 3), 0) if is_v2(spec) else X.reshape(-1, 3).mean(0)
     c = np.array([mean[0] + rng.uniform(-400, 400), rng.uniform(600, 1200), mean[2] + rng.uniform(-400, 400)])
     shape = str(rng.choice(["radial_lens", "shear_plus_radial", "single_axis_scale", "smooth_warp"]))
     A = float(rng.uniform(4, 12))
@@ -757,7 +1209,7 @@ def build_spatial_distortion(rng, spec, ang):
                           float(rng.uniform(0, 2 * np.pi))])
         e["modes"] = modes; e["scale"] = 1.0
         e["target_peak_mm"] = A * 0.6
-        e["scale"] = e["target_peak_mm"] / float(np.linalg.norm(distortion(e, X), axis=-1).max())
+        e["scale"] = e["target_peak_mm"] / float(np.nanmax(np.linalg.norm(distortion(e, X), axis=-1)))
     e["where"] = {"volume": "capture volume", "centre_mm": c.tolist()}
     return e
 
@@ -769,7 +1221,11 @@ BUILDERS = {"soft_tissue": build_soft_tissue, "marker_slip": build_marker_slip,
 
 
 # ----------------------------------------------------------------------------- trial assembly
-def build_spec(seed, index, kind, names):
+def build_spec(seed, index, kind, names, version=1, cats=None):
+    """Draw trial `index` of a dataset: v1 (stream [seed, index, 7919]) or v2 (build_spec_v2,
+    with `cats` = (motion, layout, has_gaps) from plan_categories_v2)."""
+    if version == 2:
+        return build_spec_v2(seed, index, kind, names, *cats)
     rng = np.random.default_rng([seed, index, 7919])
     geom = make_geometry(rng)
     N = int(rng.integers(1000, 2001))
@@ -786,6 +1242,45 @@ def build_spec(seed, index, kind, names):
         e = BUILDERS[nme](rng, spec, ang)
         spec["effects"].append(e)
     # record the realised peak displacement of every effect, each in isolation, noise-free
+    for e in spec["effects"]:
+        e["magnitude_mm"] = peak_disp(spec, e["name"])
+    return spec
+
+
+def plan_categories_v2(n, seed):
+    """v2 categories per trial, balanced and randomly assigned (own stream [seed, 1234567, 2]):
+    motion sit_to_stand round(n/3), the rest split functional / gait; layout anatomical
+    round(n/2); occlusion gaps in round(0.6 n) trials.  Returns [(motion, layout, has_gaps)]."""
+    rng = np.random.default_rng([seed, 1234567, 2])
+    n_s2s = int(round(n / 3)); n_fun = int(round((n - n_s2s) / 2))
+    motions = ["sit_to_stand"] * n_s2s + ["functional"] * n_fun + ["gait"] * (n - n_s2s - n_fun)
+    n_anat = int(round(0.5 * n)); n_gaps = int(round(0.6 * n))
+    layouts = ["anatomical"] * n_anat + ["clusters"] * (n - n_anat)
+    gaps = [True] * n_gaps + [False] * (n - n_gaps)
+    cols = [[c[i] for i in rng.permutation(n)] for c in (motions, layouts, gaps)]
+    return list(zip(*cols))
+
+
+def build_spec_v2(seed, index, kind, names, motion_kind, layout, has_gaps):
+    """Draw a v2 trial from its own stream [seed, index, 7919, 2], given its categories: subject
+    (v1 clusters or anatomical layout), 1000-2000 frames, motion, noise (sigma 0.3-1.5 mm),
+    occlusion gaps (when has_gaps), then the effects.  A marker_swap is built first (outliers
+    avoid the samples it hides); effects are listed in `names` order."""
+    rng = np.random.default_rng([seed, index, 7919, 2])
+    geom = make_geometry_anatomical(rng) if layout == "anatomical" else make_geometry(rng)
+    N = int(rng.integers(1000, 2001))
+    motion = make_motion(rng, motion_kind, geom, N, force_treadmill="spatial_distortion" in names)
+    nm = "white" if rng.random() < 0.5 else "ar1"
+    noise = {"model": nm, "sigma_mm": float(rng.uniform(0.3, 1.5)), "seed": int(rng.integers(0, 2 ** 31))}
+    if nm == "ar1":
+        noise["phi"] = float(rng.uniform(0.6, 0.9))
+    gaps = make_gaps(rng, geom, N) if has_gaps else []
+    spec = {"version": 2, "layout": layout, "n_frames": N, "rate_hz": RATE, "geometry": geometry_to_json(geom),
+            "_geom": geom, "motion": motion, "noise": noise, "gaps": gaps, "effects": []}
+    ang = eval_motion(motion, np.arange(N) / RATE)
+    for nme in sorted(names, key=lambda x: x != "marker_swap"):
+        spec["effects"].append(BUILDERS[nme](rng, spec, ang))
+    spec["effects"].sort(key=lambda e: names.index(e["name"]))
     for e in spec["effects"]:
         e["magnitude_mm"] = peak_disp(spec, e["name"])
     return spec
@@ -824,6 +1319,7 @@ def plan_trials(n, seed):
 
 
 def write_trc(path, X, names):
+    """OpenSim TRC, mm, 4 decimals; a missing (NaN) sample is written as empty fields."""
     N, M, _ = X.shape
     stem = os.path.basename(path)
     lines = [f"PathFileType\t4\t(X/Y/Z)\t{stem}",
@@ -834,7 +1330,7 @@ def write_trc(path, X, names):
              ""]
     flat = X.reshape(N, 3 * M)
     for f in range(N):
-        lines.append(f"{f + 1}\t{f / RATE:.4f}\t" + "\t".join(f"{v:.4f}" for v in flat[f]))
+        lines.append(f"{f + 1}\t{f / RATE:.4f}\t" + "\t".join("" if v != v else f"{v:.4f}" for v in flat[f]))
     with open(path, "w") as fh:
         fh.write("\n".join(lines) + "\n")
 
@@ -850,6 +1346,7 @@ def write_toml(path, g):
 
 
 def trial_entry(stem, kind, spec):
+    """Index entry of a trial (v2 adds category.gaps / category.layout and params.layout / gaps)."""
     m = spec["motion"]; g = spec["_geom"]
     params = {"n_frames": spec["n_frames"], "rate_hz": RATE,
               "thigh_length_mm": g["thigh_length"], "shank_length_mm": g["shank_length"],
@@ -863,9 +1360,15 @@ def trial_entry(stem, kind, spec):
                                 for e in spec["effects"]]}
     effects = [{"name": e["name"], "where": e["where"], "magnitude_mm": e["magnitude_mm"], "shape": e["shape"]}
                for e in spec["effects"]]
-    return {"stem": stem, "effects": effects,
-            "category": {"motion": m["kind"], "noise": spec["noise"]["model"], "kind": kind},
-            "params": params}
+    category = {"motion": m["kind"], "noise": spec["noise"]["model"], "kind": kind}
+    if is_v2(spec):
+        category["gaps"] = bool(spec["gaps"])
+        category["layout"] = spec["layout"]
+        params["layout"] = spec["layout"]
+        params["gaps"] = spec["gaps"]
+        if m["kind"] == "sit_to_stand":
+            params["sit_to_stand_cycles"] = m["n_cycles"]
+    return {"stem": stem, "effects": effects, "category": category, "params": params}
 
 
 def main(argv=None):
@@ -873,24 +1376,33 @@ def main(argv=None):
     ap.add_argument("--out", required=True)
     ap.add_argument("--n", type=int, default=120)
     ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--version", type=int, default=1, choices=[1, 2],
+                    help="1: heldout-effects v1 (default, unchanged); 2: v1 plus gaps, sit_to_stand, "
+                         "anatomical layout, noise up to 1.5 mm and new effect shapes")
     args = ap.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     trials = []
+    cats = plan_categories_v2(args.n, args.seed) if args.version == 2 else [None] * args.n
     for i, (kind, names) in enumerate(plan_trials(args.n, args.seed)):
         stem = f"trial_{i:04d}"
-        spec = build_spec(args.seed, i, kind, names)
+        spec = build_spec(args.seed, i, kind, names, version=args.version, cats=cats[i])
         X, mnames, _, _ = simulate(spec)
         write_trc(os.path.join(args.out, stem + ".trc"), X, mnames)
         write_toml(os.path.join(args.out, stem + ".toml"), spec["_geom"])
         entry = trial_entry(stem, kind, spec)
         truth = dict(entry)
         truth["joints"] = truth_distances(spec["_geom"])
+        if args.version == 2:
+            truth["gaps"] = spec["gaps"]
         truth["spec"] = spec_json(spec)
         with open(os.path.join(args.out, stem + ".truth.json"), "w") as fh:
             json.dump(truth, fh, indent=1)
         trials.append(entry)
     with open(os.path.join(args.out, "index.json"), "w") as fh:
-        json.dump({"generator": GENERATOR, "seed": args.seed, "trials": trials}, fh, indent=1)
+        if args.version == 2:
+            json.dump({"generator": GENERATOR_V2, "version": 2, "seed": args.seed, "trials": trials}, fh, indent=1)
+        else:
+            json.dump({"generator": GENERATOR, "seed": args.seed, "trials": trials}, fh, indent=1)
     print(f"wrote {len(trials)} trials to {args.out}")
 
 
