@@ -320,10 +320,11 @@ def _turn_onto(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.eye(3) + K + K @ K / (1.0 + c)
 
 
-def segment_frames(chain: Skeleton, data) -> dict:
-    """Rigid poses of every segment (three or more markers each), gaps filled from the nearest frame."""
+def segment_frames(chain: Skeleton, data, only=None) -> dict:
+    """Rigid poses of every segment (three or more markers each; of the segments `only`, when given), gaps filled
+    from the nearest frame."""
     out, problems = {}, []
-    for seg in chain.segments:
+    for seg in (chain.segments if only is None else only):
         idx = chain.seg_markers[seg]
         if len(idx) < 3:
             problems.append(f"segment {seg!r} has {len(idx)} marker(s): diagnose needs three or more on every "

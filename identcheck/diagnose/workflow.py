@@ -17,8 +17,9 @@ from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
-from identcheck.bundle.chain import fit_chain, information, initial_state
+from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.honest import assess, joint_answer
+from identcheck.bundle.start import start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
@@ -230,7 +231,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     chain = Skeleton.from_model(model)
     if progress:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
-    state = _naming(files, initial_state, chain, data)
+    state = _naming(files, start_state, model, chain, data, trial.rate_hz)
     weights = seen.astype(float)
     fit = fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER)
     return ctx, Hypothesis(chain, fit.terms, data, weights, fit)

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import convert_joint, initial_state
+from identcheck.bundle.chain import convert_joint
+from identcheck.bundle.start import start_state
 from identcheck.bundle.model import Terms, forward, second_axis, tangents
 from identcheck.bundle.hypothesis import time_basis
 from identcheck.effects.base import Effect, Proposal
@@ -41,7 +42,7 @@ def off_axis_deg(h, joint: str) -> np.ndarray:
     from the segments' own rigid poses: zero for a true hinge."""
     from identcheck.estimate.obrien import joint_location
     from identcheck.bundle.chain import segment_frames
-    frames = segment_frames(h.chain, h.data)
+    frames = segment_frames(h.chain, h.data, only=(h.chain.parent[joint], h.chain.child[joint]))
     P, C = frames[h.chain.parent[joint]], frames[h.chain.child[joint]]
     fit = joint_location(P, C, hinge=True)
     a = np.einsum("fij,j->fi", P.R, fit.axis_parent)
@@ -215,11 +216,14 @@ class ExtraDof(Effect):
             return new
         chain, _ = convert_joint(hyp.chain, hyp.fit.state, j, NEXT_TYPE[hyp.chain.types[j]])
         # a fresh start: the hinge fit bent every constant to absorb the missing rotation
-        state = initial_state(chain, hyp.data)
+        state = start_state(ctx.model, chain, hyp.data, ctx.rate_hz)
         return hyp.refit(chain=chain, state=state, effect=proposal, max_iter=12)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]
+        ch = before.chain
+        if min(len(ch.seg_markers[ch.parent[j]]), len(ch.seg_markers[ch.child[j]])) < 3:
+            return {}            # a segment its own markers cannot pose shows no hinge direction of its own
         off = off_axis_deg(before, j)
         return {"x": np.arange(len(off)), "x_label": "frame", "y": off,
                 "y_label": f"{j}: hinge direction from thigh vs from shank (deg)".replace(

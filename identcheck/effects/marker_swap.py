@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from identcheck.bundle.chain import initial_state
+from identcheck.bundle.start import start_state
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, draw_frame
 from identcheck.estimate.labels import detect, flips
@@ -74,7 +74,7 @@ class MarkerSwap(Effect):
         data, w = hyp.data.copy(), hyp.weights.copy()
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]
         w[a:b + 1, [i, j]] = w[a:b + 1, [j, i]]
-        fresh = initial_state(hyp.chain, data)       # the swapped frames pulled the old fit far off
+        fresh = start_state(ctx.model, hyp.chain, data, ctx.rate_hz)   # the swapped frames pulled the old fit far off
         fresh.term_params = hyp.fit.state.term_params
         return hyp.refit(data=data, weights=w, state=fresh, extra_params=3, effect=proposal, max_iter=15)
 

@@ -34,16 +34,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import chdtrc
 
-from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
+from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.model import n_const
+from identcheck.bundle.start import virtual_frames
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
-from identcheck.estimate.joint import start_stride
-from identcheck.geometry.poses import refine_local, segment_poses
+from identcheck.geometry.poses import segment_poses
 from identcheck.progress import Progress
 from identcheck.skeleton import Skeleton
 
@@ -70,11 +70,6 @@ ITERATION_REPORT_S = 5.0
 """A whole-tree fit running longer than this says its iteration and cost this often (a 16-marker body's start
 ran 60 s between two lines)."""
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
-START_SHAPE_TOL_MM = 0.1
-"""Body-fixed coordinates of a start's segment poses are averaged over the frames (:func:`refine_local`) until they
-move less than this: the whole-tree fit refines them, so its start needs them to a fraction of the noise, not to
-the 1e-9 mm of the closed forms' own poses (on the bundled leg: 2 passes a segment instead of 4, the same fits
-in the same number of iterations)."""
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
                          # reach the same minimum to ~1e-3 mm)
 @dataclass
@@ -100,51 +95,6 @@ def skeleton_of(model, trial) -> Skeleton:
         if m in col and np.isfinite(data[:, col[m]]).all(axis=1).any():
             seen.add(m)
     return Skeleton.from_model(model, markers=seen)
-
-
-def _frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
-    """Poses of every segment from its seen markers plus the virtual points (joint centres, hinge points)
-    the closed-form fits give it; raises DegenerateError naming a segment with fewer than 3 points."""
-    out = {}
-    for seg in chain.segments:
-        idx = chain.seg_markers[seg]
-        extra = [v for v in virtual.get(seg, {}).values() if np.isfinite(v).all(axis=1).any()]
-        pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
-        if pts.shape[1] == 2:           # two points leave the roll about their line free: any roll will do
-            pts = np.concatenate([pts, _roll_point(pts[:, 0], pts[:, 1])[:, None]], axis=1)
-        if pts.shape[1] < 3:
-            raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
-                                  "pose it (three are needed to start the whole-tree fit)", segment=seg)
-        try:
-            local, poses = _start_poses(pts)
-        except ValueError as exc:
-            raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
-        if poses.valid.sum() < 3:
-            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points", segment=seg)
-        out[seg] = filled_poses(pts, local, poses, n_markers=len(idx))
-    return out
-
-
-def _start_poses(pts: np.ndarray) -> tuple:
-    """A segment's body-fixed shape averaged over spread frames (:func:`~identcheck.estimate.joint.start_stride`),
-    and its poses in every frame for that shape; over every frame when a marker is not seen in the spread ones."""
-    every = start_stride(len(pts))
-    if every > 1:
-        try:
-            local, _ = refine_local(pts[::every], tol=START_SHAPE_TOL_MM)
-            return local, segment_poses(pts, local)
-        except ValueError:
-            pass
-    return refine_local(pts, tol=START_SHAPE_TOL_MM)
-
-
-def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """A third point (F, 3) 100 mm from `a`, perpendicular to a→b, turning smoothly with it: it fixes the
-    roll that two points leave free (the data do not see it, so the whole-tree fit treats it as gauge)."""
-    u = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1, keepdims=True), 1e-12)
-    ref = np.where(np.abs(u[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
-    w = np.cross(u, ref)
-    return a + 100.0 * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
 
 
 def candidates(closed_form: dict) -> dict:
@@ -316,7 +266,7 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
             for seg in (jt.parent, jt.child):
                 virtual.setdefault(seg, {}).update(est.virtual_markers(n))
         try:
-            frames = _frames(chain, data, virtual)
+            frames = virtual_frames(chain, data, virtual)
             state = initial_state(chain, data, frames=frames)
         except (DegenerateError, InputError) as exc:
             problems.append(str(exc))

@@ -1,0 +1,95 @@
+"""Where a whole-tree fit starts when a segment has fewer than three markers: its pose taken from its markers plus
+the points the closed-form joint fits leave on it (joint centres, hinge points), or, with two points, any roll
+about their line (the data do not see it: gauge).
+
+Used by ``fit`` for every candidate start, and by ``diagnose`` for its rigid fit when a segment has one or two
+markers (an anatomical layout: a thigh's lateral marker and its epicondyle), where poses from a segment's own
+markers alone (:func:`identcheck.bundle.chain.segment_frames`) need three.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.chain import filled_poses, initial_state
+from identcheck.errors import DegenerateError
+from identcheck.estimate.closed_forms import fit_model
+from identcheck.estimate.joint import start_stride
+from identcheck.geometry.poses import refine_local, segment_poses
+from identcheck.skeleton import Skeleton
+from identcheck.trial import Trial
+
+START_SHAPE_TOL_MM = 0.1
+"""Body-fixed coordinates of a start's segment poses are averaged over the frames (:func:`refine_local`) until they
+move less than this: the whole-tree fit refines them, so its start needs them to a fraction of the noise, not to
+the 1e-9 mm of the closed forms' own poses (on the bundled leg: 2 passes a segment instead of 4, the same fits
+in the same number of iterations)."""
+
+
+def virtual_frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
+    """Poses of every segment from its seen markers plus the virtual points (joint centres, hinge points)
+    the closed-form fits give it; raises DegenerateError naming a segment with fewer than 3 points."""
+    out = {}
+    for seg in chain.segments:
+        idx = chain.seg_markers[seg]
+        extra = [v for v in virtual.get(seg, {}).values() if np.isfinite(v).all(axis=1).any()]
+        pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
+        if pts.shape[1] == 2:           # two points leave the roll about their line free: any roll will do
+            pts = np.concatenate([pts, _roll_point(pts[:, 0], pts[:, 1])[:, None]], axis=1)
+        if pts.shape[1] < 3:
+            raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
+                                  "pose it (three are needed to start the whole-tree fit)", segment=seg)
+        try:
+            local, poses = _start_poses(pts)
+        except ValueError as exc:
+            raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
+        if poses.valid.sum() < 3:
+            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points", segment=seg)
+        out[seg] = filled_poses(pts, local, poses, n_markers=len(idx))
+    return out
+
+
+def _start_poses(pts: np.ndarray) -> tuple:
+    """A segment's body-fixed shape averaged over spread frames (:func:`~identcheck.estimate.joint.start_stride`),
+    and its poses in every frame for that shape; over every frame when a marker is not seen in the spread ones."""
+    every = start_stride(len(pts))
+    if every > 1:
+        try:
+            local, _ = refine_local(pts[::every], tol=START_SHAPE_TOL_MM)
+            return local, segment_poses(pts, local)
+        except ValueError:
+            pass
+    return refine_local(pts, tol=START_SHAPE_TOL_MM)
+
+
+def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """A third point (F, 3) 100 mm from `a`, perpendicular to a→b, turning smoothly with it: it fixes the
+    roll that two points leave free (the data do not see it, so the whole-tree fit treats it as gauge)."""
+    u = (b - a) / np.maximum(np.linalg.norm(b - a, axis=1, keepdims=True), 1e-12)
+    ref = np.where(np.abs(u[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    w = np.cross(u, ref)
+    return a + 100.0 * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
+
+
+def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
+    """The whole tree's starting state from the closed-form joint fits (:func:`~identcheck.estimate.closed_forms.fit_model`):
+    each joint's first candidate lends its points to both of its segments, every segment is posed from its markers and
+    those points (:func:`virtual_frames`), and the joints start from those poses
+    (:func:`~identcheck.bundle.chain.initial_state`). Raises DegenerateError naming a segment no points pose."""
+    fitted, _ = fit_model(model, trial)
+    virtual: dict = {}
+    for name, (est, _info) in fitted.items():
+        if est is None:
+            continue
+        jt = model.joints[name]
+        for seg in (jt.parent, jt.child):
+            virtual.setdefault(seg, {}).update(est.virtual_markers(name))
+    return initial_state(chain, data, frames=virtual_frames(chain, data, virtual))
+
+
+def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float):
+    """A fresh starting state for `chain` on `data` (F, M, 3) in its marker order: from every segment's own poses
+    (:func:`~identcheck.bundle.chain.initial_state`) when each has three markers or more, otherwise from the
+    closed-form joints of `model` (:func:`closed_form_state`)."""
+    if all(len(chain.seg_markers[seg]) >= 3 for seg in chain.segments):
+        return initial_state(chain, data)
+    return closed_form_state(model, Trial.from_array(data, chain.labels, rate_hz), chain, data)
