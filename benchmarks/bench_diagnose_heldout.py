@@ -124,7 +124,9 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
     return {"stem": stem, "named": named, "visible_chi2": None if visible is None else round(visible, 1),
             "where_right": right, "indistinguishable": indistinct,
             "gap_ratio": round(diag["gap_after"] / diag["noise_floor"], 3) if diag.get("noise_floor") else None,
-            "noise": entry["category"]["noise"], "motion": entry["category"]["motion"], "truth": [e["name"] for e in entry["effects"]],
+            "noise": entry["category"]["noise"], "motion": entry["category"]["motion"],
+            "gaps": entry["category"].get("gaps", False), "layout": entry["category"].get("layout", "clusters"),
+            "truth": [e["name"] for e in entry["effects"]],
             "magnitudes": [round(e.get("magnitude_mm", float("nan")), 2) for e in entry["effects"]],
             "shapes": [e.get("shape", "") for e in entry["effects"]], "kind": entry["category"]["kind"],
             "seconds": time.process_time() - t0}
@@ -170,8 +172,23 @@ def summarise(results: list) -> dict:
         "per_effect": per_effect,
         "confusion": {k: dict(v) for k, v in sorted(confusion.items())},
         "misses": misses,
+        "by_category": by_category(single, clean),
         "median_seconds": sorted(r["seconds"] for r in results)[len(results) // 2] if results else None,
     }
+
+
+def by_category(single: list, clean: list) -> dict:
+    """Single effects named first, and clean trials with nothing named, split by each trial category (gaps or none,
+    marker layout, motion): where the misses gather."""
+    out = {}
+    for key in ("gaps", "layout", "motion", "noise"):
+        for value in sorted({str(r.get(key)) for r in single + clean}):
+            s = [r for r in single if str(r.get(key)) == value]
+            c = [r for r in clean if str(r.get(key)) == value]
+            out[f"{key}={value}"] = {
+                "single": len(s), "named_first": sum(bool(r["named"]) and r["named"][0] == r["truth"][0] for r in s),
+                "clean": len(c), "nothing_named": sum(not r["named"] for r in c)}
+    return out
 
 
 def detection_limits(single: list, rate: float = 0.9) -> dict:
@@ -251,6 +268,8 @@ def main(argv=None) -> int:
     for name, p in s["per_effect"].items():
         others = {k: v for k, v in s["confusion"][name].items() if k != name}
         print(f"{name:<20} {p['trials']:>6} {p['named_first']:>6} {p['named_any']:>5}  {others}")
+    for cat, c in s["by_category"].items():
+        print(f"  {cat:<22} single named first {c['named_first']}/{c['single']}, clean {c['nothing_named']}/{c['clean']}")
     for m in s["misses"]:
         print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm, visible χ² "
               f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
