@@ -23,7 +23,6 @@ import pytest
 
 from identcheck import cli
 from identcheck.diagnose.workflow import diagnose
-from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.trial import Trial
 from real_data import real_file
@@ -97,16 +96,18 @@ def test_input_file_unchanged(run):
     assert before == after
 
 
-def test_two_marker_segment_is_refused(tmp_path):
+def test_two_marker_root_is_started_through_its_joint(tmp_path):
+    """The pelvis with two markers (it had been refused: "diagnose needs three or more on every segment") is posed
+    through the hip, its fit started from the closed-form joints: the real walk is diagnosed, the effects it names are
+    named ones and close part of the gap, and both joints carry a verdict."""
     text = MODEL.read_text().replace('["R.ASIS", "L.ASIS", "V.Sacral"]', '["R.ASIS", "L.ASIS"]')
     assert '["R.ASIS", "L.ASIS"]' in text
-    (tmp_path / "bad.toml").write_text(text)
-    model = Model.from_toml(tmp_path / "bad.toml")
-    trial = Trial.from_file(TRIAL)
-    with pytest.raises(InputError) as exc:
-        diagnose(model, trial)
-    assert "pelvis" in str(exc.value)
-    assert "2 marker" in str(exc.value)
+    (tmp_path / "two.toml").write_text(text)
+    rep = diagnose(Model.from_toml(tmp_path / "two.toml"), Trial.from_file(TRIAL)).to_dict()
+    assert {e["name"] for e in rep["effects"]} <= EFFECT_NAMES
+    assert rep["gap_after"] < rep["gap_before"]
+    assert {j: v["practical"]["verdict"] in ("determined", "ambiguous", "undetermined")
+            for j, v in rep["joints"].items()} == {"hip_r": True, "knee_r": True}
 
 
 def test_cli_missing_marker(tmp_path, capsys):
