@@ -269,7 +269,8 @@ def main(argv=None) -> int:
         others = {k: v for k, v in s["confusion"][name].items() if k != name}
         print(f"{name:<20} {p['trials']:>6} {p['named_first']:>6} {p['named_any']:>5}  {others}")
     for cat, c in s["by_category"].items():
-        print(f"  {cat:<22} single named first {c['named_first']}/{c['single']}, clean {c['nothing_named']}/{c['clean']}")
+        print(f"  {cat:<22} single named first {c['named_first']}/{c['single']}, "
+              f"clean {c['nothing_named']}/{c['clean']}")
     for m in s["misses"]:
         print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm, visible χ² "
               f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
