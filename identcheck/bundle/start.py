@@ -72,9 +72,10 @@ def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
     """The whole tree's starting state from the closed-form joint fits
-    (:func:`~identcheck.estimate.closed_forms.fit_model`): each joint's first candidate lends its points to both of its segments, every segment is posed from its markers and
-    those points (:func:`virtual_frames`), and the joints start from those poses
-    (:func:`~identcheck.bundle.chain.initial_state`). Raises DegenerateError naming a segment no points pose."""
+    (:func:`~identcheck.estimate.closed_forms.fit_model`): each joint's first candidate lends its points to both of
+    its segments, every segment is posed from its markers and those points (:func:`virtual_frames`), and the joints
+    start from those poses (:func:`~identcheck.bundle.chain.initial_state`). Raises DegenerateError naming a segment
+    no points pose."""
     fitted, _ = fit_model(model, trial)
     virtual: dict = {}
     for name, (est, _info) in fitted.items():
