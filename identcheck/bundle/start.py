@@ -70,21 +70,24 @@ def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a + 100.0 * w / np.maximum(np.linalg.norm(w, axis=1, keepdims=True), 1e-12)
 
 
-def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
-    """The whole tree's starting state from the closed-form joint fits
-    (:func:`~identcheck.estimate.closed_forms.fit_model`): each joint's first candidate lends its points to both of
-    its segments, every segment is posed from its markers and those points (:func:`virtual_frames`), and the joints
-    start from those poses (:func:`~identcheck.bundle.chain.initial_state`). Raises DegenerateError naming a segment
-    no points pose."""
-    fitted, _ = fit_model(model, trial)
+def state_from_joints(model, chain: Skeleton, data: np.ndarray, joints: dict):
+    """The whole tree's starting state from closed-form joints (`joints`: name -> JointEstimate, one candidate each):
+    each lends its points (centre, hinge points) to both of its segments, every segment is posed from its markers and
+    those points (:func:`virtual_frames`), and the joints start from those poses
+    (:func:`~identcheck.bundle.chain.initial_state`). Raises DegenerateError naming a segment no points pose."""
     virtual: dict = {}
-    for name, (est, _info) in fitted.items():
-        if est is None:
-            continue
+    for name, est in joints.items():
         jt = model.joints[name]
         for seg in (jt.parent, jt.child):
             virtual.setdefault(seg, {}).update(est.virtual_markers(name))
     return initial_state(chain, data, frames=virtual_frames(chain, data, virtual))
+
+
+def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
+    """:func:`state_from_joints` from each joint's first candidate of the closed-form fits
+    (:func:`~identcheck.estimate.closed_forms.fit_model`)."""
+    fitted, _ = fit_model(model, trial)
+    return state_from_joints(model, chain, data, {n: est for n, (est, _info) in fitted.items() if est is not None})
 
 
 def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float):

@@ -34,13 +34,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import chdtrc
 
-from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.model import n_const
-from identcheck.bundle.start import virtual_frames
+from identcheck.bundle.start import state_from_joints
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import segment_poses
@@ -260,14 +260,8 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
         tried += 1
         if progress and len(combos) > 1:
             progress(f"whole-tree fit from candidate start {k + 1} of {len(combos)}")
-        virtual: dict = {}
-        for n, est in combo.items():
-            jt = model.joints[n]
-            for seg in (jt.parent, jt.child):
-                virtual.setdefault(seg, {}).update(est.virtual_markers(n))
         try:
-            frames = virtual_frames(chain, data, virtual)
-            state = initial_state(chain, data, frames=frames)
+            state = state_from_joints(model, chain, data, combo)
         except (DegenerateError, InputError) as exc:
             problems.append(str(exc))
             stuck |= {j for j in chain.joints if chain.child[j] == exc.segment}
