@@ -81,9 +81,11 @@ class Step:
         moves the markers of a last segment as its skin cluster moving as one does). The same effect counts too
         where it acts on another segment, joint or set of markers (a thigh delayed 38 ms scored above the shank
         advanced 40 ms that was adopted, and the report had not said so), not where only its frames or sizes
-        differ (a slip one frame later)."""
+        differ (a slip one frame later), nor where it only adds markers to the step's own on its segment (skin on
+        every shank marker, scoring as skin on the ankle marker alone did, is that story again with more terms, not
+        another one)."""
         out = [(n, w) for n, w, sc in self.rejected
-               if (n != self.name or acts_on(w) != acts_on(self.where))
+               if (n != self.name or (acts_on(w) != acts_on(self.where) and not widens(w, self.where)))
                and sc >= self.score - max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * self.score)]
         return out + [(n, w) for n, w in self.alike
                       if n != self.name and place(n, w) not in {place(k, v) for k, v in out}]
@@ -242,6 +244,13 @@ def creep(ctx: Context, h: Hypothesis) -> float:
     criterion's units (≥ 0): the rigid fit of data an effect corrupts creeps on for long, and every candidate's
     refit takes that gain too, so each candidate's score is counted net of it."""
     return max(score(ctx, h.refit(max_iter=CREEP_ITER), h), 0.0)
+
+
+def widens(where: dict, of: dict) -> bool:
+    """Whether `where` is the place `of` with markers added: the same segment, and every marker of `of` among its
+    own (`of` names some)."""
+    mine, theirs = set(where.get("markers") or ()), set(of.get("markers") or ())
+    return bool(theirs) and where.get("segment") == of.get("segment") and theirs < mine
 
 
 def acts_on(where: dict) -> tuple:

@@ -1,9 +1,10 @@
-"""``soft_tissue``: a marker moves on its segment as a smooth function of an adjacent joint's angles.
+"""``soft_tissue``: a marker moves on its segment as a smooth function of its segment's joints' angles.
 
 Detector: each marker's residual in its own segment's frame, regressed on smooth functions of the
-angles of each joint its segment takes part in; the variance explained, net of the parameters it
-costs, ranks the (marker, joint) pairs. Augmentation: the marker's position on its segment becomes
-``local + basis(angles) @ B`` with B (2n × 3) fitted with everything else.
+angles of each joint its segment takes part in, and of each pair of them together (:func:`drivers`); the
+variance explained, net of the parameters it costs, ranks the (marker, joints) pairs. Augmentation: the
+marker's position on its segment becomes ``local + basis(angles) @ B`` with B (K × 3) fitted with everything
+else. ``where`` names the joint (with two, ``joints`` names both and ``joint`` the first).
 
 Skin also carries a whole marker cluster at once (a cluster on a plate, or the soft tissue under it): the
 mean of a segment's markers' residuals regressed the same way proposes the cluster moving together, one
@@ -65,6 +66,19 @@ def same_motion_clusters(chain, joint: str) -> list:
     return out
 
 
+def drivers(chain) -> list:
+    """Where skin can move and with which angles: (segment, joints) for each joint and each of its two segments,
+    and, for a segment between joints (a thigh, below the hip and above the knee), each pair of its joints
+    together. Skin over a segment moves with the angles of the muscles that cross it, and those span both of its
+    joints: a thigh's cluster moving with hip flexion and knee flexion at once (a bulge with their product) was
+    fitted by neither joint's angles alone, and a distortion of the whole volume explained more of it."""
+    out = [(seg, (j,)) for j in chain.joints for seg in (chain.parent[j], chain.child[j])]
+    for seg in chain.seg_markers:
+        own = [j for j in chain.joints if seg in (chain.parent[j], chain.child[j])]
+        out += [(seg, (a, b)) for k, a in enumerate(own) for b in own[k + 1:]]
+    return out
+
+
 class SoftTissue(Effect):
     name = "soft_tissue"
     max_proposals = 3
@@ -94,37 +108,46 @@ class SoftTissue(Effect):
                        clean=clean)
 
     def propose(self, ctx, hyp) -> list:
+        """Three kinds of place on each segment: one marker, the cluster moving as one (one shared motion), and every
+        marker of the segment each moving its own way (skin under a cluster of separate markers); for each, the
+        joints whose angles (:func:`drivers`) earn the most."""
         seg_res = segment_residuals(hyp)
         angles = joint_angles(hyp)
         ch = hyp.chain
-        out = []
-        for j in ch.joints:
-            basis = angle_basis(angles[j])
-            for seg in (ch.parent[j], ch.child[j]):
-                cols = np.asarray(ch.seg_markers[seg])
-                if len(cols) >= 2:
-                    # the root's own pose takes up its cluster's common motion whole, which then shows on the
-                    # markers below the joint instead (in the root's frame, with the sign turned)
-                    seen = ch.downstream[j] if seg == ch.root else cols
-                    mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
-                        "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
-                    gain = ctx.bic_gain(len(seen) * explained(mean, basis), 3 * basis.shape[1])
-                    if gain > 0:
-                        out.append(Proposal(self.name, {"markers": [ch.labels[c] for c in cols], "segment": seg,
-                                                        "joint": j, "together": True},
-                                            gain, {"col": cols, "basis": basis, "joint": j}))
-                for col in ch.seg_markers[seg]:
-                    gain = ctx.bic_gain(explained(seg_res[:, col], basis), 3 * basis.shape[1])
-                    if gain > 0:
-                        out.append(Proposal(self.name, {"markers": [ch.labels[col]], "segment": seg, "joint": j},
-                                            gain, {"col": int(col), "basis": basis, "joint": j}))
-        return sorted(out, key=lambda p: -p.strength)
+        best = {}
+
+        def offer(where, gain, payload):  # noqa: E306 - keep the best joints for each place
+            key = (where["segment"], tuple(where["markers"]), where.get("together", False))
+            if gain > 0 and (key not in best or gain > best[key].strength):
+                best[key] = Proposal(self.name, where, gain, payload)
+
+        for seg, joints in drivers(ch):
+            basis = angle_basis(np.column_stack([angles[j] for j in joints]))
+            K, cols = basis.shape[1], np.asarray(ch.seg_markers[seg])
+            place = {"segment": seg, "joint": joints[0]} | ({"joints": list(joints)} if len(joints) > 1 else {})
+            payload = {"basis": basis, "joint": joints[0]}
+            own = [explained(seg_res[:, col], basis) for col in cols]
+            for col, found in zip(cols, own):
+                offer({"markers": [ch.labels[col]], **place}, ctx.bic_gain(found, 3 * K), {"col": int(col), **payload})
+            if len(cols) < 2:
+                continue
+            names = [ch.labels[c] for c in cols]
+            offer({"markers": names, **place}, ctx.bic_gain(sum(own), 3 * K * len(cols)),
+                  {"col": cols, "each": True, **payload})
+            # the root's own pose takes up its cluster's common motion whole, which then shows on the
+            # markers below its joints instead (in the root's frame, with the sign turned)
+            seen = sorted(set().union(*(ch.downstream[j] for j in joints))) if seg == ch.root else cols
+            mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
+                "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
+            offer({"markers": names, **place, "together": True},
+                  ctx.bic_gain(len(seen) * explained(mean, basis), 3 * K), {"col": cols, **payload})
+        return sorted(best.values(), key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
         """A cluster moving as one with its joint's angles, where that is the joint's centre moving in the parent
-        (:func:`same_motion_clusters`)."""
+        (:func:`same_motion_clusters`); not one moving with two joints' angles, which no one centre's motion is."""
         j = where.get("joint")
-        if not where.get("together") or j is None or j not in chain.child:
+        if not where.get("together") or j is None or j not in chain.child or len(where.get("joints", [j])) > 1:
             return []
         if where.get("segment") not in [c["segment"] for c in same_motion_clusters(chain, j)]:
             return []
@@ -133,17 +156,24 @@ class SoftTissue(Effect):
         return [("joint_translation", {"joint": j, "modelled": MODELLED})]
 
     def apply(self, ctx, hyp, proposal):
-        term = (proposal.payload["col"], proposal.payload["basis"])
-        return hyp.refit(terms=hyp.terms + Terms(markers=[term]), effect=proposal)
+        col, basis = proposal.payload["col"], proposal.payload["basis"]
+        terms = [(int(c), basis) for c in col] if proposal.payload.get("each") else [(col, basis)]
+        return hyp.refit(terms=hyp.terms + Terms(markers=terms), effect=proposal)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]
         x, x_label = main_angle(before, j)
 
-        def moved(h):  # noqa: E306 - the marker's (the cluster's mean) residual on its segment
+        each = bool(proposal.payload.get("each"))
+
+        def moved(h):  # noqa: E306 - the marker's residual on its segment (the cluster's mean; its markers' RMS)
             with np.errstate(all="ignore"):
-                return np.linalg.norm(seen_mean(segment_residuals(h)[:, col], axis=1), axis=1)
-        who = proposal.where["markers"][0] if len(col) == 1 else "the cluster's mean"
+                r = segment_residuals(h)[:, col]
+                if each:
+                    return np.sqrt(np.nanmean(np.sum(r ** 2, axis=2), axis=1))
+                return np.linalg.norm(seen_mean(r, axis=1), axis=1)
+        who = (proposal.where["markers"][0] if len(col) == 1 else
+               "its markers' RMS" if each else "the cluster's mean")
         return {"x": x, "x_label": x_label,
                 "y": moved(before), "y_after": moved(after),
                 "y_label": f"{who} residual on {proposal.where['segment']} (mm)",

@@ -286,3 +286,18 @@ def test_the_same_effect_elsewhere_is_named_with_the_step_when_it_explains_as_we
     close = sc >= score - max(workflow.EQUIVALENT_GAIN, workflow.EQUIVALENT_FRACTION * score)
     expected = [("time_offset", other)] if close and segment != "shank" else []
     assert step.equivalents() == expected
+
+
+@settings(max_examples=60, deadline=None)
+@given(mine=st.sets(st.sampled_from(["A", "B", "C", "D"]), min_size=1), extra=st.sets(st.sampled_from(["E", "F"])),
+       segment=st.sampled_from(["thigh", "shank"]), rel=st.floats(-0.01, 0.01))
+def test_the_same_skin_with_markers_added_is_not_named_as_another_story(mine, extra, segment, rel):
+    """A rival of the same effect on the step's segment whose markers include all of the step's (skin on every shank
+    marker beside skin on the ankle marker, scoring alike) is the step's story with more terms, never listed as
+    indistinguishable (nor is the very same place); on another segment it is another story and is."""
+    where = {"markers": sorted(mine), "segment": "shank", "joint": "knee"}
+    wider = {"markers": sorted(mine | extra), "segment": segment, "joint": "knee"}
+    step = workflow.Step("soft_tissue", where, 2.0, 1.0, 1000.0, rejected=(("soft_tissue", wider, 1000.0 * (1 + rel)),))
+    listed = step.equivalents() == [("soft_tissue", wider)]
+    assert listed == (segment != "shank")
+    assert workflow.widens(wider, where) == (segment == "shank" and bool(extra))
