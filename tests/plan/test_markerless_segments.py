@@ -241,7 +241,7 @@ def test_joints_identifiable_only_together_are_searched_and_said_uncounted():
     spec = spec_of(model)
     p = plan.analyse(spec)
     assert all(j["jointly_only"] for j in p.joints.values())
-    found = witness.witnesses(model, spec, p)
+    found = witness.witnesses(model, spec, p, max_seconds=3600.0)   # what the searches say, not their budget
     assert set(found) == set(p.joints)
     for n, w in found.items():
         if w["verified"]:             # a second skeleton would be a counterexample: it must change this joint
