@@ -5,7 +5,9 @@ of labels and every frame the distances to each one's segment partners are compa
 medians as labelled and as exchanged; the longest run of frames that fits clearly better exchanged
 is the span. Two markers whose distances to the rest are alike (the base of an isosceles triangle, a
 mirror-symmetric pair) exchange without changing any distance: the segment then turns by a half turn at both
-ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Augmentation: the two
+ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Two markers alone on a segment
+have one distance and no pose of their own: their positions continuing from each other's at the span's ends show it
+(:func:`identcheck.estimate.labels.exchanges`). Augmentation: the two
 columns are exchanged back over the span (the pair and the two ends count as three parameters).
 """
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 from identcheck.bundle.start import start_state
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, draw_frame
-from identcheck.estimate.labels import detect, flips
+from identcheck.estimate.labels import detect, exchanges, flips
 
 
 def _unexplained(ctx, hyp, span) -> float:
@@ -60,12 +62,13 @@ class MarkerSwap(Effect):
         ch = hyp.chain
         found = detect(hyp.data, ch, ctx.noise.sigma_mm, ctx.n_obs)
         seen = {(d["cols"], d["span"]) for d in found}
-        for d in flips(hyp.data, ch):
+        for d in flips(hyp.data, ch) + exchanges(hyp.data, ch):
             if (d["cols"], d["span"]) not in seen:
                 found.append({**d, "gain": _unexplained(ctx, hyp, d["span"])})
         out = [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
                                     "frames": list(d["span"])},
-                        d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"]})
+                        d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"],
+                                    "steps": d.get("steps", False)})
                for d in found]
         return sorted(out, key=lambda p: -p.strength)
 
@@ -82,5 +85,6 @@ class MarkerSwap(Effect):
         keep, swap = proposal.payload["keep"], proposal.payload["swap"]
         return {"x": np.arange(len(keep)), "x_label": "frame", "y": np.sqrt(np.maximum(keep, 0)),
                 "y_after": np.sqrt(np.maximum(swap, 0)),
-                "y_label": "within-segment distance misfit (mm): as labelled / exchanged",
+                "y_label": ("step from the frame before (mm): as labelled / exchanged" if proposal.payload.get("steps")
+                            else "within-segment distance misfit (mm): as labelled / exchanged"),
                 "span": list(proposal.payload["span"]), "kind": "series"}

@@ -198,6 +198,48 @@ def flips(data: np.ndarray, chain) -> list:
     return out
 
 
+JUMP_RATIO = 10.0
+"""A frame where two markers' positions continue this many times better exchanged than as labelled (squared
+distances from where each was last seen) is where their labels changed over."""
+LOOKBACK = 10
+"""Frames back to the last one showing both markers that a change of labels is read across (a short gap)."""
+
+
+def exchanges(data: np.ndarray, chain) -> list:
+    """Label swaps between markers whose distances cannot show them: pairs of markers both on segments of fewer than
+    three markers (two markers alone on a segment keep their one distance when exchanged; an anatomical thigh's
+    lateral marker and epicondyle, exchanged over 190 frames, were named as skin on the thigh).
+
+    Where labels change over, each marker's position continues from where the other was last seen: the frames where
+    the pair's squared steps from their last common frame (at most :data:`LOOKBACK` back) are :data:`JUMP_RATIO`
+    times smaller exchanged than as labelled. The spans between such frames are the candidates as in :func:`flips`
+    (with one, the shorter side). Returns dicts like :func:`flips`', ``keep`` and ``swap`` being those squared
+    steps, mm², per frame."""
+    F, out = data.shape[0], []
+    few = [c for c in range(chain.n_markers) if len(chain.seg_markers[chain.marker_seg[c]]) < 3]
+    for k, i in enumerate(few):
+        for j in few[k + 1:]:
+            both = np.flatnonzero(np.all(np.isfinite(data[:, [i, j]]), axis=(1, 2)))
+            if len(both) < 2 * MIN_RUN:
+                continue
+            now, last = both[1:], both[:-1]
+            near = now - last <= LOOKBACK
+            xi, xj = data[:, i], data[:, j]
+            keep = np.full(F, np.nan)
+            swap = np.full(F, np.nan)
+            keep[now] = np.sum((xi[now] - xi[last]) ** 2 + (xj[now] - xj[last]) ** 2, axis=1)
+            swap[now] = np.sum((xi[now] - xj[last]) ** 2 + (xj[now] - xi[last]) ** 2, axis=1)
+            turned = now[near & (JUMP_RATIO * swap[now] < keep[now])]
+            if not len(turned) or len(turned) > 20:
+                continue
+            edges = [0] + [int(f) for f in turned] + [F]
+            spans = [(edges[q], edges[q + 1] - 1) for q in range(len(edges) - 1)]
+            spans = [min(spans, key=lambda ab: ab[1] - ab[0])] if len(turned) == 1 else spans[1:-1]
+            out += [{"cols": (i, j), "span": (a, b), "keep": keep, "swap": swap, "steps": True}
+                    for a, b in spans if b - a + 1 >= MIN_RUN]
+    return out
+
+
 MAX_SWAPS = 5            # swaps looked for, strongest first, each exchanged back before the next search
 
 
