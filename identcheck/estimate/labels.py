@@ -7,8 +7,8 @@ labelled and as exchanged with their medians. A span that fits clearly better ex
 against the majority labelling, so the span is the minority. :func:`screen` leaves that span out for
 the two markers, so the fit sees only the frames labelled like the rest of the trial, and it says so.
 The noise scale is the distances' whole-trial scatter (skin motion included), so only exchanges far
-beyond the segment's own deformation count. A wrong pair corrupts the distances of its partners too, so its span is exchanged back before the
-next search (the strongest detection first), which keeps those echoes from being reported.
+beyond the segment's own deformation count. A wrong pair corrupts the distances of its partners too, so its span is
+exchanged back before the next search (the strongest detection first), which keeps those echoes from being reported.
 Two markers whose distances to the rest of their segment are alike (the base of a near-isosceles triangle, a pair
 mirror-symmetric about the plane of the others) exchange without changing a distance; the segment's pose then
 turns by a half turn at both ends of the span, and :func:`flips` finds them from that.
@@ -22,7 +22,6 @@ from identcheck.errors import InputError
 from identcheck.estimate.noise import noise_floor
 from identcheck.geometry.poses import reference_shape, segment_poses
 from identcheck.skeleton import Skeleton
-from identcheck.trial import Trial
 
 MIN_RUN = 3          # frames
 MAX_HOLE = 2         # frames of doubt (gaps, ties) bridged inside a run
