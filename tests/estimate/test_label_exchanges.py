@@ -16,26 +16,8 @@ from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
+from tests.diagnose.test_two_marker_segment import MODEL   # a leg whose thigh carries two markers
 
-MODEL = """
-units = "mm"
-[segments.pelvis]
-markers = ["LASI", "RASI", "SACR"]
-[segments.thigh]
-markers = ["RTHI", "RKNE"]
-length_mm = 420
-[segments.shank]
-markers = ["RTIB", "RTIB2", "RANK"]
-length_mm = 400
-[joints.hip]
-type = "spherical"
-parent = "pelvis"
-child = "thigh"
-[joints.knee]
-type = "revolute"
-parent = "thigh"
-child = "shank"
-"""
 
 
 def _pair(rng, n_frames, noise, swap=None, gap=None):
