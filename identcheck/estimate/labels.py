@@ -138,6 +138,15 @@ def _turns(poses_R: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return idx, np.concatenate([[0.0], _angle_deg(R[:-1], R[1:])])
 
 
+def spans_between(changes, n_frames: int) -> list:
+    """The spans (first, last) a labelling may be wrong over, given the frames where it changes over: with one
+    change, the shorter side of it (the majority labelling is kept); with more, every span between two of them (the
+    trial's two ends being labelled alike)."""
+    edges = [0] + [int(f) for f in changes] + [n_frames]
+    spans = [(edges[k], edges[k + 1] - 1) for k in range(len(edges) - 1)]
+    return [min(spans, key=lambda ab: ab[1] - ab[0])] if len(changes) == 1 else spans[1:-1]
+
+
 def flips(data: np.ndarray, chain) -> list:
     """Label swaps that the segment's pose shows and its distances do not.
 
@@ -167,13 +176,7 @@ def flips(data: np.ndarray, chain) -> list:
         before = {int(q): int(frames[k - 1]) for k, q in zip(np.flatnonzero(turn > FLIP_DEG), jumps)}
         # an exchange must leave the markers fitting the segment's shape as well as its frames usually do
         shape_tol = SHAPE_TOL * float(np.nanmedian(poses.rms)) + 1e-9
-        edges = [0] + [int(f) for f in jumps] + [F]
-        spans = [(edges[k], edges[k + 1] - 1) for k in range(len(edges) - 1)]
-        if len(jumps) == 1:                              # one jump: the shorter side is the odd one out
-            spans = [min(spans, key=lambda ab: ab[1] - ab[0])]
-        else:                                            # between two jumps (labelled as at both ends of the trial)
-            spans = spans[1:-1]
-        for a, b in spans:
+        for a, b in spans_between(jumps, F):
             # the pairs of frames across the span's ends (the frame before a jump: the last one with a pose)
             ends = [(before[a], a)] if a in before else []
             ends += [(before[b + 1], b + 1)] if b + 1 in before else []
@@ -231,11 +234,8 @@ def exchanges(data: np.ndarray, chain) -> list:
             turned = now[near & (JUMP_RATIO * swap[now] < keep[now])]
             if not len(turned) or len(turned) > 20:
                 continue
-            edges = [0] + [int(f) for f in turned] + [F]
-            spans = [(edges[q], edges[q + 1] - 1) for q in range(len(edges) - 1)]
-            spans = [min(spans, key=lambda ab: ab[1] - ab[0])] if len(turned) == 1 else spans[1:-1]
             out += [{"cols": (i, j), "span": (a, b), "keep": keep, "swap": swap, "steps": True}
-                    for a, b in spans if b - a + 1 >= MIN_RUN]
+                    for a, b in spans_between(turned, F) if b - a + 1 >= MIN_RUN]
     return out
 
 
