@@ -6,7 +6,8 @@ medians as labelled and as exchanged; the longest run of frames that fits clearl
 is the span. Two markers whose distances to the rest are alike (the base of an isosceles triangle, a
 mirror-symmetric pair) exchange without changing any distance: the segment then turns by a half turn at both
 ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Two markers alone on a segment
-have one distance and no pose of their own: their positions continuing from each other's at the span's ends show it
+have one distance and no pose of their own, and a swap that begins or ends in a gap shows its distances on one side
+only: their positions continuing from each other's at the span's ends show it
 (:func:`identcheck.estimate.labels.exchanges`). Augmentation: the two
 columns are exchanged back over the span (the pair and the two ends count as three parameters).
 """
@@ -64,6 +65,7 @@ class MarkerSwap(Effect):
         seen = {(d["cols"], d["span"]) for d in found}
         for d in flips(hyp.data, ch) + exchanges(hyp.data, ch):
             if (d["cols"], d["span"]) not in seen:
+                seen.add((d["cols"], d["span"]))
                 found.append({**d, "gain": _unexplained(ctx, hyp, d["span"])})
         out = [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
                                     "frames": list(d["span"])},

@@ -11,10 +11,15 @@ beyond the segment's own deformation count. A wrong pair corrupts the distances 
 exchanged back before the next search (the strongest detection first), which keeps those echoes from being reported.
 Two markers whose distances to the rest of their segment are alike (the base of a near-isosceles triangle, a pair
 mirror-symmetric about the plane of the others) exchange without changing a distance; the segment's pose then
-turns by a half turn at both ends of the span, and :func:`flips` finds them from that.
+turns by a half turn at both ends of the span, and :func:`flips` finds them from that. Two markers alone on a
+segment keep their one distance, and a swap beginning or ending in a gap shows the distances only on one side of it:
+each marker's trajectory then goes on from where the other's was last seen, and :func:`exchanges` reads that.
+Where only one of the two markers is seen, its own distances are read both ways (:func:`swap_costs`).
 The input file is not touched.
 """
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -55,16 +60,31 @@ class _Distances:
 
 
 def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None = None):
-    """Per-frame misfit of the within-segment distances with labels i, j as given and exchanged (F,)."""
+    """Per-frame misfit of the within-segment distances with labels i, j as given and exchanged (F,), mm².
+
+    Where both markers are seen, each one's distances to its partners are read as its own and as the other's. Where
+    only one is seen (a swap often begins or ends in a gap), its distances alone are read both ways, their mean
+    misfit per distance scaled to the pair's number of distances so that both kinds of frame weigh alike; NaN
+    where neither is seen, or where the seen one has no partner seen on either side."""
     dists = dists or _Distances(data, chain)
-    Pi, Di, keep_i = dists.own(i, {j})
-    Pj, Dj, keep_j = dists.own(j, {i})
-    if len(Pi) + len(Pj) == 0:
+    Pi, Di, _ = dists.own(i, {j})
+    Pj, Dj, _ = dists.own(j, {i})
+    n = len(Pi) + len(Pj)
+    if n == 0:
         return None, None
-    keep = keep_i + keep_j
-    swap = np.nansum((dists.to(j, Pi) - Di) ** 2, axis=1) + np.nansum((dists.to(i, Pj) - Dj) ** 2, axis=1)
-    both = np.all(np.isfinite(data[:, [i, j]]), axis=(1, 2))
-    keep[~both], swap[~both] = np.nan, np.nan
+    own_i, own_j = (dists.to(i, Pi) - Di) ** 2, (dists.to(j, Pj) - Dj) ** 2
+    i_as_j, j_as_i = (dists.to(i, Pj) - Dj) ** 2, (dists.to(j, Pi) - Di) ** 2
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)            # means of frames with no partner seen: NaN
+        keep = np.nansum(own_i, axis=1) + np.nansum(own_j, axis=1)
+        swap = np.nansum(j_as_i, axis=1) + np.nansum(i_as_j, axis=1)
+        only_i = n * np.nanmean(own_i, axis=1), n * np.nanmean(i_as_j, axis=1)
+        only_j = n * np.nanmean(own_j, axis=1), n * np.nanmean(j_as_i, axis=1)
+    seen = np.all(np.isfinite(data[:, [i, j]]), axis=2)
+    for alone, (k, s) in ((seen[:, 0] & ~seen[:, 1], only_i), (seen[:, 1] & ~seen[:, 0], only_j)):
+        keep[alone], swap[alone] = k[alone], s[alone]
+    neither = ~seen[:, 0] & ~seen[:, 1]
+    keep[neither], swap[neither] = np.nan, np.nan
     return keep, swap
 
 
@@ -89,7 +109,9 @@ def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
     """Label swaps the within-segment distances show, strongest first: dicts with the two columns, the
     frame span (first, last), the evidence ``gain`` (log-likelihood gain net of a BIC penalty for 3
     parameters), the per-frame misfits as labelled (``keep``) and exchanged (``swap``), mm², and the
-    margin ``clear`` a frame's improvement had to exceed."""
+    margin ``clear`` a frame's improvement had to exceed. A span needs :data:`MIN_RUN` frames showing both markers
+    (where one alone is seen, two markers with alike distances, as in a cluster, read as exchanged by chance: a real
+    walking trial's shank over three frames of a gap)."""
     sig2, pen = sigma_mm ** 2, np.log(max(n_obs, 2))
     out = []
     dists = _Distances(data, chain)
@@ -107,6 +129,9 @@ def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
             a, b = longest_run(np.nan_to_num(better, nan=0).astype(bool), doubt)
             if a < 0 or b - a + 1 < MIN_RUN:
                 continue
+            both = np.all(np.isfinite(data[a:b + 1, [i, j]]), axis=(1, 2))
+            if np.sum(better[a:b + 1] & both) < MIN_RUN:
+                continue        # frames showing one marker only extend a run; alone they read too little
             gain = np.nansum((keep - swap)[a:b + 1]) / (2 * sig2) - 3 * pen
             if gain > 0:
                 out.append({"cols": (i, j), "span": (int(a), int(b)), "gain": float(gain), "keep": keep, "swap": swap,
@@ -207,31 +232,73 @@ LOOKBACK = 10
 """Frames back to the last one showing both markers that a change of labels is read across (a short gap)."""
 
 
-def exchanges(data: np.ndarray, chain) -> list:
-    """Label swaps between markers whose distances cannot show them: pairs of markers both on segments of fewer than
-    three markers (two markers alone on a segment keep their one distance when exchanged; an anatomical thigh's
-    lateral marker and epicondyle, exchanged over 190 frames, were named as skin on the thigh).
+def _last_seen(seen: np.ndarray) -> np.ndarray:
+    """For each frame, the last frame before it where `seen` holds (F,); -1 before the first."""
+    idx = np.where(seen, np.arange(len(seen)), -1)
+    return np.concatenate([[-1], np.maximum.accumulate(idx)[:-1]])
 
-    Where labels change over, each marker's position continues from where the other was last seen: the frames where
-    the pair's squared steps from their last common frame (at most :data:`LOOKBACK` back) are :data:`JUMP_RATIO`
-    times smaller exchanged than as labelled. The spans between such frames are the candidates as in :func:`flips`
-    (with one, the shorter side). Returns dicts like :func:`flips`', ``keep`` and ``swap`` being those squared
-    steps, mm², per frame."""
+
+def _both_continue(xi, xj, seen_i, seen_j, keep, swap) -> tuple[np.ndarray, np.ndarray]:
+    """(Frames where markers i and j, both seen, continue from their last common frame (at most :data:`LOOKBACK`
+    back) :data:`JUMP_RATIO` times better exchanged than as labelled, those last common frames); `keep` and `swap`
+    get the squared steps."""
+    both = np.flatnonzero(seen_i & seen_j)
+    if len(both) < 2:
+        return np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+    now, last = both[1:], both[:-1]
+    keep[now] = np.sum((xi[now] - xi[last]) ** 2 + (xj[now] - xj[last]) ** 2, axis=1)
+    swap[now] = np.sum((xi[now] - xj[last]) ** 2 + (xj[now] - xi[last]) ** 2, axis=1)
+    turned = (now - last <= LOOKBACK) & (JUMP_RATIO * swap[now] < keep[now])
+    return now[turned], last[turned]
+
+
+def _handovers(xa, xb, seen_a, seen_b, apart2: float, keep, swap) -> np.ndarray:
+    """Frames where marker b has just vanished (last seen at most :data:`MAX_HOLE` + 1 frames back) and marker a,
+    seen for the first time since, sits :data:`JUMP_RATIO` times closer (squared) to where b was last than to where a itself was last (within
+    :data:`LOOKBACK`; when a was not seen so recently, than the two markers' usual squared distance `apart2`): the
+    trajectory goes on under the other label, as when labels change over in a gap."""
+    last_a, last_b = _last_seen(seen_a), _last_seen(seen_b)
+    frames = np.arange(len(seen_a))
+    # the first frame showing a since b was last seen
+    at = np.flatnonzero(seen_a & ~seen_b & (last_b >= 0) & (frames - last_b <= MAX_HOLE + 1) & (last_a <= last_b))
+    if not len(at):
+        return at
+    to_b = np.sum((xa[at] - xb[last_b[at]]) ** 2, axis=1)
+    recent = (last_a[at] >= 0) & (at - last_a[at] <= LOOKBACK)
+    to_a = np.where(recent, np.sum((xa[at] - xa[np.maximum(last_a[at], 0)]) ** 2, axis=1), apart2)
+    keep[at], swap[at] = to_a, to_b
+    return at[JUMP_RATIO * to_b < to_a]
+
+
+def exchanges(data: np.ndarray, chain) -> list:
+    """Label swaps read from the markers' continuity: where labels change over, each marker's position continues
+    from where the other was last seen. Two markers alone on a segment keep their one distance when exchanged (an
+    anatomical thigh's lateral marker and epicondyle, exchanged over 190 frames, were named as skin on the thigh),
+    and a swap that begins or ends in a gap shows the distances only on one side of it (a thigh and a shank marker
+    exchanged from inside a gap were named as skin on both segments).
+
+    For every pair of markers, a change of labels is read at the frames where both are seen and their squared steps
+    from their last common frame (at most :data:`LOOKBACK` back) are :data:`JUMP_RATIO` times smaller exchanged
+    than as labelled, and at the frames where one has just vanished and the other sits where it was last
+    (:func:`_handovers`). The spans between such frames are the candidates as in :func:`flips` (with one, the
+    shorter side). Returns dicts like :func:`flips`', ``keep`` and ``swap`` being those squared steps, mm², per
+    frame."""
     F, out = data.shape[0], []
-    few = [c for c in range(chain.n_markers) if len(chain.seg_markers[chain.marker_seg[c]]) < 3]
-    for k, i in enumerate(few):
-        for j in few[k + 1:]:
-            both = np.flatnonzero(np.all(np.isfinite(data[:, [i, j]]), axis=(1, 2)))
-            if len(both) < 2 * MIN_RUN:
+    seen = np.all(np.isfinite(data), axis=2)
+    for i in range(chain.n_markers):
+        for j in range(i + 1, chain.n_markers):
+            both = seen[:, i] & seen[:, j]
+            if both.sum() < 2 * MIN_RUN:
                 continue
-            now, last = both[1:], both[:-1]
-            near = now - last <= LOOKBACK
             xi, xj = data[:, i], data[:, j]
-            keep = np.full(F, np.nan)
-            swap = np.full(F, np.nan)
-            keep[now] = np.sum((xi[now] - xi[last]) ** 2 + (xj[now] - xj[last]) ** 2, axis=1)
-            swap[now] = np.sum((xi[now] - xj[last]) ** 2 + (xj[now] - xi[last]) ** 2, axis=1)
-            turned = now[near & (JUMP_RATIO * swap[now] < keep[now])]
+            apart2 = float(np.median(np.sum((xi[both] - xj[both]) ** 2, axis=1)))
+            keep, swap = np.full(F, np.nan), np.full(F, np.nan)
+            handed = np.union1d(_handovers(xi, xj, seen[:, i], seen[:, j], apart2, keep, swap),
+                                _handovers(xj, xi, seen[:, j], seen[:, i], apart2, keep, swap))
+            now, last = _both_continue(xi, xj, seen[:, i], seen[:, j], keep, swap)
+            # a change read from both across frames where a handover was read is that same change, read again
+            again = np.array([np.any((handed > a) & (handed < b)) for a, b in zip(last, now)], dtype=bool)
+            turned = np.union1d(handed, now[~again])
             if not len(turned) or len(turned) > 20:
                 continue
             out += [{"cols": (i, j), "span": (a, b), "keep": keep, "swap": swap, "steps": True}
@@ -296,6 +363,11 @@ def screen(model, trial) -> tuple:
             leave_out(i, j, a, b, f"their segment turns by more than {FLIP_DEG:g} deg from one frame to the next at "
                                   "both ends of that span, and no longer does with the two exchanged; their distances "
                                   "to the rest of the segment are too alike to show it")
+    for d in exchanges(data, chain):           # two markers alone on a segment, or a swap read across a gap
+        (i, j), (a, b) = d["cols"], d["span"]
+        if not any({chain.labels[i], chain.labels[j]} <= set(w["markers"]) for w in warnings):
+            leave_out(i, j, a, b, "at both ends of that span each one's trajectory goes on from where the other "
+                                  "was last seen")
     if not warnings:
         return trial, []
     return trial.replace(xyz=xyz), warnings
