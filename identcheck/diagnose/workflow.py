@@ -1,6 +1,8 @@
 """Diagnose a trial: fit the rigid-joint model, and while the gap exceeds the noise floor (or an effect is
 found decisively all the same), let every named effect propose where it acts, fit the proposals, and adopt
-the one that earns its parameters best and keeps the joints identifiable; when none is left to adopt, drop the
+the one that earns its parameters best and keeps the joints identifiable (an error the data show without the joint
+model, a label swap whose exchanged distances fit, comes before the rest once it earns its parameters: skin terms can
+absorb part of a swap and be adopted first, after which the swap is never named); when none is left to adopt, drop the
 earlier effects that later ones made unnecessary (:mod:`identcheck.diagnose.backward`) and, if any was dropped, search
 on; report the effects in order with the gap before and after each.
 """
@@ -322,7 +324,8 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 tried.append((sc, eff, prop, cand))
                 if not eff.implausible(prop) and sc > best:
                     best, leader = sc, eff
-            tried.sort(key=lambda x: -x[0])
+            # errors the data show without the joint model come first among those that earn their parameters
+            tried.sort(key=lambda x: (not (x[0] > bar and x[1].read_without_joints(x[2])), -x[0]))
             adopted = None
             limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
             for sc, eff, prop, cand in tried:

@@ -51,6 +51,12 @@ class Effect:
         same family of marker motions), as [(name, where)]; by default none."""
         return []
 
+    def read_without_joints(self, proposal: Proposal) -> bool:
+        """Whether the data show this effect at the proposal's place without the joint model (a label swap whose
+        exchanged distances fit): an error in the data, which the search corrects, once it earns its parameters,
+        before the effects the joint model is asked to explain. By default no."""
+        return False
+
     def implausible(self, proposal: Proposal) -> str:
         """Why the fitted effect cannot be what it claims ('' if it can): e.g. a distortion too large for a
         calibrated capture volume is something else the field is absorbing."""

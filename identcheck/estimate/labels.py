@@ -163,13 +163,18 @@ def _turns(poses_R: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return idx, np.concatenate([[0.0], _angle_deg(R[:-1], R[1:])])
 
 
-def spans_between(changes, n_frames: int) -> list:
+def spans_between(changes, n_frames: int, bounds=()) -> list:
     """The spans (first, last) a labelling may be wrong over, given the frames where it changes over: with one
-    change, the shorter side of it (the majority labelling is kept); with more, every span between two of them (the
-    trial's two ends being labelled alike)."""
+    change, the shorter side of it (the majority labelling is kept), each side ending at the nearest of `bounds`
+    (frames where the labelling may have changed over unseen) or else at the trial's end; with more, every span
+    between two of them (the trial's two ends being labelled alike)."""
+    if len(changes) == 1:
+        t = int(changes[0])
+        lo = max((int(f) for f in bounds if f < t), default=0)
+        hi = min((int(f) for f in bounds if f > t), default=n_frames)
+        return [min([(lo, t - 1), (t, hi - 1)], key=lambda ab: ab[1] - ab[0])]
     edges = [0] + [int(f) for f in changes] + [n_frames]
-    spans = [(edges[k], edges[k + 1] - 1) for k in range(len(edges) - 1)]
-    return [min(spans, key=lambda ab: ab[1] - ab[0])] if len(changes) == 1 else spans[1:-1]
+    return [(edges[k], edges[k + 1] - 1) for k in range(1, len(edges) - 2)]
 
 
 def flips(data: np.ndarray, chain) -> list:
@@ -270,6 +275,22 @@ def _handovers(xa, xb, seen_a, seen_b, apart2: float, keep, swap) -> np.ndarray:
     return at[JUMP_RATIO * to_b < to_a]
 
 
+def _unseen_changes(seen_i: np.ndarray, seen_j: np.ndarray) -> list:
+    """Frames where the labels of markers i and j may have changed over unseen: in each stretch between two frames
+    showing both more than :data:`LOOKBACK` apart, the last frame at which neither label's trajectory runs on from
+    the frame before (each is unseen there, or seen again after a gap). A change anywhere earlier in the stretch
+    where both are unseen moves nothing; a change later would show as a jump in a label's own trajectory."""
+    both = np.flatnonzero(seen_i & seen_j)
+    out = []
+    for last, now in zip(both[:-1], both[1:]):
+        if now - last > LOOKBACK:
+            f = np.arange(last + 1, now + 1)
+            free = (~seen_i[f] | ~seen_i[f - 1]) & (~seen_j[f] | ~seen_j[f - 1])
+            if free.any():
+                out.append(int(f[free][-1]))
+    return out
+
+
 def exchanges(data: np.ndarray, chain) -> list:
     """Label swaps read from the markers' continuity: where labels change over, each marker's position continues
     from where the other was last seen. Two markers alone on a segment keep their one distance when exchanged (an
@@ -281,8 +302,9 @@ def exchanges(data: np.ndarray, chain) -> list:
     from their last common frame (at most :data:`LOOKBACK` back) are :data:`JUMP_RATIO` times smaller exchanged
     than as labelled, and at the frames where one has just vanished and the other sits where it was last
     (:func:`_handovers`). The spans between such frames are the candidates as in :func:`flips` (with one, the
-    shorter side). Returns dicts like :func:`flips`', ``keep`` and ``swap`` being those squared steps, mm², per
-    frame."""
+    shorter side, a side ending where the labels may have changed over unseen, in a long gap of both:
+    :func:`_unseen_changes`). Returns dicts like :func:`flips`', ``keep`` and ``swap`` being those squared steps,
+    mm², per frame."""
     F, out = data.shape[0], []
     seen = np.all(np.isfinite(data), axis=2)
     for i in range(chain.n_markers):
@@ -301,9 +323,17 @@ def exchanges(data: np.ndarray, chain) -> list:
             turned = np.union1d(handed, now[~again])
             if not len(turned) or len(turned) > 20:
                 continue
+            unseen = _unseen_changes(seen[:, i], seen[:, j]) if len(turned) == 1 else ()
             out += [{"cols": (i, j), "span": (a, b), "keep": keep, "swap": swap, "steps": True}
-                    for a, b in spans_between(turned, F) if b - a + 1 >= MIN_RUN]
+                    for a, b in spans_between(turned, F, unseen) if b - a + 1 >= MIN_RUN]
     return out
+
+
+def fits_exchanged(found: dict) -> bool:
+    """Whether a swap :func:`detect` found fits exchanged within its margin over most of its span (median frame):
+    a real swap does; an artefact on one marker (a bad gap edge) or an echo of another swap can merely fit better."""
+    a, b = found["span"]
+    return bool(np.nanmedian(found["swap"][a:b + 1]) <= found["clear"])
 
 
 MAX_SWAPS = 5            # swaps looked for, strongest first, each exchanged back before the next search
@@ -348,9 +378,7 @@ def screen(model, trial) -> tuple:
                                     f"labels."})
 
     for _ in range(MAX_SWAPS):
-        # a real swap fits well exchanged; an artefact on one marker (a bad gap edge) can merely fit better
-        found = [d for d in detect(data, chain, sigma, n_obs)
-                 if np.nanmedian(d["swap"][d["span"][0]:d["span"][1] + 1]) <= d["clear"]]
+        found = [d for d in detect(data, chain, sigma, n_obs) if fits_exchanged(d)]
         if not found:
             break
         (i, j), (a, b) = found[0]["cols"], found[0]["span"]     # the strongest; others may be its echoes

@@ -7,11 +7,11 @@ import tomllib
 import warnings
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import assume, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from identcheck.diagnose.workflow import diagnose
-from identcheck.estimate.labels import detect, exchanges, screen
+from identcheck.estimate.labels import LOOKBACK, MIN_RUN, detect, exchanges, screen
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -79,6 +79,27 @@ def test_a_swap_beginning_in_a_gap_is_read_from_its_first_frame(seed, start, len
     if not same:       # across bodies the distances show it too, from the first frame, where only i's label is seen
         first = detect(xyz, CHAIN, noise, xyz.size)[0]
         assert (first["cols"], first["span"]) == ((i, j), span)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), start=st.integers(40, 300), length=st.integers(20, 150),
+       before=st.integers(0, 20), after=st.integers(1, 20), noise=st.floats(0.1, 1.5), same=st.booleans())
+def test_a_swap_beginning_in_a_long_gap_of_both_is_bounded_by_it(seed, start, length, before, after, noise, same):
+    """Both markers hidden for longer than a step can be read across: the change is placed where they are seen again,
+    which exchanges the same samples as the true span (hidden frames hold nothing to exchange)."""
+    assume(before + after > LOOKBACK and length - after >= MIN_RUN)
+    rng = np.random.default_rng(seed)
+    i, j = (0, 1) if same else (0, 5)
+    truth = _two_bodies(rng, 700, noise)
+    truth[start - before:start + after] = np.nan                 # every marker hidden: no other reading either
+    span = (start, start + length - 1)
+    xyz = truth.copy()
+    xyz[span[0]:span[1] + 1, [i, j]] = xyz[span[0]:span[1] + 1, [j, i]]
+    found = exchanges(xyz, CHAIN)
+    assert [(d["cols"], d["span"]) for d in found] == [((i, j), (start + after, span[1]))]
+    a, b = found[0]["span"]
+    xyz[a:b + 1, [i, j]] = xyz[a:b + 1, [j, i]]
+    np.testing.assert_array_equal(xyz, truth)
 
 
 @settings(max_examples=40, deadline=None)
