@@ -4,19 +4,17 @@ it. Each marker's position then continues from where the other was last seen: :f
 the span from that, across short gaps, and finds nothing in smooth motion. ``diagnose`` named such a swap (a
 two-marker thigh's markers exchanged over 190 frames) as skin moving on the whole thigh."""
 import tomllib
-import warnings
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from identcheck.diagnose.workflow import diagnose
 from identcheck.estimate.labels import detect, exchanges
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
-from identcheck.trial import Trial
 from tests.diagnose.test_two_marker_segment import MODEL   # a leg whose thigh carries two markers
+from tests.swapped_trials import assert_swap_named_first
 
 
 
@@ -65,12 +63,4 @@ def test_diagnose_names_the_exchange_of_a_two_marker_thigh(tmp_path):
     xyz = sim.trial.as_array()
     i, j = sim.trial.index("RTHI"), sim.trial.index("RKNE")
     xyz[300:451, [i, j]] = xyz[300:451, [j, i]]
-    trc = tmp_path / "swapped.trc"
-    sim.trial.replace(xyz=xyz).to_file(trc)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rep = diagnose(model, Trial.from_file(trc)).to_dict()
-    first = rep["effects"][0]
-    assert first["name"] == "marker_swap" and set(first["where"]["markers"]) == {"RTHI", "RKNE"}
-    assert first["where"]["frames"] == [300, 450]
-    assert rep["gap_after"] <= 1.5 * rep["noise_floor"]
+    assert_swap_named_first(model, sim, xyz, tmp_path, {"RTHI", "RKNE"}, [300, 450])

@@ -4,18 +4,17 @@ the swap from its first frame only through the one marker seen (:func:`swap_cost
 one label going on where the other was last seen (:func:`exchanges`). ``diagnose`` named such swaps (a thigh and a
 shank marker, a shank's two anatomical markers, two pelvis markers) as skin motion or a hip translation."""
 import tomllib
-import warnings
 
 import numpy as np
 from hypothesis import assume, given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from identcheck.diagnose.workflow import diagnose
 from identcheck.estimate.labels import LOOKBACK, MIN_RUN, detect, exchanges, screen
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
+from tests.swapped_trials import assert_swap_named_first
 
 MODEL = """
 units = "mm"
@@ -129,12 +128,4 @@ def test_diagnose_names_a_thigh_shank_swap_that_began_in_a_gap(tmp_path):
     sim = simulate(model, n_frames=900, noise_mm=0.5, seed=11)
     i, j = sim.trial.index("RTHI"), sim.trial.index("RTIB")
     xyz = _swapped_in_gap(sim.trial.as_array(), i, j, (400, 599), 5, 8)
-    trc = tmp_path / "swapped_in_gap.trc"
-    sim.trial.replace(xyz=xyz).to_file(trc)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rep = diagnose(model, Trial.from_file(trc)).to_dict()
-    first = rep["effects"][0]
-    assert first["name"] == "marker_swap" and set(first["where"]["markers"]) == {"RTHI", "RTIB"}
-    assert first["where"]["frames"] == [400, 599]
-    assert rep["gap_after"] <= 1.5 * rep["noise_floor"]
+    assert_swap_named_first(model, sim, xyz, tmp_path, {"RTHI", "RTIB"}, [400, 599])
