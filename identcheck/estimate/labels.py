@@ -48,14 +48,12 @@ class _Distances:
         return np.linalg.norm(self.data[:, [a]] - self.data[:, ks], axis=2)
 
     def own(self, a: int, exclude: set):
-        """(partner columns, their distances' medians (n,), per-frame squared misfit from them (F,)) of marker `a`,
-        its partners being the other markers of its segment not in `exclude`."""
+        """(partner columns, their distances' medians (n,)) of marker `a`, its partners being the other markers of its
+        segment not in `exclude`."""
         ks = _partners(self.chain, a, exclude | {a})
         key = (a, tuple(ks))
         if key not in self._own:
-            d = self.to(a, ks)
-            med = np.nanmedian(d, axis=0) if len(ks) else np.zeros(0)
-            self._own[key] = (ks, med, np.nansum((d - med) ** 2, axis=1))
+            self._own[key] = (ks, np.nanmedian(self.to(a, ks), axis=0) if len(ks) else np.zeros(0))
         return self._own[key]
 
 
@@ -67,8 +65,8 @@ def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None
     misfit per distance scaled to the pair's number of distances so that both kinds of frame weigh alike; NaN
     where neither is seen, or where the seen one has no partner seen on either side."""
     dists = dists or _Distances(data, chain)
-    Pi, Di, _ = dists.own(i, {j})
-    Pj, Dj, _ = dists.own(j, {i})
+    Pi, Di = dists.own(i, {j})
+    Pj, Dj = dists.own(j, {i})
     n = len(Pi) + len(Pj)
     if n == 0:
         return None, None
@@ -259,9 +257,9 @@ def _both_continue(xi, xj, seen_i, seen_j, keep, swap) -> tuple[np.ndarray, np.n
 
 def _handovers(xa, xb, seen_a, seen_b, apart2: float, keep, swap) -> np.ndarray:
     """Frames where marker b has just vanished (last seen at most :data:`MAX_HOLE` + 1 frames back) and marker a,
-    seen for the first time since, sits :data:`JUMP_RATIO` times closer (squared) to where b was last than to where a itself was last (within
-    :data:`LOOKBACK`; when a was not seen so recently, than the two markers' usual squared distance `apart2`): the
-    trajectory goes on under the other label, as when labels change over in a gap."""
+    seen for the first time since, sits :data:`JUMP_RATIO` times closer (squared) to where b was last than to where
+    a itself was last (within :data:`LOOKBACK`; when a was not seen so recently, than the two markers' usual squared
+    distance `apart2`): the trajectory goes on under the other label, as when labels change over in a gap."""
     last_a, last_b = _last_seen(seen_a), _last_seen(seen_b)
     frames = np.arange(len(seen_a))
     # the first frame showing a since b was last seen
@@ -394,8 +392,8 @@ def screen(model, trial) -> tuple:
     for d in exchanges(data, chain):           # two markers alone on a segment, or a swap read across a gap
         (i, j), (a, b) = d["cols"], d["span"]
         if not any({chain.labels[i], chain.labels[j]} <= set(w["markers"]) for w in warnings):
-            leave_out(i, j, a, b, "at both ends of that span each one's trajectory goes on from where the other "
-                                  "was last seen")
+            leave_out(i, j, a, b, "where their labels change over, each one's trajectory goes on from where the "
+                                  "other's was last seen")
     if not warnings:
         return trial, []
     return trial.replace(xyz=xyz), warnings
