@@ -2,8 +2,8 @@
 
 For every measured recording paired with a model as in ``examples/real_fit_report.py``, runs
 :func:`identcheck.diagnose.workflow.diagnose` (the function behind ``identcheck diagnose``) when the
-model is one diagnose accepts (three or more markers on every segment, all present in the trial),
-and records the InputError of the others. Writes one short table per recording, the effects found
+model's markers are all in the trial (a segment with one or two markers is posed through its joints, as in
+``fit``), and records the InputError of the others. Writes one short table per recording, the effects found
 in order, and a reading of the numbers; the figures of the most telling recording go to
 ``examples/real_diagnose_*.png``.
 
@@ -42,7 +42,7 @@ from identcheck.report import diagnose_figures as figures  # noqa: E402
 from identcheck.bundle.chain import information  # noqa: E402
 from identcheck.bundle.hypothesis import joint_angles  # noqa: E402
 from identcheck.diagnose.workflow import diagnose  # noqa: E402
-from identcheck.errors import InputError  # noqa: E402
+from identcheck.errors import DegenerateError, InputError  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from identcheck.trial import Trial  # noqa: E402
 
@@ -73,11 +73,9 @@ def log(msg: str) -> None:
 
 # ------------------------------------------------------------------ running
 def accepts(model: Model, trial: Trial) -> list[str]:
-    """Why diagnose cannot use this pair (empty: it can): the same conditions diagnose checks first."""
-    why = [f"segment {s!r} has {len(seg.markers)} marker(s)" for s, seg in model.segments.items()
-           if len(seg.markers) < 3]
-    why += [f"marker {m!r} is not in the trial" for m in model.markers if m not in trial.labels]
-    return why
+    """Why diagnose cannot use this pair (empty: it can): a marker of the model missing from the trial. Segments with
+    one or two markers are diagnosed like the others (posed through their joints)."""
+    return [f"marker {m!r} is not in the trial" for m in model.markers if m not in trial.labels]
 
 
 def crop(trial: Trial, n: int | None) -> Trial:
@@ -93,8 +91,8 @@ def run_one(model: Model, trial: Trial, tag: str) -> dict:
         warnings.simplefilter("always")
         try:
             out["diag"] = diagnose(model, trial, progress=lambda m: log(f"  [{tag}] {m}"))
-        except InputError as exc:
-            out["error"] = str(exc)
+        except (InputError, DegenerateError) as exc:    # the data cannot answer: a clear refusal, not a crash
+            out["error"] = f"{type(exc).__name__}: {exc}" if isinstance(exc, DegenerateError) else str(exc)
         except Exception as exc:      # a crash is a finding for the report, not a reason to stop it
             out["error"] = f"{type(exc).__name__}: {exc}"
             out["traceback"] = traceback.format_exc()
@@ -308,8 +306,7 @@ def main() -> int:
     if refused:
         w("## Pairs diagnose cannot use")
         w("")
-        w("diagnose needs three or more markers on every segment, to check that each segment is rigid "
-          "before it blames the joints. Its InputError, verbatim:")
+        w("diagnose needs every marker of the model in the trial. Its InputError, verbatim:")
         w("")
         w("| recording | model | role | InputError |")
         w("|---|---|---|---|")
