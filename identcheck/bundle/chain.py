@@ -250,7 +250,11 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
     pieces, inner = _refit_projection(fit, weights)
-    parts = [pieces(v) for v in fields]
+    return _gram([pieces(v) for v in fields], inner)
+
+
+def _gram(parts: list, inner) -> np.ndarray:
+    """The symmetric matrix of `inner` between every two of `parts`."""
     G = np.empty((len(parts), len(parts)))
     for i in range(len(parts)):
         for j in range(i, len(parts)):
@@ -267,11 +271,25 @@ def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields:
     A detector that regresses the residual on the fields themselves understates this whenever the model's own
     unknowns take up part of each field (the joint angles, a shifted centre or axis, the segments' poses): that
     part is already gone from the residual, and the field's full norm in the denominator counts it again."""
+    return score_statistics(fit, weights, residual, [fields])[0]
+
+
+def score_statistics(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets: list) -> list:
+    """:func:`score_statistic` for each set of fields in `field_sets` (a list of lists of fields), one statistic per
+    set, the refit's projection built once for them all (it costs a whole normal-equation build and the Schur
+    complement; each field, a gradient pass)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
-    G = unabsorbed_gram(fit, weights, fields)
-    return float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)
+    pieces, inner = _refit_projection(fit, weights)
+    out = []
+    for fields in field_sets:
+        if not len(fields):
+            out.append(0.0)
+            continue
+        n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
+        G = _gram([pieces(v) for v in fields], inner)
+        out.append(float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n))
+    return out
 
 
 # ---------------------------------------------------------------------- starting point

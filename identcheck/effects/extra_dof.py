@@ -124,7 +124,7 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     explained = np.einsum("fb,fij,bi,bj->b", (smooth @ e.T) ** 2, lever, e, e)
     k = int(np.argmax(explained))
     beta = float(betas[k])
-    gain = ctx.bic_gain(float(explained[k]) * phi_discount(ctx), basis.shape[1] + 1)
+    gain = ctx.bic_gain(float(explained[k]) * ctx.smooth_share, basis.shape[1] + 1)
     # the rotation across one already adopted is a third: a place of its own (named alike, the two had been one
     # place, and a ball knee's third rotation was never tried once an oblique second had been adopted)
     where = {"joint": joint, "declared": ch.types[joint],
@@ -148,12 +148,6 @@ def axis_description(chain, state, joint: str, beta: float) -> dict:
     return {"about": "the child's long axis (axial rotation)" if tilt < 30 else
             "an axis across the child's long axis (varus/valgus)" if tilt > 60 else "an oblique axis",
             "angle_to_long_axis_deg": round(tilt, 1)}
-
-
-def phi_discount(ctx) -> float:
-    """What smooth residual is worth under serially correlated noise of lag-1 coefficient φ: (1 − φ)/(1 + φ)."""
-    phi = getattr(ctx.noise, "lag1", 0.0)
-    return (1 - phi) / (1 + phi)
 
 
 class ExtraDof(Effect):
