@@ -329,6 +329,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                     best, leader = sc, eff
             # errors the data show without the joint model come first among those that earn their parameters
             tried.sort(key=lambda x: (not (x[0] > bar and x[1].read_without_joints(x[2])), -x[0]))
+            tried = simplest_among_equals(tried, h, bar)
             adopted = None
             limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
             for sc, eff, prop, cand in tried:
@@ -364,6 +365,28 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             break
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
                      tuple(dropped_steps), progress)
+
+
+def simplest_among_equals(tried: list, h: Hypothesis, bar: float) -> list:
+    """The round's candidates `tried` ((score, effect, proposal, hypothesis), in the order they are to be considered)
+    with those at the head that explain the trial as well as the first (within :data:`EQUIVALENT_GAIN` or
+    :data:`EQUIVALENT_FRACTION` of its score: the report names them with it, ``indistinguishable_from``) put in
+    order of the parameters they add to `h`, fewest first; a swap the data show without the joint model keeps its
+    place at the head.
+
+    Why: scores that close are not told apart by the data, and the criterion's penalty is then smaller than the
+    noise in what the richer hypothesis explains. A pelvis delayed 20 ms in gait (1 parameter) scored 3 895 and the
+    hip's centre moving with its angles (31 parameters, the same marker motion when every other marker is below the
+    hip) 3 916, and the translation was named."""
+    if not tried or tried[0][0] <= bar or (tried[0][1].read_without_joints(tried[0][2])):
+        return tried
+    top = tried[0][0]
+    margin = max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * top)
+    n = 1
+    while n < len(tried) and tried[n][0] >= top - margin:
+        n += 1
+    head = sorted(tried[:n], key=lambda x: (x[3].n_params() - h.n_params(), -x[0]))
+    return head + tried[n:]
 
 
 def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list, progress) -> Hypothesis:

@@ -20,11 +20,14 @@ MODEL = Path(__file__).parents[2] / "examples" / "diagnose_leg.toml"
 class _OnTheRigidFit:
     """A stand-in hypothesis with the rigid fit's chain, gap and floor, fitted already."""
 
-    def __init__(self, base):
-        self.base, self.chain = base, base.chain
+    def __init__(self, base, added: int = 0):
+        self.base, self.chain, self.added = base, base.chain, added
 
     def polish(self, max_iter: int = 40):
         return self
+
+    def n_params(self) -> int:
+        return self.base.n_params() + self.added
 
     def gap(self, ctx):
         return self.base.gap(ctx)
@@ -36,8 +39,8 @@ class _OnTheRigidFit:
 class _Candidate(_OnTheRigidFit):
     """What a stand-in effect's fit returns: a hypothesis whose score against any other is `gain`."""
 
-    def __init__(self, base, gain: float, name: str, where: dict):
-        super().__init__(base)
+    def __init__(self, base, gain: float, name: str, where: dict, added: int = 0):
+        super().__init__(base, added)
         self.gain, self.name, self.where = gain, name, where
 
 
@@ -49,12 +52,12 @@ class _StandIn(Effect):
         self.fitted = []
 
     def propose(self, ctx, hyp):
-        return [Proposal(self.name, dict(w), s, {"score": sc}) for w, s, sc in self.places]
+        return [Proposal(self.name, dict(w), s, {"score": sc, "params": w.get("params", 0)}) for w, s, sc in self.places]
 
     def apply(self, ctx, hyp, proposal):
         self.fitted.append(proposal.where)
         base = hyp.base if isinstance(hyp, _Candidate) else hyp
-        return _Candidate(base, proposal.payload["score"], self.name, proposal.where)
+        return _Candidate(base, proposal.payload["score"], self.name, proposal.where, proposal.payload.get("params", 0))
 
 
 @pytest.fixture(scope="module")
@@ -111,6 +114,23 @@ def test_on_a_gap_consistent_with_noise_an_estimate_below_the_bar_is_still_fitte
         diag = _patched(monkeypatch, model, tr, [real, short, none], max_steps=3, consistent=True)
     assert [s.name for s in diag.steps] == ["real"]
     assert short.fitted and not none.fitted
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(100.0, 1e5), st.floats(0.0, 1.0), st.integers(2, 40))
+def test_of_two_effects_the_data_cannot_tell_apart_the_simpler_is_named(trial, big, within, more):
+    """Two effects whose fitted scores are within the equivalence margin: the one adding fewer parameters is named
+    first (the other is listed as indistinguishable from it); beyond the margin the better score is named whatever
+    it costs."""
+    model, tr = trial
+    margin = max(workflow.EQUIVALENT_GAIN, workflow.EQUIVALENT_FRACTION * big)
+    rich = _StandIn("rich", [({"joint": "hip", "params": more}, big, big)])
+    lean = _StandIn("lean", [({"segment": "pelvis", "params": 1}, big, big - 0.99 * within * margin)])
+    diag = _run(model, tr, [rich, lean])
+    assert [s.name for s in diag.steps] == ["lean"]
+    assert ("rich", {"joint": "hip", "params": more}) in diag.steps[0].equivalents()
+    far = _StandIn("lean", [({"segment": "pelvis", "params": 1}, big, big - 1.01 * margin - 1.0)])
+    assert [s.name for s in _run(model, tr, [rich, far]).steps] == ["rich"]
 
 
 def test_an_adopted_place_is_not_proposed_again(trial):
