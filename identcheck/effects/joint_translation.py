@@ -1,7 +1,8 @@
 """``joint_translation``: the joint's centre (or hinge) moves in its parent as the joint turns.
 
-Detector: the residuals of every marker below the joint, seen from the parent segment, regressed on
-smooth functions of the joint's angles. Augmentation: the centre in the parent becomes
+Detector: a score test of the translation's own marker displacements (every marker below the joint moved with the
+centre), what a refit with them would gain to first order. The smooth functions are of the joint's angles smoothed
+in time (:func:`~identcheck.bundle.hypothesis.driving_angles`). Augmentation: the centre in the parent becomes
 ``c + basis(angles) @ D`` (D fitted with everything else), which carries the whole subtree, plus the part of a
 translation linear in the angles that a rigid joint cannot absorb.
 
