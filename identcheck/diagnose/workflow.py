@@ -50,8 +50,8 @@ DECISIVE_GAIN = 50.0
 """A gap the consistency test passes may still hide an effect the criterion finds decisively (a slip under
 strongly correlated noise: the test's allowance for the uncertain noise level is wide); an effect whose gain
 exceeds this is adopted even then (the gain is 2 ln of a Bayes factor: 50 is far beyond 'very strong'). The bar is
-on the fitted gain: a proposal is fitted whenever its detector's estimate earns its parameters at all, since the
-estimates are first order and read low (a knee rolling back 10.7 mm in gait, on a trial the test passed: estimated
+on the fitted gain: a proposal of a nested effect (:attr:`identcheck.effects.base.Effect.nested`) is fitted
+whenever its detector's estimate earns its parameters at all, since the estimates are first order and read low (a knee rolling back 10.7 mm in gait, on a trial the test passed: estimated
 25, fitted 247; a hip pistoning under correlated noise: 28 and 94)."""
 EQUIVALENT_GAIN = 10.0
 EQUIVALENT_FRACTION = 0.02
@@ -303,8 +303,9 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             # both adopted would model one motion twice)
             taken = {place(n, w) for st in steps for n, w in [(st.name, st.where), *st.alike]} | dropped
             for prop, eff in proposals:
-                if prop.strength <= 0.0:
-                    continue                     # not even its detector's own estimate earns its parameters
+                if prop.strength <= (0.0 if eff.nested else bar):
+                    continue       # its detector's own estimate does not earn its parameters (or, for an effect that
+                    # changes the data, clear the bar: Effect.nested)
                 if place(eff.name, prop.where) in taken:
                     log.debug("%s %s skipped: adopted already", eff.name, prop.where)
                     continue

@@ -35,6 +35,7 @@ def _unexplained(ctx, hyp, span) -> float:
 
 class MarkerSwap(Effect):
     name = "marker_swap"
+    nested = False          # it changes the data (see Effect.nested)
     max_proposals = 2
 
     def inject(self, sim, rng) -> Change:

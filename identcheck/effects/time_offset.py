@@ -84,6 +84,7 @@ def _only(vel: np.ndarray, idx: list) -> np.ndarray:
 
 class TimeOffset(Effect):
     name = "time_offset"
+    nested = False          # it changes the data (see Effect.nested)
     max_proposals = 64
 
     def inject(self, sim, rng) -> Change:

@@ -104,16 +104,18 @@ def test_an_effect_whose_detector_underestimates_is_fitted_and_named(trial, big,
 def test_on_a_gap_consistent_with_noise_an_estimate_below_the_bar_is_still_fitted(trial, strength, above, null):
     """Where the gap passes the consistency test, an effect is adopted only when its fitted score is decisive; its
     detector's estimate need only earn its parameters for it to be fitted (a knee rolling back 10.7 mm in gait was
-    estimated at 25 and gained 247 when fitted); an estimate that does not earn its parameters is not fitted, and a
-    fitted score below the bar adopts nothing."""
+    estimated at 25 and gained 247 when fitted); an estimate that does not earn its parameters is not fitted, nor one
+    below the bar of an effect that changes the data, and a fitted score below the bar adopts nothing."""
     model, tr = trial
     real = _StandIn("real", [({"joint": "knee"}, strength, workflow.DECISIVE_GAIN + above)])
     short = _StandIn("short", [({"joint": "hip"}, strength, workflow.DECISIVE_GAIN * 0.9)])
     none = _StandIn("none", [({"segment": "thigh"}, null, 1e4)])
+    moved = _StandIn("moved", [({"segment": "pelvis"}, strength, 1e4)])
+    moved.nested = False                  # it changes the data: its estimate must clear the bar itself
     with pytest.MonkeyPatch.context() as monkeypatch:
-        diag = _patched(monkeypatch, model, tr, [real, short, none], max_steps=3, consistent=True)
+        diag = _patched(monkeypatch, model, tr, [real, short, none, moved], max_steps=3, consistent=True)
     assert [s.name for s in diag.steps] == ["real"]
-    assert short.fitted and not none.fitted
+    assert short.fitted and not none.fitted and not moved.fitted
 
 
 @settings(max_examples=20, deadline=None)
