@@ -173,7 +173,8 @@ def joint_angles(h) -> dict:
 DRIVING_SMOOTHING_S = 0.04
 """Standard deviation (s) of the Gaussian that smooths the fitted joint angles before a translating joint's smooth
 functions of them are built (:func:`driving_angles`): it passes the motion (at 1 Hz 97 % of the amplitude, at 2 Hz
-88 %) and takes out most of the frame-to-frame noise the fitted angles carry (white noise at 100 Hz: to about a quarter of its standard deviation)."""
+88 %) and takes out most of the frame-to-frame noise the fitted angles carry (white noise at 100 Hz: to about a
+quarter of its standard deviation)."""
 
 
 def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:

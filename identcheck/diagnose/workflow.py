@@ -48,11 +48,12 @@ CREEP_ITER = 12
 effect, is not the effect's (:func:`creep`)."""
 DECISIVE_GAIN = 50.0
 """A gap the consistency test passes may still hide an effect the criterion finds decisively (a slip under
-strongly correlated noise: the test's allowance for the uncertain noise level is wide); an effect whose gain
-exceeds this is adopted even then (the gain is 2 ln of a Bayes factor: 50 is far beyond 'very strong'). The bar is
-on the fitted gain: a proposal of a nested effect (:attr:`identcheck.effects.base.Effect.nested`) is fitted
-whenever its detector's estimate earns its parameters at all, since the estimates are first order and read low (a knee rolling back 10.7 mm in gait, on a trial the test passed: estimated
-25, fitted 247; a hip pistoning under correlated noise: 28 and 94)."""
+strongly correlated noise: the test's allowance for the uncertain noise level is wide); an effect whose gain exceeds
+this is adopted even then (the gain is 2 ln of a Bayes factor: 50 is far beyond 'very strong'). The bar is on the
+fitted gain: a proposal of a nested effect (:attr:`identcheck.effects.base.Effect.nested`) is fitted whenever its
+detector's estimate earns its parameters at all, since the estimates are first order and read low (a knee rolling
+back 10.7 mm in gait, on a trial the test passed: estimated 25, fitted 247; a hip pistoning under correlated noise:
+28 and 94)."""
 EQUIVALENT_GAIN = 10.0
 EQUIVALENT_FRACTION = 0.02
 """Two effects whose scores differ by less than the larger of these (criterion units, fraction of the score)

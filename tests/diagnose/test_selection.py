@@ -52,7 +52,8 @@ class _StandIn(Effect):
         self.fitted = []
 
     def propose(self, ctx, hyp):
-        return [Proposal(self.name, dict(w), s, {"score": sc, "params": w.get("params", 0)}) for w, s, sc in self.places]
+        return [Proposal(self.name, dict(w), s, {"score": sc, "params": w.get("params", 0)})
+                for w, s, sc in self.places]
 
     def apply(self, ctx, hyp, proposal):
         self.fitted.append(proposal.where)
