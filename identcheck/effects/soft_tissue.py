@@ -71,19 +71,11 @@ def drivers(chain) -> list:
     and, for a segment between joints (a thigh, below the hip and above the knee), each pair of its joints
     together. Skin over a segment moves with the angles of the muscles that cross it, and those span both of its
     joints: a thigh's cluster moving with hip flexion and knee flexion at once (a bulge with their product) was
-    fitted by neither joint's angles alone, and a distortion of the whole volume explained more of it. A muscle
-    spanning two joints moves it with the farther joint's angle too: a shank marker's skin moving 12 mm with the hip's
-    flexion was named as four slips, having no place among the knee's angles."""
+    fitted by neither joint's angles alone, and a distortion of the whole volume explained more of it."""
     out = [(seg, (j,)) for j in chain.joints for seg in (chain.parent[j], chain.child[j])]
     for seg in chain.seg_markers:
         own = [j for j in chain.joints if seg in (chain.parent[j], chain.child[j])]
         out += [(seg, (a, b)) for k, a in enumerate(own) for b in own[k + 1:]]
-        # a muscle that crosses two joints moves the skin of the segment beyond the nearer one with the farther
-        # one's angle (the hamstrings' or rectus femoris' pull on a shank's skin with the hip's flexion): each joint
-        # of a neighbouring segment, alone
-        near = {chain.parent[j] for j in own} | {chain.child[j] for j in own}
-        out += [(seg, (j,)) for j in chain.joints if j not in own
-                and (chain.parent[j] in near or chain.child[j] in near)]
     return out
 
 
