@@ -275,9 +275,9 @@ def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields:
 
 
 def score_statistics(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets: list) -> list:
-    """:func:`score_statistic` for each set of fields in `field_sets` (a list of lists of fields), one statistic per
-    set, the refit's projection built once for them all (it costs a whole normal-equation build and the Schur
-    complement; each field, a gradient pass)."""
+    """:func:`score_statistic` for each set of fields in `field_sets` (any iterable of lists of fields, read once: a
+    generator keeps one set in memory at a time), one statistic per set, the refit's projection built once for them
+    all (it costs a whole normal-equation build and the Schur complement; each field, a gradient pass)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     pieces, inner = _refit_projection(fit, weights)

@@ -142,8 +142,9 @@ class JointTranslation(Effect):
             basis = angle_basis(angles[j], linear=False, cubic=True)
             lin = linear_fields(hyp, j, angles[j])
             places.append((j, basis, lin))
+        # one joint's fields at a time (each (F, M, 3); a full body's joints' together ran to hundreds of MB)
         stats = score_statistics(hyp.fit, hyp.weights, hyp.residuals(),
-                                 [displacement_fields(hyp, j, basis, lin) for j, basis, lin in places])
+                                 (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places))
         out = []
         for (j, basis, lin), stat in zip(places, stats):
             gain = ctx.bic_gain(ctx.smooth_share * stat, 3 * basis.shape[1] + len(lin))
