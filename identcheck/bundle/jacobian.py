@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from identcheck.bundle.coupling import KronTerm
 from identcheck.bundle.model import (State, Terms, cross3, hinge_turns, n_const, second_axis, tangents, tilt_axis,
                                      turn_beta, turn_rate)
 from identcheck.geometry.rotations import hinge_matrix, skew
@@ -31,7 +32,10 @@ class Group:
     ``terms``: indices (``Terms.ordered()`` order) of the effect terms that touch them; ``frame_cols`` (kb,):
     their per-frame unknowns (the root's pose, then each joint's angles); ``const_cols`` (pb,): their
     constants (the markers' own positions, 3 each, then each joint's, root first, then each term's); and
-    both as :func:`runs`."""
+    both as :func:`runs`. For the coupling kept by structure (:mod:`identcheck.bundle.coupling`): ``plain_at``,
+    the positions in ``const_cols`` of the plain constants (those not a basis times a base direction), and
+    ``plain_runs`` their places among :attr:`Layout.plain`; ``base_runs``, the places of the group's terms' base
+    directions among the coupling's bases."""
 
     segment: str
     cols: np.ndarray
@@ -41,6 +45,9 @@ class Group:
     const_cols: np.ndarray
     frame_runs: tuple = ()
     const_runs: tuple = ()
+    plain_at: np.ndarray | None = None
+    plain_runs: tuple = ()
+    base_runs: tuple = ()
 
 
 def runs(cols: np.ndarray) -> tuple:
@@ -59,11 +66,15 @@ def runs(cols: np.ndarray) -> tuple:
 
 @dataclass(frozen=True)
 class Layout:
-    """Where every unknown sits: ``k`` per-frame columns, ``P`` constant columns, and the groups."""
+    """Where every unknown sits: ``k`` per-frame columns, ``P`` constant columns, and the groups; ``plain``, the
+    constants that are not a basis times a base direction, and ``kron``, the terms that are
+    (:class:`~identcheck.bundle.coupling.KronTerm`: skin, a translating centre, a hinge's second rotation)."""
 
     k: int
     P: int
     groups: tuple
+    plain: np.ndarray = None
+    kron: tuple = ()
 
 
 def _ancestors(chain: Skeleton, segment: str) -> tuple:
@@ -96,11 +107,25 @@ def layout(chain: Skeleton, terms: Terms) -> Layout:
     for j in chain.joints:
         const_start[j] = c
         c += 6 + (5 if chain.types[j] == "revolute" else 0)
-    term_cols = []
-    for size in [3 * b.shape[1] for _, b in terms.markers + terms.centres] \
-            + [b.shape[1] + 1 for _, b, _ in terms.rotations] + [1] * len(terms.world):
+    term_cols, kron, kron_of, offset = [], [], {}, 0
+    n_mc = len(terms.markers) + len(terms.centres)
+    for i, term in enumerate(terms.ordered()):
+        if i < n_mc + len(terms.rotations):            # a basis times base directions (3, or one turn)
+            basis = term[1]
+            d = 3 if i < n_mc else 1
+            kron_of[i] = len(kron)
+            kron.append(KronTerm(c, d, offset, basis))
+            offset += d
+            size = d * basis.shape[1] + (0 if i < n_mc else 1)     # (a hinge's second rotation: its β, plain)
+        else:
+            size = 1
         term_cols.append(np.arange(c, c + size))
         c += size
+    in_kron = np.zeros(c, dtype=bool)
+    for t in kron:
+        in_kron[t.cols] = True
+    plain = np.flatnonzero(~in_kron)
+    plain_index = np.cumsum(~in_kron) - 1
     touched = _touched(chain, terms)
     groups = []
     for seg in chain.segments:
@@ -117,17 +142,24 @@ def layout(chain: Skeleton, terms: Terms) -> Layout:
             cols = np.array(cols, dtype=int)
             ccol = np.concatenate([(3 * cols[:, None] + np.arange(3)).ravel()] + ccols
                                   + [term_cols[i] for i in key]).astype(int)
-            groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), runs(ccol)))
-    return Layout(col, n_const(chain, terms), tuple(groups))
+            plain_at = np.flatnonzero(~in_kron[ccol])
+            bases = np.concatenate([np.arange(kron[kron_of[i]].offset, kron[kron_of[i]].offset + kron[kron_of[i]].d)
+                                    for i in key if i in kron_of] or [np.zeros(0)]).astype(int)
+            groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), runs(ccol), plain_at,
+                                runs(plain_index[ccol[plain_at]]), runs(bases)))
+    return Layout(col, n_const(chain, terms), tuple(groups), plain, tuple(kron))
 
 
 @dataclass(frozen=True)
 class Block:
-    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, ``G`` (F, m, 3, pb) constants, in its columns."""
+    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, ``G`` (F, m, 3, pb) constants, in its columns;
+    ``base`` (F, m, 3, db), the base directions of the group's terms that are a basis times them (G's columns of
+    such a term are its base times each basis function: :mod:`identcheck.bundle.coupling`)."""
 
     group: Group
     J: np.ndarray
     G: np.ndarray
+    base: np.ndarray | None = None
 
 
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
@@ -196,15 +228,18 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
                 for a in range(2):                          # axis direction, tangent plane
                     G[..., cc + 3 + a] = cross3(tilt_w[j][a][:, None], d)
                 cc += 5
+        base = []
         for ti in grp.terms:
             term = ordered[ti]
             if ti < len(terms.markers):                      # the markers' position on their segment
                 basis = term[1]
+                base.append(np.broadcast_to(R[grp.segment][:, None], (F, m, 3, 3)))
                 for kk in range(basis.shape[1]):
                     G[..., cc:cc + 3] = (R[grp.segment] * basis[:, kk, None, None])[:, None]
                     cc += 3
             elif ti < n_mc:                                  # the joint centre in the parent
                 j, basis = term
+                base.append(np.broadcast_to(R[chain.parent[j]][:, None], (F, m, 3, 3)))
                 for kk in range(basis.shape[1]):
                     G[..., cc:cc + 3] = (R[chain.parent[j]] * basis[:, kk, None, None])[:, None]
                     cc += 3
@@ -212,6 +247,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
                 j, basis, _ = term
                 w_psi, w_beta = second[ti]
                 turn = cross3(w_psi[:, None], dx[j])
+                base.append(turn[..., None])
                 for kk in range(basis.shape[1]):
                     G[..., cc] = turn * basis[:, kk, None, None]
                     cc += 1
@@ -222,7 +258,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
                 where = {int(c): i for i, c in enumerate(np.atleast_1d(cols))}
                 G[..., cc] = fld[:, [where[int(c)] for c in idx]]
                 cc += 1
-        blocks.append(Block(grp, J, G))
+        blocks.append(Block(grp, J, G, np.concatenate(base, axis=3) if base else None))
     return lay, blocks
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from identcheck.bundle.coupling import Coupling
 from identcheck.bundle.jacobian import Layout
 
 
@@ -27,34 +28,47 @@ def _add(target: np.ndarray, rows: tuple, cols: tuple | None, x: np.ndarray) -> 
 
 def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False,
                      gradients_only: bool = False):
-    """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module); with
+    """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module), B as a
+    :class:`~identcheck.bundle.coupling.Coupling` (its term columns a base times a basis, never written out); with
     `gradients_only`, (g, h) alone (the products A, B and C do not depend on `r`: a caller projecting several
     fields builds them once)."""
     F, k, P = r.shape[0], lay.k, lay.P
+    plain_cols = np.arange(P) if lay.plain is None else lay.plain
+    D = sum(t.d for t in lay.kron)
     if not gradients_only:
-        A, B, C = np.zeros((F, k, k)), np.zeros((F, k, P)), np.zeros((P, P))
+        A, C = np.zeros((F, k, k)), np.zeros((P, P))
+        Bp, Bb = np.zeros((F, k, len(plain_cols))), np.zeros((F, k, D))
     g, h = np.zeros((F, k)), np.zeros((F, P) if per_frame else P)
     unit = bool(np.all(w == 1.0))        # every sample seen at unit weight (most trials): no weighted copies
     for b in blocks:
-        idx, kb, pb = b.group.cols, b.J.shape[-1], b.G.shape[-1]
-        fr, cr = b.group.frame_runs, b.group.const_runs
+        grp = b.group
+        idx, kb, pb = grp.cols, b.J.shape[-1], b.G.shape[-1]
+        fr, cr = grp.frame_runs, grp.const_runs
         n = 3 * len(idx)
+        base = None if b.base is None or not grp.base_runs else b.base.reshape(F, n, -1)
         if unit:
             Jf, Gf, rf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb), r[:, idx].reshape(F, n)
         else:
             sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
             rf = r[:, idx].reshape(F, n) * sw
+            base = None if base is None else base * sw[..., None]
         Jt, Gt = Jf.transpose(0, 2, 1), Gf.transpose(0, 2, 1)
         G2 = Gf.reshape(F * n, pb)
         if not gradients_only:
             Jt = np.ascontiguousarray(Jt)            # a contiguous Jᵀ: JᵀJ at BLAS speed
             _add(A, fr, fr, Jt @ Jf)
-            _add(B, fr, cr, Jt @ Gf)
+            at = grp.plain_at
+            plain = Gf if at is None or len(at) == pb else Gf[..., at]
+            _add(Bp, fr, grp.plain_runs if at is not None else cr, Jt @ plain)
+            if base is not None:
+                _add(Bb, fr, grp.base_runs, Jt @ base)
             _add(C, cr, cr, G2.T @ G2)
         _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
         _add(h, cr, None, (Gt @ rf[..., None])[..., 0] if per_frame else G2.T @ rf.reshape(-1))
-    return (g, h) if gradients_only else (A, B, C, g, h)
+    if gradients_only:
+        return g, h
+    return A, Coupling(Bp, plain_cols, Bb, lay.kron, P), C, g, h
 
 
 def ridged(A: np.ndarray) -> np.ndarray:
@@ -80,47 +94,33 @@ def lower_inverse(L: np.ndarray) -> np.ndarray:
     return X
 
 
-CHUNK_ENTRIES = 1 << 19
-"""Entries of L⁻¹B (float64, 4 MiB) formed at a time when the frames are eliminated: the Schur complement sums
-over frames, so it is built chunk by chunk and L⁻¹B (as large as B: 93 MB for a 42-marker body at 1500 frames) is
-never held whole."""
-
-
-def eliminate_frames(A_damped: np.ndarray, B: np.ndarray, C: np.ndarray, g: np.ndarray, h: np.ndarray):
+def eliminate_frames(A_damped: np.ndarray, B, C: np.ndarray, g: np.ndarray, h: np.ndarray):
     """The per-frame unknowns eliminated (Schur complement): ``S = C − Σ_f B_fᵀ A_f⁻¹ B_f`` (P, P) and the reduced
     gradient ``h − Σ_f B_fᵀ A_f⁻¹ g_f`` ((P,), or per frame (F, P) when `h` is), with `A_damped` (F, k, k) the
-    per-frame blocks as the caller damps or ridges them; and ``back(dc)``, the per-frame ``A_f⁻¹ (g_f + B_f dc)``
-    (F, k) that goes with a step `dc` of the constants.
+    per-frame blocks as the caller damps or ridges them and B a :class:`~identcheck.bundle.coupling.Coupling` (or
+    an array (F, k, P)); and ``back(dc)``, the per-frame ``A_f⁻¹ (g_f + B_f dc)`` (F, k) that goes with a step `dc`
+    of the constants.
 
-    Through each block's Cholesky factor L (A = LLᵀ): X = L⁻¹[B g], so that S = C − XᵀX is one symmetric
-    product, summed over chunks of frames (:data:`CHUNK_ENTRIES`); ``back`` applies L⁻¹ to ``B dc`` rather than
-    keeping L⁻¹B. A block that is not numerically positive definite (a pose the markers leave free, held by a
-    tiny ridge) is solved as a general system instead."""
+    Through each block's Cholesky factor L (A = LLᵀ): ``Σ_f B_fᵀ A_f⁻¹ B_f`` is the coupling's
+    :meth:`~identcheck.bundle.coupling.Coupling.schur` with L⁻¹, and ``A_f⁻¹ x = L⁻ᵀ L⁻¹ x``. A block that is not
+    numerically positive definite (a pose the markers leave free, held by a tiny ridge) is solved as a general
+    system instead."""
+    B = B if isinstance(B, Coupling) else Coupling.from_dense(np.asarray(B))
     F, k, P = B.shape
     try:
         Linv = lower_inverse(np.linalg.cholesky(A_damped))
     except np.linalg.LinAlgError:
         Linv = None
     if Linv is None:
-        right = np.linalg.solve(A_damped, B)
+        Bd = B.dense()
+        right = np.linalg.solve(A_damped, Bd)
         right_g = np.linalg.solve(A_damped, g[..., None])[..., 0]
-        S = C - B.reshape(F * k, P).T @ right.reshape(F * k, P)
-        if h.ndim == 2:
-            reduced = h - (B.transpose(0, 2, 1) @ right_g[..., None])[..., 0]
-        else:
-            reduced = h - B.reshape(F * k, P).T @ right_g.reshape(-1)
+        S = C - Bd.reshape(F * k, P).T @ right.reshape(F * k, P)
+        reduced = h - B.transposed_times(right_g, per_frame=h.ndim == 2)
         return 0.5 * (S + S.T), reduced, lambda dc: right_g + right @ dc
-    right_g = (Linv @ g[..., None])[..., 0]              # L⁻¹g (F, k)
-    S, reduced = C.copy(), h.copy()
-    step = max(1, CHUNK_ENTRIES // max(k * P, 1))
-    for f0 in range(0, F, step):
-        X = Linv[f0:f0 + step] @ B[f0:f0 + step]          # L⁻¹B of these frames (c, k, P), contiguous
-        X2 = X.reshape(-1, P)
-        S -= X2.T @ X2
-        if h.ndim == 2:
-            reduced[f0:f0 + step] -= (X.transpose(0, 2, 1) @ right_g[f0:f0 + step, :, None])[..., 0]
-        else:
-            reduced -= X2.T @ right_g[f0:f0 + step].reshape(-1)
     Linv_t = Linv.transpose(0, 2, 1)
-    back = lambda dc: (Linv_t @ (right_g + (Linv @ (B @ dc)[..., None])[..., 0])[..., None])[..., 0]  # noqa: E731
+    u = (Linv_t @ (Linv @ g[..., None]))[..., 0]                 # A⁻¹g (F, k)
+    S = C - B.schur(Linv)
+    reduced = h - B.transposed_times(u, per_frame=h.ndim == 2)
+    back = lambda dc: u + (Linv_t @ (Linv @ B.times(dc)[..., None]))[..., 0]  # noqa: E731
     return 0.5 * (S + S.T), reduced, back

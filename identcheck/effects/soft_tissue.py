@@ -169,8 +169,8 @@ class SoftTissue(Effect):
         def moved(h):  # noqa: E306 - the marker's residual on its segment (the cluster's mean; its markers' RMS)
             with np.errstate(all="ignore"):
                 r = segment_residuals(h)[:, col]
-                if each:
-                    return np.sqrt(np.nanmean(np.sum(r ** 2, axis=2), axis=1))
+                if each:          # (a frame where every one of them is hidden: NaN, and no warning for it)
+                    return np.sqrt(seen_mean(np.sum(r ** 2, axis=2), axis=1))
                 return np.linalg.norm(seen_mean(r, axis=1), axis=1)
         who = (proposal.where["markers"][0] if len(col) == 1 else
                "its markers' RMS" if each else "the cluster's mean")

@@ -3,6 +3,7 @@ written out frame by frame from the full Jacobians: random chains' states, effec
 from __future__ import annotations
 
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -66,7 +67,8 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
     r = rng.normal(size=(F, M, 3))
     w = {"ones": np.ones((F, M)), "gaps": (rng.random((F, M)) < 0.7).astype(float),
          "fractional": rng.random((F, M))}[weights]
-    A, B, C, g, h = normal_equations(lay, blocks, r, w)
+    A, coupling, C, g, h = normal_equations(lay, blocks, r, w)
+    B = coupling.dense()
     h_frames = normal_equations(lay, blocks, r, w, per_frame=True)[4]
     C_want, h_want = np.zeros((lay.P, lay.P)), np.zeros(lay.P)
     for f in range(F):
@@ -82,6 +84,18 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
         h_want += Gf.T @ rf
     np.testing.assert_allclose(C, C_want, atol=1e-9 * (1 + np.abs(C_want).max()))
     np.testing.assert_allclose(h, h_want, atol=1e-9 * (1 + np.abs(h_want).max()))
+    # the coupling kept by structure (term columns a base times a basis) eliminates the frames as B written out does
+    from identcheck.bundle import coupling as kept
+    from identcheck.bundle.normal import eliminate_frames, ridged
+    Ad = ridged(A) + np.eye(lay.k)
+    for hh, chunk in ((h, kept.CHUNK_ENTRIES), (h_frames, 1)):          # (1: the frames summed one at a time)
+        with mock.patch.object(kept, "CHUNK_ENTRIES", chunk):
+            S1, red1, back1 = eliminate_frames(Ad, coupling, C, g, hh)
+        S2, red2, back2 = eliminate_frames(Ad, B, C, g, hh)
+        np.testing.assert_allclose(S1, S2, atol=1e-9 * (1 + np.abs(S2).max()))
+        np.testing.assert_allclose(red1, red2, atol=1e-9 * (1 + np.abs(red2).max()))
+        dc = rng.normal(size=lay.P)
+        np.testing.assert_allclose(back1(dc), back2(dc), atol=1e-9 * (1 + np.abs(back2(dc)).max()))
 
 
 @settings(max_examples=40, deadline=None)
