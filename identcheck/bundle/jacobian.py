@@ -19,7 +19,7 @@ import numpy as np
 
 from identcheck.bundle.coupling import KronTerm
 from identcheck.bundle.model import (State, Terms, cross3, hinge_turns, n_const, second_axis, tangents, tilt_axis,
-                                     turn_beta, turn_rate)
+                                     turn_beta, turn_rate, world_motion)
 from identcheck.geometry.rotations import hinge_matrix, skew
 from identcheck.skeleton import Skeleton
 
@@ -162,6 +162,15 @@ class Block:
     base: np.ndarray | None = None
 
 
+def _base_times_basis(G: np.ndarray, cc: int, base: np.ndarray, basis: np.ndarray) -> int:
+    """Write a term's columns into G (F, m, 3, pb) from column `cc` on: its base directions `base` (F, m or 1, 3, d)
+    times each basis function (F, K), column ``cc + d·kk + a``; returns the column after them."""
+    F, K, d = basis.shape[0], basis.shape[1], base.shape[-1]
+    G[..., cc:cc + d * K] = (base[..., None, :] * basis[:, None, None, :, None]).reshape(
+        (F, base.shape[1], 3, d * K))
+    return cc + d * K
+
+
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
                     pred: np.ndarray) -> tuple[Layout, list]:
     """The derivatives of the predictions `pred` (F, M, 3) of state `s` (with the segments' rotations `R` and
@@ -169,11 +178,8 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
     lay = layout(chain, terms)
     F = pred.shape[0]
     n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
-    lever = pred
-    if terms.world:                                   # lever arms are the rigid bodies' points, not the fields'
-        lever = pred.copy()
-        for (cols, fld), p in zip(terms.world, s.term_params[n0:]):
-            lever[:, cols] -= p[0] * fld
+    lever = pred - world_motion(terms, s) if terms.world else pred    # lever arms: the rigid bodies' points
+    runs_at = {n0 + first: (cols, fields) for first, cols, fields in terms.world_runs()}
     turns = hinge_turns(chain, terms, s) if terms.rotations else {}
     hinge_w, rest_w, tilt_w = {}, {}, {}
     for j in chain.joints:
@@ -234,30 +240,24 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
             if ti < len(terms.markers):                      # the markers' position on their segment
                 basis = term[1]
                 base.append(np.broadcast_to(R[grp.segment][:, None], (F, m, 3, 3)))
-                for kk in range(basis.shape[1]):
-                    G[..., cc:cc + 3] = (R[grp.segment] * basis[:, kk, None, None])[:, None]
-                    cc += 3
+                cc = _base_times_basis(G, cc, R[grp.segment][:, None], basis)
             elif ti < n_mc:                                  # the joint centre in the parent
                 j, basis = term
                 base.append(np.broadcast_to(R[chain.parent[j]][:, None], (F, m, 3, 3)))
-                for kk in range(basis.shape[1]):
-                    G[..., cc:cc + 3] = (R[chain.parent[j]] * basis[:, kk, None, None])[:, None]
-                    cc += 3
+                cc = _base_times_basis(G, cc, R[chain.parent[j]][:, None], basis)
             elif ti < n0:                                    # a hinge's second rotation
                 j, basis, _ = term
                 w_psi, w_beta = second[ti]
                 turn = cross3(w_psi[:, None], dx[j])
                 base.append(turn[..., None])
-                for kk in range(basis.shape[1]):
-                    G[..., cc] = turn * basis[:, kk, None, None]
-                    cc += 1
+                cc = _base_times_basis(G, cc, turn[..., None], basis)
                 G[..., cc] = cross3(w_beta[:, None], dx[j])
                 cc += 1
-            else:                                            # a field in the world
-                cols, fld = term
-                where = {int(c): i for i, c in enumerate(np.atleast_1d(cols))}
-                G[..., cc] = fld[:, [where[int(c)] for c in idx]]
-                cc += 1
+            elif ti in runs_at:                              # fields in the world, a run of them at once
+                cols, fields = runs_at[ti]
+                where = {int(c): i for i, c in enumerate(cols)}
+                G[..., cc:cc + fields.shape[-1]] = fields[:, [where[int(c)] for c in idx]]
+                cc += fields.shape[-1]
         blocks.append(Block(grp, J, G, np.concatenate(base, axis=3) if base else None))
     return lay, blocks
 
