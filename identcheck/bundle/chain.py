@@ -172,8 +172,8 @@ def _solve_constants(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     only when it has none (a direction no sample and no damping holds).
 
     The damping makes S positive definite whenever every constant touches a sample, so the factor almost always
-    exists; least squares (an SVD) cost ten times as much, a third of ``diagnose``'s time on a gait trial with skin
-    terms (P = 450-775)."""
+    exists; least squares (an SVD) costs 2.4-6 times as much at P = 200-660, and took 34 of ``diagnose``'s 261 s
+    (under the profiler) on a gait trial with skin terms (P = 450-775)."""
     try:
         return cho_solve(cho_factor(S, lower=True, check_finite=False), rhs, check_finite=False)
     except np.linalg.LinAlgError:

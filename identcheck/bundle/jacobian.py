@@ -45,7 +45,7 @@ class Group:
     const_cols: np.ndarray
     frame_runs: tuple = ()
     const_runs: tuple = ()
-    plain_at: np.ndarray | None = None
+    plain_at: np.ndarray = None
     plain_runs: tuple = ()
     base_runs: tuple = ()
 

@@ -33,7 +33,7 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
     `gradients_only`, (g, h) alone (the products A, B and C do not depend on `r`: a caller projecting several
     fields builds them once)."""
     F, k, P = r.shape[0], lay.k, lay.P
-    plain_cols = np.arange(P) if lay.plain is None else lay.plain
+    plain_cols = lay.plain
     D = sum(t.d for t in lay.kron)
     if not gradients_only:
         A, C = np.zeros((F, k, k)), np.zeros((P, P))
@@ -58,9 +58,8 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
         if not gradients_only:
             Jt = np.ascontiguousarray(Jt)            # a contiguous Jᵀ: JᵀJ at BLAS speed
             _add(A, fr, fr, Jt @ Jf)
-            at = grp.plain_at
-            plain = Gf if at is None or len(at) == pb else Gf[..., at]
-            _add(Bp, fr, grp.plain_runs if at is not None else cr, Jt @ plain)
+            plain = Gf if len(grp.plain_at) == pb else Gf[..., grp.plain_at]
+            _add(Bp, fr, grp.plain_runs, Jt @ plain)
             if base is not None:
                 _add(Bb, fr, grp.base_runs, Jt @ base)
             _add(C, cr, cr, G2.T @ G2)

@@ -33,7 +33,10 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size):
     seg0 = chain.seg_markers[chain.marker_seg[0]]
     terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1)))), (np.array(seg0), tb[:, :2])],
                   centres=[(ball, tb[:, :3])],
-                  rotations=[(hinge, tb, beta)], world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
+                  rotations=[(hinge, tb, beta)],
+                  world=[(np.arange(chain.n_markers), rng.normal(size=data.shape)),   # a run of two on every marker
+                         (np.arange(chain.n_markers), rng.normal(size=data.shape)),
+                         (np.array([0, 2]), rng.normal(size=(40, 2, 3)))])
     s.term_params = [rng.normal(size=sh) * (size if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
     R, t, centre, pred = forward(chain, terms, s)
     lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
