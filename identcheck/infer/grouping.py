@@ -377,8 +377,10 @@ class Grouping:
     widened : dict of str to dict
         Inferred only: group → ``{"spread_mm", "separation_mm", "added", "note"}`` for each group that gathered
         markers beyond the tolerance (:func:`identcheck.infer.separated_groups.widen`): its largest internal
-        spread, its smallest complete-linkage spread to the rest, the markers added, and the two readings in words.
-        Such a group is an interpretation the data leave open, so the skeleton is not called settled.
+        spread, its smallest complete-linkage spread to the rest, the markers added, and the two readings in words;
+        ``"bodies_merged"`` too (each body's markers) when the group joins rigid bodies whose joints hardly move in
+        the trial (:func:`identcheck.infer.separated_groups._merge`). Such a group is an interpretation the data
+        leave open, so the skeleton is not called settled.
     """
 
     groups: dict
@@ -490,11 +492,24 @@ def group_markers(trial) -> Grouping:
     wide = {}
     for w in widened:                                   # a body may grow twice: the entries add up
         entry = wide.setdefault(home[w.added[0]], {"spread_mm": 0.0, "separation_mm": float("inf"), "added": []})
+        if w.bodies:
+            entry["bodies_merged"] = [[labels[i] for i in b] for b in w.bodies]
         entry["spread_mm"] = max(entry["spread_mm"], w.spread_mm)
         entry["separation_mm"] = min(entry["separation_mm"], w.separation_mm)
         entry["added"] = sorted(entry["added"] + [labels[i] for i in w.added], key=labels.index)
     for name, entry in wide.items():
         new = len(entry["added"]) == len(groups[name])
+        if entry.get("bodies_merged"):
+            bodies = "; ".join(", ".join(b) for b in entry["bodies_merged"])
+            entry["note"] = (f"{name} joins {len(entry['bodies_merged'])} rigid bodies ({bodies}) and "
+                             f"{', '.join(entry['added'])}, which move with them: its markers move up to "
+                             f"{entry['spread_mm']:.3g} mm relative to each other, more than the rigidity tolerance "
+                             f"{tol.tolerance_mm:.3g} mm, but everything else moves at least "
+                             f"{entry['separation_mm']:.3g} mm relative to them. The joints between those bodies "
+                             "hardly move in this trial, and which of them carries the added markers (skin markers "
+                             "wobbling) is a choice the trial cannot make; record those joints moving to tell the "
+                             "segments apart")
+            continue
         entry["note"] = (f"{', '.join(entry['added'])} " + ("form" if new else "joined") + f" {name} although its "
                          f"markers move up to {entry['spread_mm']:.3g} mm relative to each other, more than the "
                          f"rigidity tolerance {tol.tolerance_mm:.3g} mm, because everything else moves at least "

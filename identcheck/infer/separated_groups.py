@@ -17,7 +17,8 @@ and lets them gather what the tolerance left loose:
 
 - a node may hold at most one of the bodies the tolerance found (three or more markers, with a pose). Two such
   bodies are two segments whose markers each stay rigid, moving relative to each other coherently: a joint that
-  hardly moves, not skin wobble, and the node is left to its children;
+  hardly moves, not skin wobble, and the node is left to its children, unless it also holds markers that nothing
+  else will take (:func:`_merge`);
 - the node's loose markers and whole pairs join that body, or, without one, form a new group; the group made (a
   body's markers may reach beyond the node) must itself spread by at most :data:`MAX_SKIN_MM` and half its
   separation, and must not hold every marker (that would be no skeleton); a node never seen together with the
@@ -32,6 +33,16 @@ and lets them gather what the tolerance left loose:
   :func:`~identcheck.infer.body_frames.drifts_on`) does not join it: skin moving with a joint's
   angles goes and returns, a marker sliding or coming loose does not, and it is left loose (the tree then
   reports why it is placed nowhere).
+
+A node held apart that holds several bodies *and* loose markers is one group for this trial (:func:`_merge`): in a
+functional trial of the shoulder the forearm and the hand stay rigid (the elbow and the wrist hardly move) while
+the upper arm's skin markers, driven by the shoulder, wobble 5-13 mm against them; the upper arm then has no body of
+its own, and its markers, loose, were placed on nothing. Everything in the node moves with everything else in it
+within skin range and apart from the rest of the body at least twice as much, so which of its bodies carries a
+loose marker is a choice the trial cannot make; the tree needs the node as one segment to find the joint that moved
+(the shoulder). The bodies' own joints hardly move, and the group says so (:attr:`Widened.bodies`); the skeleton is
+then not called settled. Without loose markers the bodies stay apart, as above: nothing needs them together, and a
+joint that hardly moves is still a joint.
 """
 from __future__ import annotations
 
@@ -67,12 +78,16 @@ class Widened:
         The largest spread between two markers of the group made (a body's markers included).
     separation_mm : float
         Its parent's height: the smallest complete-linkage spread to the rest.
+    bodies : tuple of tuple of int
+        The columns of the tolerance's bodies (three or more markers) that the group merged (:func:`_merge`); empty
+        when it grew one body or made a new group.
     """
 
     columns: tuple
     added: tuple
     spread_mm: float
     separation_mm: float
+    bodies: tuple = ()
 
 
 def _children(Z: np.ndarray, n: int):
@@ -129,7 +144,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
     body_of = {m: k for k, g in enumerate(groups) if len(g) >= MIN_MARKERS for m in g}
     pair_of = {m: k for k, g in enumerate(groups) if len(g) < MIN_MARKERS for m in g}
     taken_pairs, grown, widened = set(), {}, []
-    new_groups = []
+    new_groups, merged = [], set()
     stack = [(root, 0.0)]                                   # the root is never held apart from anything
     while stack:
         node, parent_h = stack.pop()
@@ -149,7 +164,10 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
             continue
         if result:
             body, added, w = result
-            if body is None:
+            if isinstance(body, tuple):                     # bodies merged: their markers leave their own groups
+                merged.update(body)
+                new_groups.append(list(w.columns))
+            elif body is None:
                 new_groups.append(sorted(added))
             else:
                 grown[body] = sorted(set(grown.get(body, groups[body])) | set(added))
@@ -157,6 +175,8 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
     used = {m for w in widened for m in w.added}
     out = []
     for k, g in enumerate(groups):
+        if k in merged:
+            continue
         if k in grown:
             out.append(grown[k])
         elif not (set(g) & used):
@@ -167,20 +187,12 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
 
 def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown):
     """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
-    it has nothing to add, else (the body it grows or None, the columns it adds, a Widened)."""
+    it has nothing to add, else (the body it grows, None for a new group, or the bodies it merges as a tuple; the
+    columns it adds; a Widened)."""
     bodies = {body_of[m] for m in members if m in body_of}
+    added = _loose_in(members, groups, body_of, pair_of, taken_pairs)
     if len(bodies) > 1:
-        return None
-    inside = set(members)
-    added = []
-    for m in members:
-        if m in body_of:
-            continue
-        if m in pair_of:
-            k = pair_of[m]
-            if k in taken_pairs or not set(groups[k]) <= inside:
-                continue
-        added.append(m)
+        return _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown)
     body = next(iter(bodies)) if bodies else None
     base = list(grown.get(body, groups[body])) if body is not None else []
     added = [m for m in added if m in pair_of or not drifts_on(xyz, base, m)]
@@ -197,3 +209,44 @@ def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of
         if m in pair_of:
             taken_pairs.add(pair_of[m])
     return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h))
+
+
+def _loose_in(members, groups, body_of, pair_of, taken_pairs) -> list:
+    """A node's markers that are in no body: loose ones, and those of pairs wholly inside it not yet taken."""
+    inside = set(members)
+    added = []
+    for m in members:
+        if m in body_of:
+            continue
+        if m in pair_of:
+            k = pair_of[m]
+            if k in taken_pairs or not set(groups[k]) <= inside:
+                continue
+        added.append(m)
+    return added
+
+
+def _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown):
+    """A node held apart with several bodies (module docstring): one group of the bodies and the node's loose
+    markers, if it has any, spreads within :data:`MAX_SKIN_MM` and half its separation, passes the pose test and
+    does not hold every marker; else None (its children are looked at instead). A loose marker that drifts in the
+    largest body's frame is not taken; bodies another node has grown are not merged."""
+    if any(b in grown for b in bodies):
+        return None
+    largest = max(sorted(bodies), key=lambda b: len(groups[b]))
+    added = [m for m in added if m in pair_of or not drifts_on(xyz, list(groups[largest]), m)]
+    if not added:
+        return None
+    full = sorted(set(added).union(*(groups[b] for b in bodies)))
+    if len(full) >= n_nodes:
+        return None
+    S = spread[np.ix_(full, full)]
+    wide = float(np.max(np.where(np.isfinite(S), S, UNSEEN_MM)))
+    if wide > MAX_SKIN_MM or parent_h < SEPARATION_FACTOR * wide or not is_rigid(xyz, full, MAX_SKIN_MM):
+        return None
+    for m in added:
+        if m in pair_of:
+            taken_pairs.add(pair_of[m])
+    return (tuple(sorted(bodies)), tuple(sorted(added)),
+            Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h),
+                    tuple(tuple(groups[b]) for b in sorted(bodies))))

@@ -107,3 +107,57 @@ def test_a_widened_group_leaves_the_skeleton_open_and_says_why(tmp_path):
     assert "skin markers wobbling on one segment" in note and "joint that hardly moves" in note
     assert "wobbling group:" in skeleton_text(result)
     assert "WOBBLING GROUP:" in (tmp_path / "m.toml").read_text()
+
+
+def arm_trial(seed: int, wobble_mm: float, n_upper: int, noise_mm: float, wrist_deg: float):
+    """A still trunk (two rigid bodies of 4 markers swaying by 1.5 deg about a joint) and an arm swinging 40-60 deg
+    about a shoulder on the first: n_upper skin markers on the upper arm wobbling independently by `wobble_mm`, a
+    rigid forearm of 4 markers (the elbow still) and a rigid hand of 4 turning `wrist_deg` about the wrist."""
+    rng = np.random.default_rng(seed)
+    still_a, still_b = _cloud(rng, 4, 90) + [0, 0, 1000], _cloud(rng, 4, 90) + [0, 0, 1400]
+    sway = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(1.5)) for _ in range(3)], axis=1))
+    B = _posed(still_b - [0, 0, 1200], sway, [0, 0, 1200])
+    shoulder = np.array([200.0, 0, 1300])
+    swing = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(a)) for a in (55, 35, 20)], axis=1))
+    upper = _cloud(rng, n_upper, 50) + [0, 0, -150]
+    forearm = _cloud(rng, 4, 40) + [0, 0, -420]
+    wrist = np.array([0.0, 0, -560])
+    flick = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(wrist_deg)) for _ in range(3)], axis=1))
+    hand = _posed(_cloud(rng, 4, 40) + [0, 0, -80], flick, wrist)                      # (F, 4, 3) in the arm's frame
+    arm_local = np.concatenate([np.repeat(upper[None], F, axis=0) + _wobble(rng, n_upper, wobble_mm),
+                                np.repeat(forearm[None], F, axis=0), hand], axis=1)
+    arm = np.einsum("fij,fnj->fni", swing.as_matrix(), arm_local) + shoulder
+    X = np.concatenate([np.repeat(still_a[None], F, axis=0), B, arm], axis=1)
+    X = X + rng.normal(0, noise_mm, X.shape)
+    labels = ([f"a{k}" for k in range(4)] + [f"b{k}" for k in range(4)] + [f"u{k}" for k in range(n_upper)]
+              + [f"f{k}" for k in range(4)] + [f"h{k}" for k in range(4)])
+    return Trial(X, labels, 100.0, f"arm(seed={seed})")
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 2**16), st.floats(3.0, 6.0), st.integers(3, 5), st.sampled_from([0.02, 0.1]),
+       st.floats(1.0, 2.0))
+def test_an_arm_whose_elbow_and_wrist_stay_still_is_one_segment_with_its_skin_markers(seed, wobble, n_upper, noise,
+                                                                                        wrist):
+    """A shoulder trial: the forearm and the hand each stay rigid and turn relative to each other by a degree or two
+    (two bodies under the tolerance), the upper arm's skin markers wobble beyond it against both and have no body of
+    their own. The arm moves apart from the trunk far more than inside itself, so it is one group holding both
+    bodies and every upper-arm marker, reported with the bodies it merged; the trunk's two bodies, with no loose
+    marker among them, stay two; and the tree joins the arm to the trunk."""
+    trial = arm_trial(seed, wobble, n_upper, noise, wrist)
+    g = group_markers(trial)
+    forearm, hand = {f"f{k}" for k in range(4)}, {f"h{k}" for k in range(4)}
+    arm = {f"u{k}" for k in range(n_upper)} | forearm | hand
+    assert g.tolerance.tolerance_mm < wobble                      # the premise: the one tolerance cannot hold them
+    groups = {frozenset(ms) for ms in g.groups.values()}
+    assert frozenset(arm) in groups
+    assert frozenset(f"a{k}" for k in range(4)) in groups and frozenset(f"b{k}" for k in range(4)) in groups
+    (name,) = [name for name, ms in g.groups.items() if set(ms) == arm]
+    entry = g.widened[name]
+    assert sorted(map(frozenset, entry["bodies_merged"])) == sorted(map(frozenset, (forearm, hand)))
+    assert set(entry["added"]) == arm - forearm - hand and entry["separation_mm"] >= 2 * entry["spread_mm"]
+    assert "hardly move in this trial" in entry["note"]
+    doc = skeleton(trial).to_dict()
+    owner = {m: s for s, ms in doc["segments"].items() for m in ms}
+    joined = {frozenset((j["parent"], j["child"])) for j in doc["joints"]}
+    assert frozenset((owner["a0"], owner["f0"])) in joined and not doc["ok"]
