@@ -12,8 +12,10 @@ import warnings
 import numpy as np
 from scipy.stats import spearmanr
 
+from identcheck.errors import InputError
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.noise import MIN_SAMPLES_PER_PAIR
+from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor, segment_poses
 
 DRIFT_RHO = 0.9
@@ -22,6 +24,10 @@ DRIFT_RHO = 0.9
 moving with a joint's angles go and return. On three development draws of the independent random-skeleton
 generator: 0.95-1.00 for its 16 markers drifting 20-83 mm on a segment (in the frame where each moves least), at most
 0.79 (in any segment's frame) for its 35 one-marker segments."""
+STILL_DEG = 10.0
+"""Two bodies whose relative rotation spreads less than this (degrees, the largest of O'Brien's rotation spreads:
+about the RMS rotation about each direction) hardly rotate relative to each other in the trial. The still joints of
+a functional trial sway by a few degrees; a joint that a trial exercises turns by tens."""
 DEVIATION_PERCENTILE = 95.0
 """A marker's deviation in a body's frame: this percentile over frames of its distance from its median position."""
 
@@ -126,3 +132,13 @@ def is_rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:
         if not d[0] <= tolerance * a[0]:
             return False
     return True
+
+
+def relative_turn_deg(xyz: np.ndarray, body_a: list, body_b: list) -> float:
+    """How much the rigid body `body_b` turns in the frame of `body_a` (3 or more marker columns each): the largest of
+    the rotation spreads of O'Brien's joint fit between them (:func:`identcheck.estimate.obrien.joint_location`),
+    degrees; NaN when the two are not posed together in enough frames."""
+    try:
+        return float(np.max(joint_location(segment_poses(xyz[:, body_a]), segment_poses(xyz[:, body_b])).spread_deg))
+    except (InputError, ValueError):
+        return float("nan")

@@ -37,7 +37,9 @@ and lets them gather what the tolerance left loose:
 A node held apart that holds several bodies *and* loose markers is one group for this trial (:func:`_merge`): in a
 functional trial of the shoulder the forearm and the hand stay rigid (the elbow and the wrist hardly move) while
 the upper arm's skin markers, driven by the shoulder, wobble 5-13 mm against them; the upper arm then has no body of
-its own, and its markers, loose, were placed on nothing. Everything in the node moves with everything else in it
+its own, and its markers, loose, were placed on nothing. The bodies must hardly turn relative to each other (less
+than :data:`~identcheck.infer.body_frames.STILL_DEG`): a joint the trial turns is kept, skin markers or not.
+Everything in the node moves with everything else in it
 within skin range and apart from the rest of the body at least twice as much, so which of its bodies carries a
 loose marker is a choice the trial cannot make; the tree needs the node as one segment to find the joint that moved
 (the shoulder). The bodies' own joints hardly move, and the group says so (:attr:`Widened.bodies`); the skeleton is
@@ -53,7 +55,7 @@ from scipy.cluster.hierarchy import linkage
 from scipy.spatial.distance import squareform
 
 from identcheck.geometry.poses import MIN_MARKERS
-from identcheck.infer.body_frames import drifts_on, is_rigid
+from identcheck.infer.body_frames import STILL_DEG, drifts_on, is_rigid, relative_turn_deg
 
 SEPARATION_FACTOR = 2.0
 """A node is held apart from the rest when its parent's height is at least this many times its own."""
@@ -228,11 +230,17 @@ def _loose_in(members, groups, body_of, pair_of, taken_pairs) -> list:
 
 def _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown):
     """A node held apart with several bodies (module docstring): one group of the bodies and the node's loose
-    markers, if it has any, spreads within :data:`MAX_SKIN_MM` and half its separation, passes the pose test and
-    does not hold every marker; else None (its children are looked at instead). A loose marker that drifts in the
+    markers, if it has any, its bodies hardly turn relative to each other (less than
+    :data:`~identcheck.infer.body_frames.STILL_DEG`, every pair), it spreads within :data:`MAX_SKIN_MM` and half
+    its separation, passes the pose test and does not hold every marker; else None (its children are looked at
+    instead). A loose marker that drifts in the
     largest body's frame is not taken; bodies another node has grown are not merged."""
     if any(b in grown for b in bodies):
         return None
+    ordered = sorted(bodies)
+    if not all(relative_turn_deg(xyz, list(groups[a]), list(groups[b])) < STILL_DEG
+               for k, a in enumerate(ordered) for b in ordered[k + 1:]):
+        return None                                     # a joint the trial turns is a joint, skin or not
     largest = max(sorted(bodies), key=lambda b: len(groups[b]))
     added = [m for m in added if m in pair_of or not drifts_on(xyz, list(groups[largest]), m)]
     if not added:

@@ -51,7 +51,7 @@ from identcheck.estimate.hierarchy import Hierarchy, infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
-from identcheck.infer.body_frames import is_drift, path_monotone
+from identcheck.infer.body_frames import STILL_DEG, is_drift, path_monotone
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
@@ -78,8 +78,6 @@ POOR_FACTOR = 3.0
 """A joint leaving more than this many times the median joint's residual is poor (:func:`_insert`)."""
 POOR_FLOOR_MM = 20.0
 """... and more than this (mm): skin markers leave real joints residuals of several to 15 mm."""
-STILL_DEG = 10.0
-"""Two segments whose relative rotation spreads less than this hardly move relative to each other."""
 
 
 # ---------------------------------------------------------------------- results
