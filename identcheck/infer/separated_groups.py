@@ -160,7 +160,7 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
         # (a parent at UNSEEN_MM: never seen with the rest, so no evidence of being apart from it)
         if h <= MAX_SKIN_MM and SEPARATION_FACTOR * h <= parent_h < UNSEEN_MM:
             result = _gather(xyz, spread, len(nodes), members, h, parent_h, groups, body_of, pair_of,
-                             taken_pairs, grown)
+                             taken_pairs, grown, merged)
         if result is None:
             stack.extend((child, h) for child in kids[node])
             continue
@@ -187,11 +187,14 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
     return sorted((sorted(g) for g in out), key=lambda g: g[0]), sorted(m for m in loose if m not in used), widened
 
 
-def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown):
+def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, merged):
     """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
     it has nothing to add, else (the body it grows, None for a new group, or the bodies it merges as a tuple; the
-    columns it adds; a Widened)."""
+    columns it adds; a Widened). A body already merged by another node (a body's markers can lie in two nodes) is
+    not taken again."""
     bodies = {body_of[m] for m in members if m in body_of}
+    if bodies & merged:
+        return None
     added = _loose_in(members, groups, body_of, pair_of, taken_pairs)
     if len(bodies) > 1:
         return _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown)
