@@ -42,16 +42,23 @@ def _posed(local, rot, origin):
     return np.einsum("fij,nj->fni", rot.as_matrix(), local) + origin
 
 
+def _still_body_and_swing(rng):
+    """A still body's markers: one rigid body of 4 (shape (4, 3), fixed), a second of 4 swaying by 1.5 deg about a
+    joint with it ((F, 4, 3)); and a swing of 40-60 deg (F rotations) for a limb on the first."""
+    still_a, still_b = _cloud(rng, 4, 90) + [0, 0, 1000], _cloud(rng, 4, 90) + [0, 0, 1400]
+    sway = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(1.5)) for _ in range(3)], axis=1))
+    B = _posed(still_b - [0, 0, 1200], sway, [0, 0, 1200])
+    swing = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(a)) for a in (55, 35, 20)], axis=1))
+    return still_a, B, swing
+
+
 def functional_trial(seed: int, wobble_mm: float, n_child: int, noise_mm: float):
     """A still 'body' (two rigid segments of 4 markers that sway by 1.5 deg about a joint) and a
     child swinging 40-60 deg about a ball joint on the first, whose n_child skin markers wobble independently by
     `wobble_mm`."""
     rng = np.random.default_rng(seed)
-    still_a, still_b = _cloud(rng, 4, 90) + [0, 0, 1000], _cloud(rng, 4, 90) + [0, 0, 1400]
-    sway = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(1.5)) for _ in range(3)], axis=1))
-    B = _posed(still_b - [0, 0, 1200], sway, [0, 0, 1200])
+    still_a, B, swing = _still_body_and_swing(rng)
     hip = np.array([120.0, 0, 900])
-    swing = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(a)) for a in (55, 35, 20)], axis=1))
     child_local = _cloud(rng, n_child, 70) + [60, 0, -220]
     C = _posed(child_local, swing, hip) + _wobble(rng, n_child, wobble_mm)
     X = np.concatenate([np.repeat(still_a[None], F, axis=0), B, C], axis=1)
@@ -114,11 +121,8 @@ def arm_trial(seed: int, wobble_mm: float, n_upper: int, noise_mm: float, wrist_
     about a shoulder on the first: n_upper skin markers on the upper arm wobbling independently by `wobble_mm`, a
     rigid forearm of 4 markers (the elbow still) and a rigid hand of 4 turning `wrist_deg` about the wrist."""
     rng = np.random.default_rng(seed)
-    still_a, still_b = _cloud(rng, 4, 90) + [0, 0, 1000], _cloud(rng, 4, 90) + [0, 0, 1400]
-    sway = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(1.5)) for _ in range(3)], axis=1))
-    B = _posed(still_b - [0, 0, 1200], sway, [0, 0, 1200])
+    still_a, B, swing = _still_body_and_swing(rng)
     shoulder = np.array([200.0, 0, 1300])
-    swing = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(a)) for a in (55, 35, 20)], axis=1))
     upper = _cloud(rng, n_upper, 50) + [0, 0, -150]
     forearm = _cloud(rng, 4, 40) + [0, 0, -420]
     wrist = np.array([0.0, 0, -560])
