@@ -289,7 +289,8 @@ def _separating_motion(u, v, a, b, h: Hierarchy) -> str:
         except InputError:
             still = float("nan")
         if np.isfinite(still) and still < STILL_DEG:
-            return (f"{u} and {w} hardly rotate relative to each other in this trial (rotation spread {still:.3g} deg), "
+            return (f"{u} and {w} hardly rotate relative to each other in this trial "
+                    f"(rotation spread {still:.3g} deg), "
                     f"so {v} fits a joint with either: record a trial in which {u} and {w} rotate relative to each "
                     f"other, about more than one axis")
         return (f"{v} moves about as much like a joint with {w} as with {u}: record {v} moving about several axes "
@@ -429,9 +430,12 @@ def _insert(edges: list, fits: dict, accept_mm: float) -> tuple[list, list, list
     A joint of the posed tree whose residual exceeds :data:`POOR_FACTOR` times the median of the other joints'
     (or the accepted residual `accept_mm`, if that is larger), and :data:`POOR_FLOOR_MM`, is no joint: the two
     segments are probably joined through a group without a pose. If a group fits a joint with both (each within
-    `accept_mm`), it goes between them; otherwise the joint is reported as poor. Returns (edges, the groups
-    inserted, poor-joint reports)."""
-    out, used, poor = [], [], []
+    `accept_mm`), it goes between them; otherwise the joint is reported as poor. The poor joint's parent was chosen
+    without the group, possibly among segments that hardly move relative to each other: another segment that fits
+    the group as well or better is reported (:func:`_inserted_doubt`). Returns (edges, the groups inserted,
+    poor-joint reports, ambiguity reports)."""
+    out, used, poor, ambiguous = [], [], [], []
+    above = {x.child: x.parent for x in edges}
     for e in sorted(edges, key=lambda e: -e.residual_mm):
         others = [o.residual_mm for o in edges if o is not e]
         median = float(np.median(others)) if others else 0.0
@@ -439,7 +443,8 @@ def _insert(edges: list, fits: dict, accept_mm: float) -> tuple[list, list, list
             out.append(e)
             continue
         cands = sorted((max(f[e.parent].residual_mm, f[e.child].residual_mm), g) for g, f in fits.items()
-                       if g not in used and f[e.parent].residual_mm <= accept_mm and f[e.child].residual_mm <= accept_mm)
+                       if g not in used and f[e.parent].residual_mm <= accept_mm
+                       and f[e.child].residual_mm <= accept_mm)
         if not cands:
             poor.append({"joint": [e.parent, e.child], "residual_mm": e.residual_mm, "median_mm": median,
                          "note": f"the best joint between {e.parent} and {e.child} leaves {e.residual_mm:.3g} mm, "
@@ -454,12 +459,34 @@ def _insert(edges: list, fits: dict, accept_mm: float) -> tuple[list, list, list
         conf = _phi((e.residual_mm - worst) / unit)
         note = {"parent": e.parent, "child": e.child, "residual_mm": e.residual_mm, "margin_mm": e.residual_mm - worst,
                 "margin_units": (e.residual_mm - worst) / unit, "unit_mm": unit, "replaced": True}
-        out.append(Edge(e.parent, g, fits[g][e.parent].residual_mm, "sphere_circle", note, conf, False,
+        amb = _inserted_doubt(g, fits[g], e.parent, _subtree(above, e.child), accept_mm)
+        ambiguous += amb
+        out.append(Edge(e.parent, g, fits[g][e.parent].residual_mm, "sphere_circle", note, conf, bool(amb),
                         small=fits[g][e.parent]))
         out.append(Edge(g, e.child, fits[g][e.child].residual_mm, "sphere_circle", note, conf, False,
                         small=fits[g][e.child]))
         used.append(g)
-    return out, used, poor
+    return out, used, poor, ambiguous
+
+
+def _inserted_doubt(g: str, fits: dict, parent: str, below: set, accept_mm: float) -> list:
+    """An ambiguity report when a group inserted below `parent` (the poor joint's parent, which the posed tree chose
+    without the group) fits a joint with another posed segment outside `below` (the child's side) within
+    `accept_mm` and no more than :data:`Z_AMBIGUOUS` units (:data:`REL_AMBIGUOUS` of its residual with `parent`)
+    worse: segments that hardly move relative to each other, or a wrong choice of the posed tree, carry the group's
+    joint as well. Empty otherwise."""
+    r = fits[parent].residual_mm
+    unit = max(REL_AMBIGUOUS * r, 1e-9)
+    others = sorted((f.residual_mm, s) for s, f in fits.items() if s != parent and s not in below
+                    and np.isfinite(f.residual_mm) and f.residual_mm <= accept_mm)
+    if not others or (others[0][0] - r) / unit >= Z_AMBIGUOUS:
+        return []
+    r2, s2 = others[0]
+    return [{"joint": [parent, g], "residual_mm": float(r), "alternative": [s2, g],
+             "alternative_residual_mm": float(r2), "margin_mm": float(r2 - r), "margin_units": float((r2 - r) / unit), "trees": None,
+             "separating_motion": (f"the markers of {g} move about as much on a sphere or circle about a point of "
+                                   f"{parent} as of {s2} (or more so about {s2}): record {parent} and {s2} moving "
+                                   f"relative to each other while {g} moves")}]
 
 
 def _loops(h: Hierarchy, edges: list, sigma_mm: float) -> list:
@@ -627,11 +654,11 @@ def infer_tree(trial, grouping, root: str | None = None, sigma_mm: float = float
     fits = {g: {s: small_fit(poses[s], pts) for s in posed} for g, pts in small.items()}
     drifting = {g: why for g, f in fits.items() if (why := drift_reason(f))}
     fits = {g: f for g, f in fits.items() if g not in drifting}
-    edges, inserted, poor = _insert(edges, fits, accept)
+    edges, inserted, poor, amb_inserted = _insert(edges, fits, accept)
     placed, unplaced, amb_small = _place([g for g in fits if g not in inserted], fits, accept, sigma_mm)
     unplaced += list(drifting.items())
     edges = _breadth_first(edges + placed, top)
-    ambiguous += amb_small
+    ambiguous += amb_small + amb_inserted
     if h is not None:
         loops = _loops(h, edges, sigma_mm)
     inv = {v: k for k, v in loose_names.items()}

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 
 from identcheck.estimate.obrien import joint_location
 from identcheck.infer.joint_types import classify_posed, noise_wobble_deg
-from identcheck.infer.tree import compare_residuals, orient
+from identcheck.infer.tree import REL_AMBIGUOUS, Z_AMBIGUOUS, SmallFit, _inserted_doubt, compare_residuals, orient
 from identcheck.infer.workflow import infer_skeleton
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
@@ -180,3 +180,26 @@ def test_type_rule(spread, noise, kind):
     assert jt.type == kind and jt.evidence["wobble_deg"] == spread[0] and "rule" in jt.evidence
     if spread[1] < 2:
         assert jt.confidence == 0.5
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.2, 5.0), st.lists(st.floats(0.1, 12.0), min_size=1, max_size=5), st.floats(1.0, 8.0),
+       st.integers(0, 4))
+def test_an_inserted_group_that_fits_another_segment_as_well_is_reported(r_parent, r_others, accept, n_below):
+    """A group put between two posed segments hangs from the poor joint's parent, which the posed tree chose without
+    it. A report is made exactly when some other segment outside the child's side fits it within the accepted
+    residual and by less than Z_AMBIGUOUS units (REL_AMBIGUOUS of its residual with the parent) worse; segments on
+    the child's side are never the alternative, and the report names the best alternative."""
+    fits = {"P": SmallFit(r_parent, float("nan"), 50.0, 100.0, 500)}
+    fits.update({f"S{k}": SmallFit(r, float("nan"), 50.0, 100.0, 500) for k, r in enumerate(r_others)})
+    below = {f"S{k}" for k in range(min(n_below, len(r_others)))}
+    out = _inserted_doubt("g", fits, "P", below, accept)
+    outside = sorted((f.residual_mm, s) for s, f in fits.items() if s != "P" and s not in below
+                     and f.residual_mm <= accept)
+    unit = max(REL_AMBIGUOUS * r_parent, 1e-9)
+    expected = bool(outside) and (outside[0][0] - r_parent) / unit < Z_AMBIGUOUS
+    assert bool(out) == expected
+    if out:
+        (rep,) = out
+        assert rep["joint"] == ["P", "g"] and rep["alternative"] == [outside[0][1], "g"]
+        assert rep["alternative"][0] not in below and rep["margin_units"] < Z_AMBIGUOUS
