@@ -39,12 +39,11 @@ functional trial of the shoulder the forearm and the hand stay rigid (the elbow 
 the upper arm's skin markers, driven by the shoulder, wobble 5-13 mm against them; the upper arm then has no body of
 its own, and its markers, loose, were placed on nothing. The bodies must hardly turn relative to each other (less
 than :data:`~identcheck.infer.body_frames.STILL_DEG`): a joint the trial turns is kept, skin markers or not.
-Everything in the node moves with everything else in it
-within skin range and apart from the rest of the body at least twice as much, so which of its bodies carries a
-loose marker is a choice the trial cannot make; the tree needs the node as one segment to find the joint that moved
-(the shoulder). The bodies' own joints hardly move, and the group says so (:attr:`Widened.bodies`); the skeleton is
-then not called settled. Without loose markers the bodies stay apart, as above: nothing needs them together, and a
-joint that hardly moves is still a joint.
+Everything in the node moves with everything else in it within skin range and apart from the rest of the body at
+least twice as much, so which of its bodies carries a loose marker is a choice the trial cannot make; the tree
+needs the node as one segment to find the joint that moved (the shoulder). The bodies' own joints hardly move,
+and the group says so (:attr:`Widened.bodies`); the skeleton is then not called settled. Without loose markers the
+bodies stay apart, as above: nothing needs them together, and a joint that hardly moves is still a joint.
 """
 from __future__ import annotations
 
@@ -233,11 +232,11 @@ def _loose_in(members, groups, body_of, pair_of, taken_pairs) -> list:
 
 def _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown):
     """A node held apart with several bodies (module docstring): one group of the bodies and the node's loose
-    markers, if it has any, its bodies hardly turn relative to each other (less than
-    :data:`~identcheck.infer.body_frames.STILL_DEG`, every pair), it spreads within :data:`MAX_SKIN_MM` and half
-    its separation, passes the pose test and does not hold every marker; else None (its children are looked at
-    instead). A loose marker that drifts in the
-    largest body's frame is not taken; bodies another node has grown are not merged."""
+    markers when it has loose markers, every pair of its bodies turns less than
+    :data:`~identcheck.infer.body_frames.STILL_DEG` relative to each other, and the group spreads within
+    :data:`MAX_SKIN_MM` and half its separation, passes the pose test and does not hold every marker; else None
+    (its children are looked at instead). A loose marker that drifts in the largest body's frame is not taken;
+    bodies another node has grown are not merged."""
     if any(b in grown for b in bodies):
         return None
     ordered = sorted(bodies)

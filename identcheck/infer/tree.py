@@ -483,7 +483,8 @@ def _inserted_doubt(g: str, fits: dict, parent: str, below: set, accept_mm: floa
         return []
     r2, s2 = others[0]
     return [{"joint": [parent, g], "residual_mm": float(r), "alternative": [s2, g],
-             "alternative_residual_mm": float(r2), "margin_mm": float(r2 - r), "margin_units": float((r2 - r) / unit), "trees": None,
+             "alternative_residual_mm": float(r2), "margin_mm": float(r2 - r),
+             "margin_units": float((r2 - r) / unit), "trees": None,
              "separating_motion": (f"the markers of {g} move about as much on a sphere or circle about a point of "
                                    f"{parent} as of {s2} (or more so about {s2}): record {parent} and {s2} moving "
                                    f"relative to each other while {g} moves")}]
