@@ -40,7 +40,6 @@ import sys
 import tempfile
 import time
 import warnings
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402  (not ic.skeleton: that name is the module identcheck.skeleton)
-from results_io import (add_shard_arguments, benchmark_folder, by_category, error_rows,  # noqa: E402
+from results_io import (add_shard_arguments, benchmark_folder, by_bin, by_category, error_rows,  # noqa: E402
                         errors_line, percent, seconds_summary)
 
 GENERATOR = Path(__file__).resolve().parent / "heldout_skeleton" / "generator.py"
@@ -154,17 +153,6 @@ FRAME_BINS = (1000, 1500)
 """Trial length (frames) bins of the rates."""
 
 
-def _bin_names(edges, unit: str) -> list:
-    lo = [None, *edges]
-    hi = [*edges, None]
-    return [(f"< {b:g} {unit}" if a is None else f">= {a:g} {unit}" if b is None else f"{a:g}-{b:g} {unit}")
-            for a, b in zip(lo, hi)]
-
-
-def _bin(value: float, edges, unit: str) -> str:
-    return _bin_names(edges, unit)[int(np.searchsorted(edges, value, side="right"))]
-
-
 def _rate(rows, key) -> float | None:
     vals = [r[key] for r in rows if r.get(key) is not None]
     return float(np.mean(vals)) if vals else None
@@ -186,15 +174,10 @@ def summarise(rows: list) -> dict:
                 "ok_when_tree_right": _rate([r for r in rs if r["tree_exact"]], "ok"),
                 "ok_when_tree_wrong": _rate([r for r in rs if not r["tree_exact"]], "ok"), **seconds_summary(rs)}
 
-    noise, length = defaultdict(list), defaultdict(list)
-    for r in ok:
-        if r.get("sigma_mm") is not None:
-            noise[_bin(r["sigma_mm"], NOISE_BINS, "mm")].append(r)
-        length[_bin(r["n_frames"], FRAME_BINS, "frames")].append(r)
     big = [r for r in ok if r["n_markers"] >= TARGET["markers"] and r["n_frames"] >= TARGET["frames"]]
     return {"all": block(ok), "by_category": {c: block(rs) for c, rs in by_category(ok).items()},
-            "by_noise": {k: block(noise[k]) for k in _bin_names(NOISE_BINS, "mm") if noise[k]},
-            "by_frames": {k: block(length[k]) for k in _bin_names(FRAME_BINS, "frames") if length[k]},
+            "by_noise": {k: block(rs) for k, rs in by_bin(ok, "sigma_mm", NOISE_BINS, "mm").items()},
+            "by_frames": {k: block(rs) for k, rs in by_bin(ok, "n_frames", FRAME_BINS, "frames").items()},
             "errors": error_rows(rows),
             "speed_target": {**TARGET, "trials": len(big),
                              "max_seconds": float(max(r["seconds"] for r in big)) if big else None,

@@ -20,7 +20,9 @@ needs from such a trial is the moving joint. For each moving joint (parent P, ch
   ``markers_on_joints`` (near the joint's axis or centre, which segment carries it is a choice);
 
 and per trial ``all_found`` (every moving joint found and typed right), ``ok`` (the tool calls the skeleton
-settled: exit 0), and the time of the library call.
+settled: exit 0), and the time of the library call. The rates are also given by moving joint, by the generator's
+categories, by marker noise (:data:`NOISE_BINS`) and by trial length (:data:`FRAME_BINS`). ``--merge`` takes the
+row files of several draws as well as of several shards: a pooled summary.
 
 Usage::
 
@@ -46,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import identcheck as ic  # noqa: E402
 from identcheck.api import skeleton  # noqa: E402
-from results_io import (add_shard_arguments, benchmark_folder, by_category, error_rows,  # noqa: E402
+from results_io import (add_shard_arguments, benchmark_folder, by_bin, by_category, error_rows,  # noqa: E402
                         errors_line, percent, seconds_summary)
 
 
@@ -120,6 +122,12 @@ def evaluate(folder: Path, entry: dict) -> dict:
     return row
 
 
+NOISE_BINS = (0.1, 0.3)
+"""Marker noise σ (mm per coordinate, the generator's truth: log-uniform 0.05-1 mm) bins of the rates."""
+FRAME_BINS = (1000, 1500)
+"""Trial length (frames, 600-2000) bins of the rates."""
+
+
 def summarise(rows: list) -> dict:
     ok = [r for r in rows if "error" not in r]
 
@@ -146,6 +154,8 @@ def summarise(rows: list) -> dict:
             by_joint[m["joint"].rsplit("_", 1)[0]].append({**r, "moving": [m]})
     return {"all": block(ok), "by_category": {c: block(rs) for c, rs in by_category(ok).items()},
             "by_moving_joint": {c: block(rs) for c, rs in sorted(by_joint.items())},
+            "by_noise": {k: block(rs) for k, rs in by_bin(ok, "sigma_mm", NOISE_BINS, "mm").items()},
+            "by_frames": {k: block(rs) for k, rs in by_bin(ok, "n_frames", FRAME_BINS, "frames").items()},
             "errors": error_rows(rows)}
 
 
@@ -154,7 +164,9 @@ def table(summary: dict) -> str:
             f"{'leak%':>6} {'rep%':>5} {'all%':>5} {'ok%':>4} {'ok|miss':>8} {'med s':>6} {'max s':>6}")
     lines = [head, "-" * len(head)]
     rows = ([("all", summary["all"])] + [(f"moving {k}", b) for k, b in summary["by_moving_joint"].items()]
-            + list(summary["by_category"].items()))
+            + list(summary["by_category"].items())
+            + [(f"noise {k}", b) for k, b in summary.get("by_noise", {}).items()]
+            + [(f"length {k}", b) for k, b in summary.get("by_frames", {}).items()])
     for name, b in rows:
         lines.append(f"{name:<22}{b['trials']:>4} {b['moving_joints']:>6} {percent(b['child_whole']):>7} "
                      f"{percent(b['parent_whole']):>8} {percent(b['joint_found']):>7} {percent(b['type_right']):>6} "

@@ -85,6 +85,26 @@ def by_category(rows: list) -> dict:
     return dict(sorted(out.items()))
 
 
+def bin_names(edges, unit: str) -> list:
+    """Names of the bins that the increasing `edges` cut a quantity into: ``< a unit``, ``a-b unit``, ``>= z unit``."""
+    lo, hi = [None, *edges], [*edges, None]
+    return [(f"< {b:g} {unit}" if a is None else f">= {a:g} {unit}" if b is None else f"{a:g}-{b:g} {unit}")
+            for a, b in zip(lo, hi)]
+
+
+def by_bin(rows: list, key: str, edges, unit: str) -> dict:
+    """The rows grouped by the bin (:func:`bin_names`) of their value ``row[key]``, bins in order, empty ones and rows
+    without the value left out."""
+    import numpy as np
+
+    names = bin_names(edges, unit)
+    out: dict = {n: [] for n in names}
+    for r in rows:
+        if r.get(key) is not None:
+            out[names[int(np.searchsorted(edges, r[key], side="right"))]].append(r)
+    return {n: rs for n, rs in out.items() if rs}
+
+
 def seconds_summary(rows: list) -> dict:
     """``median_seconds`` and ``max_seconds`` of the rows' ``seconds`` (None for no rows)."""
     import numpy as np
