@@ -43,11 +43,11 @@ class Group:
     terms: tuple
     frame_cols: np.ndarray
     const_cols: np.ndarray
-    frame_runs: tuple = ()
-    const_runs: tuple = ()
-    plain_at: np.ndarray = None
-    plain_runs: tuple = ()
-    base_runs: tuple = ()
+    frame_runs: tuple
+    const_runs: tuple
+    plain_at: np.ndarray
+    plain_runs: tuple
+    base_runs: tuple
 
 
 def runs(cols: np.ndarray) -> tuple:

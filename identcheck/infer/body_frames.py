@@ -134,11 +134,21 @@ def is_rigid(xyz: np.ndarray, members: list, tolerance: float) -> bool:
     return True
 
 
-def relative_turn_deg(xyz: np.ndarray, body_a: list, body_b: list) -> float:
-    """How much the rigid body `body_b` turns in the frame of `body_a` (3 or more marker columns each): the largest of
-    the rotation spreads of O'Brien's joint fit between them (:func:`identcheck.estimate.obrien.joint_location`),
-    degrees; NaN when the two are not posed together in enough frames."""
+def turn_deg(poses_a, poses_b) -> float:
+    """How much one posed body turns in the frame of another (:class:`~identcheck.geometry.poses.Poses` each): the
+    largest of the rotation spreads of O'Brien's joint fit between them
+    (:func:`identcheck.estimate.obrien.joint_location`), degrees; NaN when the two are not posed together in enough
+    frames. Below :data:`STILL_DEG` they hardly rotate relative to each other."""
     try:
-        return float(np.max(joint_location(segment_poses(xyz[:, body_a]), segment_poses(xyz[:, body_b])).spread_deg))
-    except (InputError, ValueError):
+        return float(np.max(joint_location(poses_a, poses_b).spread_deg))
+    except InputError:
+        return float("nan")
+
+
+def relative_turn_deg(xyz: np.ndarray, body_a: list, body_b: list) -> float:
+    """:func:`turn_deg` of the rigid bodies `body_a` and `body_b` (3 or more marker columns of `xyz` each); NaN when
+    either has no pose."""
+    try:
+        return turn_deg(segment_poses(xyz[:, body_a]), segment_poses(xyz[:, body_b]))
+    except ValueError:
         return float("nan")

@@ -379,7 +379,7 @@ class Grouping:
         markers beyond the tolerance (:func:`identcheck.infer.separated_groups.widen`): its largest internal
         spread, its smallest complete-linkage spread to the rest, the markers added, and the two readings in words;
         ``"bodies_merged"`` too (each body's markers) when the group joins rigid bodies whose joints hardly move in
-        the trial (:func:`identcheck.infer.separated_groups._merge`). Such a group is an interpretation the data
+        the trial (:func:`identcheck.infer.separated_groups.widen`). Such a group is an interpretation the data
         leave open, so the skeleton is not called settled.
     """
 

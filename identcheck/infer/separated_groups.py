@@ -18,7 +18,7 @@ and lets them gather what the tolerance left loose:
 - a node may hold at most one of the bodies the tolerance found (three or more markers, with a pose). Two such
   bodies are two segments whose markers each stay rigid, moving relative to each other coherently: a joint that
   hardly moves, not skin wobble, and the node is left to its children, unless it also holds markers that nothing
-  else will take (:func:`_merge`);
+  else will take (below);
 - the node's loose markers and whole pairs join that body, or, without one, form a new group; the group made (a
   body's markers may reach beyond the node) must itself spread by at most :data:`MAX_SKIN_MM` and half its
   separation, and must not hold every marker (that would be no skeleton); a node never seen together with the
@@ -34,7 +34,7 @@ and lets them gather what the tolerance left loose:
   angles goes and returns, a marker sliding or coming loose does not, and it is left loose (the tree then
   reports why it is placed nowhere).
 
-A node held apart that holds several bodies *and* loose markers is one group for this trial (:func:`_merge`): in a
+A node held apart that holds several bodies *and* loose markers is one group for this trial (:func:`_gather`): in a
 functional trial of the shoulder the forearm and the hand stay rigid (the elbow and the wrist hardly move) while
 the upper arm's skin markers, driven by the shoulder, wobble 5-13 mm against them; the upper arm then has no body of
 its own, and its markers, loose, were placed on nothing. The bodies must hardly turn relative to each other (less
@@ -80,7 +80,7 @@ class Widened:
     separation_mm : float
         Its parent's height: the smallest complete-linkage spread to the rest.
     bodies : tuple of tuple of int
-        The columns of the tolerance's bodies (three or more markers) that the group merged (:func:`_merge`); empty
+        The columns of the tolerance's bodies (three or more markers) that the group merged (:func:`_gather`); empty
         when it grew one body or made a new group.
     """
 
@@ -189,19 +189,29 @@ def widen(xyz, spread: np.ndarray, tolerance: float, groups: list, loose: list,
 def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of, taken_pairs, grown, merged):
     """What a candidate node (module docstring) gathers: None to look at its children instead, an empty tuple when
     it has nothing to add, else (the body it grows, None for a new group, or the bodies it merges as a tuple; the
-    columns it adds; a Widened). A body already merged by another node (a body's markers can lie in two nodes) is
-    not taken again."""
+    columns it adds; a Widened).
+
+    A node with several bodies merges them with its loose markers (module docstring) only when it has loose markers,
+    no body of it has been grown or merged by another node (a body's markers can lie in two nodes) and every pair of
+    its bodies turns less than :data:`~identcheck.infer.body_frames.STILL_DEG` relative to each other. Loose markers
+    that drift in the body's frame (the largest body's, for a merge) are not taken. The group made must spread
+    within :data:`MAX_SKIN_MM` and half its separation, pass the pose test and not hold every marker."""
     bodies = {body_of[m] for m in members if m in body_of}
     if bodies & merged:
         return None
     added = _loose_in(members, groups, body_of, pair_of, taken_pairs)
     if len(bodies) > 1:
-        return _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown)
-    body = next(iter(bodies)) if bodies else None
-    base = list(grown.get(body, groups[body])) if body is not None else []
-    added = [m for m in added if m in pair_of or not drifts_on(xyz, base, m)]
+        if any(b in grown for b in bodies) or not _hardly_turn(xyz, groups, sorted(bodies)):
+            return None                                 # a joint the trial turns is a joint, skin or not
+        body = tuple(sorted(bodies))
+        base = sorted(set().union(*(groups[b] for b in body)))
+        frame = list(groups[max(body, key=lambda b: len(groups[b]))])
+    else:
+        body = next(iter(bodies)) if bodies else None
+        base = frame = list(grown.get(body, groups[body])) if body is not None else []
+    added = [m for m in added if m in pair_of or not drifts_on(xyz, frame, m)]
     if not added:
-        return ()
+        return None if isinstance(body, tuple) else ()
     full = sorted(set(base) | set(added))
     if len(full) < 2 or len(full) >= n_nodes:           # never everything: that would be no skeleton at all
         return None
@@ -212,7 +222,8 @@ def _gather(xyz, spread, n_nodes, members, h, parent_h, groups, body_of, pair_of
     for m in added:
         if m in pair_of:
             taken_pairs.add(pair_of[m])
-    return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h))
+    merged_bodies = tuple(tuple(groups[b]) for b in body) if isinstance(body, tuple) else ()
+    return body, tuple(sorted(added)), Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h), merged_bodies)
 
 
 def _loose_in(members, groups, body_of, pair_of, taken_pairs) -> list:
@@ -230,33 +241,8 @@ def _loose_in(members, groups, body_of, pair_of, taken_pairs) -> list:
     return added
 
 
-def _merge(xyz, spread, n_nodes, added, parent_h, groups, bodies, pair_of, taken_pairs, grown):
-    """A node held apart with several bodies (module docstring): one group of the bodies and the node's loose
-    markers when it has loose markers, every pair of its bodies turns less than
-    :data:`~identcheck.infer.body_frames.STILL_DEG` relative to each other, and the group spreads within
-    :data:`MAX_SKIN_MM` and half its separation, passes the pose test and does not hold every marker; else None
-    (its children are looked at instead). A loose marker that drifts in the largest body's frame is not taken;
-    bodies another node has grown are not merged."""
-    if any(b in grown for b in bodies):
-        return None
-    ordered = sorted(bodies)
-    if not all(relative_turn_deg(xyz, list(groups[a]), list(groups[b])) < STILL_DEG
-               for k, a in enumerate(ordered) for b in ordered[k + 1:]):
-        return None                                     # a joint the trial turns is a joint, skin or not
-    largest = max(sorted(bodies), key=lambda b: len(groups[b]))
-    added = [m for m in added if m in pair_of or not drifts_on(xyz, list(groups[largest]), m)]
-    if not added:
-        return None
-    full = sorted(set(added).union(*(groups[b] for b in bodies)))
-    if len(full) >= n_nodes:
-        return None
-    S = spread[np.ix_(full, full)]
-    wide = float(np.max(np.where(np.isfinite(S), S, UNSEEN_MM)))
-    if wide > MAX_SKIN_MM or parent_h < SEPARATION_FACTOR * wide or not is_rigid(xyz, full, MAX_SKIN_MM):
-        return None
-    for m in added:
-        if m in pair_of:
-            taken_pairs.add(pair_of[m])
-    return (tuple(sorted(bodies)), tuple(sorted(added)),
-            Widened(tuple(full), tuple(sorted(added)), wide, float(parent_h),
-                    tuple(tuple(groups[b]) for b in sorted(bodies))))
+def _hardly_turn(xyz, groups, bodies: list) -> bool:
+    """Every pair of the `bodies` (indices into `groups`) turns less than
+    :data:`~identcheck.infer.body_frames.STILL_DEG` relative to each other (NaN, never posed together, is not)."""
+    return all(relative_turn_deg(xyz, list(groups[a]), list(groups[b])) < STILL_DEG
+               for k, a in enumerate(bodies) for b in bodies[k + 1:])

@@ -51,7 +51,7 @@ from identcheck.estimate.hierarchy import Hierarchy, infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
 from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
-from identcheck.infer.body_frames import STILL_DEG, is_drift, path_monotone
+from identcheck.infer.body_frames import STILL_DEG, is_drift, path_monotone, turn_deg
 from identcheck.solve.gamage_lasenby import sphere_centre
 from identcheck.solve.minimal import circle
 
@@ -284,10 +284,7 @@ def _separating_motion(u, v, a, b, h: Hierarchy) -> str:
     """What to record so that the data tell joint (u, v) from its runner-up (b, a)."""
     if a == v or b == v:
         w = b if a == v else a
-        try:
-            still = float(np.max(joint_location(h.poses[u], h.poses[w]).spread_deg))
-        except InputError:
-            still = float("nan")
+        still = turn_deg(h.poses[u], h.poses[w])
         if np.isfinite(still) and still < STILL_DEG:
             return (f"{u} and {w} hardly rotate relative to each other in this trial "
                     f"(rotation spread {still:.3g} deg), "
