@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.api import skeleton
 from identcheck.infer.grouping import group_markers
+from identcheck.infer.body_frames import STILL_DEG
 from identcheck.infer.separated_groups import MAX_SKIN_MM, SEPARATION_FACTOR
 from identcheck.report.text import skeleton_text
 from identcheck.trial import Trial
@@ -188,3 +189,43 @@ def test_a_body_merged_by_one_node_is_not_taken_again_by_another():
     doc = skeleton(trial).to_dict()                                 # the inferred model is checked as it is written
     written = [m for ms in doc["segments"].values() for m in ms]
     assert len(written) == len(set(written))
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 2**16), st.floats(20.0, 30.0))
+def test_two_bodies_a_trial_turns_stay_two_even_with_a_loose_marker_among_them(seed, turn_deg):
+    """Two rigid 4-marker bodies whose markers sit 10-16 mm from the ball joint between them, turning by up to 20-30
+    deg about each axis (so their spreads stay within skin range), with a skin marker wobbling on the first, far
+    from a swinging third segment. The node holding them has several bodies and a loose marker, but the bodies turn
+    more than STILL_DEG relative to each other: they are a joint, not one segment. Without that check (STILL_DEG
+    lifted) the same trial merges them, so the check is what keeps them apart."""
+    from unittest import mock
+
+    from identcheck.infer import separated_groups
+    from identcheck.infer.body_frames import relative_turn_deg
+
+    rng = np.random.default_rng(seed)
+
+    def near(n):
+        d = rng.normal(size=(n, 3))
+        return d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(10, 16, size=(n, 1))
+
+    centre = np.array([0.0, 0, 1000])
+    a, b = near(4) + centre, near(4)
+    turn = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(turn_deg)) for _ in range(3)], axis=1))
+    B = _posed(b, turn, centre)
+    skin = np.repeat((near(1) + centre)[None], F, axis=0) + _wobble(rng, 1, 3.0)
+    swing = Rotation.from_rotvec(np.stack([_smooth(rng, np.radians(50)) for _ in range(3)], axis=1))
+    C = _posed(_cloud(rng, 4, 60) + [0, 0, -250], swing, centre + [0, 0, -150])
+    X = np.concatenate([np.repeat(a[None], F, axis=0), B, skin, C], axis=1) + rng.normal(0, 0.05, (F, 13, 3))
+    labels = [f"a{k}" for k in range(4)] + [f"b{k}" for k in range(4)] + ["s0"] + [f"c{k}" for k in range(4)]
+    trial = Trial(X, labels, 100.0, f"turning(seed={seed})")
+    assert relative_turn_deg(trial.xyz, [0, 1, 2, 3], [4, 5, 6, 7]) >= STILL_DEG    # the premise
+
+    def merged(g):
+        return any({"a0", "b0"} <= set(ms) for ms in g.groups.values())
+
+    with mock.patch.object(separated_groups, "STILL_DEG", 1e9):
+        assert merged(group_markers(trial))                # the premise: all else would merge them
+    g = group_markers(trial)
+    assert not merged(g) and not any(w.get("bodies_merged") for w in g.widened.values())
