@@ -10,7 +10,9 @@ from hypothesis import given, settings, strategies as st
 
 import identcheck.bundle.chain as chain_mod
 from identcheck.bundle.chain import _cost, _extend, _prepare, fit_chain, initial_state
+from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
 from identcheck.bundle.model import Terms, apply_step, forward
+from identcheck.bundle.normal import eliminate_frames
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -123,3 +125,48 @@ def test_converged_fit_keeps_to_its_budget_and_says_where_it_is(monkeypatch):
     monkeypatch.setattr(W, "START_BUDGET_S", 0.0)
     fit = W.converged_fit(chain, data, state)
     assert fit.iterations == 1 and not fit.converged
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10_000), lam=st.floats(1e-8, 1.0), spread=st.floats(1e-3, 0.05))
+def test_the_promised_drop_is_the_linearised_models_drop(seed, lam, spread):
+    """For a damped step solved as the fit solves it, :func:`promised_drop` (from the gradients and the damping
+    alone) equals the cost minus the linearised residual's cost ``Σ w |r + J dq + G dc|²``, with J and G written
+    out: the ratio the damping is adjusted by compares the actual drop with what the model truly promised."""
+    sim = simulate(MODEL, n_frames=30, noise_mm=0.5, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    rng = np.random.default_rng(seed)
+    y, w = _prepare(sim.trial.as_array(), rng.uniform(0.2, 1.0, sim.trial.as_array().shape[:2]))
+    s = initial_state(chain, sim.trial.as_array())
+    s.root_t += rng.normal(0, 100 * spread, s.root_t.shape)
+    R, _t, centre, pred = forward(chain, Terms(), s)
+    A, B, C, g, h = chain_mod._normal(chain, Terms(), s, R, centre, pred, y, w)
+    k = A.shape[1]
+    damp_q = lam * np.diagonal(A, axis1=1, axis2=2) + 1e-9 * np.trace(A, axis1=1, axis2=2)[:, None] / k
+    damp_c = lam * np.diag(C)
+    S, reduced, back = eliminate_frames(A + damp_q[..., None] * np.eye(k), B, C + np.diag(damp_c), g, h)
+    dc = chain_mod._solve_constants(S, -reduced)
+    dq = -back(dc)
+    lay, blocks = jacobian_blocks(chain, Terms(), s, R, centre, pred)
+    J, G = dense_jacobians(lay, blocks, chain.n_markers)
+    r = np.where(w[..., None] > 0, pred - y, 0.0)
+    lin = r + np.einsum("fmak,fk->fma", J, dq) + np.einsum("fmap,p->fma", G, dc)
+    model_drop = _cost(pred, y, w) - float(np.sum(w[..., None] * lin ** 2))
+    promised = chain_mod.promised_drop(g, h, dq, dc, damp_q, damp_c)
+    assert promised > 0
+    assert np.isclose(promised, model_drop, rtol=1e-6, atol=1e-9 * _cost(pred, y, w))
+
+
+@settings(max_examples=30, deadline=None)
+@given(promised=st.floats(1e-6, 1e6), share=st.floats(0.0, 1.0))
+def test_the_damping_follows_how_much_of_its_promise_a_step_kept(promised, share):
+    """A step that kept most of its promise is undamped by ten, one that kept little damped twice as hard, and in
+    between the damping stays; a step can never be undamped more than a step that kept more of its promise."""
+    factor = chain_mod.damping_factor(share * promised, promised)
+    if share > chain_mod.GOOD_STEP:
+        assert factor == 0.1
+    elif share < chain_mod.POOR_STEP:
+        assert factor == 2.0
+    else:
+        assert factor == 1.0
+    assert chain_mod.damping_factor(min(1.0, share + 0.3) * promised, promised) <= factor
