@@ -61,8 +61,12 @@ explain the trial equally well: the report names both (``indistinguishable_from`
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
 SD_GROWTH = 5.0
-"""An effect may not make the joints' worst standard error grow more than this factor and beyond
-:data:`MAX_SD_MM`: its parameters would be trading off against the joint's."""
+"""An adopted effect may not leave the joints' worst standard error more than this factor above the rigid fit's and
+beyond :data:`MAX_SD_MM`: its parameters would be trading off against the joints'. The bar is the rigid fit's, not
+the step before's, and it is checked on the candidate fitted to convergence: measured from the step before, the
+growth compounded (walking2: 0.37 mm rigid, then 4.7, 31, 128 mm as a knee turning like a ball and skin on each thigh
+were adopted, each within five times the one before), and a candidate after its few screening iterations can look
+determined where its converged fit is not (4.7 mm screened, 31 mm converged)."""
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,27 @@ class Step:
 
 
 @dataclass(frozen=True)
+class Refused:
+    """An effect that earned its parameters (``score`` in criterion units, over the hypothesis of its round) but
+    would have left the joints undetermined: ``joint``'s marker distances with standard error ``sd_mm``, or
+    ``free`` directions of the constants beyond the gauge (then ``joint`` is None and ``sd_mm`` infinite)."""
+
+    name: str
+    where: dict
+    score: float
+    joint: str | None
+    sd_mm: float
+    free: int
+
+    def to_dict(self, where: dict, limit_mm: float) -> dict:
+        reason = (f"{self.free} direction(s) of the joint parameters would be left free" if self.free else
+                  f"{self.joint} would be determined to {self.sd_mm:.0f} mm (standard error of a marker distance), "
+                  f"beyond the {limit_mm:.0f} mm an effect may leave")
+        return {"name": self.name, "where": plain(where), "score": round(self.score, 1), "joint": self.joint,
+                "worst_sd_mm": None if self.free else round(self.sd_mm, 2), "reason": reason}
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Everything ``diagnose`` found (the result of ``identcheck diagnose``).
 
@@ -125,6 +150,14 @@ class Diagnosis:
         (:mod:`identcheck.diagnose.backward`), with what each still gained given the others (criterion units).
     progress : callable, optional
         Where the joints' judgment (:attr:`joints`) reports its stages.
+    not_adopted : tuple of Refused
+        Effects that earned their parameters but were not adopted because the joints would no longer be determined
+        with them (the worst standard error beyond ``sd_limit_mm``, or a direction left free): what the data show
+        and the model cannot take without giving up the joints. Best score first; the places adopted in the end are
+        left out.
+    sd_limit_mm : float
+        The joints' worst standard error an adopted effect may leave (:data:`SD_GROWTH` times the rigid fit's, at
+        least :data:`MAX_SD_MM`).
     """
 
     ctx: Context
@@ -137,6 +170,8 @@ class Diagnosis:
     first_frame: int = 0
     dropped: tuple = ()
     progress: object = field(default=None, compare=False, repr=False)
+    not_adopted: tuple = ()
+    sd_limit_mm: float = MAX_SD_MM
 
     @cached_property
     def joints(self) -> dict:
@@ -187,6 +222,7 @@ class Diagnosis:
                         for s in self.steps],
             "dropped": [{"name": n, "where": plain(self.numbered(w)), "gain_given_the_others": round(g, 1)}
                         for n, w, g in self.dropped],
+            "not_adopted": [r.to_dict(self.numbered(r.where), self.sd_limit_mm) for r in self.not_adopted],
             "joints": self.joints,
         }
 
@@ -290,6 +326,8 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     ctx, base = start(model, trial, progress)
     test0 = consistency(ctx, base)
     h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
+    limit = max(SD_GROWTH * worst_sd(ctx, base), MAX_SD_MM)
+    refused = {}                                   # place -> Refused, the latest round's
     trail = [base]                                 # the hypothesis after each adopted effect, from the rigid fit on
     # a round adopts an effect or, with none left to adopt, drops what the later effects made unnecessary and, if it
     # dropped any, lets the search go on; a place is dropped at most once, so the rounds are few
@@ -333,7 +371,6 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             tried.sort(key=lambda x: (not (x[0] > bar and x[1].read_without_joints(x[2])), -x[0]))
             tried = simplest_among_equals(tried, h, bar)
             adopted = None
-            limit = max(SD_GROWTH * worst_sd(ctx, h), MAX_SD_MM)
             for sc, eff, prop, cand in tried:
                 if sc <= bar:
                     break
@@ -341,10 +378,14 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if why:
                     log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
                     continue
-                if undetermined(cand) == 0 and worst_sd(ctx, cand) <= limit:
+                cand = cand.polish()
+                free = undetermined(cand)
+                joint, sd = worst_joint(ctx, cand) if not free else (None, float("inf"))
+                if sd <= limit:
                     adopted = (sc, eff, prop, cand)
                     break
                 log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
+                refused[place(eff.name, prop.where)] = Refused(eff.name, prop.where, sc, joint, sd, free)
         if adopted is not None:
             h = _adopt(ctx, h, adopted, tried, steps, progress)
             adopted_effects.append(Adopted(adopted[1], adopted[2]))
@@ -365,8 +406,10 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             adopted_effects, h, trail = list(red.kept), rebuilt[-1], [base] + rebuilt
         if len(dropped_steps) == before:
             break
+    kept = {place(st.name, st.where) for st in steps}
+    not_adopted = sorted((r for key, r in refused.items() if key not in kept), key=lambda r: -r.score)
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
-                     tuple(dropped_steps), progress)
+                     tuple(dropped_steps), progress, tuple(not_adopted), limit)
 
 
 def simplest_among_equals(tried: list, h: Hypothesis, bar: float) -> list:
@@ -392,10 +435,9 @@ def simplest_among_equals(tried: list, h: Hypothesis, bar: float) -> list:
 
 
 def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list, progress) -> Hypothesis:
-    """The round's chosen candidate fitted to convergence, recorded as the next step (with the round's other
-    candidates and the effects no data could tell from it), and announced."""
+    """The round's chosen candidate (fitted to convergence already), recorded as the next step (with the round's
+    other candidates and the effects no data could tell from it), and announced."""
     sc, eff, prop, cand = adopted
-    cand = cand.polish()
     steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
                       tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8],
                       tuple(eff.alike(h.chain, prop.where))))
@@ -452,7 +494,13 @@ def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -
 
 def worst_sd(ctx: Context, h: Hypothesis) -> float:
     """The largest standard error of any joint's marker distance, mm: how well the joints are determined."""
-    return max(sd for per in marker_distances(ctx, h).values() for _, sd in per.values())
+    return worst_joint(ctx, h)[1]
+
+
+def worst_joint(ctx: Context, h: Hypothesis) -> tuple[str, float]:
+    """(the joint whose marker distance has the largest standard error, that error in mm)."""
+    return max(((j, sd) for j, per in marker_distances(ctx, h).items() for _, sd in per.values()),
+               key=lambda js: js[1])
 
 
 def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:

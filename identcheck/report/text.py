@@ -157,6 +157,9 @@ def diagnose_text(diag) -> str:
     for d in rep["dropped"]:
         lines.append(f"dropped on the way: {d['name']} ({_where_text(d['where'])}): adopted before a later effect that "
                      f"explains what it did (it gains {d['gain_given_the_others']:.0f} given them)")
+    for r in rep.get("not_adopted", []):
+        lines.append(f"seen but not adopted: {r['name']} ({_where_text(r['where'])}): it earns its parameters "
+                     f"(gain {r['score']:.0f}) but {r['reason']}")
     test = rep["consistent_after"]
     lines.append(f"gap after: {rep['gap_after']:.3g} mm, noise floor {rep['noise_floor']:.3g} mm; residual "
                  f"{'consistent' if test['consistent'] else 'NOT consistent'} with noise "
