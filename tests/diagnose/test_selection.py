@@ -79,6 +79,7 @@ def _patched(monkeypatch, model, trial, effects, max_steps, score=lambda ctx, ca
     monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
     monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
     monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: 0.0)
+    monkeypatch.setattr(workflow, "worst_joint", lambda ctx, h: ("hip", 0.0))
     monkeypatch.setattr(workflow, "consistency", lambda ctx, h: {"consistent": consistent})
     return workflow.diagnose(model, trial, max_steps=max_steps)
 
@@ -134,6 +135,31 @@ def test_of_two_effects_the_data_cannot_tell_apart_the_simpler_is_named(trial, b
     assert ("rich", {"joint": "hip", "params": more}) in diag.steps[0].equivalents()
     far = _StandIn("lean", [({"segment": "pelvis", "params": 1}, big, big - 1.01 * margin - 1.0)])
     assert [s.name for s in _run(model, tr, [rich, far]).steps] == ["rich"]
+
+
+@settings(max_examples=15, deadline=None)
+@given(rigid=st.floats(0.05, 5.0), share=st.floats(0.05, 1.0), beyond=st.floats(1.01, 20.0))
+def test_the_joints_may_not_lose_more_than_the_rigid_fit_allows_over_several_steps(trial, rigid, share, beyond):
+    """The worst standard error an adopted effect may leave is set by the rigid fit's (five times it, at least 10 mm),
+    not by the step before's: a first effect within it is adopted, a second beyond it is not, however close it is to
+    the first one's (its growth over the first may be small), and it is reported as seen but not adopted, with the
+    joint and the standard error that kept it out."""
+    model, tr = trial
+    limit = max(workflow.SD_GROWTH * rigid, workflow.MAX_SD_MM)
+    sd = {"first": share * limit, "second": beyond * limit}
+    first = _StandIn("first", [({"joint": "knee"}, 1e4, 1e4)])
+    second = _StandIn("second", [({"segment": "thigh"}, 5e3, 5e3)])
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _patched(monkeypatch, model, tr, [first, second], max_steps=3)
+        monkeypatch.setattr(workflow, "worst_sd", lambda ctx, h: rigid)
+        monkeypatch.setattr(workflow, "worst_joint", lambda ctx, h: ("knee", sd.get(getattr(h, "name", None), rigid)))
+        diag = workflow.diagnose(model, tr, max_steps=3)
+    assert [s.name for s in diag.steps] == ["first"]
+    (refused,) = diag.not_adopted
+    assert (refused.name, refused.joint, refused.sd_mm) == ("second", "knee", sd["second"])
+    assert diag.sd_limit_mm == pytest.approx(limit)
+    out = refused.to_dict(refused.where, diag.sd_limit_mm)
+    assert out["worst_sd_mm"] == round(sd["second"], 2) and "knee" in out["reason"]
 
 
 def test_an_adopted_place_is_not_proposed_again(trial):
