@@ -162,6 +162,14 @@ def test_the_joints_may_not_lose_more_than_the_rigid_fit_allows_over_several_ste
     assert out["worst_sd_mm"] == round(sd["second"], 2) and "knee" in out["reason"]
 
 
+def test_an_effect_refused_for_a_free_direction_says_so():
+    """A refused effect that would leave a direction of the joint parameters free names no joint and no standard
+    error (none is finite), and its reason says how many directions."""
+    out = workflow.Refused("extra_dof", {"joint": "knee"}, 120.0, None, float("inf"), 2).to_dict({"joint": "knee"}, 10.0)
+    assert out["worst_sd_mm"] is None and out["joint"] is None
+    assert out["reason"].startswith("2 direction(s)")
+
+
 def test_an_adopted_place_is_not_proposed_again(trial):
     """The same effect at the same place (fitted sizes aside) is adopted once; another place of it may follow."""
     model, tr = trial
