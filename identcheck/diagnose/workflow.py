@@ -378,6 +378,9 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if why:
                     log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
                     continue
+                if progress:
+                    progress(f"step {len(steps) + 1}: fitting {eff.name} {prop.where} to convergence, to check the "
+                             f"joints stay determined")
                 cand = cand.polish()
                 free = undetermined(cand)
                 joint, sd = worst_joint(ctx, cand) if not free else (None, float("inf"))
