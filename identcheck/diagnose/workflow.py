@@ -455,9 +455,10 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, 
     hypothesis without the effect; would the search adopt an effect gaining that much there?). Yes when it earns
     its parameters and the gap without it is not consistent with noise, when it gains decisively
     (:data:`DECISIVE_GAIN`) all the same, or when the joints need it to be determined: without it they are not, or
-    their worst white-noise standard error grows beyond what the forward step lets an adopted effect cause
-    (:data:`SD_GROWTH`, :data:`MAX_SD_MM`). The joints are then reported by fit's rules, which may still call them
-    undetermined (a real knee whose ball joint was dropped for skin terms driven by its angle: ±20 mm)."""
+    their worst white-noise standard error grows beyond :data:`SD_GROWTH` times theirs with it and beyond
+    :data:`MAX_SD_MM` (measured from the full model here, where the forward step measures from the rigid fit). The
+    joints are then reported by fit's rules, which may still call them undetermined (a real knee whose ball joint was
+    dropped for skin terms driven by its angle: ±20 mm)."""
     gain = score(ctx, full, without)
     bar = DECISIVE_GAIN if consistency(ctx, without)["consistent"] else 0.0
     if gain > bar:
