@@ -190,20 +190,34 @@ def effects_section(doc: dict) -> str:
     parts = [f"<p>Gap of the rigid-joint model: <b>{_num(doc.get('gap_before'))} mm</b> (noise floor "
              f"{_num(doc.get('noise_floor_before'))} mm); after the effects: <b>{_num(doc.get('gap_after'))} mm</b> "
              f"(noise floor {_num(doc.get('noise_floor'))} mm).</p>"]
+    refused = "".join(f"<li>{_e(r['name'])} ({_e(_where_cell(r.get('where')))}): gain {_num(r.get('score'))}, but "
+                      f"{_e(r['reason'])}</li>" for r in doc.get("not_adopted") or [])
+    if refused:
+        refused = ("<p>Seen but not adopted (they earn their parameters, but the joints would no longer be "
+                   f"determined with them):</p><ul>{refused}</ul>")
     if not effects:
-        parts.append("<p>No named effect earned its parameters.</p>")
+        parts.append("<p>No named effect earned its parameters" + (" and kept the joints determined.</p>" if refused
+                                                                   else ".</p>") + refused)
         return "".join(parts)
     parts.append("<table><tr><th>#</th><th>effect</th><th>where</th><th>gap before (mm)</th><th>gap after (mm)</th></tr>")
     for k, e in enumerate(effects, 1):
-        where = "; ".join(f"{_e(key)}: {_e(val if not isinstance(val, list) or len(val) <= 6 else str(val[:6]) + ' …')}"
-                          for key, val in (e.get("where") or {}).items())
+        where = _where_cell(e.get("where"), escape=True)
         parts.append(f"<tr><td>{k}</td><td>{_e(e['name'])}</td><td>{where}</td><td class='num'>"
                      f"{_num(e.get('gap_before'))}</td><td class='num'>{_num(e.get('gap_after'))}</td></tr>")
     parts.append("</table>")
     gaps = [("rigid model", doc.get("gap_before"))] + [(e["name"], e.get("gap_after")) for e in effects]
     parts.append(bars_svg([(name, v, "#4575b4", f"gap after {name}: {v:.3g} mm") for name, v in gaps if v is not None],
                           "gap after each effect", (doc["noise_floor"], "noise floor") if doc.get("noise_floor") else None))
+    parts.append(refused)
     return "".join(parts)
+
+
+def _where_cell(where: dict | None, escape: bool = False) -> str:
+    """An effect's `where` as ``key: value; ...``, a list longer than six shortened (escaped for HTML with
+    `escape`)."""
+    esc = _e if escape else str
+    return "; ".join(f"{esc(key)}: {esc(val if not isinstance(val, list) or len(val) <= 6 else str(val[:6]) + ' …')}"
+                     for key, val in (where or {}).items())
 
 
 def anatomical_section(anatomical: dict | None) -> str:

@@ -164,3 +164,20 @@ def test_the_scene_draws_no_joint_in_a_frame_where_no_marker_was_seen():
     assert scene["frames"][:2] == [10, 11]
     assert all(p is None for p in scene["joint_xyz"][0]) and all(p is None for p in scene["xyz"][0])
     assert all(p is not None for p in scene["joint_xyz"][1])
+
+
+@pytest.mark.parametrize("adopted", [0, 1])
+def test_an_effect_seen_but_not_adopted_is_on_the_page_with_its_reason(adopted):
+    """The diagnose page lists the effects refused because the joints would no longer be determined, with where they
+    act and why, whether or not another effect was adopted; a page without any says nothing of them."""
+    from identcheck.report.html import effects_section
+
+    refused = {"name": "soft_tissue", "where": {"segment": "pelvis", "markers": ["RASI", "<LASI>"]}, "score": 7362.2,
+               "joint": "hip_l", "worst_sd_mm": 22.1, "reason": "hip_l would be determined to 22 mm"}
+    effects = [{"name": "outliers", "where": {"count": 3}, "gap_before": 2.0, "gap_after": 1.5}][:adopted]
+    doc = {"gap_before": 2.0, "gap_after": 1.5, "noise_floor": 0.8, "noise_floor_before": 0.8, "effects": effects,
+           "not_adopted": [refused]}
+    page = effects_section(doc)
+    assert "Seen but not adopted" in page and "hip_l would be determined to 22 mm" in page
+    assert "pelvis" in page and "&lt;LASI&gt;" in page and "<LASI>" not in page
+    assert "Seen but not adopted" not in effects_section({**doc, "not_adopted": []})
