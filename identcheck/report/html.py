@@ -190,7 +190,7 @@ def effects_section(doc: dict) -> str:
     parts = [f"<p>Gap of the rigid-joint model: <b>{_num(doc.get('gap_before'))} mm</b> (noise floor "
              f"{_num(doc.get('noise_floor_before'))} mm); after the effects: <b>{_num(doc.get('gap_after'))} mm</b> "
              f"(noise floor {_num(doc.get('noise_floor'))} mm).</p>"]
-    refused = "".join(f"<li>{_e(r['name'])} ({_e(_where_cell(r.get('where')))}): gain {_num(r.get('score'))}, but "
+    refused = "".join(f"<li>{_e(r['name'])} ({_where_cell(r.get('where'))}): gain {_num(r.get('score'))}, but "
                       f"{_e(r['reason'])}</li>" for r in doc.get("not_adopted") or [])
     if refused:
         refused = ("<p>Seen but not adopted (they earn their parameters, but the joints would no longer be "
@@ -201,7 +201,7 @@ def effects_section(doc: dict) -> str:
         return "".join(parts)
     parts.append("<table><tr><th>#</th><th>effect</th><th>where</th><th>gap before (mm)</th><th>gap after (mm)</th></tr>")
     for k, e in enumerate(effects, 1):
-        where = _where_cell(e.get("where"), escape=True)
+        where = _where_cell(e.get("where"))
         parts.append(f"<tr><td>{k}</td><td>{_e(e['name'])}</td><td>{where}</td><td class='num'>"
                      f"{_num(e.get('gap_before'))}</td><td class='num'>{_num(e.get('gap_after'))}</td></tr>")
     parts.append("</table>")
@@ -212,11 +212,9 @@ def effects_section(doc: dict) -> str:
     return "".join(parts)
 
 
-def _where_cell(where: dict | None, escape: bool = False) -> str:
-    """An effect's `where` as ``key: value; ...``, a list longer than six shortened (escaped for HTML with
-    `escape`)."""
-    esc = _e if escape else str
-    return "; ".join(f"{esc(key)}: {esc(val if not isinstance(val, list) or len(val) <= 6 else str(val[:6]) + ' …')}"
+def _where_cell(where: dict | None) -> str:
+    """An effect's `where` as ``key: value; ...`` escaped for HTML, a list longer than six shortened."""
+    return "; ".join(f"{_e(key)}: {_e(val if not isinstance(val, list) or len(val) <= 6 else str(val[:6]) + ' …')}"
                      for key, val in (where or {}).items())
 
 
