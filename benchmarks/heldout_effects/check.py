@@ -23,6 +23,9 @@ v2 datasets (`generator.py --version 2`) also get, per trial (see check_v2_trial
     that hip centre), which also works for 2-marker segments;
   - magnitude / `where` checks for the new shapes (fast_ramp, *_in_gap, heavy_tailed,
     other_joint), layout landmarks, the sit_to_stand motion, noise level and time-lag exactness.
+Sweep datasets (`--sweep`, index "sweep": true) get the v2 checks with the sweep ranges, and per
+trial (check_sweep_trial): one effect, its stream, frames / noise / size in range, the size
+consistent with the effect's parameters, and the truth spec rebuilt identically from its stream.
 """
 import json
 import os
@@ -111,6 +114,13 @@ def line_dist(X, p, d):
 V2 = {"trials": 0, "est_frames_min": None, "est_fallback": 0, "est_kabsch_score_sara": 0,
       "min_visible": 1.0, "n_gaps": [], "swap_in_gap": 0, "noise_ratio": [], "s2s_cycles": [],
       "heavy_events": [], "other_joint": 0, "close_to_axis_mm": []}
+# sweep mode (README "Sweep mode"): size name and log-uniform range per effect; extra_dof's is
+# 0.05-1 x v2's upper amplitude for the dof (12 deg varus_valgus, 15 deg axial_rotation / ball)
+SWEEP = {"on": False, "seed": None, "rebuilt": 0}
+SWEEP_RANGES = {"soft_tissue": ("target_mm", 0.3, 15.0), "marker_slip": ("target_mm", 0.3, 15.0),
+                "marker_swap": ("span_frames", 2, 400), "joint_translation": ("target_mm", 0.3, 12.0),
+                "extra_dof": ("amplitude_deg", 0.05, 1.0), "time_offset": ("lag_frames", 0.05, 4.0),
+                "outliers": ("target_mm", 1.0, 60.0), "spatial_distortion": ("strength_mm_at_1500", 0.3, 12.0)}
 ANAT_THIGH = {"RTHI", "RKNE", "RKNM", "RGT", "RTHA"}
 ANAT_SHANK = {"RTIB", "RANK", "RMED", "RTT"}
 
@@ -231,7 +241,7 @@ def check_v2_swap(stem, spec, e, w, X0, X1, moved, names, seg_of):
     if not np.array_equal(moved, exp) or not exp.any():
         fail(stem, "marker_swap: moved samples are not the visible samples of the span")
     if w["frame_numbers"] != [s0 + 1, s1 + 1] or [seg_of[m] for m in w["markers"]] != w["segments"] \
-            or not 50 <= s1 - s0 + 1 <= 400 or e["frames"] != w["frames"] or e["markers"] != w["markers"]:
+            or not (2 if SWEEP["on"] else 50) <= s1 - s0 + 1 <= 400 or e["frames"] != w["frames"] or e["markers"] != w["markers"]:
         fail(stem, "marker_swap where / span")
     if not np.array_equal(m1, swapped(m0, names, e)):
         fail(stem, "marker_swap: the gaps do not follow the swapped markers")
@@ -254,6 +264,8 @@ def check_v2_effect(stem, spec, e, w, X0, X1, D, moved, names, seg_of):
     if nm != "marker_swap" and not np.array_equal(nanmask(X0), nanmask(X1)):
         fail(stem, f"{nm} changes the gaps")
     rng_ = {"soft_tissue": (2, 15), "marker_slip": (4, 15), "joint_translation": (3, 12), "outliers": (5, 60)}
+    if SWEEP["on"]:
+        rng_ = {k: SWEEP_RANGES[k][1:] for k in rng_}
     if nm in rng_ and not rng_[nm][0] - 1e-9 <= e["target_peak_mm"] <= rng_[nm][1] + 1e-9:
         fail(stem, f"{nm} target out of range")
     if nm == "marker_slip":
@@ -360,7 +372,8 @@ def check_motion(stem, spec):
     b = np.array(m["sit_start_s"]); q = np.array(m["sit_s"])
     V2["s2s_cycles"].append(n)
     ends = b + q
-    if not (3 <= n <= 6 and len(T) == n and (T >= 2.5 - 1e-9).all() and (T <= 4 + 1e-9).all()
+    n_lo, n_hi = (1, 12) if SWEEP["on"] else (3, 6)
+    if not (n_lo <= n <= n_hi and len(T) == n and (T >= 2.5 - 1e-9).all() and (T <= 4 + 1e-9).all()
             and (b > a + r).all() and (a[1:] > ends[:-1]).all() and a[0] > 0 and ends[-1] <= N / G.RATE + 1e-9):
         fail(stem, "sit_to_stand cycle structure")
         return
@@ -384,6 +397,84 @@ def check_motion(stem, spec):
         f_seat = int(round(seat_t[k] * G.RATE)); rise = (t >= a[k]) & (t <= a[k] + r[k])
         if rise.any() and f_seat < N and not tilt[rise].min() < tilt[f_seat] - 5:
             fail(stem, "sit_to_stand: the pelvis does not tilt forward during the rise")
+
+
+def check_sweep_trial(stem, truth, entry, spec):
+    """Sweep mode: one effect drawn from its own stream, frames / noise / size in their ranges,
+    the size consistent with the effect's parameters, and the spec rebuilt from the stream."""
+    sw = spec.get("sweep")
+    if not sw:
+        fail(stem, "sweep dataset, but the spec has no sweep record")
+        return
+    nm = sw["effect"]
+    if entry["category"]["kind"] != "single" or len(spec["effects"]) != 1 or spec["effects"][0]["name"] != nm \
+            or sw["effect_index"] != G.EFFECTS.index(nm):
+        fail(stem, "sweep: not a single trial of its effect")
+        return
+    key = [SWEEP["seed"], G.EFFECTS.index(nm), sw["trial_index"], 4242] + ([sw["attempt"]] if sw["attempt"] else [])
+    if sw["stream"] != key:
+        fail(stem, f"sweep stream {sw['stream']} != {key}")
+    N, nz, p = spec["n_frames"], spec["noise"], entry["params"]
+    if not 500 <= N <= 3000 or p.get("frames") != N:
+        fail(stem, f"sweep frames {N} / params.frames {p.get('frames')}")
+    if p.get("noise") != {"kind": nz["model"], "sigma_mm": nz["sigma_mm"], "phi": nz.get("phi"),
+                          "model": nz["model"], "seed": nz["seed"]}:
+        fail(stem, "sweep params.noise")
+    e, rec = spec["effects"][0], entry["effects"][0]
+    size = rec.get("size")
+    sname, lo, hi = SWEEP_RANGES[nm]
+    if size is None or size != e.get("size") or size["name"] != sname:
+        fail(stem, "sweep: effect size missing or named wrongly")
+        return
+    v, u = size["value"], sw["size_u"]
+    if nm == "extra_dof":
+        f = size["fraction"]
+        amps = {"varus_valgus": e.get("vv_peak_deg"), "axial_rotation": e.get("ax_peak_deg")}
+        top = 15.0 if e["dof"] != "varus_valgus" else 12.0
+        ok = abs(f - lo * (hi / lo) ** u) <= 1e-9 and lo - 1e-12 <= f <= hi + 1e-12 \
+            and abs(v - top * f) <= 1e-9 * top and size["range"] == [lo * top, hi * top] \
+            and all((a is None) == (d not in e["dof"] and e["dof"] != "ball") for d, a in amps.items()) \
+            and all(a is None or abs(a - {"varus_valgus": 12.0, "axial_rotation": 15.0}[d] * f) <= 1e-9 * 15
+                    for d, a in amps.items())
+    elif nm == "marker_swap":
+        ok = v == int(v) and lo <= v <= hi and v == e["frames"][1] - e["frames"][0] + 1 \
+            and v == min(hi, np.floor(lo * ((hi + 1) / lo) ** u))
+    else:
+        ok = lo - 1e-9 <= v <= hi + 1e-9 and abs(v - lo * (hi / lo) ** u) <= (5e-5 if nm == "time_offset" else 1e-9 * v)
+        field = {"target_mm": "target_peak_mm", "lag_frames": "delay_frames", "strength_mm_at_1500": "mm_at_1500"}[sname]
+        ok = ok and e[field] == v
+        if nm == "time_offset":
+            ok = ok and e["shape"].endswith("_fractional_lag") and rec["where"]["delay_frames"] == v
+        if nm == "spatial_distortion" and e["shape"] == "smooth_warp":
+            ok = ok and abs(e["target_peak_mm"] - 0.6 * v) <= 1e-9 * v
+    if not ok:
+        fail(stem, f"sweep: size {size} inconsistent with {nm} / its quantile {u}")
+    # the spec rebuilds identically from its stream
+    again = json.loads(json.dumps(G.spec_json(G.build_spec_sweep(SWEEP["seed"], sw["trial_index"], nm))))
+    if again != {k: v for k, v in truth["spec"].items() if not k.startswith("_")}:
+        fail(stem, "sweep: the spec does not rebuild from its stream")
+    else:
+        SWEEP["rebuilt"] += 1
+
+
+def summarise_sweep(index, trials):
+    """Per swept effect: trial count, size and magnitude ranges, lengths, noise, worlds."""
+    from collections import Counter
+    names, n = index["effects"], index["n_per_effect"]
+    if [t["effects"][0]["name"] for t in trials] != [x for x in names for _ in range(n)] \
+            or len({t["stem"] for t in trials}) != len(trials):
+        fail("index", "sweep: trials are not n_per_effect single trials per listed effect, in order, with unique stems")
+    print(f"sweep: {n} trials per effect; spec rebuilt from its stream for {SWEEP['rebuilt']} of {len(trials)}")
+    for nm in names:
+        ts = [t for t in trials if t["effects"][0]["name"] == nm]
+        sz = [t["effects"][0]["size"]["value"] for t in ts]
+        mg = [t["effects"][0]["magnitude_mm"] for t in ts]
+        fr = [t["params"]["frames"] for t in ts]
+        sg = [t["params"]["noise"]["sigma_mm"] for t in ts]
+        print(f"  {nm:19s} {ts[0]['effects'][0]['size']['name']:>19s} {min(sz):8.3f}-{max(sz):8.3f}  "
+              f"magnitude {min(mg):8.3f}-{max(mg):8.3f} mm  frames {min(fr)}-{max(fr)}  sigma {min(sg):.2f}-{max(sg):.2f}  "
+              f"noise {dict(Counter(t['params']['noise']['kind'] for t in ts))}  "
+              f"motion {dict(Counter(t['category']['motion'] for t in ts))}")
 
 
 def check_v2_trial(stem, truth, entry, spec, X0, Xfull, Xf, names, seg_of):
@@ -441,6 +532,10 @@ def check_v2_trial(stem, truth, entry, spec, X0, Xfull, Xf, names, seg_of):
         fail(stem, f"noise std / sigma = {ratio:.3f}")
     check_layout(stem, spec, geom)
     check_motion(stem, spec)
+    if SWEEP["on"]:
+        check_sweep_trial(stem, truth, entry, spec)
+    elif "sweep" in spec:
+        fail(stem, "sweep spec in a non-sweep dataset")
 
 
 # ----------------------------------------------------------------------------- per trial
@@ -573,14 +668,15 @@ def check_trial(d, entry):
 
 
 def summarise_v2(trials):
-    """Print the v2 mix (gaps / layout / motion / new shapes) and check its proportions."""
+    """Print the v2 mix (gaps / layout / motion / new shapes) and check its proportions (not in
+    sweep mode, whose categories are drawn independently per trial)."""
     from collections import Counter
     n = len(trials)
     cat = lambda k: Counter(t["category"][k] for t in trials)
     gaps, layout, motion = cat("gaps"), cat("layout"), cat("motion")
     kinds = cat("kind")
     print(f"v2: gaps {dict(gaps)}  layout {dict(layout)}  motion {dict(motion)}")
-    for k in ("gaps", "layout", "motion"):
+    for k in ("gaps", "layout", "motion") if not SWEEP["on"] else ():
         print(f"    clean trials by {k}: {dict(Counter(t['category'][k] for t in trials if t['category']['kind'] == 'clean'))}")
     ng = Counter(V2["n_gaps"])
     print(f"    gaps per gapped trial: {dict(sorted(ng.items()))}; min visible fraction (any marker, any view): "
@@ -607,6 +703,8 @@ def summarise_v2(trials):
     print(f"    marker-estimated joints: virtual-marker fit on {V2['trials']} trials (>= {V2['est_frames_min']} "
           f"fully visible frames; {V2['est_fallback']} gap-free fallbacks), plus Kabsch/SCoRE/SARA on "
           f"{V2['est_kabsch_score_sara']}")
+    if SWEEP["on"]:
+        return
     if kinds != Counter({"clean": round(0.12 * n), "pair": round(0.18 * n),
                          "single": n - round(0.12 * n) - round(0.18 * n)}):
         fail("index", f"mix {dict(kinds)}")
@@ -626,6 +724,8 @@ def main():
     assert index["generator"] in (G.GENERATOR, G.GENERATOR_V2)
     version = 2 if index["generator"] == G.GENERATOR_V2 else 1
     assert index.get("version", 1) == version
+    SWEEP["on"], SWEEP["seed"] = bool(index.get("sweep")), index["seed"]
+    assert not SWEEP["on"] or version == 2
     trials = index["trials"]
     worst = np.zeros(4)
     for entry in trials:
@@ -659,6 +759,8 @@ def main():
     print(f"worst relative magnitude error: {worst[2]:.2e};  worst TRC vs regeneration: {worst[3]:.2e} mm")
     if version == 2:
         summarise_v2(trials)
+    if SWEEP["on"]:
+        summarise_sweep(index, trials)
     print(f"checked in {time.time() - t0:.1f} s")
     if failures:
         print(f"FAIL ({len(failures)})")
