@@ -41,7 +41,7 @@ where the fit scored 22 930, and skin on the thigh, estimated 5 020, scored 20 0
 effect's further places are not fitted this round when their strength is below 1/SKIP_RATIO of the best score
 fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
 lag is several frames) or is marked ``always_fit`` (a swap's strength is read from distances, not from the
-residual)."""
+residual; a hinge's extra rotation's are a bound and a first-order reading)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its

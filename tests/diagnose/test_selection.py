@@ -103,6 +103,29 @@ def test_an_effect_whose_detector_underestimates_is_fitted_and_named(trial, big,
 
 
 @settings(max_examples=15, deadline=None)
+@given(st.floats(1e3, 1e5), st.floats(2.0, 1e3), st.floats(1.01, 3.0), st.booleans())
+def test_a_further_place_of_an_effect_marked_always_fit_is_fitted_however_weak_its_estimate(trial, big, ratio, lead,
+                                                                                              marked):
+    """An effect whose detector strengths do not estimate its score (``always_fit``: a hinge's extra rotation, whose
+    ball-joint strength is a bound and whose second rotation's reads low) has its further places fitted even when
+    their strength is far below the round's best, and named when one scores best; unmarked, that place is skipped
+    and the loud effect is named."""
+    model, tr = trial
+    weak = big / (workflow.SKIP_RATIO * ratio)
+    loud = _StandIn("loud", [({"segment": "thigh"}, big, big)])
+    turn = _StandIn("turn", [({"joint": "knee", "needs": "spherical"}, 2 * big, big / 2),
+                             ({"joint": "knee", "needs": "a second rotation"}, weak, big * lead)])
+    turn.always_fit = marked
+    diag = _run(model, tr, [loud, turn])
+    assert len(turn.fitted) == (2 if marked else 1)
+    assert [s.name for s in diag.steps] == (["turn"] if marked else ["loud"])
+
+
+def test_the_effects_marked_always_fit_are_those_whose_strength_is_no_estimate():
+    assert {name for name, eff in workflow.EFFECTS.items() if eff.always_fit} == {"extra_dof", "marker_swap"}
+
+
+@settings(max_examples=15, deadline=None)
 @given(st.floats(0.1, workflow.DECISIVE_GAIN), st.floats(1.0, 50.0), st.floats(-1e3, 0.0))
 def test_on_a_gap_consistent_with_noise_an_estimate_below_the_bar_is_still_fitted(trial, strength, above, null):
     """Where the gap passes the consistency test, an effect is adopted only when its fitted score is decisive; its
