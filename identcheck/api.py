@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from identcheck.errors import InputError
 from identcheck.io.model import Model
+from identcheck.plan import capture
 from identcheck.trial import FORMATS, Trial
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -54,6 +55,23 @@ def load_model(model) -> Model:
         Every problem of the file at once (unknown marker, joint cycle, ...), naming file and line.
     """
     return model if isinstance(model, Model) else Model.from_toml(model)
+
+
+def _model_with_joints(model, verb: str) -> Model:
+    """The model of `verb` (:func:`load_model`), which must have a joint: a model of segments alone is a valid
+    plan (``plan`` says every joint of it is identifiable) but leaves ``fit`` and ``diagnose`` nothing to fit.
+
+    Raises
+    ------
+    InputError
+        The model has no joint, naming its file.
+    """
+    model = load_model(model)
+    if not model.joints:
+        raise InputError([f"the model has no joint ({len(model.segments)} segment(s), no [joints.*] table): {verb} "
+                          "has nothing to fit; add the joints between the segments, or let `identcheck skeleton` "
+                          "infer them from the trial"], source=str(model.source))
+    return model
 
 
 def read_trial(trial) -> Trial:
@@ -181,7 +199,7 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     with warnings.catch_warnings(record=True) as read:        # the reader's findings belong in the JSON too
         warnings.simplefilter("always")
         data = _frames(trial, frames)
-    model = load_model(model)
+    model = _model_with_joints(model, "fit")
     doc = fit_trial(model, data, progress=progress, export=export_markers,
                     on_fit=keep if report is not None or export_osim is not None else None)
     doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
@@ -248,8 +266,9 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
     from identcheck.diagnose import workflow
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
+    model = _model_with_joints(model, "diagnose")
     data = _frames(trial, frames)
-    diag = workflow.diagnose(load_model(model), data, progress=progress, max_steps=steps)
+    diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
     if export_markers is not None:
         from identcheck.fit.export import export_markers as write_markers
 
@@ -318,7 +337,7 @@ def _plan_is_numerical(*args, **kwargs) -> bool:
 @functools.partial(_one_blas_thread, with_scipy=_plan_is_numerical)
 def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest: bool = True,
          fewest: bool = False, witness: bool = False, progress=None, noise_mm: float | None = None,
-         practical_motion: str = "functional", frames: int = 1000, max_seconds: float | None = None):
+         practical_motion: str = "functional", frames: int = capture.FRAMES, max_seconds: float | None = None):
     """Check a marker plan before capture: which joints `model`'s markers identify, how, with how many
     samples, and the fewest markers to add (see :func:`identcheck.plan.analysis.plan_model`).
 
@@ -338,6 +357,8 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
     from identcheck.plan.analysis import plan_model
     from identcheck.plan.result import PlanResult
 
+    if noise_mm is not None and capture.frames_problem(frames):
+        raise InputError([f"frames {capture.frames_problem(frames)}"])
     m = load_model(model)
     res = plan_model(m, seed=seed, motion=motion, robust=robust, suggest=suggest,
                      fewest=fewest, witness=witness, progress=progress, max_seconds=max_seconds)

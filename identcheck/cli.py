@@ -21,6 +21,7 @@ import warnings
 import identcheck
 from identcheck import api
 from identcheck.errors import DegenerateError, IdentifiabilityWarning, InputError
+from identcheck.plan import capture
 from identcheck.report import json_out, text
 
 log = logging.getLogger("identcheck")
@@ -151,7 +152,7 @@ def _cmd_fit(a) -> int:
 def _cmd_plan(a) -> int:
     res = api.plan(a.model, seed=a.seed, motion=not a.fast, robust=not a.fast, fewest=a.fewest, witness=a.witness,
                    progress=_progress("plan"), noise_mm=a.noise_mm, practical_motion=a.motion or "functional",
-                   frames=PLAN_FRAMES if a.frames is None else a.frames,
+                   frames=capture.FRAMES if a.frames is None else a.frames,
                    max_seconds=a.max_seconds)
     if a.figure:
         from identcheck.report.plan_figure import draw
@@ -377,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the motion of that capture (with --noise-mm): functional (default), flexion or small, or a "
                         "recorded trial")
     s.add_argument("--frames", type=int, default=None, metavar="N",
-                   help=f"frames of that capture (with --noise-mm; default {PLAN_FRAMES})")
+                   help=f"frames of that capture (with --noise-mm; default {capture.FRAMES})")
     s.set_defaults(func=_cmd_plan)
 
     s = sub.add_parser("diagnose", formatter_class=_Help, epilog=_epilog("identcheck diagnose examples/diagnose_leg.toml trial.trc --plots figures/", "the residual left is consistent with noise", "a gap stays unexplained"),
@@ -473,8 +474,8 @@ FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 JSON_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("truth",)}
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
-PLAN_FRAMES = 1000                  # frames of the capture plan --noise-mm predicts, unless --frames says
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
+RATE_HZ = (0.01, 1e6)               # a simulated capture's rate: its times print (6 decimals) and rise frame by frame
 
 
 def preflight(a) -> list:
@@ -557,8 +558,8 @@ def preflight(a) -> list:
     if a.verb == "plan" and a.noise_mm is not None:
         if not 0 < a.noise_mm < math.inf:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm")
-        if a.frames is not None and not 10 <= a.frames <= 20000:
-            problems.append(f"--frames {a.frames}: between 10 and 20000 frames")
+        if a.frames is not None and capture.frames_problem(a.frames):
+            problems.append(f"--frames {capture.frames_problem(a.frames)}")
     elif a.verb == "plan":
         given = [f"--{o} {getattr(a, o)}" for o in ("motion", "frames") if getattr(a, o) is not None]
         if given:
@@ -570,6 +571,8 @@ def preflight(a) -> list:
 
         if extra.problem():
             problems.append(extra.problem())
+        if a.dashboard is not None and _bad_address(a.dashboard):
+            problems.append(f"--dashboard {a.dashboard}: {_bad_address(a.dashboard)}")
         if a.workers is not None and a.workers < 1:
             problems.append(f"--workers {a.workers}: 1 or more")
         if a.workers is not None and a.scheduler:
@@ -580,7 +583,7 @@ def preflight(a) -> list:
     if a.verb == "simulate":
         for opt, ok, allowed in (
                 ("frames", 2 <= a.frames <= MAX_SIMULATED_FRAMES, f"2 to {MAX_SIMULATED_FRAMES:,} frames"),
-                ("rate", 0 < a.rate < math.inf, "a positive, finite rate in Hz"),
+                ("rate", RATE_HZ[0] <= a.rate <= RATE_HZ[1], f"{RATE_HZ[0]:g} to {RATE_HZ[1]:g} Hz"),
                 ("noise_mm", 0 <= a.noise_mm < math.inf, "0 or more mm, finite"),
                 ("occlusion", 0 <= a.occlusion < 1, "a fraction of frames from 0 up to (not including) 1"),
                 ("rom_deg", 0 <= a.rom_deg <= 360, "0 to 360 degrees")):
@@ -598,6 +601,17 @@ def _skeleton_problems(a) -> list:
     if a.out and not str(a.out).lower().endswith(".toml"):
         problems.append(f"--out {a.out}: give a .toml file name (the model file to write)")
     return problems           # an output over an input, or over the other output: preflight's own checks
+
+
+def _bad_address(address: str) -> str:
+    """Why `address` is no ``[HOST]:PORT`` a dashboard can listen on ('' when it is): the port a number from 0
+    (any free one) to 65535."""
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isascii() or not port.isdigit() or not 0 <= int(port) <= 65535:
+        return "give [HOST]:PORT with PORT from 0 (any free port) to 65535, e.g. :8787 or 127.0.0.1:0"
+    if host and not all(c.isascii() and (c.isalnum() or c in ".-[]:") for c in host):
+        return f"{host!r} is no host name or address"
+    return ""
 
 
 def _unwritable_file(path) -> str:

@@ -7,6 +7,19 @@ silent wrong number).
 from __future__ import annotations
 
 
+MAX_PROBLEM_CHARS = 1000
+"""Longest problem sentence shown: one that quotes a value from a file (a marker name, a cell) could otherwise be
+as long as the file."""
+
+
+def _shortened(problem) -> str:
+    """`problem` as text, cut to :data:`MAX_PROBLEM_CHARS` with a note of how much was left out."""
+    text = str(problem)
+    if len(text) <= MAX_PROBLEM_CHARS:
+        return text
+    return f"{text[:MAX_PROBLEM_CHARS]}... ({len(text) - MAX_PROBLEM_CHARS:,} characters more)"
+
+
 class InputError(ValueError):
     """Bad user input (file, marker, joint type, option); lists every problem found at once.
 
@@ -26,7 +39,7 @@ class InputError(ValueError):
         self.segment = segment
         if isinstance(problems, str):
             problems = [problems]
-        self.problems = list(problems)
+        self.problems = [_shortened(p) for p in problems]
         self.source = source
         head = f"{source}: " if source else ""
         if len(self.problems) == 1:

@@ -274,8 +274,9 @@ class Trial:
                     f"model match; name the model's marker {prefixed[0]!r}, or fix the trial's labels)")
                 problems.append(f"marker {lab!r}{seg(lab)} of the model is not in the trial{hint}")
             elif not np.isfinite(self._xyz[:, self._index[lab]]).all(axis=1).any():
-                problems.append(f"marker {lab!r}{seg(lab)} is in the model but never visible in the trial (every "
-                                "sample is empty): fix its labelling, or remove it from the model")
+                problems.append(f"marker {lab!r}{seg(lab)} is in the model but never visible in the trial's frames "
+                                f"{self.frame_number(0)} to {self.frame_number(self.n_frames - 1)} (every sample is "
+                                "empty): fix its labelling, choose other frames, or remove it from the model")
         present = [lab for lab in labels if lab in self._index]
         pairs = self.coincident(present)
         if len(present) >= 3 and len(pairs) == len(present) * (len(present) - 1) // 2:

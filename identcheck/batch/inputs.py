@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from identcheck.errors import InputError
+from identcheck.plan import capture
 from identcheck.trial import FORMATS, frame_range
 
 VERBS = ("fit", "diagnose", "plan")
@@ -33,8 +34,7 @@ MANIFEST_COLUMNS = ("trial", "model", "frames")
 """A manifest's columns; ``trial`` and ``model`` are required."""
 GLOB_CHARS = "*?["
 DEFAULT_MOTION = "functional"
-DEFAULT_PLAN_FRAMES = 1000
-"""As ``identcheck plan --motion`` / ``--frames``."""
+"""As ``identcheck plan --motion``."""
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def plan_settings(seed: int, fast: bool, noise_mm: float | None, motion: str | N
     return {"verb": "plan", "seed": int(seed), "fast": bool(fast),
             "noise_mm": float(noise_mm) if practical else None,
             "motion": str(motion or DEFAULT_MOTION) if practical else None,
-            "frames": int(frames or DEFAULT_PLAN_FRAMES) if practical else None}
+            "frames": int(frames or capture.FRAMES) if practical else None}
 
 
 def resolve(verb: str, inputs, model=None, frames=None, noise_mm=None, motion=None, seed: int = 0,
@@ -259,14 +259,16 @@ def _plan_jobs(items, model, frames, noise_mm, motion, seed, fast, problems) -> 
     models = _files(items + ([str(model)] if model is not None else []), (MODEL_SUFFIX,), "model (.toml)", problems)
     noises = _numbers(noise_mm, "--noise-mm", problems)
     motions = _words(motion) or [DEFAULT_MOTION]
-    n_frames = DEFAULT_PLAN_FRAMES
+    n_frames = capture.FRAMES
     if frames not in (None, ""):
         try:
-            n_frames = int(frames)
-            if n_frames < 1:
-                raise ValueError
-        except (TypeError, ValueError):
-            problems.append(f"--frames {frames!r}: plan takes the number of frames of the predicted capture")
+            n_frames = int(str(frames).strip())
+        except ValueError:
+            n_frames = str(frames)
+        if capture.frames_problem(n_frames):
+            problems.append(f"--frames {capture.frames_problem(n_frames)} (plan takes the number of frames of the "
+                            "capture it predicts)")
+            n_frames = capture.FRAMES            # the jobs are not run: the problems are raised first
     if noises is None:
         if motion not in (None, "", []):
             problems.append("--motion applies with --noise-mm (the practical verdicts); give both")

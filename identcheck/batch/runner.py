@@ -163,8 +163,12 @@ def _client(workers, scheduler, dashboard, scratch, n_jobs):
     try:
         with _quiet_logs(), dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                                              "temporary-directory": str(scratch)}):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=dashboard,
-                                   silence_logs=logging.CRITICAL, local_directory=str(scratch))
+            try:
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=dashboard,
+                                       silence_logs=logging.CRITICAL, local_directory=str(scratch))
+            except (RuntimeError, OSError, ValueError) as exc:     # Dask wraps what stopped it in a RuntimeError
+                raise InputError([f"the local cluster did not start ({jobs.message(exc.__cause__ or exc)}); "
+                                  f"check --dashboard {dashboard} (':0' takes any free port)"]) from None
             client = Client(cluster)
             try:
                 client.register_plugin(QuietWorkers())

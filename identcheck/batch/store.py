@@ -20,31 +20,12 @@ import hashlib
 import json
 import os
 import shutil
-import uuid
 from pathlib import Path
 
 from identcheck.errors import InputError
+from identcheck.io.atomic import TMP_PREFIX, atomic_write
 
 STATE = ".identcheck-batch"
-TMP_PREFIX = ".tmp-"
-
-
-def atomic_write(path, data: bytes) -> Path:
-    """Write `data` to `path` through a temporary file in the same folder and ``os.replace`` (a reader, or a run
-    killed midway, never sees a partial file). The file gets the usual permissions (0666 less the umask)."""
-    path = Path(path)
-    tmp = path.with_name(f"{TMP_PREFIX}{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
 
 
 def file_sha256(path) -> str:

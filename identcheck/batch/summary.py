@@ -12,7 +12,7 @@ import io
 import json
 from pathlib import Path
 
-from identcheck.batch.store import atomic_write
+from identcheck.io.atomic import atomic_write
 
 COLUMNS = (
     "job", "verb", "trial", "model", "frames", "motion",

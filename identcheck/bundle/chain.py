@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, tangents
 from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
-from identcheck.errors import InputError
+from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
 from identcheck.geometry.rotations import hinge_matrix, skew
@@ -479,10 +479,10 @@ def initial_state(chain: Skeleton, data, frames: dict | None = None) -> State:
             if fit.axis_parent is None:
                 both = int(np.sum(P.valid & C.valid))
                 seen = f" in the {both} of {len(P.valid)} frames that pose both" if both < len(P.valid) else ""
-                raise InputError([f"joint {j!r}: {chain.child[j]!r} does not move relative to {chain.parent[j]!r}"
-                                  f"{seen} ({fit.reason}); a static trial leaves the hinge undefined, so there is no "
-                                  "model to compare with. Record the joint's functional movement."],
-                                 segment=chain.child[j])
+                raise DegenerateError(f"joint {j!r}: {chain.child[j]!r} does not move relative to "
+                                      f"{chain.parent[j]!r}{seen} ({fit.reason}); a static trial leaves the hinge "
+                                      "undefined, so there is no model to compare with. Record the joint's functional "
+                                      "movement.", segment=chain.child[j])
             s.axis[j] = fit.axis_parent / np.linalg.norm(fit.axis_parent)
             s.rest[j], s.theta[j] = _rest_and_theta(rel, s.axis[j], fit.axis_child / np.linalg.norm(fit.axis_child))
         else:

@@ -90,10 +90,11 @@ def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
     return state_from_joints(model, chain, data, {n: est for n, (est, _info) in fitted.items() if est is not None})
 
 
-def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float):
+def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float, source: str = "<array>"):
     """A fresh starting state for `chain` on `data` (F, M, 3) in its marker order: from every segment's own poses
     (:func:`~identcheck.bundle.chain.initial_state`) when each has three markers or more, otherwise from the
-    closed-form joints of `model` (:func:`closed_form_state`)."""
+    closed-form joints of `model` (:func:`closed_form_state`). `source` names the trial the data came from in
+    what the closed forms may say about it."""
     if all(len(chain.seg_markers[seg]) >= 3 for seg in chain.segments):
         return initial_state(chain, data)
-    return closed_form_state(model, Trial.from_array(data, chain.labels, rate_hz), chain, data)
+    return closed_form_state(model, Trial.from_array(data, chain.labels, rate_hz, source=source), chain, data)

@@ -43,6 +43,32 @@ def _rat(text) -> sp.Rational:
         raise ValueError(f"{text!r} has a zero denominator") from None
 
 
+def _shape_problems(cert: dict) -> list:
+    """The fields a rank certificate is rebuilt from, checked for their JSON kind before anything is read from
+    them: each one missing or of another kind, named (a rebuilt certificate then judges the values)."""
+    def number_text(v) -> bool:
+        return isinstance(v, str) or (isinstance(v, (int, float)) and not isinstance(v, bool))
+
+    def point(v) -> bool:
+        return isinstance(v, list) and len(v) > 0 and all(number_text(c) for c in v)
+
+    kinds = {"joint": (lambda v: isinstance(v, str), "a joint type (text)"),
+             "p": (lambda v: type(v) is int, "an integer"), "q": (lambda v: type(v) is int, "an integer"),
+             "seed": (lambda v: type(v) is int, "an integer"),
+             "parameters": (lambda v: isinstance(v, dict) and all(number_text(x) for x in v.values()),
+                            "an object of parameter name to rational (text)"),
+             "samples": (lambda v: isinstance(v, list) and all(
+                 isinstance(x, dict) and isinstance(x.get("t"), list) and all(number_text(t) for t in x["t"])
+                 and point(x.get("xyz")) for x in v), 'a list of {"t": [angles], "xyz": [x, y, z]}')}
+    problems = []
+    for key, (ok, what) in kinds.items():
+        if key not in cert:
+            problems.append(f"malformed certificate: field {key!r} missing")
+        elif not ok(cert[key]):
+            problems.append(f"malformed certificate: field {key!r} is {str(json.dumps(cert[key]))[:60]}, not {what}")
+    return problems
+
+
 def half_angle(t) -> tuple:
     """Exact (cos, sin) of the angle whose tangent of half is the rational ``t``."""
     return exact_half_angle(sp.Rational(t))
@@ -305,6 +331,9 @@ def verify(cert: dict) -> Verification:
     problems = []
     if cert.get("format") != FORMAT:
         return Verification(False, [f"unknown certificate format {cert.get('format')!r}; expected {FORMAT}"])
+    shape = _shape_problems(cert)
+    if shape:
+        return Verification(False, shape)
     try:
         cs = get_case(cert["joint"], cert["p"], cert["q"])
         if sorted(cert["parameters"]) != sorted(draw_parameters(cs, random.Random(0))):
@@ -332,7 +361,7 @@ def verify(cert: dict) -> Verification:
             problems.append(f"seed {seed} does not draw the stored parameters and angles")
     except KeyError as exc:
         return Verification(False, [f"malformed certificate: field {exc.args[0]!r} missing"])
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError) as exc:          # a value of the right kind that is no rational, or no case
         return Verification(False, [f"malformed certificate: {exc}"])
     if rk != cert["rank"] or type(cert["rank"]) is not int:
         problems.append(f"rank recomputed as {rk}, certificate says {cert['rank']!r}")

@@ -284,6 +284,7 @@ def verify(doc: dict, progress=None) -> list:
             found += meaning(row)
         problems += [f"{key}: {f}" for f in found]
     problems += _symmetry(doc.get("cases", []))
+    problems += _coverage(doc["cases"])
     if type(seed) is int:
         problems += _recomputed(doc["cases"], seed, progress)
     return problems
@@ -331,6 +332,24 @@ def _recomputed(cases: list, seed: int, progress=None) -> list:
                 out.append(f"{_key(j, row['p'], row['q'])}: and {len(diffs) - 5} more fields differ")
     unknown = sorted({r["joint"] for r in cases} - set(JOINTS))
     out += [f"joint {j!r}: not a joint type of this table" for j in unknown]
+    return out
+
+
+def _coverage(cases: list) -> list:
+    """A table answers every marker count of each joint type it covers, once: a row listed twice, a (p, q) left
+    out, or no row at all is named (the rows recomputed from the seed would not notice a row that is absent)."""
+    if not cases:
+        return ["cases: no row; a table answers p, q = 0..3 for each of its joint types"]
+    out = []
+    seen: dict = {}
+    for i, row in enumerate(cases):
+        seen.setdefault((row["joint"], row["p"], row["q"]), []).append(i)
+    out += [f"{_key(*k)}: listed {len(rows)} times (rows {', '.join(map(str, rows))})"
+            for k, rows in seen.items() if len(rows) > 1]
+    for j in dict.fromkeys(r["joint"] for r in cases):
+        absent = [f"({p},{q})" for p in MARKERS for q in MARKERS if (j, p, q) not in seen]
+        if absent:
+            out.append(f"joint {j!r}: no row for p, q = {', '.join(absent)}")
     return out
 
 

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from pathlib import Path
 
 from identcheck.certify import counterexamples, jacobian
 from identcheck.certify import exact_rank
 from identcheck.certify import seal, table
 from identcheck.errors import InputError
+from identcheck.io.text import read_input
 
 CHECKS = {exact_rank.FORMAT: lambda c: exact_rank.verify(c).problems, jacobian.FORMAT: jacobian.replay,
           counterexamples.FORMAT: counterexamples.verify_dict, table.FORMAT: table.verify}
@@ -59,12 +59,9 @@ def read(path) -> dict:
     InputError
         The file is missing, is not JSON, or holds no JSON object.
     """
+    raw = read_input(path, "certificate file (JSON)")
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(["file not found"], source=str(path)) from None
-    except IsADirectoryError:
-        raise InputError(["is a directory, not a certificate file"], source=str(path)) from None
+        doc = json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise InputError([f"not UTF-8 text (byte {exc.start}): a certificate is a JSON file"], source=str(path)) from None
     except json.JSONDecodeError as exc:
@@ -115,6 +112,8 @@ def verify(certificate, source: str | None = None, progress=None) -> VerifyResul
     except (KeyError, TypeError, AttributeError, IndexError, ValueError) as exc:
         # a field missing or of the wrong type: the file is not a certificate of its stated format; that is a
         # rejection (exit 1), with what was missing, never a traceback
-        what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
+        what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else \
+            "a field holds a value of another kind than the format's (a number, text, list or object where another " \
+            "is expected)"
         problems = problems + [f"malformed {fmt} document ({what})"]
     return VerifyResult(ok=not problems, problems=tuple(problems), certificate=source, format=fmt)

@@ -16,9 +16,10 @@ import json
 import os
 import pickle
 import sys
-import tempfile
 from functools import lru_cache
 from pathlib import Path
+
+from identcheck.io.atomic import atomic_write
 
 _MEMO: dict = {}
 
@@ -59,9 +60,7 @@ def _save(path: Path, value) -> None:
     written."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as tmp:
-            pickle.dump(value, tmp)
-        os.replace(tmp.name, path)
+        atomic_write(path, pickle.dumps(value))
     except OSError:
         pass
 
@@ -93,10 +92,7 @@ def printed(name: str, render):
         value = render()
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp",
-                                             encoding="utf-8") as tmp:
-                json.dump(value, tmp)
-            os.replace(tmp.name, path)
+            atomic_write(path, json.dumps(value))
         except OSError:
             pass
     _MEMO[memo_key] = value

@@ -7,6 +7,7 @@ import sympy as sp
 
 from identcheck.derive.base import Derivation, as_latex
 from identcheck.derive.errata import ERRATA
+from identcheck.io.atomic import atomic_write
 
 
 def _cell(obj, limit=160) -> str:
@@ -42,10 +43,10 @@ def write(derivations, out_dir) -> list:
     index = ["# Derivations", "", "| derivation | checks | all agree or recorded |", "|---|---|---|"]
     for dv in derivations:
         p = out_dir / f"{dv.name}.md"
-        p.write_text(to_markdown(dv), encoding="utf-8")
+        atomic_write(p, to_markdown(dv))
         paths.append(p)
         index.append(f"| [{dv.title}]({p.name}) | {len(dv.checks)} | {'yes' if dv.ok else 'NO'} |")
     index += ["", "## Errata", ""] + [f"- **{k}**: {v}" for k, v in ERRATA.items()] + [""]
     p = out_dir / "README.md"
-    p.write_text("\n".join(index), encoding="utf-8")
+    atomic_write(p, "\n".join(index))
     return paths + [p]

@@ -215,7 +215,7 @@ class ExtraDof(Effect):
             return new
         chain, _ = convert_joint(hyp.chain, hyp.fit.state, j, NEXT_TYPE[hyp.chain.types[j]])
         # a fresh start: the hinge fit bent every constant to absorb the missing rotation
-        state = start_state(ctx.model, chain, hyp.data, ctx.rate_hz)
+        state = start_state(ctx.model, chain, hyp.data, ctx.rate_hz, ctx.source)
         return hyp.refit(chain=chain, state=state, effect=proposal, max_iter=12)
 
     def evidence(self, ctx, before, after, proposal) -> dict:

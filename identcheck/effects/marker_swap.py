@@ -87,7 +87,8 @@ class MarkerSwap(Effect):
         data, w = hyp.data.copy(), hyp.weights.copy()
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]
         w[a:b + 1, [i, j]] = w[a:b + 1, [j, i]]
-        fresh = start_state(ctx.model, hyp.chain, data, ctx.rate_hz)   # the swapped frames pulled the old fit far off
+        # the swapped frames pulled the old fit far off
+        fresh = start_state(ctx.model, hyp.chain, data, ctx.rate_hz, ctx.source)
         fresh.term_params = hyp.fit.state.term_params
         return hyp.refit(data=data, weights=w, state=fresh, extra_params=3, effect=proposal, max_iter=15)
 

@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import tangents
 from identcheck.errors import InputError
+from identcheck.io.atomic import replacing
 
 MM = 1e-3        # metres per millimetre
 
@@ -102,4 +103,11 @@ def export_osim(path, fit, name: str = "identcheck") -> None:
     if fit.terms.size():
         raise InputError([f"--export-osim {path}: the fit carries effect terms, which an OpenSim model of rigid "
                           "joints cannot hold"])
-    build_model(fit, name).printToXML(str(path))
+    model = build_model(fit, name)
+    try:
+        with replacing(path) as tmp:
+            if model.printToXML(str(tmp)) is False or not tmp.stat().st_size:
+                raise OSError("OpenSim wrote nothing")
+    except (RuntimeError, OSError) as exc:          # OpenSim says a failed write with a RuntimeError of its own
+        why = getattr(exc, "strerror", None) or str(exc).strip().splitlines()[0]
+        raise InputError([f"--export-osim {path}: cannot write the model ({why})"]) from None

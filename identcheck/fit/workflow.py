@@ -83,7 +83,9 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     clash = sorted(set(reserved) & set(trial.labels))
     if clash:
         raise InputError([f"marker {m!r} carries the name fit gives a virtual marker of joint {reserved[m]!r}; rename "
-                          "it" for m in clash], source=trial.source)
+                          "it" for m in clash] + [
+            "a file `--export-markers` wrote holds such points: they are a fit's output, not measured markers; fit "
+            "the trial it was exported from"], source=trial.source)
     trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
     trial, spikes = without_spikes(trial)
     centred, offset = trial.recentred()

@@ -478,6 +478,12 @@ def group_markers(trial) -> Grouping:
     unused = {m: f"seen in only {int(seen[i])} frame(s); grouping needs {MIN_SAMPLES_PER_PAIR}"
               for i, m in enumerate(labels) if seen[i] < MIN_SAMPLES_PER_PAIR}
     usable = [i for i, m in enumerate(labels) if m not in unused]
+    if len(usable) < 2:
+        raise InputError([f"the trial has {trial.n_frames} frame(s) ({len(labels) - len(usable)} of its {len(labels)} "
+                          f"markers seen in fewer than {MIN_SAMPLES_PER_PAIR}): grouping markers into rigid segments "
+                          f"reads how their distances change over a movement, and needs each marker seen in "
+                          f"{MIN_SAMPLES_PER_PAIR} frames or more; record (or choose with --frames) a longer span"],
+                         source=trial.source)
     stats = pair_statistics(trial.xyz)
     _refuse_static(stats, labels, trial.source, usable)
     tol = rigidity_tolerance(stats)

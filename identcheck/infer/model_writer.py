@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
 try:  # Python >= 3.11
     import tomllib
@@ -17,6 +16,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 from identcheck.errors import InputError
+from identcheck.io.atomic import atomic_write
 from identcheck.io.model import Model
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
@@ -79,5 +79,5 @@ def check_model(text: str, source: str) -> Model:
 def write_model(path, text: str) -> Model:
     """Check `text` (:func:`check_model`), then write it to `path` (UTF-8); returns the model."""
     model = check_model(text, str(path))
-    Path(path).write_text(text, encoding="utf-8")
+    atomic_write(path, text)
     return model

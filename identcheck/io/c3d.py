@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import struct
 import warnings
 from pathlib import Path
@@ -20,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from identcheck.errors import InputError
+from identcheck.io.atomic import replacing
 from identcheck.io.trc import (FARTHEST_MM, MarkerData, check_units, duplicates, far_samples, read_bytes,
                                unit_factor)
 
@@ -522,11 +524,36 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     points[:3] = xyz.transpose(2, 1, 0)
     c3d["data"]["points"] = points
     c3d["header"]["points"]["first_frame"] = max(int(first_frame), 0)
-    # ezc3d appends ".c3d" to any other ending (".C3D" included): write beside, then rename
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.c3d")
     try:
-        c3d.write(str(tmp))
-        os.replace(tmp, path)
+        with replacing(path) as tmp:
+            beside = tmp.with_name(tmp.name + ".c3d")    # ezc3d appends ".c3d" to any other ending, ".C3D" too
+            try:
+                c3d.write(str(beside))
+                os.replace(beside, tmp)
+            finally:
+                beside.unlink(missing_ok=True)
+            _check_written(tmp, xyz.shape)
     except Exception as exc:
-        tmp.unlink(missing_ok=True)
         raise InputError([f"cannot write C3D file ({str(exc).strip()})"], source=str(path)) from None
+
+
+def _check_written(path: Path, shape: tuple) -> None:
+    """Check the C3D file ezc3d wrote holds every frame of every marker: ezc3d reports no failed write (a full disk
+    leaves a file cut short, and a success). The file's own structure is read, not its numbers (a file may be
+    written with samples its reader then refuses)."""
+    raw = path.read_bytes()
+    n_frames, n_markers = shape[:2]
+    problem = ""
+    if len(raw) < 512 or raw[1] != 0x50:
+        problem = f"its header is cut short ({len(raw)} bytes)"
+    else:
+        broken = _structure_problems(raw)
+        layout = _header_layout(raw)
+        held = None if broken or layout is None else _frames_in_file(raw, layout, n_markers, layout["start"])
+        if broken:
+            problem = broken[0]
+        elif held is not None and held < n_frames:
+            problem = f"it holds {held} of the {n_frames} frames"
+    if problem:
+        free = shutil.disk_usage(path.parent).free
+        raise OSError(f"the file written does not read back: {problem}; its disk has {free} bytes free")

@@ -7,6 +7,8 @@ readers agree on what a text file is.
 from __future__ import annotations
 
 import codecs
+import os
+import stat
 from pathlib import Path
 
 try:  # Python >= 3.11
@@ -38,22 +40,43 @@ def decode(raw: bytes, fallback: str | None = None) -> str:
         return raw.decode(fallback)
 
 
+MAX_INPUT_BYTES = 4 << 30
+"""Largest input file read: a TRC of a C3D file's most frames (65 535) of 300 markers is about 1.5 GB."""
+
+
+def read_input(path, kind: str) -> bytes:
+    """The bytes of the input file at `path` (`kind`, e.g. "TOML model file", says what was expected); every way
+    it can fail is an InputError naming the file: missing, a directory, no regular file (a device such as
+    /dev/zero or a FIFO would be read without end), larger than :data:`MAX_INPUT_BYTES`, unreadable."""
+    source = str(path)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(["file not found"], source=source) from None
+    except OSError as exc:
+        raise InputError([f"cannot read file: {exc.strerror or exc}"], source=source) from None
+    if stat.S_ISDIR(info.st_mode):
+        raise InputError([f"is a directory, expected a {kind}"], source=source)
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError([f"is not a regular file (a device, FIFO or socket), expected a {kind}"], source=source)
+    if info.st_size > MAX_INPUT_BYTES:
+        raise InputError([f"{info.st_size:,} bytes: larger than any {kind} identcheck reads "
+                          f"({MAX_INPUT_BYTES:,} bytes)"], source=source)
+    try:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise InputError([f"cannot read file: {exc.strerror or exc}"], source=source) from None
+
+
 def read_toml(path, kind: str) -> tuple[dict, str]:
     """The TOML file at `path` parsed, and its name for messages; every way it can fail is an InputError naming
     the file (`kind`, e.g. "model file", says what was expected): missing, a directory, unreadable, not text,
     a syntax error, nested too deeply. One reader for every TOML input (models, segments files)."""
-    path = Path(path)
     source = str(path)
     try:
-        text = decode(path.read_bytes())
-    except FileNotFoundError:
-        raise InputError(["file not found"], source=source) from None
-    except IsADirectoryError:
-        raise InputError([f"is a directory, expected a TOML {kind}"], source=source) from None
+        text = decode(read_input(path, f"TOML {kind}"))
     except UnicodeDecodeError as exc:
         raise InputError([f"not UTF-8 text ({exc.reason} at byte {exc.start})"], source=source) from None
-    except OSError as exc:
-        raise InputError([f"cannot read file: {exc.strerror}"], source=source) from None
     try:
         return tomllib.loads(text), source
     except tomllib.TOMLDecodeError as exc:

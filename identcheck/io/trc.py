@@ -22,7 +22,8 @@ from typing import NamedTuple
 import numpy as np
 
 from identcheck.errors import InputError
-from identcheck.io.text import decode
+from identcheck.io.atomic import atomic_write
+from identcheck.io.text import decode, read_input
 
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 """Length units a trial file may use, with their factor to millimetres."""
@@ -55,16 +56,14 @@ class MarkerData(NamedTuple):
     frame as ezc3d reports it, the numbering of QTM): row i is the file's frame ``first_frame + i``."""
 
 
+MAX_CELL_CHARS = 64
+"""Longest cell of a data row: a number printed with every digit of a double takes about 25 characters. A longer
+cell is no number, and a table of cells sized by the longest would take that size for every cell."""
+
+
 def read_bytes(path: Path) -> bytes:
-    """File contents, or an :class:`InputError` naming the file (missing, directory, ...)."""
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(["file not found"], source=str(path)) from None
-    except IsADirectoryError:
-        raise InputError(["is a directory, expected a marker file"], source=str(path)) from None
-    except OSError as exc:
-        raise InputError([f"cannot read file: {exc.strerror or exc}"], source=str(path)) from None
+    """The bytes of a marker file (:func:`identcheck.io.text.read_input`: missing, directory, device, ...)."""
+    return read_input(path, "marker file")
 
 
 def unit_factor(units: str, where: str, problems: list[str]) -> float:
@@ -91,6 +90,11 @@ labelled m (a span of kilometres) are refused; metres labelled mm (a span of a f
 about, since a small rig could span that little."""
 
 
+LARGE_SPAN_MM = 5_000.0
+"""A span of the markers of one frame that is suspicious (warned about) when the units field scaled the numbers
+up: mm labelled cm read as a leg 10 m long, a body 20 m tall; a span that large in the file's own mm is left alone."""
+
+
 def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool]:
     """Whether the file's units field (at `where`, read as `factor` to mm) contradicts its coordinates `xyz` (mm,
     as converted): the message and whether it is an error (else a warning); ('', False) when they agree or there
@@ -108,6 +112,10 @@ def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool
     if span > high and factor > 1.0:
         return (f"{where} says {name}, but then the markers of a frame span {span / 1e6:.3g} km (median over "
                 "frames): the coordinates are in mm; fix the units field"), True
+    if span > LARGE_SPAN_MM and factor > 1.0:
+        return (f"{where} says {name}, but then the markers of a frame span {span / 1e3:.3g} m (median over "
+                f"frames), more than one capture volume holds: are the coordinates in mm (or in a unit smaller than "
+                f"{name})?"), False
     if span < low and factor == 1.0:
         return (f"{where} says {name}, but the markers of a frame span only {span:.3g} mm (median over frames): are "
                 "the coordinates in metres?"), False
@@ -209,10 +217,17 @@ def read_trc(path) -> MarkerData:
     width = 2 + 3 * len(labels)
     rows, linenos = [], []
     bad_width = []
+    long_cells = []
     for i in range(5, len(lines)):
         if not lines[i].strip():
             continue
         cells = [c.strip() for c in lines[i].split("\t")]
+        longest = max(cells, key=len)
+        if len(longest) > MAX_CELL_CHARS:
+            long_cells.append(f"line {i + 1}, column {cells.index(longest) + 1}: a cell of {len(longest):,} "
+                              f"characters ({longest[:24]!r}...); a frame number, time or coordinate takes at most "
+                              f"{MAX_CELL_CHARS}")
+            continue
         if len(cells) > width and not any(cells[width:]):
             cells = cells[:width]
         if labels and len(cells) != width:
@@ -222,6 +237,7 @@ def read_trc(path) -> MarkerData:
             continue
         rows.append(cells)
         linenos.append(i + 1)
+    problems += _capped(long_cells, "cells too long to be a number")
     problems += _capped(bad_width, "rows with the wrong number of columns")
     cut_row = None
     if rows and linenos[-1] == len(lines) and not text.endswith(("\n", "\r")):
@@ -314,11 +330,11 @@ def _first_frame(rows: list, linenos: list, src: str) -> int:
             return float("nan")
 
     numbers = np.array([number(r[0]) if r else float("nan") for r in rows])
-    with np.errstate(invalid="ignore"):
-        bad = np.flatnonzero(~(np.abs(numbers) < 2.0 ** 53))        # no number, or none a frame can have
+    with np.errstate(invalid="ignore"):        # no number, none a frame can have, or not a whole one
+        bad = np.flatnonzero(~(np.abs(numbers) < 2.0 ** 53) | (numbers != np.floor(numbers)))
     if len(bad):
         cell = rows[bad[0]][0] if rows[bad[0]] else ""
-        warnings.warn(f"{src}: the Frame# column is not numeric at line {linenos[bad[0]]} ({cell!r}"
+        warnings.warn(f"{src}: the Frame# column is not a whole number at line {linenos[bad[0]]} ({cell!r}"
                       f"{f' and {len(bad) - 1} more rows' if len(bad) > 1 else ''}); frames are numbered from 1 by row",
                       UserWarning, stacklevel=4)
         return 1
@@ -346,7 +362,7 @@ def _parse_header(keys_line: str, values_line: str, problems: list[str]):
         problems.append("line 2: missing key DataRate (the frame rate in Hz)")
     else:
         try:
-            rate_hz = float(header[rate_key])
+            rate_hz = float(header[rate_key]) if header[rate_key].isascii() and "_" not in header[rate_key] else 0.0
             if not (math.isfinite(rate_hz) and rate_hz > 0):
                 raise ValueError
         except ValueError:
@@ -364,6 +380,8 @@ def _parse_header(keys_line: str, values_line: str, problems: list[str]):
             counts.append(None)
             continue
         try:
+            if not value.isascii() or "_" in value:
+                raise ValueError
             counts.append(int(value))
         except ValueError:
             problems.append(f"line 3: {key} = {value!r} is not a whole number")
@@ -395,6 +413,16 @@ def _parse_names(line: str, problems: list[str]) -> list[str]:
     return labels
 
 
+def _not_plain(cells: np.ndarray) -> np.ndarray:
+    """Cells Python reads as numbers but no capture software writes: digit groups (``1_000``) and digits of other
+    scripts (full-width ``１２３``). Such a cell is an edit or a corruption, not a coordinate; read as one it would be
+    a silent wrong number. Checked on the cells only when the rows hold such characters at all (a fast test)."""
+    flat = "".join(cells.ravel().tolist())
+    if flat.isascii() and "_" not in flat:
+        return np.zeros(cells.shape, bool)
+    return np.vectorize(lambda c: not c.isascii() or "_" in c, otypes=[bool])(cells)
+
+
 def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> np.ndarray:
     """Cells (strings, shape (n_rows, 3 n_markers)) to float64, '' -> NaN; locate bad cells."""
     cells = np.where(cells == "", "nan", cells)
@@ -403,7 +431,7 @@ def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> n
     except ValueError:
         values = None
     if values is not None:
-        bad = np.isinf(values)
+        bad = np.isinf(values) | _not_plain(cells)
     else:
         values = np.full(cells.shape, np.nan)
         bad = np.zeros(cells.shape, bool)
@@ -412,7 +440,7 @@ def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> n
                 values[r, c] = float(s)
             except ValueError:
                 bad[r, c] = True
-        bad |= np.isinf(values)
+        bad |= np.isinf(values) | _not_plain(cells)
     found = []
     for r, c in np.argwhere(bad):
         found.append(f"line {linenos[r]}, column {c + 3} (marker {labels[c // 3]!r} {'XYZ'[c % 3]}): "
@@ -465,5 +493,4 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     frames = np.char.mod("%d", np.arange(first, first + n_frames))
     times = np.char.mod("%.6f", (np.arange(n_frames) + first - 1) / rate_hz)
     body = ["\t".join((f, t, *row)) for f, t, row in zip(frames, times, cells)]
-    with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write("\n".join(head + body) + "\n")
+    atomic_write(path, "\n".join(head + body) + "\n")

@@ -42,6 +42,7 @@ from importlib import resources
 from identcheck.certify import tree_rank
 from identcheck.progress import Progress
 from identcheck.certify import twin as twin_certificate
+from identcheck.io.atomic import atomic_write
 from identcheck.plan import windows as plan_windows
 from identcheck.plan.result import PlanResult
 
@@ -72,9 +73,7 @@ def write_table_summary(path, seed: int = 0) -> dict:
     keep = ("joint", "p", "q", "identifiable", "local", "candidates", "min_samples")
     out = {"format": "identcheck.table-summary/1", "seed": seed,
            "cases": [{k: c[k] for k in keep} for c in doc.cases]}
-    with open(path, "w", encoding="utf-8") as fh:
-        json.dump(out, fh, indent=1)
-        fh.write("\n")
+    atomic_write(path, json.dumps(out, indent=1) + "\n")
     return out
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from identcheck.io.atomic import replacing
+
 
 def figure(**kw):
     """A new :class:`matplotlib.figure.Figure` (keywords as for it, e.g. ``figsize``), owned by the caller."""
@@ -21,7 +23,8 @@ def save(fig, path, dpi: int = 110, rect=None) -> Path:
     """Lay out ``fig`` (within ``rect``, figure fraction, when room is kept for a legend) and write it to
     ``path`` (PNG/SVG by extension); returns the path."""
     fig.tight_layout(rect=rect)
-    fig.savefig(path, dpi=dpi)
+    with replacing(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=Path(path).suffix.lstrip(".").lower() or None)
     return Path(path)
 
 

@@ -15,6 +15,8 @@ import datetime
 import html
 import json
 import math
+
+from identcheck.io.atomic import atomic_write
 from pathlib import Path
 
 VERDICT_COLOURS = {"determined": "#1a9850", "ambiguous": "#f39c12", "undetermined": "#d73027"}
@@ -314,5 +316,5 @@ def write_html(path, kind: str, doc: dict, scene: dict | None, title: str, versi
                figures: list | None = ()) -> Path:
     """Write the page to `path` (see :func:`render`); returns the path."""
     path = Path(path)
-    path.write_text(render(kind, doc, scene, title, version, figures), encoding="utf-8")
+    atomic_write(path, render(kind, doc, scene, title, version, figures))
     return path

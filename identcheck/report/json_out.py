@@ -8,7 +8,10 @@ that would hide it as a string).
 from __future__ import annotations
 
 import json
+
 from pathlib import Path
+
+from identcheck.io.atomic import atomic_write
 
 
 def document(result) -> dict:
@@ -31,5 +34,5 @@ def dumps(result, indent: int | None = 2, sort_keys: bool = True) -> str:
 def write(path, result, indent: int | None = 2, sort_keys: bool = False) -> Path:
     """Write ``result`` as JSON to ``path`` (a saved certificate or table, which ``verify`` re-reads)."""
     path = Path(path)
-    path.write_text(dumps(result, indent=indent, sort_keys=sort_keys), encoding="utf-8")
+    atomic_write(path, dumps(result, indent=indent, sort_keys=sort_keys))
     return path

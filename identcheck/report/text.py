@@ -221,7 +221,8 @@ def plan_text(result) -> str:
             said.append(f"needs motion of: {', '.join(j['motion_needed'])}")
         if j.get("practical"):
             p = j["practical"]
-            said.append(f"in practice ({p.get('motion', '')}, {p.get('noise_mm', '?')} mm noise): "
+            noise = f"{p['noise_mm']} mm noise" if "noise_mm" in p else "the trial's own noise, measured"
+            said.append(f"in practice ({p.get('motion', '')}, {noise}): "
                         f"{p['verdict']}: {p['reason']}")
         notes += [f"{name}: {s}" for s in said]
     if notes:

@@ -37,6 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.errors import InputError
 from identcheck.geometry.kinematics import chain_poses
+from identcheck.io.atomic import atomic_write
 from identcheck.io.model import Model
 from identcheck.trial import FORMATS, Trial
 
@@ -215,7 +216,7 @@ class Simulation:
     def save_truth(self, path, poses: bool = True) -> None:
         """Write the truth and the settings as JSON (see :func:`load_truth`)."""
         doc = {"settings": self.settings, "labels": list(self.trial.labels), **self.truth.to_dict(poses)}
-        Path(path).write_text(json.dumps(doc, indent=2, sort_keys=True))
+        atomic_write(path, json.dumps(doc, indent=2, sort_keys=True))
 
 
 def load_truth(path) -> Truth:

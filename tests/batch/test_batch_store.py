@@ -8,32 +8,11 @@ import pytest
 
 from identcheck.batch import store as store_mod
 from identcheck.batch.inputs import resolve
-from identcheck.batch.store import Store, atomic_write, input_hash
+from identcheck.batch.store import Store, input_hash
 from identcheck.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "examples" / "diagnose_leg.toml"
-
-
-def test_atomic_write_leaves_no_temporary_file_and_cleans_up_on_failure(tmp_path, monkeypatch):
-    target = tmp_path / "a.json"
-    atomic_write(target, b"{}\n")
-    assert target.read_bytes() == b"{}\n" and os.listdir(tmp_path) == ["a.json"]
-    assert oct(target.stat().st_mode & 0o777) == oct(0o666 & ~_umask())
-
-    def killed(src, dst):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(store_mod.os, "replace", killed)
-    with pytest.raises(KeyboardInterrupt):
-        atomic_write(target, b"new")
-    assert target.read_bytes() == b"{}\n" and os.listdir(tmp_path) == ["a.json"]
-
-
-def _umask() -> int:
-    old = os.umask(0)
-    os.umask(old)
-    return old
 
 
 def test_input_hash_is_of_the_bytes_in_order(tmp_path):

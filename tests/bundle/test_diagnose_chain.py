@@ -17,7 +17,7 @@ from identcheck.bundle.hypothesis import Hypothesis, centre_world, score
 from identcheck.estimate.noise import noise_floor
 from identcheck.diagnose.workflow import SD_GROWTH, start, undetermined, worst_sd
 from identcheck.effects.registry import inject_effect
-from identcheck.errors import InputError
+from identcheck.errors import DegenerateError, InputError
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 
@@ -153,12 +153,14 @@ def test_cli_diagnose_reads_c3d_with_gaps(tmp_path, capsys):
     assert rep["gap_after"] <= 1.5 * rep["noise_floor"] < rep["gap_before"]
 
 
-def test_static_trial_and_never_seen_marker_are_clear_input_errors():
+def test_a_static_trial_is_degenerate_and_a_never_seen_marker_an_input_error():
+    """A static trial is data that cannot decide (DegenerateError, exit 1, as ``fit`` says it); a marker never
+    seen is bad input (InputError, exit 2)."""
     sim = simulate(MODEL, n_frames=200, noise_mm=0.5, seed=3)
     xyz = sim.clean.as_array()
     rng = np.random.default_rng(0)
     static = np.repeat(xyz[:1], 200, axis=0) + rng.normal(0, 0.5, xyz.shape)
-    with pytest.raises(InputError, match="does not move"):
+    with pytest.raises(DegenerateError, match="does not move"):
         start(MODEL, sim.trial.replace(xyz=static))
     hidden = sim.trial.as_array().copy()
     hidden[:, MODEL.markers.index("RKNE")] = np.nan

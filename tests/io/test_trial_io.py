@@ -248,12 +248,12 @@ def test_trc_more_rows_than_header_warns(tmp_path):
     assert t.n_frames == 3
 
 
-@pytest.mark.parametrize("cell", ["", "x", "nan"])
+@pytest.mark.parametrize("cell", ["", "x", "nan", "2.5"])
 def test_a_frame_number_that_is_no_number_is_named_by_its_line(tmp_path, cell):
     """A Frame# cell that is empty or not a number: the warning names that row's line (it had named the first
     data row's line, whatever row held the bad cell)."""
     path = write(tmp_path, TRC_OK.replace("2\t0.01\t", f"{cell}\t0.01\t"))
-    with pytest.warns(UserWarning, match=f"Frame# column is not numeric at line 8 \\({cell!r}\\)"):
+    with pytest.warns(UserWarning, match=f"Frame# column is not a whole number at line 8 \\({cell!r}\\)"):
         t = Trial.from_trc(path)
     assert t.n_frames == 3
 
@@ -261,7 +261,7 @@ def test_a_frame_number_that_is_no_number_is_named_by_its_line(tmp_path, cell):
 def test_a_frame_number_no_frame_can_have_is_named_not_wrapped(tmp_path):
     """A Frame# of 1e30 (rising, so in order) is named as no frame number, not cast to an integer no frame has."""
     path = write(tmp_path, TRC_OK.replace("3\t0.02\t", "1e30\t0.02\t"))
-    with pytest.warns(UserWarning, match=r"Frame# column is not numeric at line 9 \('1e30'\)"):
+    with pytest.warns(UserWarning, match=r"Frame# column is not a whole number at line 9 \('1e30'\)"):
         t = Trial.from_trc(path)
     assert t.n_frames == 3
 

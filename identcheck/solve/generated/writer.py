@@ -6,12 +6,11 @@ the derivations' disk cache: a pickle round trip can change how an expression pr
 """
 from __future__ import annotations
 
-import os
 import re
-import tempfile
 from dataclasses import dataclass
 
 from identcheck.codegen import BACKENDS
+from identcheck.io.atomic import atomic_write
 
 TITLES = {"revolute21": "revolute (2,1)", "spherical22": "spherical (2,2)", "spherical31": "spherical (3,1)"}
 
@@ -96,17 +95,9 @@ def sync(write: bool = False) -> tuple:
         old = target.read_text() if target.exists() else ""
         current = same_code(old, fresh)
         if write and not current:
-            _write_atomic(target, fresh)
+            atomic_write(target, fresh)
         shown = target.relative_to(root).as_posix() if target.is_relative_to(root) else str(target)
         out.append(ModuleStatus(case, shown, current, write and not current))
     if any(s.written for s in out):
         generated.reset()
     return tuple(out)
-
-
-def _write_atomic(target, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, target)

@@ -1,0 +1,188 @@
+"""Inputs that would exhaust the machine or read without end, numbers Python reads but no capture writes,
+outputs a full disk cuts short, arguments out of range and a model with nothing to fit: each an exit-2 (or
+exit-1, for data that cannot decide) message naming the file, field or option, never a traceback, an exit 3, a
+hang or a changed input (the ``run`` fixture).
+
+Before: a FIFO or /dev/zero given as a trial or model was read without end (a hang, or memory until the machine
+killed the run); a 1 MB cell in a TRC file took gigabytes (every cell of the table sized like it) and the error
+quoted it whole; ``1_000`` and full-width digits were read as numbers; a C3D file written to a full disk was cut
+short and reported written; a model without joints stopped ``diagnose`` and ``fit --report`` with a traceback;
+``--dashboard xx:yy`` and ``batch plan --frames 5`` ran; a static trial was exit 2 for ``diagnose`` but exit 1
+for ``fit``."""
+from __future__ import annotations
+
+import json
+import os
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from fuzz_support import DIAGNOSE_LEG, FUZZ, LEG
+
+
+def _trc_lines(corpus) -> list[str]:
+    return (corpus / "leg.trc").read_text().split("\n")
+
+
+@pytest.mark.parametrize("role", ["trial", "model", "certificate"])
+def test_a_fifo_is_refused_without_being_opened(run, corpus, tmp_path, role):
+    """A FIFO no one writes to would block the first read for ever: it is refused by what it is, and a
+    watchdog fails the test instead of hanging the suite if it is opened."""
+    fifo = tmp_path / {"trial": "t.trc", "model": "m.toml", "certificate": "c.json"}[role]
+    os.mkfifo(fifo)
+    opened = threading.Timer(20.0, lambda: open(fifo, "wb").close())    # unblocks a reader, after the fact
+    opened.start()
+    try:
+        argv = {"trial": ["fit", LEG, fifo], "model": ["fit", fifo, corpus / "leg.trc"],
+                "certificate": ["verify", fifo]}[role]
+        res = run(argv, inputs=())
+    finally:
+        opened.cancel()
+    assert res.code == 2 and res.names(fifo, "not a regular file"), res.err
+
+
+def test_a_device_is_refused_as_a_model(run, corpus):
+    res = run(["fit", "/dev/zero", corpus / "leg.trc"], inputs=())
+    assert res.code == 2 and res.names("/dev/zero", "not a regular file"), res.err
+
+
+@FUZZ
+@given(size=st.integers(65, 2_000_000), column=st.integers(0, 29), row=st.integers(0, 199))
+def test_a_cell_too_long_for_a_number_is_named_and_quoted_short(run, corpus, tmp_path, size, column, row):
+    lines = _trc_lines(corpus)
+    cells = lines[6 + row].split("\t")
+    cells[column % len(cells)] = "7" * size
+    lines[6 + row] = "\t".join(cells)
+    path = tmp_path / "long.trc"
+    path.write_text("\n".join(lines))
+    res = run(["fit", LEG, path])
+    assert res.code == 2 and res.names(path, f"line {7 + row}, column {column % len(cells) + 1}",
+                                       f"{size:,} characters"), res.err[:500]
+    assert len(res.err) < 5000
+
+
+@FUZZ
+@given(kind=st.sampled_from(["1_000.5", "\uff11\uff12\uff13.4", "1\u0663.0", "12_3"]), row=st.integers(0, 199),
+       marker=st.integers(0, 9), axis=st.integers(0, 2))
+def test_numbers_no_capture_software_writes_are_named(run, corpus, tmp_path, kind, row, marker, axis):
+    """Digit groups and digits of other scripts, which Python's float() reads: named by line and column."""
+    lines = _trc_lines(corpus)
+    cells = lines[6 + row].split("\t")
+    cells[2 + 3 * marker + axis] = kind
+    lines[6 + row] = "\t".join(cells)
+    path = tmp_path / "digits.trc"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    res = run(["fit", LEG, path])
+    assert res.code == 2 and res.names(path, f"line {7 + row}, column {3 + 3 * marker + axis}",
+                                       "not a finite number"), res.err
+
+
+def test_a_fractional_frame_number_is_not_truncated(run, corpus, tmp_path):
+    """Frame# 1.5, 2.5, ... would have been cast to 1, 2, ...: a warning says the rows are numbered instead."""
+    lines = _trc_lines(corpus)
+    for i in range(6, 206):
+        cells = lines[i].split("\t")
+        cells[0] = f"{int(cells[0])}.5"
+        lines[i] = "\t".join(cells)
+    path = tmp_path / "half.trc"
+    path.write_text("\n".join(lines))
+    res = run(["fit", LEG, path, "--json"])
+    assert res.code in (0, 1) and "not a whole number at line 7" in res.out
+
+
+@pytest.mark.parametrize("suffix", [".c3d", ".C3D"])
+def test_a_c3d_file_cut_short_by_the_disk_is_no_success(run, corpus, tmp_path, monkeypatch, suffix):
+    """ezc3d reports no failed write; a file the disk cut short is read back, refused, and neither it nor a
+    temporary file is left."""
+    import ezc3d
+
+    write = ezc3d.c3d.write
+
+    def cut(self, path, *args, **kwargs):
+        write(self, path, *args, **kwargs)
+        with open(path, "r+b") as fh:
+            fh.truncate(4096)
+
+    monkeypatch.setattr(ezc3d.c3d, "write", cut)
+    out = tmp_path / f"sim{suffix}"
+    res = run(["simulate", LEG, "--out", out, "--frames", "300"])
+    assert res.code == 2 and res.names(out, "cannot write C3D file", "does not read back"), res.err
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_model_without_joints_has_nothing_to_fit(run, corpus, tmp_path):
+    model = tmp_path / "one.toml"
+    model.write_text('units = "mm"\n\n[segments.pelvis]\nmarkers = ["LASI", "RASI", "SACR"]\n')
+    report = tmp_path / "r.html"
+    for argv in (["fit", model, corpus / "leg.trc", "--report", report], ["diagnose", model, corpus / "leg.trc"]):
+        res = run(argv)
+        assert res.code == 2 and res.names(model, "no joint", "skeleton"), res.err
+    assert not report.exists()
+
+
+@pytest.mark.parametrize("address", ["xx:yy", ":99999", "8787", ":-1", "host name:80"])
+def test_a_dashboard_address_that_cannot_be_is_refused_before_any_work(run, corpus, tmp_path, address):
+    res = run(["batch", "fit", LEG, corpus / "leg.trc", "--out", tmp_path / "o", "--dashboard", address])
+    assert res.code == 2 and res.names("--dashboard", address), res.err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("frames", ["5", "0", "-3", "20001", "ten"])
+def test_a_batch_plan_capture_length_out_of_range_is_refused(run, tmp_path, frames):
+    res = run(["batch", "plan", LEG, "--out", tmp_path / "o", "--noise-mm", "1", "--frames", frames])
+    assert res.code == 2 and res.names("--frames", frames, "10 to 20000"), res.err
+
+
+@pytest.mark.parametrize("rate", ["1e300", "1e-300", "0.001", "2e6"])
+def test_a_simulated_rate_whose_times_cannot_print_is_refused(run, tmp_path, rate):
+    res = run(["simulate", LEG, "--out", tmp_path / "s.trc", "--rate", rate])
+    assert res.code == 2 and res.names("--rate", "Hz") and not (tmp_path / "s.trc").exists(), res.err
+
+
+def test_millimetres_labelled_centimetres_are_warned_about(run, corpus, tmp_path):
+    lines = _trc_lines(corpus)
+    lines[2] = lines[2].replace("\tmm\t", "\tcm\t")
+    path = tmp_path / "cm.trc"
+    path.write_text("\n".join(lines))
+    res = run(["fit", LEG, path, "--json"])
+    warned = [w["message"] for w in json.loads(res.out)["warnings"]]
+    assert any("Units says cm" in w and "in mm" in w for w in warned), warned
+
+
+def test_a_static_trial_is_degenerate_data_for_diagnose_as_for_fit(run, corpus, tmp_path):
+    """Data that cannot decide is exit 1 with one JSON document, for diagnose as for fit (it was exit 2)."""
+    from identcheck.trial import Trial
+
+    t = Trial.from_file(corpus / "dleg.trc")
+    still = np.repeat(t.as_array()[:1], 200, axis=0) + np.random.default_rng(0).normal(0, 0.3, (200, t.n_markers, 3))
+    path = tmp_path / "still.trc"
+    Trial(still, t.labels, t.rate_hz).to_file(path)
+    res = run(["diagnose", DIAGNOSE_LEG, path, "--json"])
+    doc = json.loads(res.out)
+    assert res.code == 1 and doc["ok"] is False and "does not move" in doc["degenerate"], res.err
+
+
+def test_a_marker_never_seen_in_the_chosen_frames_names_them(run, corpus, tmp_path):
+    lines = _trc_lines(corpus)
+    for i in range(6, 106):                     # RTIB (marker 7) unseen in frames 1-100
+        cells = lines[i].split("\t")
+        cells[2 + 3 * 6:5 + 3 * 6] = ["", "", ""]
+        lines[i] = "\t".join(cells)
+    path = tmp_path / "gap.trc"
+    path.write_text("\n".join(lines))
+    res = run(["fit", LEG, path, "--frames", "10:90"])
+    assert res.code == 2 and res.names("never visible in the trial's frames 10 to 90"), res.err
+
+
+@pytest.mark.parametrize("frames", [1, 3, 9])
+def test_a_trial_too_short_to_group_says_so(run, corpus, tmp_path, frames):
+    """A skeleton from a handful of frames: the message says the trial is too short (it had asked for markers)."""
+    lines = _trc_lines(corpus)
+    head = lines[:6]
+    head[2] = head[2].replace("\t200\t", f"\t{frames}\t", 1)
+    path = tmp_path / "short.trc"
+    path.write_text("\n".join(head + lines[6:6 + frames]) + "\n")
+    res = run(["skeleton", path, "--out", tmp_path / "m.toml"])
+    assert res.code == 2 and res.names(path, f"has {frames} frame(s)", "longer span"), res.err
