@@ -208,6 +208,7 @@ def figure(summary: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
     effects = [(n, e) for n, e in summary["effects"].items() if "trials_detail" in e]
     cols = 4
@@ -229,6 +230,9 @@ def figure(summary: dict, path: Path) -> None:
             ax.plot(s_grid, [np.nan if v is None else v for v in lims], "k" + ls, lw=1)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xticks([0.2, 0.5, 1.0, 2.0])                  # plain numbers: minor log labels overlapped
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(name, fontsize=10)
         ax.set_xlabel("noise σ·√(1000/frames) [mm]", fontsize=8)
         ax.set_ylabel(f"size [{e['unit']}]", fontsize=8)
