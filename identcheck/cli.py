@@ -553,6 +553,9 @@ def preflight(a) -> list:
                 again = sorted({f for f in listed if listed.count(f) > 1})
                 problems.append(f"--frames {a.frames}: frame(s) {', '.join(map(str, again))} listed twice; a frame "
                                 "repeated adds no sample (each frame is one sample of the joint)")
+    if a.verb in ("fit", "diagnose", "skeleton", "batch") and a.frames is not None and not str(a.frames).strip():
+        problems.append("--frames is empty: give START:END in the file's frame numbers (either end may be left out, "
+                        "e.g. 100: or :500), or leave the option out for every frame")
     if a.verb == "plan" and a.max_seconds is not None and not 0 < a.max_seconds <= 86400:
         problems.append(f"--max-seconds {a.max_seconds}: a positive number of seconds, at most a day")
     if a.verb == "plan" and a.noise_mm is not None:
@@ -571,6 +574,10 @@ def preflight(a) -> list:
 
         if extra.problem():
             problems.append(extra.problem())
+        folders = [i for i in a.inputs if os.path.isdir(i) and same_file(i, a.out)]
+        if folders:
+            problems.append(f"--out {a.out}: is an input folder ({folders[0]}); the jobs' JSONs and the summary would "
+                            "lie among the trials: give the batch a folder of its own")
         if a.dashboard is not None and _bad_address(a.dashboard):
             problems.append(f"--dashboard {a.dashboard}: {_bad_address(a.dashboard)}")
         if a.workers is not None and a.workers < 1:

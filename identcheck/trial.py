@@ -48,7 +48,16 @@ def frame_range(spec: str) -> tuple[int | None, int | None]:
         Not two integers (either may be empty) around one colon.
     """
     a, b = str(spec).split(":")
-    return (int(a) if a.strip() else None), (int(b) if b.strip() else None)
+
+    def number(text: str) -> int | None:
+        text = text.strip()
+        if not text:
+            return None
+        if not text.lstrip("+-").isascii() or not text.lstrip("+-").isdigit():    # no 1_000, no other digits
+            raise ValueError(f"{text!r} is not a frame number")
+        return int(text)
+
+    return number(a), number(b)
 
 
 def _float_array(xyz, source: str, copy: bool = False) -> np.ndarray:

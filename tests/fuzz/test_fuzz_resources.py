@@ -186,3 +186,24 @@ def test_a_trial_too_short_to_group_says_so(run, corpus, tmp_path, frames):
     path.write_text("\n".join(head + lines[6:6 + frames]) + "\n")
     res = run(["skeleton", path, "--out", tmp_path / "m.toml"])
     assert res.code == 2 and res.names(path, f"has {frames} frame(s)", "longer span"), res.err
+
+
+@pytest.mark.parametrize("verb", ["fit", "diagnose"])
+@pytest.mark.parametrize("spec", ["", " ", "1_0:50", "\uff11:50", "10:5_0"])
+def test_a_frame_range_that_is_empty_or_not_plain_digits_is_refused(run, corpus, verb, spec):
+    """``--frames=`` had meant every frame and ``1_0:50`` frames 10 to 50: both are refused, naming the option."""
+    model = LEG if verb == "fit" else DIAGNOSE_LEG
+    trial = corpus / ("leg.trc" if verb == "fit" else "dleg.trc")
+    res = run([verb, model, trial, f"--frames={spec}"])
+    assert res.code == 2 and res.names("--frames"), res.err
+
+
+def test_a_batch_writing_into_its_input_folder_is_refused(run, corpus, tmp_path):
+    import shutil
+
+    folder = tmp_path / "trials"
+    folder.mkdir()
+    shutil.copy(corpus / "leg.trc", folder / "leg.trc")
+    res = run(["batch", "fit", LEG, folder, "--out", folder])
+    assert res.code == 2 and res.names("--out", "input folder"), res.err
+    assert sorted(os.listdir(folder)) == ["leg.trc"]
