@@ -430,8 +430,9 @@ def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> n
         values = cells.astype(np.float64)
     except ValueError:
         values = None
+    odd = _not_plain(cells)
     if values is not None:
-        bad = np.isinf(values) | _not_plain(cells)
+        bad = np.isinf(values) | odd
     else:
         values = np.full(cells.shape, np.nan)
         bad = np.zeros(cells.shape, bool)
@@ -440,11 +441,12 @@ def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> n
                 values[r, c] = float(s)
             except ValueError:
                 bad[r, c] = True
-        bad |= np.isinf(values) | _not_plain(cells)
+        bad |= np.isinf(values) | odd
     found = []
     for r, c in np.argwhere(bad):
+        what = "is not written in plain digits (0-9, '.', '-', 'e')" if odd[r, c] else "is not a finite number"
         found.append(f"line {linenos[r]}, column {c + 3} (marker {labels[c // 3]!r} {'XYZ'[c % 3]}): "
-                     f"{str(cells[r, c])!r} is not a finite number")
+                     f"{str(cells[r, c])!r} {what}")
     problems += _capped(found, "non-numeric cells")
     return values
 

@@ -76,7 +76,7 @@ def test_numbers_no_capture_software_writes_are_named(run, corpus, tmp_path, kin
     path.write_text("\n".join(lines), encoding="utf-8")
     res = run(["fit", LEG, path])
     assert res.code == 2 and res.names(path, f"line {7 + row}, column {3 + 3 * marker + axis}",
-                                       "not a finite number"), res.err
+                                       "not written in plain digits"), res.err
 
 
 def test_a_fractional_frame_number_is_not_truncated(run, corpus, tmp_path):
