@@ -50,7 +50,10 @@ def standardized(ctx, hyp) -> np.ndarray:
     correlated noise, its squared departure from its neighbours (:func:`spike_residuals`) over that departure's
     variance when that is larger. The residual is judged against the noise floor; the departure against its own
     robust scale over the trial (1.4826 × the median absolute value: the AR(1) formula's variance assumes the noise
-    is AR(1) exactly, and a filtered export's is not). 0 where unseen."""
+    is AR(1) exactly, and a filtered export's is not). The departures are not used when more than
+    :data:`MAX_FRACTION` of them fail the bound: they are then not sparse errors in AR(1) noise but the noise (or a
+    misfit) being something else; on the real recordings, low-pass filtered, this left no outlier proposal at all
+    (walking2: its 121 samples of outliers, set aside before, were not proposed). 0 where unseen."""
     seen = hyp.weights > 0
     res = np.nan_to_num(hyp.residuals())
     z2 = np.where(seen, np.sum(res ** 2, axis=2), 0.0) / ctx.noise.sigma_mm ** 2
@@ -60,7 +63,9 @@ def standardized(ctx, hyp) -> np.ndarray:
         if has.sum() > 10:
             scale = 1.4826 * float(np.median(np.abs(spike[has])))
             if scale > 0.0:
-                z2 = np.maximum(z2, np.where(has, np.sum(np.nan_to_num(spike) ** 2, axis=2), 0.0) / scale ** 2)
+                departure = np.where(has, np.sum(np.nan_to_num(spike) ** 2, axis=2), 0.0) / scale ** 2
+                if (departure > chdtri(3, 0.005 / ctx.n_samples)).sum() <= MAX_FRACTION * has.sum():
+                    z2 = np.maximum(z2, departure)
     return z2
 
 
