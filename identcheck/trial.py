@@ -15,6 +15,7 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.io.c3d import read_c3d, write_c3d
+from identcheck.io.text import plain
 from identcheck.io.trc import FARTHEST_MM, UNITS_TO_MM, duplicates, far_samples, read_trc, write_trc
 
 COINCIDENT_MM = 1.0
@@ -53,7 +54,7 @@ def frame_range(spec: str) -> tuple[int | None, int | None]:
         text = text.strip()
         if not text:
             return None
-        if not text.lstrip("+-").isascii() or not text.lstrip("+-").isdigit():    # no 1_000, no other digits
+        if not plain(text):
             raise ValueError(f"{text!r} is not a frame number")
         return int(text)
 

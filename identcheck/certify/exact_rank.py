@@ -59,7 +59,7 @@ def _shape_problems(cert: dict) -> list:
                             "an object of parameter name to rational (text)"),
              "samples": (lambda v: isinstance(v, list) and all(
                  isinstance(x, dict) and isinstance(x.get("t"), list) and all(number_text(t) for t in x["t"])
-                 and point(x.get("xyz")) for x in v), 'a list of {"t": [angles], "xyz": [x, y, z]}')}
+                 and point(x.get("xyz")) for x in v), 'a list of {"t": [angles], "xyz": [coordinates]}')}
     problems = []
     for key, (ok, what) in kinds.items():
         if key not in cert:

@@ -18,6 +18,7 @@ from scipy.special import chdtri
 
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, unit_vectors
+from identcheck.estimate.seed001 import MAD_TO_SD
 
 ROUNDS = 8
 MAX_FRACTION = 0.05
@@ -45,6 +46,12 @@ def spike_residuals(residuals: np.ndarray, seen: np.ndarray, phi: float) -> tupl
     return spike, np.isfinite(spike).all(axis=2)
 
 
+def noise_bound(ctx) -> float:
+    """The χ²₃ value a standardized sample exceeds by chance at a rate of 0.5 % over the whole trial (each of the
+    two tests of :func:`standardized` at half the 1 % the residual alone had)."""
+    return float(chdtri(3, 0.005 / ctx.n_samples))
+
+
 def standardized(ctx, hyp) -> np.ndarray:
     """Each sample's squared residual over its noise variance (F, M; χ²₃ under the noise), or, under serially
     correlated noise, its squared departure from its neighbours (:func:`spike_residuals`) over that departure's
@@ -61,10 +68,10 @@ def standardized(ctx, hyp) -> np.ndarray:
     if phi > 0.0:
         spike, has = spike_residuals(res, seen, phi)
         if has.sum() > 10:
-            scale = 1.4826 * float(np.median(np.abs(spike[has])))
+            scale = MAD_TO_SD * float(np.median(np.abs(spike[has])))
             if scale > 0.0:
                 departure = np.where(has, np.sum(np.nan_to_num(spike) ** 2, axis=2), 0.0) / scale ** 2
-                if (departure > chdtri(3, 0.005 / ctx.n_samples)).sum() <= MAX_FRACTION * has.sum():
+                if (departure > noise_bound(ctx)).sum() <= MAX_FRACTION * has.sum():
                     z2 = np.maximum(z2, departure)
     return z2
 
@@ -74,9 +81,8 @@ def beyond_noise(ctx, hyp, z2: np.ndarray | None = None) -> np.ndarray:
     their frame. Two tests (the residual, the departure from the neighbours), each at half the rate: a false sample
     in 200 trials."""
     z2 = standardized(ctx, hyp) if z2 is None else z2
-    limit = chdtri(3, 0.005 / ctx.n_samples)
     worst = z2 >= z2.max(axis=1, keepdims=True)
-    return (z2 > limit) & worst
+    return (z2 > noise_bound(ctx)) & worst
 
 
 def flagged(ctx, hyp, beyond: np.ndarray | None = None) -> np.ndarray:

@@ -40,6 +40,13 @@ def decode(raw: bytes, fallback: str | None = None) -> str:
         return raw.decode(fallback)
 
 
+def plain(text: str) -> bool:
+    """Whether `text` holds only what capture software writes in a number: ASCII, no digit groups. Python's
+    ``float`` and ``int`` also read ``1_000`` and the digits of other scripts (full-width ``１２３``); in a trial or
+    an argument those are an edit or a corruption, and read as numbers they would be silent wrong ones."""
+    return text.isascii() and "_" not in text
+
+
 MAX_INPUT_BYTES = 4 << 30
 """Largest input file read: a TRC of a C3D file's most frames (65 535) of 300 markers is about 1.5 GB."""
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.io.atomic import atomic_write
-from identcheck.io.text import decode, read_input
+from identcheck.io.text import decode, plain, read_input
 
 UNITS_TO_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 """Length units a trial file may use, with their factor to millimetres."""
@@ -362,7 +362,7 @@ def _parse_header(keys_line: str, values_line: str, problems: list[str]):
         problems.append("line 2: missing key DataRate (the frame rate in Hz)")
     else:
         try:
-            rate_hz = float(header[rate_key]) if header[rate_key].isascii() and "_" not in header[rate_key] else 0.0
+            rate_hz = float(header[rate_key]) if plain(header[rate_key]) else 0.0
             if not (math.isfinite(rate_hz) and rate_hz > 0):
                 raise ValueError
         except ValueError:
@@ -380,7 +380,7 @@ def _parse_header(keys_line: str, values_line: str, problems: list[str]):
             counts.append(None)
             continue
         try:
-            if not value.isascii() or "_" in value:
+            if not plain(value):
                 raise ValueError
             counts.append(int(value))
         except ValueError:
@@ -414,13 +414,11 @@ def _parse_names(line: str, problems: list[str]) -> list[str]:
 
 
 def _not_plain(cells: np.ndarray) -> np.ndarray:
-    """Cells Python reads as numbers but no capture software writes: digit groups (``1_000``) and digits of other
-    scripts (full-width ``１２３``). Such a cell is an edit or a corruption, not a coordinate; read as one it would be
-    a silent wrong number. Checked on the cells only when the rows hold such characters at all (a fast test)."""
-    flat = "".join(cells.ravel().tolist())
-    if flat.isascii() and "_" not in flat:
+    """The cells that are no :func:`~identcheck.io.text.plain` number, (n_rows, n_cols); each cell is looked at
+    only when the rows hold such characters at all (one test of their joined text)."""
+    if plain("".join(cells.ravel().tolist())):
         return np.zeros(cells.shape, bool)
-    return np.vectorize(lambda c: not c.isascii() or "_" in c, otypes=[bool])(cells)
+    return np.vectorize(lambda c: not plain(c), otypes=[bool])(cells)
 
 
 def _parse_numbers(cells: np.ndarray, linenos: list[int], labels, problems) -> np.ndarray:

@@ -24,7 +24,7 @@ def save(fig, path, dpi: int = 110, rect=None) -> Path:
     ``path`` (PNG/SVG by extension); returns the path."""
     fig.tight_layout(rect=rect)
     with replacing(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format=Path(path).suffix.lstrip(".").lower() or None)
+        fig.savefig(tmp, dpi=dpi)           # the temporary name keeps the ending that chooses the format
     return Path(path)
 
 

@@ -15,9 +15,9 @@ import datetime
 import html
 import json
 import math
+from pathlib import Path
 
 from identcheck.io.atomic import atomic_write
-from pathlib import Path
 
 VERDICT_COLOURS = {"determined": "#1a9850", "ambiguous": "#f39c12", "undetermined": "#d73027"}
 SEGMENT_COLOURS = ("#4575b4", "#91bfdb", "#7b3294", "#c2a5cf", "#008837", "#a6dba0", "#e66101", "#fdb863",

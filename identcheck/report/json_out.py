@@ -8,7 +8,6 @@ that would hide it as a string).
 from __future__ import annotations
 
 import json
-
 from pathlib import Path
 
 from identcheck.io.atomic import atomic_write
