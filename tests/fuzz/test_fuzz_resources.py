@@ -207,3 +207,48 @@ def test_a_batch_writing_into_its_input_folder_is_refused(run, corpus, tmp_path)
     res = run(["batch", "fit", LEG, folder, "--out", folder])
     assert res.code == 2 and res.names("--out", "input folder"), res.err
     assert sorted(os.listdir(folder)) == ["leg.trc"]
+
+
+def test_an_opensim_model_the_disk_refuses_is_exit_2_and_leaves_nothing(run, corpus, tmp_path, monkeypatch):
+    """OpenSim reports a failed write with a RuntimeError of its own (seen on a full disk): exit 2 naming the
+    option and the file, and no partial .osim (it had been a traceback)."""
+    from identcheck.fit import osim
+
+    if osim.opensim_missing():
+        pytest.skip("OpenSim's Python package is not installed (identcheck[osim])")
+
+    class Refusing:
+        def printToXML(self, path):
+            open(path, "w").write("<Op")                 # a start, then the disk is full
+            raise RuntimeError("std::exception in 'bool OpenSim::Object::print': SimTK Exception thrown at Xml.cpp")
+
+    monkeypatch.setattr(osim, "build_model", lambda fit, name="identcheck": Refusing())
+    out = tmp_path / "m.osim"
+    res = run(["fit", LEG, corpus / "leg.trc", "--export-osim", out])
+    assert res.code == 2 and res.names("--export-osim", out, "cannot write the model"), res.err
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_cluster_that_cannot_listen_is_exit_2_naming_the_dashboard(run, corpus, tmp_path):
+    """A well-formed address the machine cannot listen on (a host that does not resolve): the local cluster does
+    not start, which is said with the option (it had been a traceback)."""
+    pytest.importorskip("distributed")
+    res = run(["batch", "fit", LEG, corpus / "leg.trc", "--out", tmp_path / "o", "--dashboard",
+               "no-such-host.invalid:0", "--workers", "1"])
+    assert res.code == 2 and res.names("the local cluster did not start", "--dashboard no-such-host.invalid:0"), \
+        res.err
+
+
+def test_an_exported_marker_file_given_back_to_fit_says_where_it_came_from(run, corpus, tmp_path):
+    out = tmp_path / "with_joints.trc"
+    assert run(["fit", LEG, corpus / "leg.trc", "--export-markers", out]).code in (0, 1)
+    res = run(["fit", LEG, out])
+    assert res.code == 2 and res.names("virtual marker", "--export-markers", "fit the trial it was exported from"), \
+        res.err
+
+
+def test_plan_on_a_recorded_motion_says_the_noise_is_the_trials_own(run, corpus):
+    """With --motion TRIAL the practical verdicts are the recorded trial's fit, at its own noise: the text said
+    '? mm noise'."""
+    res = run(["plan", LEG, "--fast", "--noise-mm", "1", "--motion", corpus / "leg.trc"])
+    assert res.code in (0, 1) and "the trial's own noise, measured" in res.out and "? mm" not in res.out, res.out
