@@ -38,7 +38,8 @@ def named(doc: dict, model: Model) -> set:
 def test_walk_trial_alone_gives_the_leg_segments_and_joints():
     """subject01_walk1 (OpenSim, 41 markers, one stride): the pelvis, thigh and shank clusters of both legs, the
     trunk and the head come out as segments; hips and knees join them as in examples/real_walk_leg.toml (both
-    legs); the knees are hinges."""
+    legs); the knees are hinges. Each arm hangs from the trunk through its upper arm, which carries one marker
+    (the biceps): trunk - upper arm - forearm, not the two forearms joined to each other (they swing together)."""
     pytest.importorskip("scipy")
     doc = skeleton(WALK).to_dict()
     groups = {frozenset(ms) for ms in doc["segments"].values()}
@@ -55,6 +56,12 @@ def test_walk_trial_alone_gives_the_leg_segments_and_joints():
     assert joints[seg["thigh_r"], seg["shank_r"]]["type"] == "revolute"
     assert joints[seg["thigh_l"], seg["shank_l"]]["type"] == "revolute"
     assert doc["root"] == seg["pelvis"] and doc["playback"]["rms_mm"] < 20
+    pairs = {frozenset(p) for p in joints}
+    for side in "RL":
+        trunk, upper, fore = owner["Sternum"], owner[f"{side}.Bicep"], owner[f"{side}.Elbow"]
+        assert doc["segments"][upper] == [f"{side}.Bicep"]
+        assert frozenset((trunk, upper)) in pairs and frozenset((upper, fore)) in pairs
+    assert frozenset((owner["R.Elbow"], owner["L.Elbow"])) not in pairs
 
 
 def test_walking2_with_the_example_segments_gives_the_example_model(tmp_path, capsys):

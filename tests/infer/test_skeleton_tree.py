@@ -6,7 +6,9 @@ from hypothesis import given, settings, strategies as st
 
 from identcheck.estimate.obrien import joint_location
 from identcheck.infer.joint_types import classify_posed, noise_wobble_deg
-from identcheck.infer.tree import REL_AMBIGUOUS, Z_AMBIGUOUS, SmallFit, _inserted_doubt, compare_residuals, orient
+from identcheck.estimate.joint import MIN_TRAVEL_MM
+from identcheck.infer.tree import (REL_AMBIGUOUS, THROUGH_RATIO, THROUGH_TRAVEL, Z_AMBIGUOUS, Edge, SmallFit, _insert,
+                                   _inserted_doubt, compare_residuals, orient)
 from identcheck.infer.workflow import infer_skeleton
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
@@ -204,3 +206,76 @@ def test_an_inserted_group_that_fits_another_segment_as_well_is_reported(r_paren
         (rep,) = out
         assert rep["joint"] == ["P", "g"] and rep["alternative"] == [outside[0][1], "g"]
         assert rep["alternative"][0] not in below and rep["margin_units"] < Z_AMBIGUOUS
+
+
+class _Turnable:
+    """A stand-in O'Brien fit that records how often it was turned parent <-> child."""
+
+    def __init__(self, turns=0):
+        self.turns = turns
+
+    def reversed(self):
+        return _Turnable(self.turns + 1)
+
+
+def _path(pairs, a, b) -> list:
+    """The undirected pairs on the tree path from a to b."""
+    adj: dict = {}
+    for u, v in pairs:
+        adj.setdefault(u, []).append(v)
+        adj.setdefault(v, []).append(u)
+    back, queue = {a: None}, [a]
+    while queue:
+        u = queue.pop(0)
+        for v in adj.get(u, []):
+            if v not in back:
+                back[v], queue = u, queue + [v]
+    out, v = [], b
+    while back[v] is not None:
+        out.append(frozenset((back[v], v)))
+        v = back[v]
+    return out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(2, 7), st.data(), st.floats(0.3, 4.0), st.floats(1.0, 6.0), st.floats(5.0, 60.0))
+def test_a_small_group_goes_where_the_direct_joint_it_explains_is_worst(n, data, r_group, accept, travel):
+    """Posed segments joined by a random tree of joints leaving 1-15 mm (none poor) and a one-marker group that
+    fits a joint with two of them (a, b): the group replaces the worst joint on the tree path between a and b
+    exactly when that joint leaves more than THROUGH_RATIO times the group's worst fit and the group moves at least
+    THROUGH_TRAVEL x the accepted residual and x the travel a joint fit needs in both frames; the result is a tree over the posed segments and
+    the group, oriented from the top, with every O'Brien fit turned exactly when its joint was."""
+    parents = [data.draw(st.integers(0, i - 1)) for i in range(1, n)]
+    res = data.draw(st.lists(st.floats(1.0, 15.0), min_size=n - 1, max_size=n - 1, unique=True))
+    edges = [Edge(f"P{p}", f"P{i}", r, "obrien", None, 1.0, False, fit=_Turnable())
+             for i, (p, r) in enumerate(zip(parents, res), 1)]
+    a, b = data.draw(st.lists(st.integers(0, n - 1), min_size=2, max_size=2, unique=True))
+    r_a, r_b = r_group, data.draw(st.floats(0.3, 4.0))
+    r_a, r_b = min(r_a, accept), min(r_b, accept)
+    nan = float("nan")
+    fits = {"g": {f"P{k}": (SmallFit(r_a if k == a else r_b, nan, travel, 100.0, 500) if k in (a, b) else
+                            SmallFit(nan, nan, travel, nan, 500, "no sphere"))
+                  for k in range(n)}}
+    out, used, poor, _, replaced = _insert(edges, fits, accept, "P0")
+    on_path = _path([(e.parent, e.child) for e in edges], f"P{a}", f"P{b}")
+    worst = max((e for e in edges if frozenset((e.parent, e.child)) in on_path), key=lambda e: e.residual_mm)
+    expect = (worst.residual_mm > THROUGH_RATIO * max(r_a, r_b)
+              and travel >= THROUGH_TRAVEL * max(accept, MIN_TRAVEL_MM))
+    assert not poor
+    assert (used == ["g"]) == expect
+    assert replaced == ([(worst.parent, worst.child)] if expect else [])
+    nodes = {f"P{k}" for k in range(n)} | ({"g"} if expect else set())
+    assert len(out) == len(nodes) - 1
+    assert {frozenset((e.parent, e.child)) for e in out if e.method == "obrien"} == \
+        {frozenset((e.parent, e.child)) for e in edges} - ({frozenset((worst.parent, worst.child))} if expect else set())
+    seen = {"P0"}
+    for e in out:                                   # parents before children, each child once
+        assert e.parent in seen and e.child not in seen
+        seen.add(e.child)
+    assert seen == nodes
+    before = {(e.parent, e.child) for e in edges}
+    for e in out:
+        if e.method == "obrien":
+            assert e.fit.turns == (0 if (e.parent, e.child) in before else 1)
+        else:
+            assert {e.parent, e.child} & {f"P{a}", f"P{b}"} and "g" in (e.parent, e.child)
