@@ -6,17 +6,20 @@ as one group. Measured on held-out random skeletons, such merges were most of th
 settled.
 
 With the marker noise σ known, a rigid group can be checked against it: seen in the pose of some of its markers
-(part A, three or more), each other marker (part B) scatters about its body-fixed place by σ²(1 + f²) per
-coordinate, f being how much A's own pose noise adds there (:func:`identcheck.geometry.poses.pose_noise_factor`).
-The *motion ratio* of a split is the root of the mean, over B's markers and the frames, of the squared distance from
-that place over 3σ²(1 + f²): about 1 for a rigid group whatever the split (0.85-1.15 for 95 % of 172 rigid groups of
-five or more markers in two development draws of the independent skeleton generator), larger when B turns
-relative to A. The splits tried are those of the group's own complete-linkage tree of pair spreads (each node
-against the rest, either side posed). A group whose largest ratio is at least :data:`RATIO_LIMIT` is reported, with
-the split whose two parts are each closest to rigid (:func:`best_split`). So is a group whose split parts are each
-rigid while one moves in the other's pose clearly more than either departs from rigid on its own
-(:data:`RELATIVE_LIMIT`). Skin motion raises the ratio too (half the rigid groups with soft tissue in those draws),
-so the report names both readings: it is a question the data leave open, and the skeleton is not called settled.
+(part A, three or more), each other marker (part B, one or more) scatters about its body-fixed place by σ²(1 + f²)
+per coordinate, f being how much A's own pose noise adds there
+(:func:`identcheck.geometry.poses.pose_noise_factor`). The *motion ratio* of a split is the root of the mean, over
+B's markers and the frames, of the squared distance from that place over 3σ²(1 + f²): about 1 for a rigid group
+whatever the split (0.85-1.15 for 95 % of 172 rigid groups of five or more markers in two development draws of the
+independent skeleton generator), larger when B turns relative to A. For groups of four, split three and one, the
+median was 1.02 and 6 of 490 rigid groups without soft tissue reached 1.5 (two development draws, 6969 and 7272); a
+one-marker segment near a joint that joined its neighbour's three markers is seen only this way. The splits tried
+are those of the group's own complete-linkage tree of pair spreads (each node against the rest, either side posed).
+A group whose largest ratio is at least :data:`RATIO_LIMIT` is reported, with the split whose two parts are each
+closest to rigid (:func:`best_split`). So is a group whose split parts are each rigid while one moves in the other's
+pose clearly more than either departs from rigid on its own (:data:`RELATIVE_LIMIT`). Skin motion raises the ratio
+too (half the rigid groups with soft tissue in those draws), so the report names both readings: it is a question the
+data leave open, and the skeleton is not called settled.
 """
 from __future__ import annotations
 
@@ -37,8 +40,12 @@ pose beyond that. Skin motion raises both, so this sees a merge that wobbling sk
 development draw 6868 of the independent skeleton generator, 99 % of 125 groups of one segment stayed below 1.38
 (largest 1.48); a merge of two 4- and 2-marker segments across a hinge turning 26 deg reached 1.51 with a plain
 ratio of 1.49."""
-MIN_GROUP = MIN_MARKERS + 2
-"""Smallest group checked: a posed part and at least two markers to see in its frame."""
+MAX_NOISE_FACTOR = 4.0
+"""A marker of part B where A's pose amplifies the noise more than this (:func:`pose_noise_factor`) is not judged:
+there, far from a thin triangle of three markers, the linear amplification understates the pose's noise (rigid
+groups of four with white noise reached ratios of 1.4-1.8 at amplifications of 4.6-12)."""
+MIN_GROUP = MIN_MARKERS + 1
+"""Smallest group checked: a posed part and a marker to see in its frame."""
 MAX_FRAMES = 400
 """The check uses at most this many frames, evenly spread."""
 MOVE_ROUNDS = 4
@@ -49,7 +56,8 @@ MOVE_MAX_GROUP = 16
 
 def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -> float:
     """How much the markers `part_b` move in the pose of `part_a`, in units of what noise σ alone would do
-    (module docstring). NaN when A has no pose or B is never seen with it."""
+    (module docstring). NaN when A has no pose, B is never seen with it, or every marker of B lies where A's pose
+    amplifies the noise beyond :data:`MAX_NOISE_FACTOR`."""
     try:
         poses, local, place = body_fixed(xyz, part_a, part_b)
     except ValueError:                                                     # A never seen whole in these frames
@@ -57,8 +65,9 @@ def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         d2 = np.sum((local - place) ** 2, axis=2)                          # NaN where unseen
-        expected = 3.0 * sigma_mm ** 2 * (1.0 + pose_noise_factor(poses.local, np.nan_to_num(place)) ** 2)
-        per_marker = np.nanmean(d2, axis=0) / expected
+        factor = pose_noise_factor(poses.local, np.nan_to_num(place))
+        expected = 3.0 * sigma_mm ** 2 * (1.0 + factor ** 2)
+        per_marker = np.where(factor <= MAX_NOISE_FACTOR, np.nanmean(d2, axis=0) / expected, np.nan)
     return float(np.sqrt(np.nanmean(per_marker))) if np.isfinite(per_marker).any() else float("nan")
 
 
@@ -102,7 +111,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
     (float, list, list, float) or None
         The largest ratio, the reported split's posed part and other part (columns), and that split's motion ratio
         over the larger of its parts' own departures from rigid (:data:`RELATIVE_LIMIT`); None when the group is too
-        small to split into a posed part and two more markers, or no split has a finite ratio.
+        small to split into a posed part and one more marker, or no split has a finite ratio.
     """
     if len(columns) < MIN_GROUP:
         return None
@@ -114,7 +123,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
         inside = leaves[node]
         rest = [c for c in sorted(columns) if c not in inside]
         for a, b in ((inside, rest), (rest, inside)):
-            if len(a) >= MIN_MARKERS and len(b) >= 2:
+            if len(a) >= MIN_MARKERS and len(b) >= 1:
                 r = motion_ratio(xyz, a, b, sigma_mm)
                 if np.isfinite(r):
                     splits.append((r, sorted(a), sorted(b)))
@@ -135,7 +144,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
     score, a, b = min(((worse(s[1], s[2]), s[1], s[2]) for s in splits), key=lambda s: s[0])
     for _ in range(MOVE_ROUNDS if len(columns) <= MOVE_MAX_GROUP else 0):   # the tree's splits need not hold
         moves = [(sorted(set(a) - {m}), sorted(set(b) | {m})) for m in a if len(a) > MIN_MARKERS] + \
-                [(sorted(set(a) | {m}), sorted(set(b) - {m})) for m in b if len(b) > 2]
+                [(sorted(set(a) | {m}), sorted(set(b) - {m})) for m in b if len(b) > 1]
         best = min(((worse(x, y), x, y) for x, y in moves), key=lambda s: s[0], default=None)
         if best is None or best[0] >= score:
             break

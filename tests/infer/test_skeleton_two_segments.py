@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.api import skeleton
 from identcheck.infer.grouping import pair_statistics
-from identcheck.infer.two_segments import RATIO_LIMIT, best_split, check_groups
+from identcheck.geometry.poses import pose_noise_factor
+from identcheck.infer.two_segments import MAX_NOISE_FACTOR, RATIO_LIMIT, best_split, check_groups, motion_ratio
 from identcheck.trial import Trial
 
 F = 500
@@ -26,7 +27,7 @@ def _body(rng, n, turn, origin=(0.0, 0.0, 0.0), offset=(0.0, 0.0, 0.0)):
 
 
 @settings(max_examples=15, deadline=None)
-@given(st.integers(0, 2**16), st.integers(5, 9), st.floats(0.1, 1.5))
+@given(st.integers(0, 2**16), st.integers(4, 9), st.floats(0.1, 1.5))
 def test_a_rigid_group_moves_as_noise_predicts(seed, n, sigma):
     """Any rigid group, any motion, white noise σ: every split's motion ratio is near 1, and none is reported."""
     rng = np.random.default_rng(seed)
@@ -53,6 +54,28 @@ def test_two_segments_turning_a_little_are_found_and_split_right(seed, n_a, n_b,
     (found,) = check_groups(X, labels, {"g": labels}, S, sigma)
     assert found["motion_ratio"] >= RATIO_LIMIT
     assert {frozenset(p) for p in found["parts"]} == {frozenset(labels[:n_a]), frozenset(labels[n_a:])}
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 2**16), st.integers(3, 5), st.floats(0.2, 1.0), st.floats(100.0, 200.0))
+def test_one_marker_turning_a_little_with_a_group_is_found(seed, n_a, sigma, radius):
+    """A one-marker segment on a ball joint turning by about 20 sigma / radius radians (at most 11 degrees; its
+    marker moving some 20 sigma in A's pose), grouped with its neighbour's markers: where A's pose amplifies the
+    noise at most MAX_NOISE_FACTOR-fold there, the group is reported, split A | the marker; beyond, the marker is
+    not judged (NaN ratio)."""
+    rng = np.random.default_rng(seed)
+    A = _body(rng, n_a, Rotation.identity(F), origin=(0, 0, 1000))
+    d = rng.normal(size=3)
+    B = np.einsum("fij,j->fi", _rotations(rng, 20.0 * sigma / radius).as_matrix(), radius * d / np.linalg.norm(d))
+    X = np.concatenate([A, B[:, None] + [0, 0, 900]], axis=1) + rng.normal(0, sigma, (F, n_a + 1, 3))
+    labels = [f"a{k}" for k in range(n_a)] + ["b0"]
+    S = pair_statistics(X).spread_mm
+    if pose_noise_factor(A[0], (B.mean(axis=0) + [0, 0, 900])[None])[0] > MAX_NOISE_FACTOR:
+        assert np.isnan(motion_ratio(X, list(range(n_a)), [n_a], sigma))
+        return
+    (found,) = check_groups(X, labels, {"g": labels}, S, sigma)
+    assert found["motion_ratio"] >= RATIO_LIMIT
+    assert {frozenset(p) for p in found["parts"]} == {frozenset(labels[:n_a]), frozenset(["b0"])}
 
 
 def test_a_possible_merge_leaves_the_skeleton_open(tmp_path):
