@@ -41,9 +41,10 @@ development draw 6868 of the independent skeleton generator, 99 % of 125 groups 
 (largest 1.48); a merge of two 4- and 2-marker segments across a hinge turning 26 deg reached 1.51 with a plain
 ratio of 1.49."""
 MAX_NOISE_FACTOR = 4.0
-"""A marker of part B where A's pose amplifies the noise more than this (:func:`pose_noise_factor`) is not judged:
-there, far from a thin triangle of three markers, the linear amplification understates the pose's noise (rigid
-groups of four with white noise reached ratios of 1.4-1.8 at amplifications of 4.6-12)."""
+"""A part B of one marker where A's pose amplifies the noise more than this (:func:`pose_noise_factor`) is not
+judged: there, far from a thin triangle of three markers, the linear amplification understates the pose's noise
+(rigid groups of four with white noise reached ratios of 1.4-1.8 at amplifications of 4.6-12), and one marker's
+ratio has no others to average that with. Parts of two or more markers are judged wherever they lie, as before."""
 MIN_GROUP = MIN_MARKERS + 1
 """Smallest group checked: a posed part and a marker to see in its frame."""
 MAX_FRAMES = 400
@@ -56,7 +57,7 @@ MOVE_MAX_GROUP = 16
 
 def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -> float:
     """How much the markers `part_b` move in the pose of `part_a`, in units of what noise σ alone would do
-    (module docstring). NaN when A has no pose, B is never seen with it, or every marker of B lies where A's pose
+    (module docstring). NaN when A has no pose, B is never seen with it, or B is one marker where A's pose
     amplifies the noise beyond :data:`MAX_NOISE_FACTOR`."""
     try:
         poses, local, place = body_fixed(xyz, part_a, part_b)
@@ -67,7 +68,9 @@ def motion_ratio(xyz: np.ndarray, part_a: list, part_b: list, sigma_mm: float) -
         d2 = np.sum((local - place) ** 2, axis=2)                          # NaN where unseen
         factor = pose_noise_factor(poses.local, np.nan_to_num(place))
         expected = 3.0 * sigma_mm ** 2 * (1.0 + factor ** 2)
-        per_marker = np.where(factor <= MAX_NOISE_FACTOR, np.nanmean(d2, axis=0) / expected, np.nan)
+        per_marker = np.nanmean(d2, axis=0) / expected
+        if len(part_b) == 1:
+            per_marker = np.where(factor <= MAX_NOISE_FACTOR, per_marker, np.nan)
     return float(np.sqrt(np.nanmean(per_marker))) if np.isfinite(per_marker).any() else float("nan")
 
 
@@ -98,13 +101,14 @@ def own_ratio(xyz: np.ndarray, part: list, sigma_mm: float) -> float:
 def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: float):
     """Whether one group moves inside beyond the noise, and where it splits.
 
-    Every split of the group's complete-linkage tree (a node against the rest, either side posed) gets its motion
-    ratio. The largest says whether the group is rigid. When it reaches :data:`RATIO_LIMIT`, the split reported is
-    the one whose two parts are each closest to rigid (:func:`own_ratio`): a pose of markers from both segments is
-    itself distorted, so the largest ratio often comes from such a mixed part, and the two segments' own split
-    can show less than the limit. When the segments hardly move, noise decides the tree's order and their split
-    need not be among its nodes, so markers are then moved one at a time between the parts while that brings both
-    closer to rigid.
+    Every split of the group's complete-linkage tree (a node against the rest, either side posed; a node may be one
+    marker) gets its motion ratio. The largest says whether the group is rigid. When it reaches
+    :data:`RATIO_LIMIT`, the split reported is the one whose two parts are each closest to rigid
+    (:func:`own_ratio`; among splits with two or more markers on each side where the group has them): a pose of
+    markers from both segments is itself distorted, so the largest ratio often comes from such a mixed part, and
+    the two segments' own split can show less than the limit. When the segments hardly move, noise decides the
+    tree's order and their split need not be among its nodes, so markers are then moved one at a time between the
+    parts while that brings both closer to rigid.
 
     Returns
     -------
@@ -130,6 +134,10 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
     if not splits:
         return None
     largest = max(s[0] for s in splits)
+    # a part of one marker is rigid by definition and would win every comparison below: the split reported has
+    # two or more on each side wherever the group allows it (every marker still counts for `largest`)
+    least_b = 2 if any(len(s[2]) >= 2 for s in splits) else 1
+    splits = [s for s in splits if len(s[2]) >= least_b]
     own: dict = {}
 
     def rigidity(part):
@@ -144,7 +152,7 @@ def best_split(xyz: np.ndarray, spread: np.ndarray, columns: list, sigma_mm: flo
     score, a, b = min(((worse(s[1], s[2]), s[1], s[2]) for s in splits), key=lambda s: s[0])
     for _ in range(MOVE_ROUNDS if len(columns) <= MOVE_MAX_GROUP else 0):   # the tree's splits need not hold
         moves = [(sorted(set(a) - {m}), sorted(set(b) | {m})) for m in a if len(a) > MIN_MARKERS] + \
-                [(sorted(set(a) | {m}), sorted(set(b) - {m})) for m in b if len(b) > 1]
+                [(sorted(set(a) | {m}), sorted(set(b) - {m})) for m in b if len(b) > least_b]
         best = min(((worse(x, y), x, y) for x, y in moves), key=lambda s: s[0], default=None)
         if best is None or best[0] >= score:
             break
