@@ -534,7 +534,7 @@ def _insert(edges: list, fits: dict, accept_mm: float, top: str) -> tuple[list, 
         unit = max(REL_AMBIGUOUS * worst, 1e-9)
         conf = _phi((e.residual_mm - worst) / unit)
         note = {"parent": e.parent, "child": e.child, "residual_mm": e.residual_mm, "margin_mm": e.residual_mm - worst,
-                "margin_units": (e.residual_mm - worst) / unit, "unit_mm": unit, "replaced": True}
+                "margin_units": (e.residual_mm - worst) / unit, "unit_mm": unit, "replaced": True, "between": [a, b]}
         amb = _inserted_doubt(g, fits[g], a, lower, accept_mm)
         ambiguous += amb
         current.remove(e)

@@ -67,8 +67,10 @@ def _joints(tree, sigma: float) -> list:
             how = {"method": f"sphere and circle fits of {small}'s {len(tree.segments[small])} marker(s) in "
                              f"{posed}'s frame", "reach_mm": _num(e.small.reach_mm)}
             if e.runner_up and e.runner_up.get("replaced"):
-                how["inserted"] = (f"{small} put between {e.runner_up['parent']} and {e.runner_up['child']}, whose "
-                                   f"direct joint left {e.runner_up['residual_mm']:.3g} mm")
+                ru = e.runner_up
+                a, b = ru.get("between", (ru["parent"], ru["child"]))
+                how["inserted"] = (f"{small} put between {a} and {b}, in place of the joint {ru['parent']}-"
+                                   f"{ru['child']}, which left {ru['residual_mm']:.3g} mm")
         tree_ev = {**how, "residual_mm": e.residual_mm, "runner_up": e.runner_up, "confidence": e.confidence,
                    "ambiguous": e.ambiguous}
         out.append({"name": name, "parent": e.parent, "child": e.child, "type": jt.type,

@@ -61,6 +61,9 @@ def test_walk_trial_alone_gives_the_leg_segments_and_joints():
         trunk, upper, fore = owner["Sternum"], owner[f"{side}.Bicep"], owner[f"{side}.Elbow"]
         assert doc["segments"][upper] == [f"{side}.Bicep"]
         assert frozenset((trunk, upper)) in pairs and frozenset((upper, fore)) in pairs
+        ev = joints.get((trunk, upper), joints.get((upper, trunk)))["evidence"]["tree"]
+        assert ev["runner_up"]["replaced"] and set(ev["runner_up"]["between"]) == {trunk, fore}
+        assert ev["inserted"].startswith(f"{upper} put between ")
     assert frozenset((owner["R.Elbow"], owner["L.Elbow"])) not in pairs
 
 
