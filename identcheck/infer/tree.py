@@ -504,9 +504,9 @@ def _insert(edges: list, fits: dict, accept_mm: float, top: str) -> tuple[list, 
       group a sphere in both frames only when their own joint hardly moves, and then their direct joint is as
       good.
 
-    A poor joint with no such group is reported as poor. The group hangs from the segment on the root's side,
-    which the posed tree chose without it, possibly among segments that hardly move relative to each other:
-    another segment that fits the group as well or better is reported (:func:`_inserted_doubt`). Returns (edges,
+    A poor joint with no such group is reported as poor. The group hangs from the segment on the root's side it
+    fits best (with the other side's), possibly among segments that hardly move relative to each other: another
+    segment outside the lower side that fits the group as well or better is reported (:func:`_inserted_doubt`). Returns (edges,
     the groups inserted, poor-joint reports, ambiguity reports, the joints replaced as (parent, child))."""
     current, used, poor, ambiguous, replaced = list(edges), [], [], [], []
     for e in sorted(edges, key=lambda e: -e.residual_mm):
@@ -546,8 +546,8 @@ def _insert(edges: list, fits: dict, accept_mm: float, top: str) -> tuple[list, 
 
 
 def _inserted_doubt(g: str, fits: dict, parent: str, below: set, accept_mm: float) -> list:
-    """An ambiguity report when a group inserted below `parent` (the poor joint's parent, which the posed tree chose
-    without the group) fits a joint with another posed segment outside `below` (the child's side) within
+    """An ambiguity report when a group inserted below `parent` (the segment on the root's side of the replaced
+    joint that it fits best) fits a joint with another posed segment outside `below` (the child's side) within
     `accept_mm` and no more than :data:`Z_AMBIGUOUS` units (:data:`REL_AMBIGUOUS` of its residual with `parent`)
     worse: segments that hardly move relative to each other, or a wrong choice of the posed tree, carry the group's
     joint as well. Empty otherwise."""
