@@ -6,6 +6,8 @@ world coordinates (``--export-markers``) is moved back.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from identcheck.errors import InputError
@@ -148,8 +150,10 @@ def _play(tree, offset, types: list) -> tuple[dict, dict]:
     a pose are not played back."""
     h = tree.hierarchy
     posed = [g for g in tree.segments if tree.points[g].shape[1] >= 3]
-    obrien = {(e.parent, e.child) for e in tree.edges if e.method == "obrien"}
-    parent = {c: p for c, p in (h.parent.items() if h else ()) if (p, c) in obrien}
+    obrien = [e for e in tree.edges if e.method == "obrien"]
+    if h is not None:      # the tree's own joints, oriented as in the tree (a group put between re-roots a part)
+        h = replace(h, parent={e.child: e.parent for e in obrien}, fits={e.child: e.fit for e in obrien})
+    parent = h.parent if h else {}
     poses = h.poses if h else {g: as_poses(tree.points[g], g) for g in posed}
     rel = relative_rotations(h) if h else {}
     joints = h.joints() if h else {}

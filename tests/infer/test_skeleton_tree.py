@@ -281,3 +281,26 @@ def test_a_small_group_goes_where_the_direct_joint_it_explains_is_worst(n, data,
             assert e.fit.turns == (0 if (e.parent, e.child) in before else 1)
         else:
             assert {e.parent, e.child} & {f"P{a}", f"P{b}"} and "g" in (e.parent, e.child)
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 2**16), st.integers(3, 5))
+def test_playback_follows_the_tree_however_its_joints_are_turned(seed, n):
+    """A noise-free chain of ball joints whose O'Brien hierarchy is rooted at its last segment, with the tree's
+    joints turned to hang from its first (as after a small group put between two segments re-roots a part): the
+    playback runs from that one top through every joint and reproduces the markers."""
+    from identcheck.estimate.hierarchy import infer_hierarchy
+    from identcheck.estimate.obrien import as_poses
+    from identcheck.infer.tree import Tree, _oriented
+    from identcheck.infer.workflow import _play
+    case = make_case(seed, n, counts=[3] * n, parents=list(range(n - 1)), types=["spherical"] * (n - 1))
+    points = {s: case.trial.select(ms).as_array() for s, ms in case.segments.items()}
+    h = infer_hierarchy({s: as_poses(p, s) for s, p in points.items()}, root=f"s{n - 1}")
+    edges = [Edge(h.parent[c], c, float(h.fits[c].rms_residual), "obrien", None, 1.0, False, fit=h.fits[c])
+             for c in h.order[1:]]
+    edges = _oriented(edges, "s0")
+    assert [(e.parent, e.child) for e in edges] == [(f"s{k}", f"s{k + 1}") for k in range(n - 1)]
+    tree = Tree("s0", "given", tuple(edges), dict(case.segments), (), (), (), {}, hierarchy=h, points=points)
+    played, summary = _play(tree, np.zeros(3), ["spherical"] * (n - 1))
+    assert summary["played_from"] == ["s0"]
+    assert summary["rms_mm"] < 1e-6
