@@ -435,18 +435,7 @@ def drift_reason(fits: dict) -> str:
 
 def _component(edges: list, without, start: str) -> set:
     """The segments reached from `start` through `edges` (undirected) when the edge `without` is left out."""
-    adj: dict = {}
-    for e in edges:
-        if e is not without:
-            adj.setdefault(e.parent, []).append(e.child)
-            adj.setdefault(e.child, []).append(e.parent)
-    out, queue = {start}, deque([start])
-    while queue:
-        for v in adj.get(queue.popleft(), []):
-            if v not in out:
-                out.add(v)
-                queue.append(v)
-    return out
+    return {start} | {v for _, v in orient([(e.parent, e.child) for e in edges if e is not without], start)}
 
 
 def _through(fits: dict, used: list, upper: set, lower: set, accept_mm: float, travel_mm: float) -> list:
@@ -467,25 +456,15 @@ def _through(fits: dict, used: list, upper: set, lower: set, accept_mm: float, t
 
 
 def _oriented(edges: list, top: str) -> list:
-    """The edges with parents before children from `top`; an edge found the wrong way round is turned (an O'Brien
-    fit through :meth:`~identcheck.estimate.obrien.JointFit.reversed`), as after a group put between two segments
-    re-roots the part below it."""
-    adj: dict = {}
-    for e in edges:
-        adj.setdefault(e.parent, []).append(e)
-        adj.setdefault(e.child, []).append(e)
-    out, seen, queue = [], {top}, deque([top])
-    while queue:
-        u = queue.popleft()
-        for e in adj.get(u, []):
-            v = e.child if e.parent == u else e.parent
-            if v in seen:
-                continue
-            seen.add(v)
-            queue.append(v)
-            if e.parent != u:
-                e = replace(e, parent=u, child=v, fit=e.fit.reversed() if e.fit is not None else None)
-            out.append(e)
+    """The edges with parents before children, breadth first from `top` (:func:`orient`); an edge found the wrong way
+    round is turned (an O'Brien fit through :meth:`~identcheck.estimate.obrien.JointFit.reversed`), as after a group
+    put between two segments re-roots the part below it."""
+    by_pair = {frozenset((e.parent, e.child)): e for e in edges}
+    out = []
+    for u, v in orient([(e.parent, e.child) for e in edges], top):
+        e = by_pair[frozenset((u, v))]
+        out.append(e if e.parent == u else
+                   replace(e, parent=u, child=v, fit=e.fit.reversed() if e.fit is not None else None))
     return out
 
 
@@ -518,7 +497,7 @@ def _insert(edges: list, fits: dict, accept_mm: float, top: str) -> tuple[list, 
         if is_poor:
             cands = _through(fits, used, upper, lower, accept_mm, 0.0)
         else:       # a group nearly rigid with one side is that side's, not a segment between
-            travel = max(THROUGH_TRAVEL * accept_mm, THROUGH_TRAVEL * MIN_TRAVEL_MM)
+            travel = THROUGH_TRAVEL * max(accept_mm, MIN_TRAVEL_MM)
             cands = [c for c in _through(fits, used, upper, lower, accept_mm, travel)
                      if e.residual_mm > THROUGH_RATIO * c[0]]
         if not cands:
@@ -590,19 +569,6 @@ def _loops(h: Hierarchy, edges: list, sigma_mm: float) -> list:
                 out.append({"segments": [a, b], "residual_mm": float(W[i, j]),
                             "note": f"not joined by the tree, yet fits a joint {why}: a closed chain (loop), or "
                                     "segments that hardly move relative to each other"})
-    return out
-
-
-def _breadth_first(edges: list, root: str) -> list:
-    """Edges ordered parents before children (breadth first from `root`)."""
-    by_parent: dict = {}
-    for e in edges:
-        by_parent.setdefault(e.parent, []).append(e)
-    out, queue = [], deque([root])
-    while queue:
-        for e in by_parent.get(queue.popleft(), []):
-            out.append(e)
-            queue.append(e.child)
     return out
 
 
@@ -735,7 +701,7 @@ def infer_tree(trial, grouping, root: str | None = None, sigma_mm: float = float
     ambiguous = [a for a in ambiguous if tuple(a["joint"]) not in replaced]
     placed, unplaced, amb_small = _place([g for g in fits if g not in inserted], fits, accept, sigma_mm)
     unplaced += list(drifting.items())
-    edges = _breadth_first(edges + placed, top)
+    edges = _oriented(edges + placed, top)
     ambiguous += amb_small + amb_inserted
     if h is not None:
         loops = _loops(h, edges, sigma_mm)

@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.estimate.obrien import joint_location
-from identcheck.infer.joint_types import classify_posed, noise_wobble_deg
+from identcheck.estimate.hierarchy import infer_hierarchy
 from identcheck.estimate.joint import MIN_TRAVEL_MM
-from identcheck.infer.tree import (REL_AMBIGUOUS, THROUGH_RATIO, THROUGH_TRAVEL, Z_AMBIGUOUS, Edge, SmallFit, _insert,
-                                   _inserted_doubt, compare_residuals, orient)
-from identcheck.infer.workflow import infer_skeleton
+from identcheck.estimate.obrien import as_poses, joint_location
+from identcheck.infer.joint_types import classify_posed, noise_wobble_deg
+from identcheck.infer.tree import (REL_AMBIGUOUS, THROUGH_RATIO, THROUGH_TRAVEL, Z_AMBIGUOUS, Edge, SmallFit, Tree,
+                                   _insert, _inserted_doubt, _oriented, compare_residuals, orient)
+from identcheck.infer.workflow import _play, infer_skeleton
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from strategies_skeleton import cases, make_case
@@ -289,10 +290,6 @@ def test_playback_follows_the_tree_however_its_joints_are_turned(seed, n):
     """A noise-free chain of ball joints whose O'Brien hierarchy is rooted at its last segment, with the tree's
     joints turned to hang from its first (as after a small group put between two segments re-roots a part): the
     playback runs from that one top through every joint and reproduces the markers."""
-    from identcheck.estimate.hierarchy import infer_hierarchy
-    from identcheck.estimate.obrien import as_poses
-    from identcheck.infer.tree import Tree, _oriented
-    from identcheck.infer.workflow import _play
     case = make_case(seed, n, counts=[3] * n, parents=list(range(n - 1)), types=["spherical"] * (n - 1))
     points = {s: case.trial.select(ms).as_array() for s, ms in case.segments.items()}
     h = infer_hierarchy({s: as_poses(p, s) for s, p in points.items()}, root=f"s{n - 1}")
