@@ -105,6 +105,36 @@ def where_right(name: str, truth: dict, named: dict) -> bool:
     return True
 
 
+MOVING_CENTRE = ("joint_translation",)
+"""Effects after which a joint's true marker distances (to its centre at the generator's zero angle) are not what the
+data determine: the part of a moving centre that is linear in the angle is a shifted joint (the contract's
+``joint_translation``), so a determined joint may sit away from that reference without being wrong about the data."""
+
+
+def joints_against_truth(diag: dict, truth: dict) -> dict:
+    """Each joint's verdict and how its marker distances' 95 % intervals hold the truth's distances: joint ->
+    {"verdict", "markers", "covered" (intervals holding the truth), "worst_miss_mm" (the largest distance from an
+    interval to the truth, 0 when all hold it), "worst_error_mm" (largest |estimate - truth|), "moving_centre" (the
+    truth moves its centre: :data:`MOVING_CENTRE`)}."""
+    out = {}
+    for j, ans in diag.get("joints", {}).items():
+        true = (truth.get("joints", {}).get(j) or {}).get("marker_distances") or {}
+        marks = [m for m in ans.get("marker_distances", {}) if m in true]
+        misses, errors = [], []
+        for m in marks:
+            lo, hi = ans["marker_distances_ci95"][m]
+            t = true[m]
+            misses.append(max(lo - t, 0.0, t - (float("inf") if hi is None else hi)))
+            errors.append(abs(ans["marker_distances"][m] - t))
+        moving = any(e["name"] in MOVING_CENTRE and (e.get("where") or {}).get("joint") == j
+                     for e in truth.get("effects", []))
+        out[j] = {"verdict": ans["practical"]["verdict"], "markers": len(marks), "moving_centre": moving,
+                  "covered": sum(x == 0.0 for x in misses),
+                  "worst_miss_mm": round(max(misses, default=0.0), 3),
+                  "worst_error_mm": round(max(errors, default=0.0), 3)}
+    return out
+
+
 def evaluate(trial_dir: Path, entry: dict) -> dict:
     """Diagnose one trial; the named effects in order, against the truth."""
     stem = entry["stem"]
@@ -121,7 +151,9 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
              for t in entry["effects"]]
     indistinct = [[o["name"] for o in e.get("indistinguishable_from", [])] for e in diag.get("effects", [])]
     visible = visible_chi2(trial_dir, entry) if entry["effects"] else None
-    return {"stem": stem, "named": named, "visible_chi2": None if visible is None else round(visible, 1),
+    truth = json.loads((trial_dir / f"{stem}.truth.json").read_text())
+    return {"stem": stem, "named": named, "joints": joints_against_truth(diag, truth),
+            "visible_chi2": None if visible is None else round(visible, 1),
             "where_right": right, "indistinguishable": indistinct,
             "gap_ratio": round(diag["gap_after"] / diag["noise_floor"], 3) if diag.get("noise_floor") else None,
             "noise": entry["category"]["noise"], "motion": entry["category"]["motion"],
@@ -173,8 +205,30 @@ def summarise(results: list) -> dict:
         "confusion": {k: dict(v) for k, v in sorted(confusion.items())},
         "misses": misses,
         "by_category": by_category(single, clean),
+        "joints": joints_summary(ok),
         "median_seconds": sorted(r["seconds"] for r in results)[len(results) // 2] if results else None,
     }
+
+
+def joints_summary(rows: list) -> dict:
+    """The joints' answers against the truth over every trial: how many were called determined, how many of
+    those had every 95 % interval hold the truth, and the determined ones whose intervals missed it by more than
+    5 mm (a confident wrong number), with the worst miss, also counted without the joints whose true centre moves
+    (:data:`MOVING_CENTRE`); and the share of all intervals that hold the truth."""
+    joints = [(r["stem"], j, a) for r in rows for j, a in (r.get("joints") or {}).items()]
+    det = [(s, j, a) for s, j, a in joints if a["verdict"] == "determined"]
+    wrong = [(s, j, a) for s, j, a in det if a["worst_miss_mm"] > 5.0]
+    return {"joints": len(joints), "determined": len(det),
+            "determined_fixed_centre": sum(not a.get("moving_centre") for _, _, a in det),
+            "determined_fixed_centre_missed_by_over_5mm": sum(not a.get("moving_centre") for _, _, a in wrong),
+            "determined_all_covered": sum(a["covered"] == a["markers"] for _, _, a in det),
+            "determined_missed_by_over_5mm": len(wrong),
+            "worst_determined_miss_mm": max((a["worst_miss_mm"] for _, _, a in det), default=None),
+            "confident_wrong": [{"stem": s, "joint": j, "moving_centre": a.get("moving_centre"),
+                                 "worst_miss_mm": a["worst_miss_mm"],
+                                 "worst_error_mm": a["worst_error_mm"]} for s, j, a in wrong],
+            "intervals": sum(a["markers"] for _, _, a in joints),
+            "intervals_covering": sum(a["covered"] for _, _, a in joints)}
 
 
 def by_category(single: list, clean: list) -> dict:
@@ -245,6 +299,7 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=None)
     add_shard_arguments(ap)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
+    ap.add_argument("--key", default="diagnose_heldout", help="results.json key to write (default %(default)s)")
     a = ap.parse_args(argv)
     entries = json.loads((a.trials / "index.json").read_text())["trials"]
     entries = entries[:a.limit] if a.limit else entries
@@ -274,6 +329,12 @@ def main(argv=None) -> int:
     for m in s["misses"]:
         print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm, visible χ² "
               f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
+    jt = s["joints"]
+    print(f"joints: {jt['determined']}/{jt['joints']} called determined, {jt['determined_all_covered']} of them with "
+          f"every interval holding the truth, {jt['determined_missed_by_over_5mm']} missing it by over 5 mm "
+          f"(worst {jt['worst_determined_miss_mm']} mm; joints whose true centre stays put: "
+          f"{jt['determined_fixed_centre_missed_by_over_5mm']}/{jt['determined_fixed_centre']}); "
+          f"intervals holding the truth {jt['intervals_covering']}/{jt['intervals']}")
     print("detection limits (named first in >= 90 % of trials from this visible chi2 up):")
     for name, d in s["detection_limits"].items():
         lim = d["limit"]
@@ -283,7 +344,7 @@ def main(argv=None) -> int:
         limits_figure(s["detection_limits"], a.out.parent / "diagnose_detection_limits.png")
     except ImportError:
         print("matplotlib missing: no figure", file=sys.stderr)
-    write_json(a.out, "diagnose_heldout", {"summary": s, "trials_dir": str(a.trials), "machine": machine_info()})
+    write_json(a.out, a.key, {"summary": s, "trials_dir": str(a.trials), "machine": machine_info()})
     return 0
 
 

@@ -5,7 +5,7 @@ maximum-likelihood estimate over many noisy captures of the same motion, in one 
 For each plan: the plan's skeleton is simulated noise-free for the named motion (``fit.predict.noise_free_fit``,
 what ``plan`` itself linearises at); ``plan``'s prediction is computed from it; then ``--trials`` captures add
 fresh white noise of ``--noise-mm`` to every visible coordinate, and each is fitted by the whole-tree
-Levenberg-Marquardt ``fit`` runs, to convergence as ``fit`` does (``fit.whole_tree.converged_fit``), started at the truth so that the spread measured is
+Levenberg-Marquardt ``fit`` runs, to convergence as ``fit`` does (``bundle.converge.converged_fit``), started at the truth so that the spread measured is
 the estimator's around the true joint and not a jump to another candidate (the multi-start and the verdict rules
 of ``fit`` are not re-run; the twins are ``plan``'s rejection probabilities, not measured here). Reported per
 plan: for every joint-marker distance the ratio predicted SE / Monte-Carlo SD, its median and range, and how many
@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from identcheck.bundle.uncertainty import distance_gradients  # noqa: E402
 from identcheck.fit.predict import noise_free_fit, predict  # noqa: E402
-from identcheck.fit.whole_tree import converged_fit  # noqa: E402
+from identcheck.bundle.converge import converged_fit  # noqa: E402
 from identcheck.io.model import Model  # noqa: E402
 from results_io import machine_info, write_json  # noqa: E402
 

@@ -131,9 +131,14 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
     - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
       side that does not close within its span is ``None``; a profile that meets a better fit than the
       minimum (the fit had not found the best joint) makes the interval unbounded.
+    A fit that did not converge (:func:`identcheck.bundle.converge.converged_fit`) is no maximum of the likelihood:
+    every distance is ``unbounded`` and nothing is profiled (its profiles had met fits better than the "minimum",
+    a minute of refits to learn that).
     Returns joint -> marker -> ([lo, hi], method)."""
     fit, cov = best.fit, best.cov
     chain = fit.chain
+    if not fit.converged:
+        return {j: {m: ([0.0, None], "unbounded") for m in best.distances[j]} for j in chain.joints}
     n_params = len(cov.information)
     grads = distance_gradients(chain, fit.state, n_params)
     start, out, jobs = time.monotonic(), {}, []
@@ -164,7 +169,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
                                   deadline=start + PROFILE_BUDGET_S)
         except OutOfTime:
             return ([0.0, None], "not_profiled")
-        if pi.lowest_rss < fit.rss - scale:
+        if pi.better_fit or pi.lowest_rss < fit.rss - scale:
             return ([0.0, None], "unbounded")
         return ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
 

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 from identcheck.skeleton import Skeleton
 from identcheck.bundle.anatomical_angles import anatomical_angles
 from identcheck.bundle.chain import fit_chain
+from identcheck.bundle.converge import converged_fit
 from identcheck.bundle.model import Fit, State, Terms, forward
 from identcheck.estimate.noise import NoiseFloor
 
@@ -106,8 +107,16 @@ class Hypothesis:
                           self.effects + ([effect] if effect is not None else []))
 
     def polish(self, max_iter: int = 40) -> "Hypothesis":
-        """The same hypothesis fitted to convergence."""
+        """The same hypothesis fitted on for at most `max_iter` iterations: near convergence, as the search
+        needs to compare candidates (the final model is taken all the way by :meth:`converged`)."""
         fit = fit_chain(self.chain, self.data, self.fit.state, self.terms, self.weights, max_iter=max_iter)
+        return replace(self, fit=fit)
+
+    def converged(self, progress=None) -> "Hypothesis":
+        """The same hypothesis fitted to convergence by ``fit``'s rule
+        (:func:`~identcheck.bundle.converge.converged_fit`: restarted within a time budget; a fit that still has
+        not converged is no maximum of the likelihood, and its joints claim no interval)."""
+        fit = converged_fit(self.chain, self.data, self.fit.state, progress, self.weights, self.terms)
         return replace(self, fit=fit)
 
 

@@ -13,6 +13,10 @@ Each side is walked outwards from the estimate in steps that double (warm-starte
 is interpolated in the signed root of Δχ², which is linear in the distance where the profile is a
 parabola. A side that stays below the threshold up to :data:`MAX_SPAN_MM` is *open*: its bound is ``None``
 (the data reject no larger value). A lower side that does not close is 0 (a distance is not negative).
+
+A refit that lands more than one χ² unit below the minimum ends the walk there: the fit had not found the best
+joint, and the caller withdraws the interval whatever the rest of the walk would have given
+(:attr:`ProfileInterval.better_fit`).
 """
 from __future__ import annotations
 
@@ -50,6 +54,7 @@ class ProfileInterval:
     hi: float | None
     refits: int
     lowest_rss: float          # the smallest data RSS met on the way (below the minimum's: a better fit exists)
+    better_fit: bool = False   # a refit beat the minimum by more than one χ² unit: the walk stopped there
 
 
 def distance_penalty(chain, joint: str, marker: str, target: float, weight: float, n_params: int):
@@ -105,6 +110,8 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
                 raise OutOfTime(f"{marker}'s distance to {joint}")
             refits += 1
             lowest = min(lowest, f.rss)
+            if lowest < fit.rss - scale:        # no minimum to profile about: the bounds would be withdrawn
+                return ProfileInterval(None, None, refits, float(lowest), better_fit=True)
             d = distance_gradients(chain, f.state, n_params)[joint][marker][0]
             q = np.sqrt(max(f.rss - fit.rss, 0.0) / scale)
             if q >= root:

@@ -103,7 +103,7 @@ def test_converged_fit_keeps_to_its_budget_and_says_where_it_is(monkeypatch):
     longer than ITERATION_REPORT_S says its iteration and cost."""
     import time
 
-    import identcheck.fit.whole_tree as W
+    import identcheck.bundle.converge as W
 
     sim = simulate(MODEL, n_frames=300, noise_mm=0.5, seed=3)
     chain = Skeleton.from_model(MODEL)

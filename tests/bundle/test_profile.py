@@ -154,3 +154,43 @@ def test_a_profile_past_its_deadline_stops(tmp_path_factory, seed, late_s):
     free = profile_interval(fit, data, joint, marker, scale, se, P)
     timed = profile_interval(fit, data, joint, marker, scale, se, P, deadline=time.monotonic() + 3600)
     assert (free.lo, free.hi, free.refits) == (timed.lo, timed.hi, timed.refits)
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), off=st.tuples(*[st.floats(-40.0, 40.0)] * 3).filter(
+    lambda v: np.linalg.norm(v) > 10.0))
+def test_a_profile_about_no_minimum_stops_at_its_first_better_fit(tmp_path_factory, seed, off):
+    """A fit stopped before its first iteration with the joint 10-70 mm from the minimum's is no minimum: the
+    profile's first refit lands more than one χ² unit below it, the walk ends there (one refit) and says so;
+    honest_intervals claims no bound for that fit without profiling at all; about the converged fit no refit beats
+    the minimum."""
+    from identcheck.bundle import honest
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, cov = _fit(model, seed)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    marker = next(iter(distance_gradients(chain, fit.state, P)[joint]))
+    scale = cov.sigma_mm ** 2
+    start = fit.state.copy()
+    for side in (start.c_parent, start.c_child):       # the joint moved on both segments
+        side[joint] = side[joint] + np.array(off)
+    early = fit_chain(chain, data, start, max_iter=0)
+    assert not early.converged and early.rss > fit.rss + 100 * scale
+    pi = profile_interval(early, data, joint, marker, scale, 1.0, P)
+    assert pi.better_fit and pi.refits == 1 and pi.lowest_rss < early.rss - scale
+    assert (pi.lo, pi.hi) == (None, None)
+    best = honest.minimum(early, data)
+    called = []
+    real = honest.profile_interval
+    honest.profile_interval = lambda *a, **k: called.append(a) or real(*a, **k)
+    try:
+        out = honest.honest_intervals(best, data, scale)
+    finally:
+        honest.profile_interval = real
+    assert not called
+    assert all(how == "unbounded" and hi is None for per in out.values() for (_, hi), how in per.values())
+    assert set(out) == set(chain.joints)
+    se = cov.se(distance_gradients(chain, fit.state, P)[joint][marker][1])
+    ok = profile_interval(fit, data, joint, marker, scale, se, P)
+    assert not ok.better_fit and ok.lowest_rss >= fit.rss - scale

@@ -14,7 +14,7 @@ from hypothesis import assume, given, settings, strategies as st
 
 import identcheck as ic
 from identcheck.diagnose.workflow import diagnose
-from identcheck.fit.whole_tree import FAST_CHI2_TOL
+from identcheck.bundle.converge import FAST_CHI2_TOL
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 

@@ -51,3 +51,26 @@ def test_the_cli_reports_the_judgment_on_stderr(tmp_path, capsys):
     assert "identcheck diagnose: judging the joints" in out.err
     assert out.err.count("judging the joints") == 1
     assert set(json.loads(out.out)["joints"]) == {"hip", "knee"}
+
+
+def test_the_final_model_is_judged_converged_or_claims_nothing(tmp_path, monkeypatch):
+    """The joints are judged on the final model taken to convergence by fit's rule (the last step's gap is that
+    model's); a final model that cannot be converged within the budget claims no interval for any joint and says why,
+    without a single profile refit (they had run a minute about a point that was no minimum)."""
+    import identcheck.bundle.converge as converge
+    import identcheck.bundle.honest as honest
+
+    trial = _trial(tmp_path)
+    diag = ic.diagnose(MODEL, trial)
+    assert diag.after.fit.converged
+    if diag.steps:
+        assert diag.steps[-1].gap_after == diag.gap_after
+    monkeypatch.setattr(converge, "MAX_ITER", 0)           # no iteration: the final model is not converged
+    monkeypatch.setattr(converge, "CONVERGE_BUDGET_S", 0.0)
+    monkeypatch.setattr(honest, "profile_interval", lambda *a, **k: (_ for _ in ()).throw(AssertionError("profiled")))
+    stuck = ic.diagnose(MODEL, trial, max_steps=0)
+    assert not stuck.after.fit.converged
+    for answer in stuck.to_dict()["joints"].values():
+        assert set(answer["interval_method"].values()) == {"unbounded"}
+        assert all(hi is None for _, hi in answer["marker_distances_ci95"].values())
+        assert not answer["unique"] and "did not converge" in answer["practical"]["reason"]

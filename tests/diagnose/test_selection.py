@@ -26,6 +26,9 @@ class _OnTheRigidFit:
     def polish(self, max_iter: int = 40):
         return self
 
+    def converged(self, progress=None):
+        return self
+
     def n_params(self) -> int:
         return self.base.n_params() + self.added
 
