@@ -111,11 +111,21 @@ data determine: the part of a moving centre that is linear in the angle is a shi
 ``joint_translation``), so a determined joint may sit away from that reference without being wrong about the data."""
 
 
+def other_type(diag_joint: dict, truth_joint: dict, effects: list, joint: str) -> bool:
+    """Whether the joint `diagnose` reports is not of the truth's declared type, so that their marker distances measure
+    different things (to a hinge's axis, to a ball's centre): the report's type differs, or the truth turns the
+    joint like a ball (an ``extra_dof`` of kind ``ball``: a hinge's axis is then the generator's reference only)."""
+    if diag_joint.get("type") and truth_joint.get("type") and diag_joint["type"] != truth_joint["type"]:
+        return True
+    return any(e["name"] == "extra_dof" and (e.get("where") or {}).get("joint") == joint
+               and (e.get("where") or {}).get("dof") == "ball" for e in effects)
+
+
 def joints_against_truth(diag: dict, truth: dict) -> dict:
     """Each joint's verdict and how its marker distances' 95 % intervals hold the truth's distances: joint ->
     {"verdict", "markers", "covered" (intervals holding the truth), "worst_miss_mm" (the largest distance from an
     interval to the truth, 0 when all hold it), "worst_error_mm" (largest |estimate - truth|), "moving_centre" (the
-    truth moves its centre: :data:`MOVING_CENTRE`)}."""
+    truth moves its centre: :data:`MOVING_CENTRE`), "other_type" (:func:`other_type`)}."""
     out = {}
     for j, ans in diag.get("joints", {}).items():
         true = (truth.get("joints", {}).get(j) or {}).get("marker_distances") or {}
@@ -129,6 +139,7 @@ def joints_against_truth(diag: dict, truth: dict) -> dict:
         moving = any(e["name"] in MOVING_CENTRE and (e.get("where") or {}).get("joint") == j
                      for e in truth.get("effects", []))
         out[j] = {"verdict": ans["practical"]["verdict"], "markers": len(marks), "moving_centre": moving,
+                  "other_type": other_type(ans, truth.get("joints", {}).get(j) or {}, truth.get("effects", []), j),
                   "covered": sum(x == 0.0 for x in misses),
                   "worst_miss_mm": round(max(misses, default=0.0), 3),
                   "worst_error_mm": round(max(errors, default=0.0), 3)}
@@ -214,17 +225,20 @@ def joints_summary(rows: list) -> dict:
     """The joints' answers against the truth over every trial: how many were called determined, how many of
     those had every 95 % interval hold the truth, and the determined ones whose intervals missed it by more than
     5 mm (a confident wrong number), with the worst miss, also counted without the joints whose true centre moves
-    (:data:`MOVING_CENTRE`); and the share of all intervals that hold the truth."""
+    (:data:`MOVING_CENTRE`) or that are not of the truth's type (:func:`other_type`); and the share of all intervals
+    that hold the truth."""
     joints = [(r["stem"], j, a) for r in rows for j, a in (r.get("joints") or {}).items()]
     det = [(s, j, a) for s, j, a in joints if a["verdict"] == "determined"]
     wrong = [(s, j, a) for s, j, a in det if a["worst_miss_mm"] > 5.0]
+    fixed = lambda a: not a.get("moving_centre") and not a.get("other_type")    # noqa: E731
     return {"joints": len(joints), "determined": len(det),
-            "determined_fixed_centre": sum(not a.get("moving_centre") for _, _, a in det),
-            "determined_fixed_centre_missed_by_over_5mm": sum(not a.get("moving_centre") for _, _, a in wrong),
+            "determined_fixed_centre": sum(fixed(a) for _, _, a in det),
+            "determined_fixed_centre_missed_by_over_5mm": sum(fixed(a) for _, _, a in wrong),
             "determined_all_covered": sum(a["covered"] == a["markers"] for _, _, a in det),
             "determined_missed_by_over_5mm": len(wrong),
             "worst_determined_miss_mm": max((a["worst_miss_mm"] for _, _, a in det), default=None),
             "confident_wrong": [{"stem": s, "joint": j, "moving_centre": a.get("moving_centre"),
+                                 "other_type": a.get("other_type"),
                                  "worst_miss_mm": a["worst_miss_mm"],
                                  "worst_error_mm": a["worst_error_mm"]} for s, j, a in wrong],
             "intervals": sum(a["markers"] for _, _, a in joints),
@@ -332,7 +346,7 @@ def main(argv=None) -> int:
     jt = s["joints"]
     print(f"joints: {jt['determined']}/{jt['joints']} called determined, {jt['determined_all_covered']} of them with "
           f"every interval holding the truth, {jt['determined_missed_by_over_5mm']} missing it by over 5 mm "
-          f"(worst {jt['worst_determined_miss_mm']} mm; joints whose true centre stays put: "
+          f"(worst {jt['worst_determined_miss_mm']} mm; joints whose true centre stays put, of the truth's type: "
           f"{jt['determined_fixed_centre_missed_by_over_5mm']}/{jt['determined_fixed_centre']}); "
           f"intervals holding the truth {jt['intervals_covering']}/{jt['intervals']}")
     print("detection limits (named first in >= 90 % of trials from this visible chi2 up):")
