@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from identcheck.bundle.bootstrap import sampling_spread, t95
+from identcheck.bundle.converge import not_converged_reason
 from identcheck.bundle.joint_frames import joint_geometry
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.practical import TOLERANCE_MM, Z95, free_markers, hardly_moved, judge, single_axis
@@ -316,6 +317,8 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
             f"{', '.join(skipped)} was not computed within the {PROFILE_BUDGET_S:g} s budget: no bound is claimed "
             "for them (fit fewer frames, or one joint at a time, to have them profiled)")
     practical = judge(chain, fit, cov, j, dist, n_alternatives=len(alternatives), unbounded=unbounded)
+    if not best.fit.converged:           # its intervals are all unbounded (honest_intervals): say why
+        practical["reason"] = not_converged_reason()
     if j in best.model_error:
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         if practical["verdict"] != "determined":

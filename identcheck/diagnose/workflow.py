@@ -20,7 +20,6 @@ from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
-from identcheck.bundle.converge import not_converged_reason
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.start import start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
@@ -534,8 +533,6 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
         rom = ", ".join(f"{name} {deg:.1f}" for name, deg in motion_ranges(h.fit, j))
         answer = joint_answer(judged, j)
         practical = answer["practical"]
-        if not h.fit.converged:
-            practical["reason"] = not_converged_reason()
         determined = practical["verdict"] == "determined"
         reason = "ok" if determined else (f"{practical['reason']}; range of motion over the central "
                                           f"{100 * ROM_SHARE:.0f} % of frames: {rom} deg"

@@ -35,7 +35,7 @@ import numpy as np
 from scipy.special import chdtrc
 
 from identcheck.bundle.chain import fit_chain
-from identcheck.bundle.converge import MAX_ITER, converged_fit, not_converged_reason
+from identcheck.bundle.converge import MAX_ITER, converged_fit
 from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
                                       minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
@@ -393,19 +393,16 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in differing if delta > REJECT_CHI2]
         judged = best
-        if not best.fit.converged or (alts and not posed_above(chain, j)):
+        if alts and not posed_above(chain, j):
             # candidates the likelihood cannot tell apart, compared through a segment whose roll in every frame
             # only they see (the incidental-parameter bias): their own intervals are not to be trusted either
-            # (minimal legs: ambiguous knees 90-280 mm off at ±3-8 mm, the truth among none of them); and a fit that
-            # did not converge is no maximum of the likelihood: nothing it says is an interval
+            # (minimal legs: ambiguous knees 90-280 mm off at ±3-8 mm, the truth among none of them); a fit that did
+            # not converge has none already (honest_intervals) and says why (joint_answer)
             judged = replace(best, intervals={**best.intervals,
                                               j: {m: ([0.0, None], "unbounded") for m in best.distances[j]}})
         out[j] = joint_answer(judged, j, alts, rejected)
         if j in undecidable and claims_a_joint(out[j]):
             out[j] = _undecided_twins(out[j], rejected, *undecidable[j], bounded=posed_above(chain, j))
-        if not best.fit.converged:
-            out[j]["practical"]["reason"] = (
-                not_converged_reason())
     return out
 
 
