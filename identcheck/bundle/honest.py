@@ -58,6 +58,9 @@ class Minimum:
     spread: dict = field(default_factory=dict)
     """joint -> {"draws": n, "ratio": largest bootstrap-over-linear standard error} where the sampling spread was
     measured (:func:`with_sampling_spread`)."""
+    scale_sd: float = 0.0
+    """Relative standard deviation of every length, inside the distances' standard errors and intervals
+    (:func:`with_scale_error`): the capture's own scale, where the trial shows its calibration off."""
 
 
 def with_model_error(m: Minimum, model_error: dict) -> Minimum:
@@ -67,6 +70,30 @@ def with_model_error(m: Minimum, model_error: dict) -> Minimum:
     dist = {j: {k: (d, float(np.hypot(se, model_error.get(j, 0.0)))) for k, (d, se) in per.items()}
             for j, per in m.distances.items()}
     return replace(m, distances=dist, model_error=dict(model_error))
+
+
+def with_scale_error(m: Minimum, rel_sd: float) -> Minimum:
+    """The minimum with every distance uncertain by the fraction `rel_sd` of itself besides what it had: a
+    distance d's standard error gains ``d · rel_sd`` in quadrature, each interval that claims a bound is widened
+    about d by ``1.96 d · rel_sd`` in quadrature on each side (its method marked ``+scale``), an interval that
+    claims none stays. For the uniform scale of a capture volume found distorted
+    (:meth:`identcheck.effects.base.Effect.scale_sd`): rigid segments cannot see it, so no interval the
+    likelihood gives holds it."""
+    if not rel_sd > 0:
+        return m
+    distances, intervals = {}, {}
+    for j, per in m.distances.items():
+        distances[j] = {k: (d, float(np.hypot(se, d * rel_sd))) for k, (d, se) in per.items()}
+        ivs = {}
+        for k, ((lo, hi), how) in m.intervals.get(j, {}).items():
+            if how in NO_BOUND:
+                ivs[k] = ([lo, hi], how)
+                continue
+            d, half = per[k][0], Z95 * per[k][0] * rel_sd
+            ivs[k] = ([round(max(d - float(np.hypot(d - lo, half)), 0.0), 3),
+                       None if hi is None else round(d + float(np.hypot(hi - d, half)), 3)], how + "+scale")
+        intervals[j] = ivs
+    return replace(m, distances=distances, intervals=intervals, scale_sd=float(rel_sd))
 
 
 PROFILE_BUDGET_S = 60.0
@@ -271,13 +298,16 @@ def with_misfit(m: Minimum, data) -> Minimum:
     return with_model_error(replace(m, misfit=misfit), {j: sd for j, sd in errors.items() if sd > 0})
 
 
-def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None) -> Minimum:
+def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None, scale_sd: float = 0.0) -> Minimum:
     """One fit judged by every rule: covariance, model error, honest intervals, and with the trial's frame rate the
     sampling spread where the linearisation is off (what ``diagnose`` reports; ``fit`` does the same for its best
-    minimum, then weighs the other candidates)."""
+    minimum, then weighs the other candidates); `scale_sd`: the relative uncertainty of the capture's scale the
+    trial showed (:func:`with_scale_error`), 0 when it showed none."""
     best = with_misfit(minimum(fit, data, weights), data)
     best = replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
-    return best if rate_hz is None else with_sampling_spread(best, data, rate_hz, progress, weights)
+    if rate_hz is not None:
+        best = with_sampling_spread(best, data, rate_hz, progress, weights)
+    return with_scale_error(best, scale_sd)
 
 
 def ci(dist: dict) -> dict:
@@ -325,8 +355,15 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
             practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
                                     "for markers that move with the joint angles (see warnings; `identcheck "
                                     "diagnose` models that motion)")
+    if best.scale_sd > 0:
+        practical["scale_sd"] = round(best.scale_sd, 6)
+        if practical["verdict"] != "determined":
+            practical["reason"] += ("; the intervals include the capture's uncertain scale "
+                                    f"(±{100 * Z95 * best.scale_sd:.2f} % of each distance: the trial shows the "
+                                    "volume distorted)")
     interval = ci(dist)
-    method = {k: "quadratic" + ("+model_error" if j in best.model_error else "") for k in dist}
+    suffix = ("+model_error" if j in best.model_error else "") + ("+scale" if best.scale_sd > 0 else "")
+    method = {k: "quadratic" + suffix for k in dist}
     for k, (iv, how) in best.intervals.get(j, {}).items():
         interval[k], method[k] = iv, how
     # no standard error for a distance the data leave free (the quadratic one is computed without that direction),

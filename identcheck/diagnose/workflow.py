@@ -514,6 +514,12 @@ def worst_joint(ctx: Context, h: Hypothesis) -> tuple[str, float]:
                key=lambda js: js[1])
 
 
+def scale_sd(h: Hypothesis) -> float:
+    """The relative uncertainty of every length that the model's effects leave (the largest any of them says,
+    :meth:`identcheck.effects.base.Effect.scale_sd`): a distorted capture volume's unseen uniform scale."""
+    return max((EFFECTS[p.effect].scale_sd(p) for p in h.effects if getattr(p, "effect", None) in EFFECTS), default=0.0)
+
+
 def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
     """Each joint as ``fit`` reports it, from the final model and by fit's rules (one estimator, one set of
     rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
@@ -524,7 +530,8 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
     ch = h.chain
     if progress:
         progress("judging the joints of the model with the effects (covariance, intervals)")
-    judged = assess(h.fit, h.data, h.weights, progress=Progress(progress), rate_hz=ctx.rate_hz)
+    judged = assess(h.fit, h.data, h.weights, progress=Progress(progress), rate_hz=ctx.rate_hz,
+                    scale_sd=scale_sd(h))
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:

@@ -66,6 +66,12 @@ class Effect:
         before the effects the joint model is asked to explain. By default no."""
         return False
 
+    def scale_sd(self, proposal: Proposal) -> float:
+        """The relative standard deviation this effect, once found, leaves on every length the trial measures,
+        which no fit can remove (a distortion of the capture volume says its calibration is off, and the uniform
+        scale part of a calibration error is invisible to rigid bodies); 0 by default."""
+        return 0.0
+
     def implausible(self, proposal: Proposal) -> str:
         """Why the fitted effect cannot be what it claims ('' if it can): e.g. a distortion too large for a
         calibrated capture volume is something else the field is absorbing."""

@@ -175,6 +175,27 @@ class SpatialDistortion(Effect):
         proposal.payload["displacement"] = disp
         return new
 
+    def scale_sd(self, proposal) -> float:
+        """The relative uncertainty of every length once the volume is found distorted: the fitted field's RMS
+        displacement over the markers' RMS distance from the volume's centre (its typical strain).
+
+        The fields leave out a uniform scale (:data:`_STRAIN` is traceless): a world scaled about any point is
+        as rigid as the true one, so no fit of rigid segments can see that part of a calibration error, and every
+        distance a fit reports carries it whole. A calibration that shows a strain ε in the part it can see has
+        no reason to be exact in the part it cannot: the uniform part is taken as of the same size. On a held-out
+        trial scaled by 0.74 % along one axis (uniform part 0.25 %), all 16 marker distances came out 0.16-0.33 %
+        long, at 95 % intervals of ±0.1-0.4 mm that missed the truth 14 times in 16."""
+        disp, at = proposal.payload.get("displacement"), proposal.payload.get("data")
+        if disp is None or at is None:
+            return 0.0
+        seen = np.all(np.isfinite(at), axis=-1)
+        if not seen.any():
+            return 0.0
+        centre = volume(at)[0]
+        reach = float(np.sqrt(np.mean(np.sum((at[seen] - centre) ** 2, axis=-1))))
+        moved = float(np.sqrt(np.mean(np.sum(disp[seen] ** 2, axis=-1))))
+        return moved / reach if reach > 0 else 0.0
+
     def implausible(self, proposal) -> str:
         amp = proposal.where.get("amplitude_mm", 0.0)
         return (f"the fitted distortion reaches {amp:.0f} mm (> {MAX_AMPLITUDE_MM:g} mm): not a calibration error"
