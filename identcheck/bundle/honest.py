@@ -58,6 +58,9 @@ class Minimum:
     spread: dict = field(default_factory=dict)
     """joint -> {"draws": n, "ratio": largest bootstrap-over-linear standard error} where the sampling spread was
     measured (:func:`with_sampling_spread`)."""
+    modelled: tuple = ()
+    """The motions with the angles the fit's effect terms take up (:class:`~identcheck.bundle.misfit.ModelledMotion`),
+    counted in the model error as if seen (:func:`with_misfit`)."""
     scale_sd: float = 0.0
     """Relative standard deviation of every length, inside the distances' standard errors and intervals
     (:func:`with_scale_error`): the capture's own scale, where the trial shows its calibration off."""
@@ -290,20 +293,24 @@ def likelihood_scale(best: Minimum) -> float:
     return max(best.cov.sigma_mm, SIGMA_FLOOR_MM) ** 2 * tau
 
 
-def with_misfit(m: Minimum, data) -> Minimum:
+def with_misfit(m: Minimum, data, modelled: tuple = ()) -> Minimum:
     """The minimum with the markers' angle-following motion measured and each joint's model error added to its
-    distances' standard errors (:mod:`identcheck.bundle.misfit`)."""
+    distances' standard errors (:mod:`identcheck.bundle.misfit`); `modelled`: the motions with the angles that
+    the fit's effect terms take up (:class:`~identcheck.bundle.misfit.ModelledMotion`), which count as seen."""
     misfit = angle_dependence(m.fit, data)
-    errors = {j: model_error_sd(m.fit, j, misfit) for j in m.fit.chain.joints}
-    return with_model_error(replace(m, misfit=misfit), {j: sd for j, sd in errors.items() if sd > 0})
+    errors = {j: model_error_sd(m.fit, j, misfit, modelled) for j in m.fit.chain.joints}
+    return with_model_error(replace(m, misfit=misfit, modelled=tuple(modelled)),
+                            {j: sd for j, sd in errors.items() if sd > 0})
 
 
-def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None, scale_sd: float = 0.0) -> Minimum:
+def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None, scale_sd: float = 0.0,
+           modelled: tuple = ()) -> Minimum:
     """One fit judged by every rule: covariance, model error, honest intervals, and with the trial's frame rate the
     sampling spread where the linearisation is off (what ``diagnose`` reports; ``fit`` does the same for its best
     minimum, then weighs the other candidates); `scale_sd`: the relative uncertainty of the capture's scale the
-    trial showed (:func:`with_scale_error`), 0 when it showed none."""
-    best = with_misfit(minimum(fit, data, weights), data)
+    trial showed (:func:`with_scale_error`), 0 when it showed none; `modelled`: the motions with the angles the
+    fit's effect terms take up (:func:`with_misfit`)."""
+    best = with_misfit(minimum(fit, data, weights), data, modelled)
     best = replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
     if rate_hz is not None:
         best = with_sampling_spread(best, data, rate_hz, progress, weights)
@@ -353,8 +360,11 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
         if practical["verdict"] != "determined":
             practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
-                                    "for markers that move with the joint angles (see warnings; `identcheck "
-                                    "diagnose` models that motion)")
+                                    "for markers that move with the joint angles " + (
+                                        "(the effects fit the motion they show; their segment's markers moving "
+                                        "together with the angles would not show, and would move the joint)"
+                                        if best.modelled else
+                                        "(see warnings; `identcheck diagnose` models that motion)"))
     if best.scale_sd > 0:
         practical["scale_sd"] = round(best.scale_sd, 6)
         if practical["verdict"] != "determined":

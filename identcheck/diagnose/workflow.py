@@ -520,6 +520,13 @@ def scale_sd(h: Hypothesis) -> float:
     return max((EFFECTS[p.effect].scale_sd(p) for p in h.effects if getattr(p, "effect", None) in EFFECTS), default=0.0)
 
 
+def modelled_motion(h: Hypothesis) -> tuple:
+    """The motions with the joint angles the model's effects fit
+    (:meth:`identcheck.effects.base.Effect.modelled_motion`: skin, a moving centre), for the joints' model error."""
+    return tuple(m for p in h.effects if getattr(p, "effect", None) in EFFECTS
+                 for m in EFFECTS[p.effect].modelled_motion(p, h))
+
+
 def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
     """Each joint as ``fit`` reports it, from the final model and by fit's rules (one estimator, one set of
     rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
@@ -531,7 +538,7 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None) -> dict:
     if progress:
         progress("judging the joints of the model with the effects (covariance, intervals)")
     judged = assess(h.fit, h.data, h.weights, progress=Progress(progress), rate_hz=ctx.rate_hz,
-                    scale_sd=scale_sd(h))
+                    scale_sd=scale_sd(h), modelled=modelled_motion(h))
     res = np.linalg.norm(np.where((h.weights > 0)[..., None], h.residuals(), np.nan), axis=2)
     out = {}
     for j in ch.joints:

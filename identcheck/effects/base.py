@@ -8,6 +8,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+def term_offsets(hyp, kind: str, basis) -> list:
+    """[(key, offsets (F, 3))] of hypothesis `hyp`'s terms of `kind` (``"markers"``: key the marker column or
+    columns, offsets on their segment; ``"centres"``: key the joint, offsets in its parent) built on `basis`, the very
+    array an effect's ``apply`` gave them: ``basis @ params`` with the fitted parameters."""
+    terms, params = hyp.terms, hyp.fit.state.term_params
+    first = 0 if kind == "markers" else len(terms.markers)
+    return [(key, b @ p) for (key, b), p in zip(getattr(terms, kind), params[first:]) if b is basis]
+
+
+def rms_mm(offsets: np.ndarray) -> float:
+    """RMS 3-D length of offsets (F, 3), mm (0 for none)."""
+    return float(np.sqrt(np.mean(np.sum(offsets ** 2, axis=1)))) if len(offsets) else 0.0
+
+
 def seen_mean(x: np.ndarray, axis) -> np.ndarray:
     """``np.nanmean(x, axis)`` without NumPy's warning for a slice with nothing seen (NaN there): in a diagnosis
     a frame where every marker of a segment is occluded is ordinary, and the warning reached the user's terminal
@@ -65,6 +79,13 @@ class Effect:
         exchanged distances fit): an error in the data, which the search corrects, once it earns its parameters,
         before the effects the joint model is asked to explain. By default no."""
         return False
+
+    def modelled_motion(self, proposal: Proposal, hyp) -> list:
+        """The motions with the joint angles this effect's terms fit in hypothesis `hyp`, as
+        :class:`~identcheck.bundle.misfit.ModelledMotion` (a marker moving on its segment, a centre moving in its
+        parent): they count in the joints' model error as if seen (:func:`identcheck.bundle.misfit.model_error_sd`);
+        none by default."""
+        return []
 
     def scale_sd(self, proposal: Proposal) -> float:
         """The relative standard deviation this effect, once found, leaves on every length the trial measures,

@@ -24,7 +24,8 @@ from scipy.spatial.transform import Rotation
 from identcheck.bundle.model import Terms
 from identcheck.bundle.chain import score_statistics
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
-from identcheck.effects.base import Effect, Proposal, seen_mean
+from identcheck.bundle.misfit import ModelledMotion
+from identcheck.effects.base import Effect, Proposal, rms_mm, seen_mean, term_offsets
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import same_motion_clusters
 
@@ -166,6 +167,14 @@ class JointTranslation(Effect):
                  for g in in_world(hyp, j, proposal.payload.get("linear", []))]
         terms = Terms(centres=[(j, proposal.payload["basis"])], world=world)
         return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
+
+    def modelled_motion(self, proposal, hyp) -> list:
+        """The joint's centre moving in its parent by the fitted (even) part, RMS over the frames: the distances to a
+        centre fixed in both segments are then a convention of the pose they are taken at."""
+        j = proposal.payload["joint"]
+        ch = hyp.chain
+        return [ModelledMotion((ch.parent[j], ch.child[j]), rms_mm(offsets), joint=j)
+                for _, offsets in term_offsets(hyp, "centres", proposal.payload["basis"])]
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]

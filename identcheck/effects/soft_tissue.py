@@ -17,7 +17,8 @@ import numpy as np
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
-from identcheck.effects.base import Effect, Proposal, seen_mean
+from identcheck.bundle.misfit import ModelledMotion
+from identcheck.effects.base import Effect, Proposal, rms_mm, seen_mean, term_offsets
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
 
@@ -159,6 +160,18 @@ class SoftTissue(Effect):
         col, basis = proposal.payload["col"], proposal.payload["basis"]
         terms = [(int(c), basis) for c in col] if proposal.payload.get("each") else [(col, basis)]
         return hyp.refit(terms=hyp.terms + Terms(markers=terms), effect=proposal)
+
+    def modelled_motion(self, proposal, hyp) -> list:
+        """Each of the proposal's terms as the motion of its marker (or cluster) on its segment, RMS over the frames
+        where one of its markers is seen."""
+        mine = set(np.atleast_1d(proposal.payload["col"]).tolist())
+        out = []
+        for cols, offsets in term_offsets(hyp, "markers", proposal.payload["basis"]):
+            cols = np.atleast_1d(cols)
+            if set(cols.tolist()) <= mine:
+                seen = np.any(hyp.weights[:, cols] > 0, axis=1)
+                out.append(ModelledMotion((proposal.where["segment"],), rms_mm(offsets[seen])))
+        return out
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]

@@ -84,3 +84,27 @@ def test_a_motion_larger_than_noise_reaches_moves_whatever_its_ratio(explained, 
     below it the ratio alone decides."""
     m = MarkerMisfit("M", "seg", explained, ratio, 0.99)
     assert m.moves == (ratio > RATIO or explained > NOISE_CEILING_MM)
+
+
+@settings(max_examples=8, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), size=st.floats(0.3, 20.0), on=st.sampled_from(["pelvis", "thigh", "shank"]))
+def test_motion_an_effect_fits_counts_as_motion_seen(examples, seed, size, on):
+    """A motion with the angles that diagnose's effect terms fit (skin on a segment, a centre moving) gives each joint
+    the model error the same motion seen in the residual would: skin on a segment counts for the joints beside it
+    and no other, a moving centre for its own joint only; none leaves the model error at 0."""
+    from identcheck.bundle.misfit import ModelledMotion
+
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    fit, data = _fit(model, simulate(model, n_frames=300, noise_mm=0.3, seed=seed).trial)
+    chain = fit.chain
+    seen = {"X": MarkerMisfit("X", on, size, 1e6, 0.0)}
+    skin = (ModelledMotion((on,), size),)
+    for j in chain.joints:
+        beside = on in (chain.parent[j], chain.child[j])
+        assert model_error_sd(fit, j, {}, skin) == model_error_sd(fit, j, seen)
+        assert (model_error_sd(fit, j, {}, skin) > 0) == beside
+        assert model_error_sd(fit, j, {}, skin) >= (1.5 * size if beside else 0.0)
+        assert model_error_sd(fit, j, {}) == 0
+    for j in chain.joints:
+        centre = (ModelledMotion((chain.parent[j], chain.child[j]), size, joint=j),)
+        assert [model_error_sd(fit, k, {}, centre) > 0 for k in chain.joints] == [k == j for k in chain.joints]

@@ -74,3 +74,27 @@ def test_the_final_model_is_judged_converged_or_claims_nothing(tmp_path, monkeyp
         assert set(answer["interval_method"].values()) == {"unbounded"}
         assert all(hi is None for _, hi in answer["marker_distances_ci95"].values())
         assert not answer["unique"] and "did not converge" in answer["practical"]["reason"]
+
+
+def test_skin_the_effects_fit_still_widens_the_joints_beside_it(tmp_path):
+    """A marker wobbling 5-10 mm with its joint's angle: diagnose fits its skin motion, and the joints beside its
+    segment keep the model error that motion gives in ``fit`` (their cluster may move with the angles as well,
+    unseen); a joint the motion does not touch has none."""
+    from identcheck.io.model import Model
+    from identcheck.simulate.rigid import simulate
+    from identcheck.effects.registry import inject_effect
+
+    model = Model.from_toml(MODEL)
+    sim = inject_effect(simulate(model, n_frames=600, noise_mm=0.4, seed=3), "soft_tissue", seed=3)
+    trial = tmp_path / "skin.trc"
+    sim.trial.to_trc(trial)
+    diag = ic.diagnose(MODEL, trial)
+    assert "soft_tissue" in [s.name for s in diag.steps]
+    seg = sim.settings["effect"]["where"]["segment"]
+    report = diag.to_dict()
+    for j, ans in report["joints"].items():
+        beside = seg in (model.joints[j].parent, model.joints[j].child)
+        assert ("model_error_sd_mm" in ans["practical"]) == beside, (j, seg, ans["practical"])
+        if beside:
+            assert ans["practical"]["model_error_sd_mm"] >= 1.5
+            assert all("model_error" in how or how == "unbounded" for how in ans["interval_method"].values())
