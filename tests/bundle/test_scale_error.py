@@ -14,6 +14,7 @@ from identcheck.effects.base import Proposal
 from identcheck.effects.registry import EFFECTS
 from identcheck.effects.spatial_distortion import volume
 from identcheck.io.model import Model
+from identcheck.report.text import diagnose_text
 from identcheck.simulate.rigid import simulate
 from identcheck.trial import Trial
 
@@ -91,7 +92,7 @@ def test_a_uniform_scale_about_the_volume_is_read_as_its_own_size(seed, eps, fra
 def test_a_volume_stretched_along_one_axis_is_named_and_its_joints_intervals_hold_the_true_lengths(tmp_path):
     """A leg recorded in a volume stretched by 0.8 % along its height (a wand-length error on one axis: a uniform
     part of 0.27 % that no rigid body shows): diagnose names the distortion, and every joint interval holds the true
-    marker distance, each marked as taking the capture's scale in."""
+    marker distance, each marked as taking the capture's scale in, and the text report says so."""
     model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
     sim = simulate(model, n_frames=600, noise_mm=0.3, seed=11)
     xyz = sim.trial.as_array()
@@ -100,7 +101,9 @@ def test_a_volume_stretched_along_one_axis_is_named_and_its_joints_intervals_hol
     stretched[..., 2] = centre[2] + 1.008 * (xyz[..., 2] - centre[2])
     path = tmp_path / "stretched.trc"
     Trial.from_array(stretched, sim.trial.labels, sim.trial.rate_hz).to_trc(path)
-    report = ic.diagnose(EXAMPLES / "diagnose_leg.toml", path).to_dict()
+    diag = ic.diagnose(EXAMPLES / "diagnose_leg.toml", path)
+    report = diag.to_dict()
+    assert "the uncertainties include" in diagnose_text(diag)
     assert [e["name"] for e in report["effects"]][:1] == ["spatial_distortion"]
     for j, ans in report["joints"].items():
         assert ans["practical"]["scale_sd"] > 0.001
