@@ -226,7 +226,7 @@ def joints_summary(rows: list) -> dict:
     those had every 95 % interval hold the truth, and the determined ones whose intervals missed it by more than
     5 mm (a confident wrong number), with the worst miss, also counted without the joints whose true centre moves
     (:data:`MOVING_CENTRE`) or that are not of the truth's type (:func:`other_type`); and the share of all intervals
-    that hold the truth."""
+    that hold the truth, also without those joints (whose truth is a distance to a centre the data cannot have)."""
     joints = [(r["stem"], j, a) for r in rows for j, a in (r.get("joints") or {}).items()]
     det = [(s, j, a) for s, j, a in joints if a["verdict"] == "determined"]
     wrong = [(s, j, a) for s, j, a in det if a["worst_miss_mm"] > 5.0]
@@ -242,7 +242,9 @@ def joints_summary(rows: list) -> dict:
                                  "worst_miss_mm": a["worst_miss_mm"],
                                  "worst_error_mm": a["worst_error_mm"]} for s, j, a in wrong],
             "intervals": sum(a["markers"] for _, _, a in joints),
-            "intervals_covering": sum(a["covered"] for _, _, a in joints)}
+            "intervals_covering": sum(a["covered"] for _, _, a in joints),
+            "intervals_fixed_centre": sum(a["markers"] for _, _, a in joints if fixed(a)),
+            "intervals_fixed_centre_covering": sum(a["covered"] for _, _, a in joints if fixed(a))}
 
 
 def by_category(single: list, clean: list) -> dict:
