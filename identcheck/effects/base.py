@@ -17,9 +17,12 @@ def term_offsets(hyp, kind: str, basis) -> list:
     return [(key, b @ p) for (key, b), p in zip(getattr(terms, kind), params[first:]) if b is basis]
 
 
-def rms_mm(offsets: np.ndarray) -> float:
-    """RMS 3-D length of offsets (F, 3), mm (0 for none)."""
-    return float(np.sqrt(np.mean(np.sum(offsets ** 2, axis=1)))) if len(offsets) else 0.0
+def motion_rms_mm(offsets: np.ndarray) -> float:
+    """How far offsets (F, 3) move: the RMS 3-D distance from their mean, mm (0 for none). Their mean is no motion
+    (a term's linear functions of the angles are not centred, and their mean only moves the marker's place)."""
+    if not len(offsets):
+        return 0.0
+    return float(np.sqrt(np.mean(np.sum((offsets - offsets.mean(axis=0)) ** 2, axis=1))))
 
 
 def seen_mean(x: np.ndarray, axis) -> np.ndarray:

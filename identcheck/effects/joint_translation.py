@@ -25,7 +25,7 @@ from identcheck.bundle.model import Terms
 from identcheck.bundle.chain import score_statistics
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
-from identcheck.effects.base import Effect, Proposal, rms_mm, seen_mean, term_offsets
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import same_motion_clusters
 
@@ -173,7 +173,7 @@ class JointTranslation(Effect):
         centre fixed in both segments are then a convention of the pose they are taken at."""
         j = proposal.payload["joint"]
         ch = hyp.chain
-        return [ModelledMotion((ch.parent[j], ch.child[j]), rms_mm(offsets), joint=j)
+        return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)
                 for _, offsets in term_offsets(hyp, "centres", proposal.payload["basis"])]
 
     def evidence(self, ctx, before, after, proposal) -> dict:

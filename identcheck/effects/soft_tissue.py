@@ -18,7 +18,7 @@ import numpy as np
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
 from identcheck.bundle.misfit import ModelledMotion
-from identcheck.effects.base import Effect, Proposal, rms_mm, seen_mean, term_offsets
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
 
 
@@ -170,7 +170,7 @@ class SoftTissue(Effect):
             cols = np.atleast_1d(cols)
             if set(cols.tolist()) <= mine:
                 seen = np.any(hyp.weights[:, cols] > 0, axis=1)
-                out.append(ModelledMotion((proposal.where["segment"],), rms_mm(offsets[seen])))
+                out.append(ModelledMotion((proposal.where["segment"],), motion_rms_mm(offsets[seen])))
         return out
 
     def evidence(self, ctx, before, after, proposal) -> dict:
