@@ -133,7 +133,7 @@ class ModelledMotion:
     segments : tuple of str
         The segments whose markers it moves relative to the joints beside them.
     rms_mm : float
-        RMS (3-D) over the frames of the fitted motion, mm.
+        RMS (3-D) over the frames of the fitted motion about its mean, mm.
     joint : str or None
         The one joint it moves (a centre moving in its parent), or None: every joint beside `segments` (skin).
     """

@@ -169,8 +169,9 @@ class JointTranslation(Effect):
         return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
 
     def modelled_motion(self, proposal, hyp) -> list:
-        """The joint's centre moving in its parent by the fitted (even) part, RMS over the frames: the distances to a
-        centre fixed in both segments are then a convention of the pose they are taken at."""
+        """The joint's centre moving in its parent by its fitted term (quadratic and cubic in the angles), RMS about its
+        mean over the frames: the distances to a centre fixed in both segments are then a convention of the pose they
+        are taken at."""
         j = proposal.payload["joint"]
         ch = hyp.chain
         return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)
