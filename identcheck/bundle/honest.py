@@ -363,7 +363,7 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
                                     "for markers that move with the joint angles " + (
                                         "(the effects fit the motion they show; their segment's markers moving "
                                         "together with the angles would not show, and would move the joint)"
-                                        if best.modelled else
+                                        if any(m.beside(chain, j) for m in best.modelled) else
                                         "(see warnings; `identcheck diagnose` models that motion)"))
     if best.scale_sd > 0:
         practical["scale_sd"] = round(best.scale_sd, 6)

@@ -158,19 +158,26 @@ def model_error_sd(fit, joint: str, misfit: dict, modelled: tuple = ()) -> float
     the motion a marker shows does not fit the motion its cluster may share unseen: a segment's markers moving
     together with the angles keep their distances to one another and are, to first order, the joint moved by
     ``e / θ``. On held-out trials whose shank cluster moved as one with the knee angle (3.8 mm), ``diagnose``
-    fitted skin on the ankle marker only and reported the knee 4-5 mm off at ±0.9 mm."""
+    fitted skin on the ankle marker only and reported the knee 4-5 mm off at ±0.9 mm. A modelled motion counts at
+    any size (its effect was adopted: it earned its parameters), a motion in the residual only once it
+    :attr:`~MarkerMisfit.moves`. A joint's own moving centre (``joint`` set) counts for that joint only, and as
+    ``MODEL_ERROR_PER_MM · e``, not ``e / θ``: the centre's motion is fitted, no cluster motion is implied by it, and
+    its distances are those to the centre's mean place, which change over the trial by about e (on simulated knees
+    translating 8-15 mm, e / θ had made every one undetermined at 9-13 mm of model error)."""
     chain = fit.chain
     sides = (chain.parent[joint], chain.child[joint])
     moved = [m.explained_mm for m in misfit.values() if m.moves and m.segment in sides]
     anywhere = [m.explained_mm for m in misfit.values() if m.moves]
-    moved += [m.rms_mm for m in modelled if m.beside(chain, joint)]
-    anywhere += [m.rms_mm for m in modelled]
+    skin = [m for m in modelled if m.joint is None]                  # not a joint's own moving centre
+    moved += [m.rms_mm for m in skin if m.beside(chain, joint)]
+    anywhere += [m.rms_mm for m in skin]
+    centre = max((m.rms_mm for m in modelled if m.joint == joint), default=0.0)
     if any(len(chain.seg_markers[s]) < 3 for s in sides) and anywhere:
         # a segment with fewer than three markers cannot show its own skin motion (no distance within it
         # changes, and the joint absorbs what would show in the residual): skin motion seen anywhere in the
         # trial may be there unseen, as large
         moved = moved + [max(anywhere)]
     if not moved:
-        return 0.0
+        return MODEL_ERROR_PER_MM * centre
     e = max(moved)
-    return max(MODEL_ERROR_PER_MM * e, e / max(excursion_rad(fit, joint), MIN_EXCURSION_RAD))
+    return max(MODEL_ERROR_PER_MM * max(e, centre), e / max(excursion_rad(fit, joint), MIN_EXCURSION_RAD))

@@ -17,6 +17,17 @@ def term_offsets(hyp, kind: str, basis) -> list:
     return [(key, b @ p) for (key, b), p in zip(getattr(terms, kind), params[first:]) if b is basis]
 
 
+def world_coefficients(hyp, fields: list) -> list:
+    """The fitted scalar of each of hypothesis `hyp`'s world terms whose field is one of `fields` (the very arrays an
+    effect's ``apply`` gave them), as [(index in `fields`, coefficient)]."""
+    terms, params = hyp.terms, hyp.fit.state.term_params
+    first = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    out = []
+    for (_, f), p in zip(terms.world, params[first:]):
+        out += [(k, float(p[0])) for k, g in enumerate(fields) if f is g]
+    return out
+
+
 def motion_rms_mm(offsets: np.ndarray) -> float:
     """How far offsets (F, 3) move: the RMS 3-D distance from their mean, mm (0 for none). Their mean is no motion
     (a term's linear functions of the angles are not centred, and their mean only moves the marker's place)."""

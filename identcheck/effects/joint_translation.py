@@ -25,7 +25,7 @@ from identcheck.bundle.model import Terms
 from identcheck.bundle.chain import score_statistics
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
-from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets, world_coefficients
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import same_motion_clusters
 
@@ -165,17 +165,24 @@ class JointTranslation(Effect):
         idx = ch.downstream[j]
         world = [(idx, np.broadcast_to(g[:, None, :], (len(g), len(idx), 3)).copy())
                  for g in in_world(hyp, j, proposal.payload.get("linear", []))]
+        proposal.payload["world_fields"] = [f for _, f in world]      # how modelled_motion finds their terms
         terms = Terms(centres=[(j, proposal.payload["basis"])], world=world)
         return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
 
     def modelled_motion(self, proposal, hyp) -> list:
-        """The joint's centre moving in its parent by its fitted term (quadratic and cubic in the angles), RMS about its
-        mean over the frames: the distances to a centre fixed in both segments are then a convention of the pose they
-        are taken at."""
+        """The joint's centre moving in its parent as fitted, RMS about its mean over the frames: its term quadratic
+        and cubic in the angles plus the part linear in them (fields given in the parent's frame, fitted as world
+        terms); the distances to a centre fixed in both segments are then a convention of the pose they are taken
+        at."""
         j = proposal.payload["joint"]
         ch = hyp.chain
-        return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)
-                for _, offsets in term_offsets(hyp, "centres", proposal.payload["basis"])]
+        linear = [np.nan_to_num(g) for g in proposal.payload.get("linear", [])]
+        found = term_offsets(hyp, "centres", proposal.payload["basis"])
+        if not found:
+            return []
+        offsets = found[0][1] + sum((c * linear[k] for k, c in
+                                     world_coefficients(hyp, proposal.payload.get("world_fields", []))), 0.0)
+        return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)]
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]

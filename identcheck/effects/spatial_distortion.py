@@ -20,7 +20,7 @@ import numpy as np
 
 from identcheck.bundle.chain import score_statistic
 from identcheck.bundle.model import Terms
-from identcheck.effects.base import Effect, Proposal
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm
 from identcheck.effects.injection import MONOMIALS, Change, cannot, monomials
 
 MAX_AMPLITUDE_MM = 25.0
@@ -177,7 +177,7 @@ class SpatialDistortion(Effect):
 
     def scale_sd(self, proposal) -> float:
         """The relative uncertainty of every length once the volume is found distorted: the fitted field's RMS
-        displacement over the markers' RMS distance from the volume's centre (its typical strain).
+        displacement about its mean over the markers' RMS distance from the volume's centre (its typical strain).
 
         The fields leave out a uniform scale (:data:`_STRAIN` is traceless): a world scaled about any point is
         as rigid as the true one, so no fit of rigid segments can see that part of a calibration error, and every
@@ -193,7 +193,7 @@ class SpatialDistortion(Effect):
             return 0.0
         centre = volume(at)[0]
         reach = float(np.sqrt(np.mean(np.sum((at[seen] - centre) ** 2, axis=-1))))
-        moved = float(np.sqrt(np.mean(np.sum(disp[seen] ** 2, axis=-1))))
+        moved = motion_rms_mm(disp[seen])           # a uniform shift is no strain: the poses take it up
         return moved / reach if reach > 0 else 0.0
 
     def implausible(self, proposal) -> str:

@@ -91,7 +91,8 @@ def test_a_motion_larger_than_noise_reaches_moves_whatever_its_ratio(explained, 
 def test_motion_an_effect_fits_counts_as_motion_seen(examples, seed, size, on):
     """A motion with the angles that diagnose's effect terms fit (skin on a segment, a centre moving) gives each joint
     the model error the same motion seen in the residual would: skin on a segment counts for the joints beside it
-    and no other, a moving centre for its own joint only; none leaves the model error at 0."""
+    and no other, a moving centre for its own joint only and as 1.5 times its motion (its distances are to the centre's
+    mean place); none leaves the model error at 0."""
     from identcheck.bundle.misfit import ModelledMotion
 
     model = Model.from_toml(examples / "diagnose_leg.toml")
@@ -107,4 +108,24 @@ def test_motion_an_effect_fits_counts_as_motion_seen(examples, seed, size, on):
         assert model_error_sd(fit, j, {}) == 0
     for j in chain.joints:
         centre = (ModelledMotion((chain.parent[j], chain.child[j]), size, joint=j),)
-        assert [model_error_sd(fit, k, {}, centre) > 0 for k in chain.joints] == [k == j for k in chain.joints]
+        own = [1.5 * size * (k == j) for k in chain.joints]
+        assert [model_error_sd(fit, k, {}, centre) for k in chain.joints] == own
+
+
+def test_a_moving_centre_does_not_widen_another_joint_beside_a_segment_with_few_markers(examples, tmp_path):
+    """With a shank of two markers (it cannot show its own skin motion), skin fitted anywhere counts for the knee as
+    if it might be on the shank unseen, but the hip's moving centre is the hip's alone: the knee takes no model error
+    from it."""
+    from identcheck.bundle.misfit import ModelledMotion
+
+    toml = (examples / "diagnose_leg.toml").read_text().replace('["RTIB", "RTIB2", "RANK"]', '["RTIB", "RANK"]')
+    path = tmp_path / "sparse.toml"
+    path.write_text(toml)
+    model = Model.from_toml(path)
+    from identcheck.diagnose.workflow import start
+
+    fit = start(model, simulate(model, n_frames=300, noise_mm=0.3, seed=2).trial)[1].fit  # posed through its joints
+    centre = (ModelledMotion(("pelvis", "thigh"), 6.0, joint="hip"),)
+    skin_on_pelvis = (ModelledMotion(("pelvis",), 6.0),)
+    assert model_error_sd(fit, "hip", {}, centre) > 0 and model_error_sd(fit, "knee", {}, centre) == 0
+    assert model_error_sd(fit, "knee", {}, skin_on_pelvis) > 0          # may be on the two-marker shank, unseen

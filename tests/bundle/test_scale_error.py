@@ -72,17 +72,24 @@ def test_no_scale_error_leaves_the_minimum_as_it_was():
        frames=st.integers(2, 40), markers=st.integers(3, 12), hidden=st.floats(0.0, 0.5))
 def test_a_uniform_scale_about_the_volume_is_read_as_its_own_size(seed, eps, frames, markers, hidden):
     """A field that scales the volume by ε about its centre moves each point by ε times its distance from there: the
-    distortion's scale uncertainty is |ε| exactly, whatever the cloud and whichever samples were unseen; a field
-    twice as large says twice as much."""
+    distortion's scale uncertainty is |ε| times the points' spread about their mean over their spread about the
+    volume's centre (|ε| when the two coincide), whatever the cloud and whichever samples were unseen; a uniform
+    shift added changes nothing (the poses take it up); a field twice as large says twice as much."""
     rng = np.random.default_rng(seed)
     at = rng.uniform(-900, 900, (frames, markers, 3)) + rng.uniform(-2000, 2000, 3)
     at[rng.uniform(size=(frames, markers)) < hidden] = np.nan
     at[0, 0] = at[0, 0] if np.all(np.isfinite(at[0, 0])) else rng.uniform(-900, 900, 3)
     disp = np.nan_to_num(eps * (at - volume(at)[0]))
+    seen = np.all(np.isfinite(at), axis=-1)
+    spread = np.sqrt(np.mean(np.sum((at[seen] - at[seen].mean(axis=0)) ** 2, axis=-1)))
+    reach = np.sqrt(np.mean(np.sum((at[seen] - volume(at)[0]) ** 2, axis=-1)))
     eff = EFFECTS["spatial_distortion"]
     one = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": disp}))
     two = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": 2 * disp}))
-    assert one == pytest.approx(abs(eps), rel=1e-9)
+    moved = disp + rng.normal(0, 5, 3)
+    shifted = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": moved}))
+    assert one == pytest.approx(abs(eps) * spread / reach, rel=1e-9)
+    assert shifted == pytest.approx(one, rel=1e-9)
     assert two == pytest.approx(2 * one, rel=1e-12)
     assert eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {})) == 0.0
     assert EFFECTS["marker_slip"].scale_sd(Proposal("marker_slip", {}, 1.0, {"data": at, "displacement": disp})) == 0
