@@ -82,7 +82,7 @@ def test_skin_the_effects_fit_still_widens_the_joints_beside_it(tmp_path):
     unseen); a joint the motion does not touch has none."""
     from identcheck.io.model import Model
     from identcheck.simulate.rigid import simulate
-    from identcheck.effects.registry import inject_effect
+    from identcheck.effects.registry import EFFECTS, inject_effect
 
     model = Model.from_toml(MODEL)
     sim = inject_effect(simulate(model, n_frames=600, noise_mm=0.4, seed=3), "soft_tissue", seed=3)
@@ -91,6 +91,8 @@ def test_skin_the_effects_fit_still_widens_the_joints_beside_it(tmp_path):
     diag = ic.diagnose(MODEL, trial)
     assert "soft_tissue" in [s.name for s in diag.steps]
     seg = sim.settings["effect"]["where"]["segment"]
+    fitted = [p for p in diag.after.effects if p.effect in ("soft_tissue", "joint_translation")]
+    assert fitted and all(EFFECTS[p.effect].modelled_motion(p, diag.after) for p in fitted)   # its terms are found
     report = diag.to_dict()
     for j, ans in report["joints"].items():
         beside = seg in (model.joints[j].parent, model.joints[j].child)
@@ -98,3 +100,25 @@ def test_skin_the_effects_fit_still_widens_the_joints_beside_it(tmp_path):
         if beside:
             assert ans["practical"]["model_error_sd_mm"] >= 1.5
             assert all("model_error" in how or how == "unbounded" for how in ans["interval_method"].values())
+
+
+def test_a_moving_centre_the_effects_fit_widens_its_own_joint_only(tmp_path):
+    """A knee whose centre moves with its angle (8-15 mm): diagnose fits the translation, finds its terms in the final
+    model, and gives the knee 1.5 times the fitted motion as model error, the hip none."""
+    from identcheck.io.model import Model
+    from identcheck.simulate.rigid import simulate
+    from identcheck.effects.registry import inject_effect
+    from identcheck.diagnose.workflow import modelled_motion
+
+    model = Model.from_toml(MODEL)
+    sim = inject_effect(simulate(model, n_frames=600, noise_mm=0.4, seed=2), "joint_translation", seed=2)
+    assert sim.settings["effect"]["where"]["joint"] == "knee"
+    trial = tmp_path / "moving.trc"
+    sim.trial.to_trc(trial)
+    diag = ic.diagnose(MODEL, trial)
+    assert [s.name for s in diag.steps] == ["joint_translation"]
+    motions = modelled_motion(diag.after)
+    assert [m.joint for m in motions] == ["knee"] and motions[0].rms_mm > 1.0
+    joints = diag.to_dict()["joints"]
+    assert joints["knee"]["practical"]["model_error_sd_mm"] >= round(1.5 * motions[0].rms_mm, 3) - 1e-3
+    assert "model_error_sd_mm" not in joints["hip"]["practical"]
