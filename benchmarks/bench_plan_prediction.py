@@ -5,12 +5,13 @@ maximum-likelihood estimate over many noisy captures of the same motion, in one 
 For each plan: the plan's skeleton is simulated noise-free for the named motion (``fit.predict.noise_free_fit``,
 what ``plan`` itself linearises at); ``plan``'s prediction is computed from it; then ``--trials`` captures add
 fresh white noise of ``--noise-mm`` to every visible coordinate, and each is fitted by the whole-tree
-Levenberg-Marquardt ``fit`` runs, to convergence as ``fit`` does (``bundle.converge.converged_fit``), started at the truth so that the spread measured is
-the estimator's around the true joint and not a jump to another candidate (the multi-start and the verdict rules
-of ``fit`` are not re-run; the twins are ``plan``'s rejection probabilities, not measured here). Reported per
-plan: for every joint-marker distance the ratio predicted SE / Monte-Carlo SD, its median and range, and how many
-lie within 25 %; the Monte-Carlo SD's own sampling error is ±1/sqrt(2(N-1)) (±7 % at N = 100). A figure plots
-predicted against Monte-Carlo. Writes key ``plan_prediction`` of benchmarks/results.json.
+Levenberg-Marquardt ``fit`` runs, to convergence as ``fit`` does (``bundle.converge.converged_fit``), started
+at the truth so that the spread measured is the estimator's around the true joint and not a jump to another
+candidate (the multi-start and the verdict rules of ``fit`` are not re-run; the twins are ``plan``'s rejection
+probabilities, not measured here). Reported per plan: for every joint-marker distance the ratio predicted SE /
+Monte-Carlo SD, its median and range, and how many lie within 25 %; the Monte-Carlo SD's own sampling error is
+±1/sqrt(2(N-1)) (±7 % at N = 100). A figure plots predicted against Monte-Carlo. Writes key ``plan_prediction`` of
+benchmarks/results.json.
 
     PYTHONPATH=. python3 benchmarks/bench_plan_prediction.py [--trials 100] [--frames 500] [--noise-mm 1]
 """

@@ -66,9 +66,10 @@ beyond :data:`MAX_SD_MM`: its parameters would be trading off against the joints
 the step before's, and it is checked on the candidate fitted on for 40 more iterations (:meth:`Hypothesis.polish`):
 measured from the step before, the growth compounded (walking2: 0.37 mm rigid, then 4.7, 31, 128 mm as a knee turning
 like a ball and skin on each thigh were adopted, each within five times the one before), and a candidate after its
-few screening iterations can look determined where its converged fit is not (4.7 mm screened, 31 mm converged). Fitted all the way, as the final model
-is (:meth:`Hypothesis.converged`), the check cost a sixth more time on held-out draw 42 and let in a knee 28 mm off
-called determined (skin terms on single shank markers instead of the refused cluster)."""
+few screening iterations can look determined where its converged fit is not (4.7 mm screened, 31 mm converged).
+Fitted all the way, as the final model is (:meth:`Hypothesis.converged`), the check cost a sixth more time on
+held-out draw 42 and let in a knee 28 mm off called determined (skin terms on single shank markers instead of the
+refused cluster)."""
 
 
 @dataclass(frozen=True)
@@ -517,7 +518,8 @@ def worst_joint(ctx: Context, h: Hypothesis) -> tuple[str, float]:
 def scale_sd(h: Hypothesis) -> float:
     """The relative uncertainty of every length that the model's effects leave (the largest any of them says,
     :meth:`identcheck.effects.base.Effect.scale_sd`): a distorted capture volume's unseen uniform scale."""
-    return max((EFFECTS[p.effect].scale_sd(p) for p in h.effects if getattr(p, "effect", None) in EFFECTS), default=0.0)
+    return max((EFFECTS[p.effect].scale_sd(p, h) for p in h.effects if getattr(p, "effect", None) in EFFECTS),
+               default=0.0)
 
 
 def modelled_motion(h: Hypothesis) -> tuple:

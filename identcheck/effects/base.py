@@ -101,10 +101,10 @@ class Effect:
         none by default."""
         return []
 
-    def scale_sd(self, proposal: Proposal) -> float:
-        """The relative standard deviation this effect, once found, leaves on every length the trial measures,
-        which no fit can remove (a distortion of the capture volume says its calibration is off, and the uniform
-        scale part of a calibration error is invisible to rigid bodies); 0 by default."""
+    def scale_sd(self, proposal: Proposal, hyp) -> float:
+        """The relative standard deviation this effect, as hypothesis `hyp` fits it, leaves on every length the trial
+        measures, which no fit can remove (a distortion of the capture volume says its calibration is off, and the
+        uniform scale part of a calibration error is invisible to rigid bodies); 0 by default."""
         return 0.0
 
     def implausible(self, proposal: Proposal) -> str:

@@ -20,7 +20,7 @@ import numpy as np
 
 from identcheck.bundle.chain import score_statistic
 from identcheck.bundle.model import Terms
-from identcheck.effects.base import Effect, Proposal, motion_rms_mm
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, world_coefficients
 from identcheck.effects.injection import MONOMIALS, Change, cannot, monomials
 
 MAX_AMPLITUDE_MM = 25.0
@@ -173,11 +173,13 @@ class SpatialDistortion(Effect):
         disp = np.einsum("k,kfmi->fmi", coef, np.stack(flds))
         proposal.where["amplitude_mm"] = round(float(np.max(np.linalg.norm(disp, axis=2))), 2)
         proposal.payload["displacement"] = disp
+        proposal.payload["fields"] = flds           # how scale_sd finds their terms in the final model
         return new
 
-    def scale_sd(self, proposal) -> float:
-        """The relative uncertainty of every length once the volume is found distorted: the fitted field's RMS
-        displacement about its mean over the markers' RMS distance from the volume's centre (its typical strain).
+    def scale_sd(self, proposal, hyp) -> float:
+        """The relative uncertainty of every length once the volume is found distorted: the field as hypothesis
+        `hyp` fits it, its RMS displacement about its mean over the markers' RMS distance from the volume's centre
+        (its typical strain).
 
         The fields leave out a uniform scale (:data:`_STRAIN` is traceless): a world scaled about any point is
         as rigid as the true one, so no fit of rigid segments can see that part of a calibration error, and every
@@ -185,12 +187,12 @@ class SpatialDistortion(Effect):
         no reason to be exact in the part it cannot: the uniform part is taken as of the same size. On a held-out
         trial scaled by 0.74 % along one axis (uniform part 0.25 %), all 16 marker distances came out 0.16-0.33 %
         long, at 95 % intervals of ±0.1-0.4 mm that missed the truth 14 times in 16."""
-        disp, at = proposal.payload.get("displacement"), proposal.payload.get("data")
-        if disp is None or at is None:
+        flds, at = proposal.payload.get("fields", []), proposal.payload.get("data")
+        coefficients = world_coefficients(hyp, flds)
+        seen = np.zeros((0,), bool) if at is None else np.all(np.isfinite(at), axis=-1)
+        if not coefficients or not seen.any():
             return 0.0
-        seen = np.all(np.isfinite(at), axis=-1)
-        if not seen.any():
-            return 0.0
+        disp = sum(c * flds[k] for k, c in coefficients)
         centre = volume(at)[0]
         reach = float(np.sqrt(np.mean(np.sum((at[seen] - centre) ** 2, axis=-1))))
         moved = motion_rms_mm(disp[seen])           # a uniform shift is no strain: the poses take it up

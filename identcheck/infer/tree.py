@@ -486,7 +486,8 @@ def _insert(edges: list, fits: dict, accept_mm: float, top: str) -> tuple[list, 
     A poor joint with no such group is reported as poor. The group hangs from the segment on the root's side it
     fits best (with the other side's), possibly among segments that hardly move relative to each other: another
     segment outside the lower side that fits the group as well or better is reported (:func:`_inserted_doubt`).
-    Returns (edges, the groups inserted, poor-joint reports, ambiguity reports, the joints replaced as (parent, child))."""
+    Returns (edges, the groups inserted, poor-joint reports, ambiguity reports, the joints replaced as
+    (parent, child))."""
     current, used, poor, ambiguous, replaced = list(edges), [], [], [], []
     for e in sorted(edges, key=lambda e: -e.residual_mm):
         others = [o.residual_mm for o in edges if o is not e]

@@ -171,7 +171,7 @@ def diagnose_text(diag) -> str:
                    indent="   ", floatfmt=".3g")
     scale = max((j["practical"].get("scale_sd", 0.0) for j in rep["joints"].values()), default=0.0)
     if scale > 0:
-        lines.append(f"   the uncertainties include ±{100 * 1.959964 * scale:.2g} % of every length (95 %): "
+        lines.append(f"   the uncertainties include a standard deviation of {100 * scale:.2g} % of every length: "
                      "the volume is distorted, and the uniform scale of its calibration is invisible to rigid bodies")
     return "\n".join(lines)
 

@@ -3,6 +3,7 @@ how large that is, the joints' intervals take it in, and a trial scaled along on
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import given, settings, strategies as st
 
 import identcheck as ic
 from identcheck.bundle.honest import NO_BOUND, Minimum, ci, with_scale_error
+from identcheck.bundle.model import Terms
 from identcheck.effects.base import Proposal
 from identcheck.effects.registry import EFFECTS
 from identcheck.effects.spatial_distortion import volume
@@ -74,25 +76,39 @@ def test_a_uniform_scale_about_the_volume_is_read_as_its_own_size(seed, eps, fra
     """A field that scales the volume by ε about its centre moves each point by ε times its distance from there: the
     distortion's scale uncertainty is |ε| times the points' spread about their mean over their spread about the
     volume's centre (|ε| when the two coincide), whatever the cloud and whichever samples were unseen; a uniform
-    shift added changes nothing (the poses take it up); a field twice as large says twice as much."""
+    shift added changes nothing (the poses take it up); a field twice as large says twice as much. The field is read
+    from the model's own terms (its fitted coefficients), never from another effect's or from fields the model does
+    not hold."""
     rng = np.random.default_rng(seed)
     at = rng.uniform(-900, 900, (frames, markers, 3)) + rng.uniform(-2000, 2000, 3)
     at[rng.uniform(size=(frames, markers)) < hidden] = np.nan
     at[0, 0] = at[0, 0] if np.all(np.isfinite(at[0, 0])) else rng.uniform(-900, 900, 3)
-    disp = np.nan_to_num(eps * (at - volume(at)[0]))
+    field = np.nan_to_num(at - volume(at)[0])              # the volume scaled about its centre, per unit of ε
+    shift = np.broadcast_to(rng.normal(0, 1, 3), at.shape).copy()
     seen = np.all(np.isfinite(at), axis=-1)
     spread = np.sqrt(np.mean(np.sum((at[seen] - at[seen].mean(axis=0)) ** 2, axis=-1)))
     reach = np.sqrt(np.mean(np.sum((at[seen] - volume(at)[0]) ** 2, axis=-1)))
+    cols = np.arange(markers)
+    other = rng.normal(0, 1, at.shape)                       # another effect's world term: not the distortion's
+
+    def fitted(scale, shifted_by):                           # a hypothesis holding the fields with these coefficients
+        terms = Terms(world=[(cols, other), (cols, field), (cols, shift)])
+        params = [np.array([7.0]), np.array([scale]), np.array([shifted_by])]
+        return SimpleNamespace(terms=terms, fit=SimpleNamespace(state=SimpleNamespace(term_params=params)))
+
     eff = EFFECTS["spatial_distortion"]
-    one = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": disp}))
-    two = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": 2 * disp}))
-    moved = disp + rng.normal(0, 5, 3)
-    shifted = eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {"data": at, "displacement": moved}))
+    mine = Proposal("spatial_distortion", {}, 1.0, {"data": at, "fields": [field, shift]})
+    one = eff.scale_sd(mine, fitted(eps, 0.0))
+    two = eff.scale_sd(mine, fitted(2 * eps, 0.0))
+    shifted = eff.scale_sd(mine, fitted(eps, 5.0))
     assert one == pytest.approx(abs(eps) * spread / reach, rel=1e-9)
     assert shifted == pytest.approx(one, rel=1e-9)
     assert two == pytest.approx(2 * one, rel=1e-12)
-    assert eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {})) == 0.0
-    assert EFFECTS["marker_slip"].scale_sd(Proposal("marker_slip", {}, 1.0, {"data": at, "displacement": disp})) == 0
+    assert eff.scale_sd(Proposal("spatial_distortion", {}, 1.0, {}), fitted(eps, 0.0)) == 0.0
+    strange = Proposal("spatial_distortion", {}, 1.0, {"data": at, "fields": [field.copy()]})   # not the model's
+    assert eff.scale_sd(strange, fitted(eps, 0.0)) == 0.0
+    assert EFFECTS["marker_slip"].scale_sd(Proposal("marker_slip", {}, 1.0, {"data": at, "fields": [field]}),
+                                           fitted(eps, 0.0)) == 0
 
 
 @pytest.mark.slow
