@@ -107,6 +107,12 @@ class Effect:
         uniform scale part of a calibration error is invisible to rigid bodies); 0 by default."""
         return 0.0
 
+    def own_params(self, proposal: Proposal, before, after) -> float:
+        """How many parameters this effect's story at `proposal` has, for ranking explanations the data cannot tell
+        apart (fewest first): by default all that hypothesis `after` charges over `before`. An effect whose score
+        also charges what is not its story (samples it had to set aside, noise its correction removes) says less."""
+        return after.n_params() - before.n_params()
+
     def implausible(self, proposal: Proposal) -> str:
         """Why the fitted effect cannot be what it claims ('' if it can): e.g. a distortion too large for a
         calibrated capture volume is something else the field is absorbing."""
