@@ -20,6 +20,7 @@ from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
+from identcheck.bundle.stuck_frames import restarted_stuck_frames
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.start import start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
@@ -280,7 +281,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     state = _naming(files, start_state, model, chain, data, trial.rate_hz)
     weights = seen.astype(float)
-    fit = fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER)
+    fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)
     return ctx, Hypothesis(chain, fit.terms, data, weights, fit)
 
 
