@@ -1,8 +1,11 @@
 """``marker_slip``: a marker shifts on its segment at one instant and stays there.
 
 Detector: each marker's residual in its own segment's frame is scanned for the single change in mean
-that explains most of its variance (a CUSUM split). Augmentation: a step in the marker's position on
-its segment from that frame on (3 parameters, plus the frame).
+that explains most of its variance (a CUSUM split). A slip may also take a moment (tape giving way, a marker
+sliding over skin for a fraction of a second): linear ramps of a few set durations centred on that frame are tried
+too (:func:`best_ramp`), the one explaining most kept when it earns its extra parameter. Augmentation: a step (or
+ramp) in the marker's position on its segment from that frame on (3 parameters, plus the frame, plus the ramp's
+duration); ``where`` gives the first moved ``frame`` and, for a ramp, ``frames`` [first moved, first fully slipped].
 """
 from __future__ import annotations
 
@@ -14,6 +17,8 @@ from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, draw_frame, pick, rotations, unit_vectors
 
 MIN_SIDE = 5     # frames on each side of a step
+RAMP_S = (0.03, 0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.5)
+"""The durations (s) of the ramps tried about a step's frame: from a few frames to a slow creep."""
 
 
 def best_step(resid: np.ndarray) -> tuple[int, float]:
@@ -32,6 +37,40 @@ def best_step(resid: np.ndarray) -> tuple[int, float]:
     stat[n - MIN_SIDE:] = 0
     i = int(np.argmax(stat))
     return int(ok[i + 1]), float(stat[i])
+
+
+def ramp(n_frames: int, onset: int, length: int) -> np.ndarray:
+    """(F, 1): 0 before `onset`, rising linearly to 1 over `length` frames (a step for a length of 1), 1 after."""
+    t = np.arange(n_frames, dtype=float)
+    return np.clip((t - onset + 1.0) / max(length, 1), 0.0, 1.0)[:, None]
+
+
+def explained_by(resid: np.ndarray, shape: np.ndarray) -> float:
+    """The sum of squares of `resid` (F, 3) that `shape` (F, 1) times a free 3-vector, plus a constant, explains
+    over the finite rows."""
+    ok = np.all(np.isfinite(resid), axis=1)
+    b = shape[ok, 0] - shape[ok, 0].mean()
+    bb = float(b @ b)
+    if bb <= 0.0:
+        return 0.0
+    r = resid[ok] - resid[ok].mean(axis=0)
+    return float(np.sum((b @ r) ** 2) / bb)
+
+
+def best_ramp(resid: np.ndarray, frame: int, rate_hz: float) -> tuple[int, int, float]:
+    """(first moved frame, length in frames, explained sum of squares) of the best of a step at `frame` and the
+    ramps of :data:`RAMP_S` centred on it (a change in mean found by :func:`best_step` sits mid-way up a ramp)."""
+    n = len(resid)
+    best = (frame, 1, explained_by(resid, ramp(n, frame, 1)))
+    for seconds in RAMP_S:
+        length = int(round(seconds * rate_hz))
+        onset = frame - length // 2
+        if length < 2 or onset < MIN_SIDE or onset + length > n - MIN_SIDE:
+            continue
+        found = explained_by(resid, ramp(n, onset, length))
+        if found > best[2]:
+            best = (onset, length, found)
+    return best
 
 
 class MarkerSlip(Effect):
@@ -59,16 +98,26 @@ class MarkerSlip(Effect):
         out = []
         for col in range(ch.n_markers):
             frame, ss = best_step(seg_res[:, col])
+            if frame < 0:
+                continue
             gain = ctx.bic_gain(ss, 4)
-            if frame >= 0 and gain > 0:
-                step = (np.arange(len(seg_res)) >= frame).astype(float)[:, None]
-                out.append(Proposal(self.name, {"markers": [ch.labels[col]], "segment": ch.marker_seg[col],
-                                                "frame": frame}, gain, {"col": col, "basis": step}))
+            onset, length, found = best_ramp(seg_res[:, col], frame, ctx.rate_hz)
+            if length > 1 and ctx.bic_gain(found, 5) > gain:          # the ramp's duration is one parameter more
+                gain, frame = ctx.bic_gain(found, 5), onset
+            else:
+                length = 1
+            if gain > 0:
+                where = {"markers": [ch.labels[col]], "segment": ch.marker_seg[col], "frame": frame}
+                if length > 1:
+                    where["frames"] = [frame, frame + length - 1]
+                out.append(Proposal(self.name, where, gain,
+                                    {"col": col, "basis": ramp(len(seg_res), frame, length), "length": length}))
         return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
         term = (proposal.payload["col"], proposal.payload["basis"])
-        return hyp.refit(terms=hyp.terms + Terms(markers=[term]), extra_params=1, effect=proposal)
+        ramped = int(proposal.payload.get("length", 1) > 1)
+        return hyp.refit(terms=hyp.terms + Terms(markers=[term]), extra_params=1 + ramped, effect=proposal)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         col = proposal.payload["col"]

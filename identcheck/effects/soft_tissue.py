@@ -72,11 +72,17 @@ def drivers(chain) -> list:
     and, for a segment between joints (a thigh, below the hip and above the knee), each pair of its joints
     together. Skin over a segment moves with the angles of the muscles that cross it, and those span both of its
     joints: a thigh's cluster moving with hip flexion and knee flexion at once (a bulge with their product) was
-    fitted by neither joint's angles alone, and a distortion of the whole volume explained more of it."""
+    fitted by neither joint's angles alone, and a distortion of the whole volume explained more of it. Also each
+    joint next to one of the segment's own (a shank's skin with the hip's angles, a pelvis's with the knee's): muscles
+    that cross two joints move skin with the far joint too, and a shank marker moving with hip flexion had been
+    named a distortion of the volume (held-out draw 46, trial 92)."""
     out = [(seg, (j,)) for j in chain.joints for seg in (chain.parent[j], chain.child[j])]
     for seg in chain.seg_markers:
         own = [j for j in chain.joints if seg in (chain.parent[j], chain.child[j])]
         out += [(seg, (a, b)) for k, a in enumerate(own) for b in own[k + 1:]]
+        beside = {chain.parent[j] for j in own} | {chain.child[j] for j in own}
+        out += [(seg, (j,)) for j in chain.joints
+                if j not in own and (chain.parent[j] in beside or chain.child[j] in beside)]
     return out
 
 
