@@ -55,7 +55,7 @@ def converged_fit(chain: Skeleton, data, state, progress=None, weights=None, ter
     first = time.monotonic() + START_BUDGET_S
     fit = fit_chain(chain, data, state, terms=terms, weights=weights, max_iter=MAX_ITER, on_iteration=said,
                     fast_tol=fast_tol, deadline=first)
-    fit = restarted_stuck_frames(fit, data, weights)        # frames left in a wrong pose, restarted from neighbours
+    fit = restarted_stuck_frames(fit, data, weights, deadline=first)   # frames in a wrong pose, from neighbours
     out_of_time = time.monotonic() > first
     deadline = time.monotonic() + CONVERGE_BUDGET_S
     while not fit.converged and not out_of_time and time.monotonic() < deadline:

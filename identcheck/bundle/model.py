@@ -47,6 +47,13 @@ class Terms:
         return 3 * sum(b.shape[1] for _, b in self.markers + self.centres) \
             + sum(b.shape[1] + 1 for _, b, _ in self.rotations) + len(self.world)
 
+    def redundant(self) -> int:
+        """Directions of the terms' parameters that change no prediction: a hinge turning about two axes across it
+        (two ``rotations``) spans the same plane whatever the two axes' angles, and each angle's change is taken back
+        by mixing the two profiles (2 for each such hinge)."""
+        hinges = [j for j, _, _ in self.rotations]
+        return 2 * sum(hinges.count(j) >= 2 for j in set(hinges))
+
     def shapes(self) -> list:
         """Shape of each term's parameters, in ``State.term_params`` order."""
         return [(b.shape[1], 3) for _, b in self.markers + self.centres] \

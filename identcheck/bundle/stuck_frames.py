@@ -35,10 +35,13 @@ def stuck_frames(fit: Fit, data: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.nan_to_num(per) > STUCK_FACTOR * typical)
 
 
-def posed_from_neighbours(state: State, bad: np.ndarray, n_frames: int) -> State:
+def posed_from_neighbours(state: State, bad: np.ndarray, n_frames: int, seen: np.ndarray | None = None) -> State:
     """`state` with each of the `bad` frames' per-frame unknowns (root pose, joint angles) copied from the nearest
-    frame not among them."""
-    good = np.setdiff1d(np.arange(n_frames), bad)
+    frame not among them (and, with `seen` (F,), among the frames that see a marker: an unseen frame's pose is no
+    fitted pose)."""
+    usable = np.ones(n_frames, dtype=bool) if seen is None else np.asarray(seen, dtype=bool).copy()
+    usable[bad] = False
+    good = np.flatnonzero(usable)
     s = state.copy()
     if not len(good):
         return s
@@ -53,13 +56,21 @@ def posed_from_neighbours(state: State, bad: np.ndarray, n_frames: int) -> State
     return s
 
 
-def restarted_stuck_frames(fit: Fit, data: np.ndarray, weights=None) -> Fit:
+def restarted_stuck_frames(fit: Fit, data: np.ndarray, weights=None, deadline: float | None = None) -> Fit:
     """`fit`, or, where :func:`stuck_frames` finds frames, its refit from their neighbours' poses
-    (:func:`posed_from_neighbours`, :data:`RESTART_ITER` iterations) when that lowers the cost."""
-    w = np.isfinite(np.asarray(data)).all(axis=2).astype(float) if weights is None else np.asarray(weights, float)
+    (:func:`posed_from_neighbours`, :data:`RESTART_ITER` iterations, none begun after `deadline`, a
+    ``time.monotonic()`` value) when that lowers the cost and at least halves what those frames leave: a fit that
+    had not converged lowers its cost by iterating on alone, which says nothing of the frames."""
+    data = np.asarray(data)
+    finite = np.isfinite(data).all(axis=2)
+    w = finite.astype(float) if weights is None else np.where(finite, np.asarray(weights, float), 0.0)
     bad = stuck_frames(fit, data, w)
     if not len(bad) or len(bad) > len(data) // 2:
         return fit
-    start = posed_from_neighbours(fit.state, bad, len(data))
-    again = fit_chain(fit.chain, data, start, terms=fit.terms, weights=w, max_iter=RESTART_ITER)
-    return again if again.rss < fit.rss else fit
+    start = posed_from_neighbours(fit.state, bad, len(data), seen=w.sum(axis=1) > 0)
+    again = fit_chain(fit.chain, data, start, terms=fit.terms, weights=w, max_iter=RESTART_ITER, deadline=deadline)
+
+    def left(f: Fit) -> float:
+        return float(np.sum(w[bad] * np.sum(np.nan_to_num(data[bad] - f.pred[bad]) ** 2, axis=2)))
+
+    return again if again.rss < fit.rss and left(again) < 0.5 * left(fit) else fit

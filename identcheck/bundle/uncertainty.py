@@ -168,7 +168,8 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
 def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`gauge_free_inverse` of a chain's information ``S`` at ``state``, its gauge written out
     (:func:`identcheck.bundle.gauge.gauge_basis`; ``terms``: the fit's effect terms)."""
-    return gauge_free_inverse(S, chain.gauge(), gauge_basis(chain, state, len(S), terms))
+    redundant = terms.redundant() if terms is not None else 0
+    return gauge_free_inverse(S, chain.gauge() + redundant, gauge_basis(chain, state, len(S), terms))
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -244,7 +244,7 @@ def undetermined(h: Hypothesis) -> int:
     if not np.isfinite(S).all():
         return len(S)
     try:
-        return gauge_free_inverse(S, h.chain.gauge())[1]
+        return gauge_free_inverse(S, h.chain.gauge() + h.terms.redundant())[1]
     except np.linalg.LinAlgError:
         return len(S)
 
@@ -315,7 +315,11 @@ def place(name: str, where: dict) -> tuple:
         if isinstance(v, (list, tuple, np.ndarray)):
             return tuple(key(x) for x in v)
         return v
-    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not isinstance(v, (float, np.floating))))
+    def size(v) -> bool:  # noqa: E306 - a fitted size, or a list of them (an extra rotation's ranges)
+        if isinstance(v, (list, tuple, np.ndarray)):
+            return len(v) > 0 and all(isinstance(x, (float, np.floating)) for x in v)
+        return isinstance(v, (float, np.floating))
+    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not size(v)))
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:
@@ -503,7 +507,7 @@ def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -
     {joint: {marker: (distance, sd)}}."""
     ch, s = h.chain, h.fit.state
     S = information(h.fit, h.data, h.weights) if S is None else S
-    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge())[0]
+    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge() + h.terms.redundant())[0]
     return {j: {m: (d, float(np.sqrt(max(g @ cov @ g, 0.0)))) for m, (d, g) in per.items()}
             for j, per in distance_gradients(ch, s, len(S)).items()}
 

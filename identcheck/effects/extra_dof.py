@@ -138,7 +138,7 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
         # 45, a knee turning like a ball in gait: one axis 128 114, skin on the thigh cluster 133 895, the two axes
         # never fitted together)
         both = float(np.einsum("fi,fij,fj->", smooth, lever, smooth))
-        gain2 = ctx.bic_gain(both * ctx.smooth_share, 2 * (basis.shape[1] + 1))
+        gain2 = ctx.bic_gain(both * ctx.smooth_share, 2 * basis.shape[1])
         if gain2 > 0:
             out.append(Proposal(name, {"joint": joint, "declared": ch.types[joint],
                                        "needs": "a second and a third rotation"},
@@ -223,11 +223,12 @@ class ExtraDof(Effect):
 
     def apply(self, ctx, hyp, proposal):
         j = proposal.payload["joint"]
-        if "betas" in proposal.payload:                   # two axes at once: each angle's range
+        if "betas" in proposal.payload:
+            # two axes at once: they span the plane across the hinge whatever their angles (Terms.redundant leaves
+            # those two directions out of the count), so no axis is chosen and nothing more is charged
             added = [(j, proposal.payload["basis"], b) for b in proposal.payload["betas"]]
             new = hyp.refit(terms=hyp.terms + Terms(rotations=added),
-                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j), extra_params=2, effect=proposal,
-                            max_iter=12)
+                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j), effect=proposal, max_iter=12)
             ranges = [round(float(np.rad2deg(np.ptp(t[1] @ _own_params(new, t)[:-1, 0]))), 1) for t in added]
             proposal.where["range_deg"] = ranges
             return new

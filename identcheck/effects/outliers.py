@@ -32,9 +32,10 @@ break for longer than this is a lasting change. Measured on held-out development
 marker, 507 of them not outliers, which left the slip nothing to explain (it gained 1.8 after them, 4 170 before)."""
 
 MAX_BURST_S = 0.05
-"""The longest brief excursion (:func:`excursions`) modelled as a burst at one offset. Longer windows read smooth
-misfit as bursts: a 2 Hz wave of 5 σ (skin with the angles in gait) departs from the 0.1 s either side of a 0.1 s
-window at its crest by χ² 48, beyond the trial-wide bound; over 0.05 s windows and flanks, by χ² 2."""
+"""The longest brief excursion (:func:`excursions`) modelled as a burst at one offset (but 2 frames at least: below
+40 Hz a burst is 2 frames). Longer windows read smooth misfit as bursts: a 2 Hz wave of 5 σ (skin with the angles in
+gait) departs from the 0.1 s either side of a 0.1 s window at its crest by χ² 48, beyond the trial-wide bound; over
+0.05 s windows and flanks, by χ² 2. A run within 5 frames of either end of the trial has no side to be judged by."""
 
 
 def spike_residuals(residuals: np.ndarray, seen: np.ndarray, phi: float) -> tuple[np.ndarray, np.ndarray]:
@@ -135,6 +136,8 @@ def excursions(residuals: np.ndarray, seen: np.ndarray, max_len: int, bound: flo
     found = []
     for length in range(2, max_len + 1):
         side = max(length, 5)
+        if F < length + 2 * side:                 # no run with frames on both sides
+            continue
         stats = []
         for c in range(M):
             ok = seen[:, c]

@@ -143,7 +143,10 @@ class SoftTissue(Effect):
                   {"col": cols, "each": True, **payload})
             # the root's own pose takes up its cluster's common motion whole, which then shows on the
             # markers below its joints instead (in the root's frame, with the sign turned)
-            seen = sorted(set().union(*(ch.downstream[j] for j in joints))) if seg == ch.root else cols
+            # (for a joint a segment further, below the root's own joints: its cluster's motion shows there too)
+            own = [j for j in joints if seg in (ch.parent[j], ch.child[j])] or [
+                j for j in ch.joints if ch.parent[j] == seg]
+            seen = sorted(set().union(*(ch.downstream[j] for j in own))) if seg == ch.root else cols
             mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
                 "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
             offer({"markers": names, **place, "together": True},

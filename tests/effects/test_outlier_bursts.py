@@ -85,3 +85,22 @@ def test_diagnose_names_bursts_in_correlated_noise_that_no_sample_shows():
     assert first["name"] == "outliers" and first["where"].get("bursts")
     assert set(first["where"]["markers"]) <= hit
     assert d["gap_after"] <= 1.1 * d["noise_floor"]
+
+
+def test_pure_noise_shows_no_burst_and_short_trials_do_not_break_the_search():
+    """White and AR(1) noise (φ 0.8) alone, 40 trials each of 6 markers x 1000 frames: at most 2 bursts in all (the
+    bound allows 0.5 % a trial); trials of 3-30 frames, shorter than a run and its sides, give none and no error."""
+    found = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        white = rng.normal(0, 1.0, (F, M, 3))
+        ar = np.zeros((F, M, 3))
+        ar[0] = rng.normal(0, 1.0, (M, 3))
+        for f in range(1, F):
+            ar[f] = 0.8 * ar[f - 1] + 0.6 * rng.normal(0, 1.0, (M, 3))
+        for res in (white, ar):
+            found += len(excursions(res, np.ones((F, M), dtype=bool), MAX_LEN, _bound(F * M)))
+    assert found <= 2
+    for n in (3, 10, 14, 30):
+        res = np.random.default_rng(n).normal(0, 1.0, (n, M, 3))
+        assert excursions(res, np.ones((n, M), dtype=bool), 15, _bound(n * M)) == [] or n >= 30

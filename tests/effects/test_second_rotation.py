@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.model import Terms, forward
 from identcheck.bundle.hypothesis import Hypothesis, score, time_basis
-from identcheck.diagnose.workflow import diagnose, place, start
+from identcheck.diagnose.workflow import diagnose, place, start, undetermined
 from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers
 from identcheck.effects.time_offset import interpolation_loss, shifted
 from identcheck.io.model import Model
@@ -83,6 +83,20 @@ def test_a_knee_turning_smoothly_about_both_axes_across_its_hinge_is_offered_bot
     assert score(ctx, two, one) > 100
     assert len(both[0].where["range_deg"]) == 2
     assert two.gap(ctx) < 1.2 * ctx.noise.floor(ctx.n_samples, two.n_params())
+    # the two axes' angles change no prediction (the pair spans the plane whatever they are): counted out, the pair
+    # costs its two profiles alone, and no direction is left undetermined
+    K = both[0].payload["basis"].shape[1]
+    assert two.n_params() - h.n_params() == 2 * K
+    assert undetermined(two) == 0
+
+
+def test_a_place_is_the_same_whatever_sizes_were_fitted_there():
+    """A place leaves out the sizes a fit writes into `where`, a list of them too (a pair of axes' ranges): a
+    dropped or refused place must be known again when it is proposed afresh."""
+    where = {"joint": "knee", "declared": "revolute", "needs": "a second and a third rotation"}
+    assert place("extra_dof", where) == place("extra_dof", where | {"range_deg": [24.9, 21.8]})
+    assert place("extra_dof", where) == place("extra_dof", where | {"range_deg": 20.8})
+    assert place("outliers", {"frames": [3, 4]}) != place("outliers", {"frames": [3, 5]})
 
 
 @settings(max_examples=3, deadline=None)
