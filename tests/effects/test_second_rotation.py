@@ -12,7 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.model import Terms, forward
-from identcheck.bundle.hypothesis import Hypothesis, score, time_basis
+from identcheck.bundle.hypothesis import score, time_basis
 from identcheck.diagnose.workflow import diagnose, place, start, undetermined
 from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers
 from identcheck.effects.time_offset import interpolation_loss, shifted
