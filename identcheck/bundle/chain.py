@@ -18,7 +18,7 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.jacobian import jacobian_blocks
-from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, tangents
+from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, null_count, tangents
 from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.obrien import joint_location
@@ -163,7 +163,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         if deadline is not None and time.monotonic() > deadline:
             break
     n_samples = int((w > 0).sum())
-    n_params = int(frame_has.sum()) * chain.frame_dof() + n_const(chain, terms) - chain.gauge() - terms.redundant()
+    n_params = int(frame_has.sum()) * chain.frame_dof() + n_const(chain, terms) - null_count(chain, terms)
     rss = _cost(pred, y, w) if penalty else cost
     return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
 

@@ -282,6 +282,12 @@ def n_const(chain: Skeleton, terms: Terms) -> int:
     return 3 * chain.n_markers + sum(_joint_width(chain, j) for j in chain.joints) + terms.size()
 
 
+def null_count(chain: Skeleton, terms: Terms | None = None) -> int:
+    """Directions of the constants that change no prediction: the chain's gauge
+    (:meth:`~identcheck.skeleton.Skeleton.gauge`) and its effect terms' redundant ones (:meth:`Terms.redundant`)."""
+    return chain.gauge() + (terms.redundant() if terms is not None else 0)
+
+
 def joint_offsets(chain) -> dict:
     """Column where each joint's constants start (centre in parent, centre in child, then for a hinge the
     rest rotation and the axis' two tangent directions), after the 3M marker coordinates."""

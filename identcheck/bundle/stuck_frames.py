@@ -22,12 +22,17 @@ RESTART_ITER = 20
 """Iterations of the fit restarted from the repaired poses (the constants start where they were)."""
 
 
-def stuck_frames(fit: Fit, data: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def frame_residuals(fit: Fit, data: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's weighted sum of squared residuals (F,) and its seen weight (F,): `w` (F, M) is 0 where `data`
+    is not seen."""
+    r2 = np.sum(w * np.sum(np.nan_to_num(data - fit.pred) ** 2, axis=2), axis=1)
+    return r2, w.sum(axis=1)
+
+
+def stuck_frames(fit: Fit, data: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The frames (indices) whose mean squared residual per seen sample is beyond :data:`STUCK_FACTOR` times the
-    median frame's."""
-    w = np.where(np.isfinite(np.asarray(data)).all(axis=2), np.asarray(weights, dtype=float), 0.0)
-    seen = w.sum(axis=1)
-    r2 = np.sum(w * np.sum(np.nan_to_num(np.asarray(data) - fit.pred) ** 2, axis=2), axis=1)
+    median frame's (`w` (F, M) as :func:`frame_residuals` takes it)."""
+    r2, seen = frame_residuals(fit, data, w)
     per = np.where(seen > 0, r2 / np.maximum(seen, 1e-12), np.nan)
     typical = float(np.nanmedian(per)) if np.isfinite(per).any() else 0.0
     if typical <= 0.0:
@@ -69,8 +74,5 @@ def restarted_stuck_frames(fit: Fit, data: np.ndarray, weights=None, deadline: f
         return fit
     start = posed_from_neighbours(fit.state, bad, len(data), seen=w.sum(axis=1) > 0)
     again = fit_chain(fit.chain, data, start, terms=fit.terms, weights=w, max_iter=RESTART_ITER, deadline=deadline)
-
-    def left(f: Fit) -> float:
-        return float(np.sum(w[bad] * np.sum(np.nan_to_num(data[bad] - f.pred[bad]) ** 2, axis=2)))
-
-    return again if again.rss < fit.rss and left(again) < 0.5 * left(fit) else fit
+    left_before, left_after = (frame_residuals(f, data, w)[0][bad].sum() for f in (fit, again))
+    return again if again.rss < fit.rss and left_after < 0.5 * left_before else fit

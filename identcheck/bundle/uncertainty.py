@@ -45,7 +45,7 @@ import numpy as np
 from identcheck.bundle.chain import _prepare, information_at
 from identcheck.bundle.gauge import gauge_basis
 from identcheck.bundle.jacobian import jacobian_blocks
-from identcheck.bundle.model import apply_step, forward, joint_offsets, n_const, tangents
+from identcheck.bundle.model import apply_step, forward, joint_offsets, n_const, null_count, tangents
 from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
@@ -168,8 +168,7 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
 def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`gauge_free_inverse` of a chain's information ``S`` at ``state``, its gauge written out
     (:func:`identcheck.bundle.gauge.gauge_basis`; ``terms``: the fit's effect terms)."""
-    redundant = terms.redundant() if terms is not None else 0
-    return gauge_free_inverse(S, chain.gauge() + redundant, gauge_basis(chain, state, len(S), terms))
+    return gauge_free_inverse(S, null_count(chain, terms), gauge_basis(chain, state, len(S), terms))
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

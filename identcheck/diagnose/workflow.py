@@ -21,6 +21,7 @@ from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
+from identcheck.bundle.model import null_count
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.start import start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
@@ -244,7 +245,7 @@ def undetermined(h: Hypothesis) -> int:
     if not np.isfinite(S).all():
         return len(S)
     try:
-        return gauge_free_inverse(S, h.chain.gauge() + h.terms.redundant())[1]
+        return gauge_free_inverse(S, null_count(h.chain, h.terms))[1]
     except np.linalg.LinAlgError:
         return len(S)
 
@@ -507,7 +508,7 @@ def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -
     {joint: {marker: (distance, sd)}}."""
     ch, s = h.chain, h.fit.state
     S = information(h.fit, h.data, h.weights) if S is None else S
-    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, ch.gauge() + h.terms.redundant())[0]
+    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, null_count(ch, h.terms))[0]
     return {j: {m: (d, float(np.sqrt(max(g @ cov @ g, 0.0)))) for m, (d, g) in per.items()}
             for j, per in distance_gradients(ch, s, len(S)).items()}
 
