@@ -27,6 +27,7 @@ NEWTON_STEPS = 6
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
 WHOLE_FRAME_TRY = 0.02   # a delay this far (frames) or more from a whole frame is also tried at whole frames
+SHIFTED_ITER = 8         # iterations of a refit with a delay undone
 MAX_WHOLE_FRAME_STEPS = 6
 """How many frames the whole-frame search (:func:`best_whole_frame`) may walk from where Newton ended."""
 
@@ -189,7 +190,15 @@ class TimeOffset(Effect):
         # in gait: from 0.6 frames Newton stopped at 0.52, from 1 frame at 1.50; 1 frame scored 1 018, 2 frames
         # 1 590): from the whole frames beside Newton's delay the search walks a frame at a time while the score rises
         # (:func:`best_whole_frame`)
-        fitted = {}                                    # delay (s) -> (refitted hypothesis, its score)
+        # Newton ending at a whole frame may still be frames short (a thigh 4 frames late in gait: it stopped at 3.005),
+        # so the walk starts there too. Its refits start from a fit to the data with Newton's delay undone, taken from
+        # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
+        # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
+        first = tau * ctx.rate_hz
+        if not whole_frames_beside(first) and round(first) != 0:
+            first = float(round(first))                # a whole frame: interpolation would only blur it
+        fitted = {first / ctx.rate_hz: self._best_start_fit(ctx, hyp, current, idx, first / ctx.rate_hz)}
+        current = replace(fitted[first / ctx.rate_hz][0], extra_params=hyp.extra_params)
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz
@@ -198,10 +207,7 @@ class TimeOffset(Effect):
                 fitted[t] = fit, score(ctx, fit, hyp)
             return fitted[t][1]
 
-        scored(tau * ctx.rate_hz)
-        start = whole_frames_beside(tau * ctx.rate_hz)
-        if start:
-            best_whole_frame(scored, start)
+        best_whole_frame(scored, whole_frames_beside(first) or ([first] if round(first) == first else []))
         tau = max(fitted, key=lambda t: fitted[t][1])
         new = fitted[tau][0]
         new.effects = hyp.effects + [proposal]
@@ -214,8 +220,18 @@ class TimeOffset(Effect):
         not the story's parameter."""
         return 1.0
 
+    def _best_start_fit(self, ctx, hyp, current, idx, tau: float) -> tuple:
+        """:meth:`_shifted_fit` from `current` and from a fresh start (:meth:`Hypothesis.restarted`), the better fit
+        of the two with its score."""
+        fits = [self._shifted_fit(ctx, hyp, current, idx, tau)]
+        fresh = self._shifted_fit(ctx, hyp, current, idx, tau, fresh=True)
+        if fresh is not None:
+            fits.append(fresh)
+        best = min(fits, key=lambda f: f.rss)
+        return best, score(ctx, best, hyp)
+
     @staticmethod
-    def _shifted_fit(ctx, hyp, current, idx, tau: float):
+    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False):
         """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
         charged for the delay, the samples the shift moves out of view and what interpolation removes from noise.
 
@@ -225,12 +241,19 @@ class TimeOffset(Effect):
         a pelvis 3 frames late lost 12 samples and 375 units, more than the whole of what the rigid model could not
         absorb of it (366; held-out draw 46, trial 109). Kept at their measured values instead, they were named
         outliers after the delay (a thigh 46 ms late at speed). A pose left without markers by it is not a saving:
-        the delay leaves the model's parameters as they were."""
+        the delay leaves the model's parameters as they were. `fresh`: refitted from a fresh start instead
+        (:meth:`Hypothesis.restarted`; None when the shifted data cannot start one)."""
         base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
-        new = current.refit(data=data, weights=np.where(lost, 0.0, hyp.weights), max_iter=8)
+        weights = np.where(lost, 0.0, hyp.weights)
+        if fresh:
+            new = current.restarted(ctx.model, ctx.rate_hz, data, weights, max_iter=SHIFTED_ITER)
+            if new is None:
+                return None
+        else:
+            new = current.refit(data=data, weights=weights, max_iter=SHIFTED_ITER)
         # interpolating between frames averages the noise away in part, which would pass for explained residual:
         # what it removes from noise alone is charged as parameters
         moved = int(np.sum((hyp.weights[:, idx] > 0) & ~lost[:, idx]))
