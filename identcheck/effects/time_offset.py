@@ -8,7 +8,9 @@ displacement is partly taken up by the model (a single marker's by its segment's
 three markers most of it; a lagging limb segment's almost whole by the joint angles): the residual is regressed
 on the part of the velocity field a refit of the model does not absorb (:func:`identcheck.bundle.chain.unabsorbed`).
 Augmentation: the segment's trajectories are shifted back by τ (cubic spline through its visible samples), τ
-refined by Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter).
+refined by Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter) from the better
+of the current fit and a fresh start (the current fit's angles are bent to the lag); whole-frame delays beside it are
+searched a frame at a time (:func:`best_whole_frame`).
 """
 from __future__ import annotations
 
