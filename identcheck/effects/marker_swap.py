@@ -17,7 +17,6 @@ import math
 
 import numpy as np
 
-from identcheck.bundle.start import start_state
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, draw_frame
 from identcheck.estimate.labels import detect, exchanges, fits_exchanged, flips
@@ -87,10 +86,8 @@ class MarkerSwap(Effect):
         data, w = hyp.data.copy(), hyp.weights.copy()
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]
         w[a:b + 1, [i, j]] = w[a:b + 1, [j, i]]
-        # the swapped frames pulled the old fit far off
-        fresh = start_state(ctx.model, hyp.chain, data, ctx.rate_hz, ctx.source)
-        fresh.term_params = hyp.fit.state.term_params
-        return hyp.refit(data=data, weights=w, state=fresh, extra_params=3, effect=proposal, max_iter=15)
+        # the swapped frames may have pulled the old fit far off, and a fresh start may find another minimum
+        return hyp.refit_corrected(ctx.model, ctx.rate_hz, data, w, max_iter=15, extra_params=3, effect=proposal)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         keep, swap = proposal.payload["keep"], proposal.payload["swap"]

@@ -199,8 +199,9 @@ class TimeOffset(Effect):
         first = tau * ctx.rate_hz
         if not whole_frames_beside(first) and round(first) != 0:
             first = float(round(first))                # a whole frame: interpolation would only blur it
-        fitted = {first / ctx.rate_hz: self._best_start_fit(ctx, hyp, current, idx, first / ctx.rate_hz)}
-        current = replace(fitted[first / ctx.rate_hz][0], extra_params=hyp.extra_params)
+        at_first = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
+        fitted = {first / ctx.rate_hz: (at_first, score(ctx, at_first, hyp))}
+        current = replace(at_first, extra_params=hyp.extra_params)
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz
@@ -222,16 +223,6 @@ class TimeOffset(Effect):
         not the story's parameter."""
         return 1.0
 
-    def _best_start_fit(self, ctx, hyp, current, idx, tau: float) -> tuple:
-        """:meth:`_shifted_fit` from `current` and from a fresh start (:meth:`Hypothesis.restarted`), the better fit
-        of the two with its score."""
-        fits = [self._shifted_fit(ctx, hyp, current, idx, tau)]
-        fresh = self._shifted_fit(ctx, hyp, current, idx, tau, fresh=True)
-        if fresh is not None:
-            fits.append(fresh)
-        best = min(fits, key=lambda f: f.rss)
-        return best, score(ctx, best, hyp)
-
     @staticmethod
     def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False):
         """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
@@ -243,17 +234,15 @@ class TimeOffset(Effect):
         a pelvis 3 frames late lost 12 samples and 375 units, more than the whole of what the rigid model could not
         absorb of it (366; held-out draw 46, trial 109). Kept at their measured values instead, they were named
         outliers after the delay (a thigh 46 ms late at speed). A pose left without markers by it is not a saving:
-        the delay leaves the model's parameters as they were. `fresh`: refitted from a fresh start instead
-        (:meth:`Hypothesis.restarted`; None when the shifted data cannot start one)."""
+        the delay leaves the model's parameters as they were. `fresh`: refitted from `current` and from a fresh
+        start, the better kept (:meth:`Hypothesis.refit_corrected`)."""
         base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
         weights = np.where(lost, 0.0, hyp.weights)
         if fresh:
-            new = current.restarted(ctx.model, ctx.rate_hz, data, weights, max_iter=SHIFTED_ITER)
-            if new is None:
-                return None
+            new = current.refit_corrected(ctx.model, ctx.rate_hz, data, weights, max_iter=SHIFTED_ITER)
         else:
             new = current.refit(data=data, weights=weights, max_iter=SHIFTED_ITER)
         # interpolating between frames averages the noise away in part, which would pass for explained residual:
