@@ -45,6 +45,7 @@ class _Candidate(_OnTheRigidFit):
     def __init__(self, base, gain: float, name: str, where: dict, added: int = 0):
         super().__init__(base, added)
         self.gain, self.name, self.where = gain, name, where
+        self.terms = ("stand-in terms", name)        # a model of its own, not the rigid fit's data corrected
 
 
 class _StandIn(Effect):
@@ -434,3 +435,4 @@ def test_the_same_skin_with_markers_added_is_not_named_as_another_story(mine, ex
     listed = step.equivalents() == [("soft_tissue", wider)]
     assert listed == (segment != "shank")
     assert workflow.widens(wider, where) == (segment == "shank" and bool(extra))
+
