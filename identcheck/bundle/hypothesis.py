@@ -108,31 +108,40 @@ class Hypothesis:
         return Hypothesis(chain, terms, data, weights, fit, self.extra_params + extra_params,
                           self.effects + ([effect] if effect is not None else []))
 
-    def restarted(self, model, rate_hz: float, data: np.ndarray, weights: np.ndarray,
-                  max_iter: int = SCREEN_ITER, **changes) -> "Hypothesis | None":
-        """This hypothesis (terms and their parameters) refitted to `data` from a fresh start of its chain's poses and
-        constants (:func:`~identcheck.bundle.start.start_state`), or None when `data` cannot start one. `changes`:
-        as :meth:`refit` takes them (``extra_params``, ``effect``)."""
+    def restarted(self, ctx: Context, data: np.ndarray | None = None, weights: np.ndarray | None = None,
+                  chain: Skeleton | None = None, max_iter: int = SCREEN_ITER, **changes) -> "Hypothesis | None":
+        """This hypothesis (terms and their parameters) refitted to `data` and `weights` (default: its own), on
+        `chain` (default: its own), from a fresh start of the poses and constants
+        (:func:`~identcheck.bundle.start.start_state` on the samples of weight > 0), or None when they cannot start
+        one. `changes`: as :meth:`refit` takes them (``extra_params``, ``effect``)."""
+        data = self.data if data is None else data
+        weights = self.weights if weights is None else weights
+        chain = chain or self.chain
+        seen = np.where((weights > 0)[..., None], data, np.nan)
         try:
-            state = start_state(model, self.chain, data, rate_hz)
+            state = start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
         except (DegenerateError, InputError):
             return None
-        return self.refit(data=data, weights=weights, state=state, max_iter=max_iter, **changes)
+        return self.refit(data=data, weights=weights, chain=chain, state=state, max_iter=max_iter, **changes)
 
-    def refit_corrected(self, model, rate_hz: float, data: np.ndarray, weights: np.ndarray,
-                        max_iter: int = SCREEN_ITER, **changes) -> "Hypothesis":
+    def refit_corrected(self, ctx: Context, data: np.ndarray, weights: np.ndarray, max_iter: int = SCREEN_ITER,
+                        **changes) -> "Hypothesis":
         """This hypothesis refitted to corrected `data` and `weights` (labels swapped back, a delay undone) from its
-        own state and from a fresh start (:meth:`restarted`), whichever fits better.
+        own state and from a fresh start (:meth:`restarted`), whichever leaves less unexplained (:meth:`Context.rss`).
 
         Why both: this hypothesis's state is bent to what the correction undid, and a fresh start may fall into
         another minimum. A thigh 4 frames late in gait: the rigid fit had turned the hip and knee angles to the lag;
         refitted from it with the lag undone, 8 iterations ended at 262 000 mm² and scored 145 000 criterion units
-        below the fit a fresh start reached in 8 (12 400 mm², the noise's share; held-out draw 48, trial 36). Two pelvis markers swapped in a sit-to-stand (anatomical markers,
-        two on the shank): from a fresh start the swap-corrected fit stopped at 140 000 mm² and scored below the
-        rigid fit, from the rigid fit's state at 48 000 (held-out draw 49, trial 63)."""
+        below the fit a fresh start reached in 8 (12 400 mm², the noise's share; held-out draw 48, trial 36). Two
+        pelvis markers swapped in a sit-to-stand (anatomical markers, two on the shank): from a fresh start the
+        swap-corrected fit stopped at 140 000 mm² and scored below the rigid fit, from the rigid fit's state at
+        48 000 (held-out draw 49, trial 63)."""
         warm = self.refit(data=data, weights=weights, max_iter=max_iter, **changes)
-        fresh = self.restarted(model, rate_hz, data, weights, max_iter, **changes)
-        return warm if fresh is None or fresh.rss >= warm.rss else fresh
+        try:
+            fresh = self.restarted(ctx, data, weights, max_iter=max_iter, **changes)
+        except (np.linalg.LinAlgError, ValueError):       # a fresh start that fails leaves the warm fit
+            fresh = None
+        return warm if fresh is None or ctx.rss(fresh) >= ctx.rss(warm) else fresh
 
     def polish(self, max_iter: int = 40) -> "Hypothesis":
         """The same hypothesis fitted on for at most `max_iter` iterations: near convergence, as the search

@@ -71,7 +71,8 @@ like a ball and skin on each thigh were adopted, each within five times the one 
 few screening iterations can look determined where its converged fit is not (4.7 mm screened, 31 mm converged).
 Fitted all the way, as the final model is (:meth:`Hypothesis.converged`), the check cost a sixth more time on
 held-out draw 42 and let in a knee 28 mm off called determined (skin terms on single shank markers instead of the
-refused cluster)."""
+refused cluster). A correction of the data that adds no term to the model (:func:`corrects_data_only`) is not held to
+the bar; what it leaves of the joints sets the bar for the effects after it."""
 
 
 @dataclass(frozen=True)
@@ -336,6 +337,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     test0 = consistency(ctx, base)
     h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
     limit = max(SD_GROWTH * worst_sd(ctx, base), MAX_SD_MM)
+    free_floor = 0                                 # directions the data (as corrected so far) leave free
     refused = {}                                   # place -> Refused, the latest round's
     trail = [base]                                 # the hypothesis after each adopted effect, from the rigid fit on
     # a round adopts an effect or, with none left to adopt, drops what the later effects made unnecessary and, if it
@@ -391,9 +393,16 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                     progress(f"step {len(steps) + 1}: fitting {eff.name} {prop.where} further, to check the "
                              f"joints stay determined")
                 cand = cand.polish()
+                if corrects_data_only(h, cand):
+                    # what the corrected data leave of the joints is the bar for the effects after it
+                    free_floor = undetermined(cand)
+                    if not free_floor:
+                        limit = max(limit, SD_GROWTH * worst_sd(ctx, cand))
+                    adopted = (sc, eff, prop, cand)
+                    break
                 free = undetermined(cand)
-                joint, sd = worst_joint(ctx, cand) if not free else (None, float("inf"))
-                if sd <= limit or corrects_data_only(h, cand):
+                joint, sd = worst_joint(ctx, cand) if free <= free_floor else (None, float("inf"))
+                if sd <= limit:
                     adopted = (sc, eff, prop, cand)
                     break
                 log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
@@ -431,13 +440,14 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
 
 def corrects_data_only(h: Hypothesis, cand: Hypothesis) -> bool:
     """Whether `cand` is `h` fitted to corrected data (labels swapped back, a delay undone, samples set aside) with the
-    same chain and terms: it adds no parameter that could trade off against the joints', so what it leaves of the
-    joints (undetermined, or standard errors beyond :data:`SD_GROWTH`'s bar) is what the corrected data determine, and
-    is reported so; it does not keep the correction out. The rigid fit of corrupted data can look better determined
-    than the truth: two pelvis markers swapped for 122 frames of a sit-to-stand, the rigid fit posing the pelvis on
-    the swapped labels there, gave the joints a worst standard error of 0.07 mm; swapped back, the hip's is 36 mm,
-    and the swap (2.1 million criterion units) had been refused and skin on a pelvis marker named instead (held-out
-    draw 48, trial 28)."""
+    same chain and terms: it adds no term to the model (its own parameters, a delay or the samples set aside, do not
+    move the predictions the joints' constants could), so what it leaves of the joints (undetermined, or standard
+    errors beyond :data:`SD_GROWTH`'s bar) is what the corrected data determine. It does not keep the correction out;
+    it becomes the bar for the effects after it, and the final model's joints are judged by fit's rules. The rigid fit
+    of corrupted data can look better determined than the truth: two pelvis markers swapped for 122 frames of a
+    sit-to-stand, the rigid fit posing the pelvis on the swapped labels there, gave the joints a worst standard error
+    of 0.07 mm; swapped back, the hip's is 36 mm, and the swap (2.1 million criterion units) had been refused and skin
+    on a pelvis marker named instead (held-out draw 48, trial 28)."""
     return cand.terms is h.terms and cand.chain is h.chain
 
 
@@ -493,7 +503,7 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, 
     if gain > bar:
         return gain, True
     limit = max(SD_GROWTH * worst_sd(ctx, full), MAX_SD_MM)
-    return gain, bool(undetermined(without) != 0 or worst_sd(ctx, without) > limit)
+    return gain, bool(undetermined(without) > undetermined(full) or worst_sd(ctx, without) > limit)
 
 
 def restated(ctx: Context, base: Hypothesis, red: Redundant, kept_steps: list) -> tuple[list, list]:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import convert_joint
-from identcheck.bundle.start import start_state
+from identcheck.errors import DegenerateError
 from identcheck.bundle.model import Terms, forward, second_axis, tangents
 from identcheck.bundle.hypothesis import time_basis
 from identcheck.effects.base import Effect, Proposal
@@ -242,8 +242,10 @@ class ExtraDof(Effect):
             return new
         chain, _ = convert_joint(hyp.chain, hyp.fit.state, j, NEXT_TYPE[hyp.chain.types[j]])
         # a fresh start: the hinge fit bent every constant to absorb the missing rotation
-        state = start_state(ctx.model, chain, hyp.data, ctx.rate_hz, ctx.source)
-        return hyp.refit(chain=chain, state=state, effect=proposal, max_iter=12)
+        new = hyp.restarted(ctx, chain=chain, effect=proposal, max_iter=12)
+        if new is None:
+            raise DegenerateError(f"joint {j!r} as {chain.types[j]}: its samples cannot start a fit")
+        return new
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]

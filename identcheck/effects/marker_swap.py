@@ -87,7 +87,7 @@ class MarkerSwap(Effect):
         data[a:b + 1, [i, j]] = data[a:b + 1, [j, i]]
         w[a:b + 1, [i, j]] = w[a:b + 1, [j, i]]
         # the swapped frames may have pulled the old fit far off, and a fresh start may find another minimum
-        return hyp.refit_corrected(ctx.model, ctx.rate_hz, data, w, max_iter=15, extra_params=3, effect=proposal)
+        return hyp.refit_corrected(ctx, data, w, max_iter=15, extra_params=3, effect=proposal)
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         keep, swap = proposal.payload["keep"], proposal.payload["swap"]

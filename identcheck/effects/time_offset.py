@@ -28,7 +28,8 @@ from identcheck.effects.injection import Change, cannot, marker_column, pick
 NEWTON_STEPS = 6
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
-WHOLE_FRAME_TRY = 0.02   # a delay this far (frames) or more from a whole frame is also tried at whole frames
+WHOLE_FRAME_TRY = 0.02   # a delay farther than this (frames) from a whole frame is also tried at the two beside it;
+                         # one within it is taken to be that whole frame
 SHIFTED_ITER = 8         # iterations of a refit with a delay undone
 MAX_WHOLE_FRAME_STEPS = 6
 """How many frames the whole-frame search (:func:`best_whole_frame`) may walk from where Newton ended."""
@@ -93,6 +94,18 @@ def whole_frames_beside(shift_frames: float) -> list:
     if abs(round(shift_frames) - shift_frames) <= WHOLE_FRAME_TRY:
         return []
     return [float(w) for w in (np.floor(shift_frames), np.ceil(shift_frames)) if w != 0.0]
+
+
+def walk_start(shift_frames: float) -> list:
+    """Where the whole-frame search (:func:`best_whole_frame`) starts from a delay of `shift_frames`: the whole frames
+    beside it (:func:`whole_frames_beside`), the delay itself when it is a whole frame, and a frame on its side when it
+    is within :data:`WHOLE_FRAME_TRY` of none (never 0: no delay at all)."""
+    beside = whole_frames_beside(shift_frames)
+    if beside:
+        return beside
+    if round(shift_frames) == shift_frames and shift_frames != 0.0:
+        return [float(shift_frames)]
+    return [1.0 if shift_frames >= 0 else -1.0]
 
 
 def best_whole_frame(scored, start: list, max_steps: int = MAX_WHOLE_FRAME_STEPS) -> float:
@@ -198,7 +211,7 @@ class TimeOffset(Effect):
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = tau * ctx.rate_hz
         if not whole_frames_beside(first) and round(first) != 0:
-            first = float(round(first))                # a whole frame: interpolation would only blur it
+            first = float(round(first))                # a whole frame (within 0.02): interpolating would only blur it
         at_first = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
         fitted = {first / ctx.rate_hz: (at_first, score(ctx, at_first, hyp))}
         current = replace(at_first, extra_params=hyp.extra_params)
@@ -210,7 +223,7 @@ class TimeOffset(Effect):
                 fitted[t] = fit, score(ctx, fit, hyp)
             return fitted[t][1]
 
-        best_whole_frame(scored, whole_frames_beside(first) or ([first] if round(first) == first else []))
+        best_whole_frame(scored, walk_start(first))
         tau = max(fitted, key=lambda t: fitted[t][1])
         new = fitted[tau][0]
         new.effects = hyp.effects + [proposal]
@@ -242,7 +255,7 @@ class TimeOffset(Effect):
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
         weights = np.where(lost, 0.0, hyp.weights)
         if fresh:
-            new = current.refit_corrected(ctx.model, ctx.rate_hz, data, weights, max_iter=SHIFTED_ITER)
+            new = current.refit_corrected(ctx, data, weights, max_iter=SHIFTED_ITER)
         else:
             new = current.refit(data=data, weights=weights, max_iter=SHIFTED_ITER)
         # interpolating between frames averages the noise away in part, which would pass for explained residual:

@@ -22,6 +22,7 @@ class _OnTheRigidFit:
 
     def __init__(self, base, added: int = 0):
         self.base, self.chain, self.added = base, base.chain, added
+        self.terms = object()          # a model of its own, not another's data corrected (corrects_data_only)
 
     def polish(self, max_iter: int = 40):
         return self
@@ -45,7 +46,6 @@ class _Candidate(_OnTheRigidFit):
     def __init__(self, base, gain: float, name: str, where: dict, added: int = 0):
         super().__init__(base, added)
         self.gain, self.name, self.where = gain, name, where
-        self.terms = ("stand-in terms", name)        # a model of its own, not the rigid fit's data corrected
 
 
 class _StandIn(Effect):
@@ -436,3 +436,36 @@ def test_the_same_skin_with_markers_added_is_not_named_as_another_story(mine, ex
     assert listed == (segment != "shank")
     assert workflow.widens(wider, where) == (segment == "shank" and bool(extra))
 
+
+
+class _Correction(_StandIn):
+    """A stand-in effect that corrects the data only: its fit has the rigid fit's terms and chain."""
+
+    def apply(self, ctx, hyp, proposal):
+        cand = super().apply(ctx, hyp, proposal)
+        cand.terms = hyp.terms
+        return cand
+
+
+@settings(max_examples=10, deadline=None)
+@given(rigid=st.floats(0.05, 1.0), left=st.floats(1.2, 10.0), growth=st.floats(1.0, 4.0))
+def test_a_correction_of_the_data_is_adopted_past_the_bar_and_sets_it_for_the_effects_after(trial, rigid, left,
+                                                                                            growth):
+    """A swap swapped back may leave the joints worse determined than the rigid fit of the corrupted data showed
+    (`left` times the bar): it is adopted all the same, and an effect after it is held to a bar set by what the
+    correction left (here within it); without the correction before it, that effect is refused."""
+    model, tr = trial
+    bar = max(workflow.SD_GROWTH * rigid, workflow.MAX_SD_MM)
+    sd = {"swap": left * bar, "skin": growth * left * bar}
+    swap = _Correction("swap", [({"markers": ["LASI", "SACR"]}, 1e5, 1e5)])
+    skin = _StandIn("skin", [({"segment": "thigh"}, 5e3, 5e3)])
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _patched(monkeypatch, model, tr, [swap, skin], max_steps=3,
+                        worst_joint=lambda ctx, h: ("hip", sd.get(getattr(h, "name", None), rigid)))
+    assert [s.name for s in diag.steps] == ["swap", "skin"]
+    assert diag.sd_limit_mm == pytest.approx(workflow.SD_GROWTH * left * bar)
+    skin = _StandIn("skin", [({"segment": "thigh"}, 5e3, 5e3)])
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _patched(monkeypatch, model, tr, [skin], max_steps=3,
+                        worst_joint=lambda ctx, h: ("hip", sd.get(getattr(h, "name", None), rigid)))
+    assert not diag.steps
