@@ -178,6 +178,22 @@ def test_the_whole_frames_beside_a_delay_bracket_it_and_leave_out_no_delay(shift
         assert all(abs(w - shift) < 1.0 for w in out)
 
 
+def _shank_late(seed: int, frames: float, noise_mm: float) -> tuple:
+    """A 600-frame trial of the bundled leg with its shank `frames` late and white noise: the context, the rigid fit,
+    the shank's columns and the frame rate."""
+    from identcheck.diagnose.workflow import start
+
+    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
+    xyz = sim.trial.as_array().copy()
+    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
+    rate = sim.trial.rate_hz
+    xyz[:, cols] = shifted(xyz[:, cols], rate, -frames / rate, extrapolate=True)
+    xyz += np.random.default_rng(seed).normal(0, noise_mm, xyz.shape)
+    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    return ctx, h, cols, rate
+
+
 @settings(max_examples=3, deadline=None)
 @given(st.integers(0, 2**16), st.floats(1.3, 1.7))
 def test_a_delay_left_short_by_more_than_a_frame_is_walked_to_the_truth(seed, short):
@@ -186,17 +202,9 @@ def test_a_delay_left_short_by_more_than_a_frame_is_walked_to_the_truth(seed, sh
     late was left at 0.52 and at 1.50): the whole-frame search walks on to the 3 frames (the nearest whole frame
     alone was 1 or 2)."""
     import identcheck.effects.time_offset as time_offset
-    from identcheck.diagnose.workflow import start
     from identcheck.effects.registry import EFFECTS
 
-    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
-    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
-    xyz = sim.trial.as_array().copy()
-    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
-    rate = sim.trial.rate_hz
-    xyz[:, cols] = shifted(xyz[:, cols], rate, -3.0 / rate, extrapolate=True)
-    xyz += np.random.default_rng(seed).normal(0, 0.6, xyz.shape)
-    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    ctx, h, cols, rate = _shank_late(seed, 3.0, 0.6)
     eff = EFFECTS["time_offset"]
     prop = next(p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where)
     prop.payload["tau"] = (3.0 - short) / rate
@@ -215,17 +223,9 @@ def test_a_delay_left_at_a_whole_frame_beside_the_truth_is_walked_to_it(seed, fr
     thigh 4 frames late in gait: Newton stopped at 3.005 frames, where no fractional part started the whole-frame
     search, and the delay was named second, after skin): the search starts from a whole frame too."""
     import identcheck.effects.time_offset as time_offset
-    from identcheck.diagnose.workflow import start
     from identcheck.effects.registry import EFFECTS
 
-    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
-    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
-    xyz = sim.trial.as_array().copy()
-    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
-    rate = sim.trial.rate_hz
-    xyz[:, cols] = shifted(xyz[:, cols], rate, -frames / rate, extrapolate=True)
-    xyz += np.random.default_rng(seed).normal(0, 0.6, xyz.shape)
-    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    ctx, h, cols, rate = _shank_late(seed, frames, 0.6)
     eff = EFFECTS["time_offset"]
     prop = next(p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where)
     prop.payload["tau"] = (frames + off) / rate + 0.004 / rate      # within WHOLE_FRAME_TRY of a whole frame
@@ -243,17 +243,9 @@ def test_a_delay_refitted_from_a_fresh_start_too_reaches_the_noise(seed, frames)
     """The shank 5-8 frames late (0.5 mm noise): the rigid fit's angles bend to the lag. The delay's refit with the
     lag undone, taken from the better of the bent fit and a fresh start, leaves no more than the refit from the bent
     fit alone, and within 5 % of the noise's expected share."""
-    from identcheck.diagnose.workflow import start
     from identcheck.effects.time_offset import TimeOffset
 
-    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
-    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
-    xyz = sim.trial.as_array().copy()
-    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
-    rate = sim.trial.rate_hz
-    xyz[:, cols] = shifted(xyz[:, cols], rate, -frames / rate, extrapolate=True)
-    xyz += np.random.default_rng(seed).normal(0, 0.5, xyz.shape)
-    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    ctx, h, cols, rate = _shank_late(seed, frames, 0.5)
     both = TimeOffset._shifted_fit(ctx, h, h, cols, frames / rate, fresh=True)
     warm = TimeOffset._shifted_fit(ctx, h, h, cols, frames / rate)
     assert ctx.rss(both) <= ctx.rss(warm)
