@@ -72,7 +72,8 @@ few screening iterations can look determined where its converged fit is not (4.7
 Fitted all the way, as the final model is (:meth:`Hypothesis.converged`), the check cost a sixth more time on
 held-out draw 42 and let in a knee 28 mm off called determined (skin terms on single shank markers instead of the
 refused cluster). A correction of the data that adds no term to the model (:func:`corrects_data_only`) is not held to
-the bar; what it leaves of the joints sets the bar for the effects after it."""
+the bar; what the rigid model fitted to the corrected data leaves of the joints sets the bar for the effects after
+it."""
 
 
 @dataclass(frozen=True)
@@ -394,10 +395,12 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                              f"joints stay determined")
                 cand = cand.polish()
                 if corrects_data_only(h, cand):
-                    # what the corrected data leave of the joints is the bar for the effects after it
-                    free_floor = undetermined(cand)
+                    # what the corrected data leave of the joints, fitted by the rigid model, is the bar for the
+                    # effects after it (measured on `cand`, the terms adopted before would raise it step by step)
+                    rigid = base.refit_corrected(ctx, cand.data, cand.weights, max_iter=BASE_ITER)
+                    free_floor = max(free_floor, undetermined(rigid))
                     if not free_floor:
-                        limit = max(limit, SD_GROWTH * worst_sd(ctx, cand))
+                        limit = max(limit, SD_GROWTH * worst_sd(ctx, rigid))
                     adopted = (sc, eff, prop, cand)
                     break
                 free = undetermined(cand)
@@ -443,7 +446,8 @@ def corrects_data_only(h: Hypothesis, cand: Hypothesis) -> bool:
     same chain and terms: it adds no term to the model (its own parameters, a delay or the samples set aside, do not
     move the predictions the joints' constants could), so what it leaves of the joints (undetermined, or standard
     errors beyond :data:`SD_GROWTH`'s bar) is what the corrected data determine. It does not keep the correction out;
-    it becomes the bar for the effects after it, and the final model's joints are judged by fit's rules. The rigid fit
+    the rigid model fitted to the corrected data sets the bar for the effects after it, and the final model's joints
+    are judged by fit's rules. The rigid fit
     of corrupted data can look better determined than the truth: two pelvis markers swapped for 122 frames of a
     sit-to-stand, the rigid fit posing the pelvis on the swapped labels there, gave the joints a worst standard error
     of 0.07 mm; swapped back, the hip's is 36 mm, and the swap (2.1 million criterion units) had been refused and skin

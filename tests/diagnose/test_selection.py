@@ -439,11 +439,15 @@ def test_the_same_skin_with_markers_added_is_not_named_as_another_story(mine, ex
 
 
 class _Correction(_StandIn):
-    """A stand-in effect that corrects the data only: its fit has the rigid fit's terms and chain."""
+    """A stand-in effect that corrects the data only: its fit has the rigid fit's terms and chain, and data of its own
+    (``corrected``: the rigid model refitted to them is known by them)."""
+
+    corrected = None
 
     def apply(self, ctx, hyp, proposal):
         cand = super().apply(ctx, hyp, proposal)
-        cand.terms = hyp.terms
+        cand.terms, cand.weights = hyp.terms, cand.base.weights
+        cand.data = self.corrected = cand.base.data.copy()
         return cand
 
 
@@ -452,20 +456,50 @@ class _Correction(_StandIn):
 def test_a_correction_of_the_data_is_adopted_past_the_bar_and_sets_it_for_the_effects_after(trial, rigid, left,
                                                                                             growth):
     """A swap swapped back may leave the joints worse determined than the rigid fit of the corrupted data showed
-    (`left` times the bar): it is adopted all the same, and an effect after it is held to a bar set by what the
-    correction left (here within it); without the correction before it, that effect is refused."""
+    (`left` times the bar, as the rigid model fitted to the corrected data has them): it is adopted all the same, and
+    an effect after it is held to a bar set by that rigid fit (here within it); without the correction before it,
+    that effect is refused. The bar is the rigid model's on the corrected data, not the correction's own fit, which
+    carries the terms adopted before it (a skin term ahead of it would raise the bar step by step)."""
     model, tr = trial
     bar = max(workflow.SD_GROWTH * rigid, workflow.MAX_SD_MM)
-    sd = {"swap": left * bar, "skin": growth * left * bar}
     swap = _Correction("swap", [({"markers": ["LASI", "SACR"]}, 1e5, 1e5)])
     skin = _StandIn("skin", [({"segment": "thigh"}, 5e3, 5e3)])
+
+    def worst(ctx, h):
+        if swap.corrected is not None and getattr(h, "data", None) is swap.corrected:
+            return "hip", left * bar                  # the corrected data, by the rigid model or the swap's fit
+        return "hip", {"skin": growth * left * bar}.get(getattr(h, "name", None), rigid)
+
     with pytest.MonkeyPatch.context() as monkeypatch:
-        diag = _patched(monkeypatch, model, tr, [swap, skin], max_steps=3,
-                        worst_joint=lambda ctx, h: ("hip", sd.get(getattr(h, "name", None), rigid)))
+        diag = _patched(monkeypatch, model, tr, [swap, skin], max_steps=3, worst_joint=worst)
     assert [s.name for s in diag.steps] == ["swap", "skin"]
     assert diag.sd_limit_mm == pytest.approx(workflow.SD_GROWTH * left * bar)
     skin = _StandIn("skin", [({"segment": "thigh"}, 5e3, 5e3)])
     with pytest.MonkeyPatch.context() as monkeypatch:
-        diag = _patched(monkeypatch, model, tr, [skin], max_steps=3,
-                        worst_joint=lambda ctx, h: ("hip", sd.get(getattr(h, "name", None), rigid)))
+        diag = _patched(monkeypatch, model, tr, [skin], max_steps=3, worst_joint=worst)
     assert not diag.steps
+
+
+def test_a_correction_after_a_term_does_not_raise_the_bar_by_that_term(trial):
+    """Skin adopted within the bar, then a swap swapped back whose own fit (with the skin's terms) leaves the joints
+    three times the bar while the rigid model on the corrected data leaves them as the rigid fit did: a second skin
+    effect at twice the bar is refused (the bar measured on the swap's own fit would have let it in)."""
+    from identcheck.bundle.hypothesis import Hypothesis
+
+    model, tr = trial
+    rigid = 0.1
+    bar = max(workflow.SD_GROWTH * rigid, workflow.MAX_SD_MM)
+    first = _StandIn("first", [({"segment": "pelvis"}, 1e6, 1e6)])
+    swap = _Correction("swap", [({"markers": ["LASI", "SACR"]}, 1e5, 1e5)])
+    second = _StandIn("second", [({"segment": "thigh"}, 5e3, 5e3)])
+    sd = {"first": 0.5 * bar, "swap": 3 * bar, "second": 2 * bar}
+
+    def worst(ctx, h):
+        if isinstance(h, Hypothesis):                  # the rigid model, on the trial's data or the corrected data
+            return "hip", rigid
+        return "hip", sd.get(getattr(h, "name", None), rigid)
+
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _patched(monkeypatch, model, tr, [first, swap, second], max_steps=3, worst_joint=worst)
+    assert [s.name for s in diag.steps] == ["first", "swap"]
+    assert [r.name for r in diag.not_adopted] == ["second"]
