@@ -447,11 +447,10 @@ def corrects_data_only(h: Hypothesis, cand: Hypothesis) -> bool:
     move the predictions the joints' constants could), so what it leaves of the joints (undetermined, or standard
     errors beyond :data:`SD_GROWTH`'s bar) is what the corrected data determine. It does not keep the correction out;
     the rigid model fitted to the corrected data sets the bar for the effects after it, and the final model's joints
-    are judged by fit's rules. The rigid fit
-    of corrupted data can look better determined than the truth: two pelvis markers swapped for 122 frames of a
-    sit-to-stand, the rigid fit posing the pelvis on the swapped labels there, gave the joints a worst standard error
-    of 0.07 mm; swapped back, the hip's is 36 mm, and the swap (2.1 million criterion units) had been refused and skin
-    on a pelvis marker named instead (held-out draw 48, trial 28)."""
+    are judged by fit's rules. The rigid fit of corrupted data can look better determined than the truth: two pelvis
+    markers swapped for 122 frames of a sit-to-stand, the rigid fit posing the pelvis on the swapped labels there,
+    gave the joints a worst standard error of 0.07 mm; swapped back, the hip's is 36 mm, and the swap (2.1 million
+    criterion units) had been refused and skin on a pelvis marker named instead (held-out draw 48, trial 28)."""
     return cand.terms is h.terms and cand.chain is h.chain
 
 
