@@ -23,6 +23,7 @@ class _OnTheRigidFit:
     def __init__(self, base, added: int = 0):
         self.base, self.chain, self.added = base, base.chain, added
         self.terms = object()          # a model of its own, not another's data corrected (corrects_data_only)
+        self.data, self.weights = base.data, base.weights                  # the trial's, uncorrected
 
     def polish(self, max_iter: int = 40):
         return self
