@@ -96,6 +96,13 @@ def whole_frames_beside(shift_frames: float) -> list:
     return [float(w) for w in (np.floor(shift_frames), np.ceil(shift_frames)) if w != 0.0]
 
 
+def nearest_whole(shift_frames: float) -> float:
+    """`shift_frames` as the whole frame it lies within :data:`WHOLE_FRAME_TRY` of (but 0: no delay is not one), else
+    as it is: interpolating a hundredth of a frame would only blur the samples."""
+    whole = float(round(shift_frames))
+    return whole if whole != 0.0 and abs(whole - shift_frames) <= WHOLE_FRAME_TRY else shift_frames
+
+
 def walk_start(shift_frames: float) -> list:
     """Where the whole-frame search (:func:`best_whole_frame`) starts from a delay of `shift_frames`: the whole frames
     beside it (:func:`whole_frames_beside`), the delay itself when it is a whole frame, and a frame on its side when it
@@ -209,12 +216,9 @@ class TimeOffset(Effect):
         # so the walk starts there too. Its refits start from a fit to the data with Newton's delay undone, taken from
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
-        first = tau * ctx.rate_hz
-        if not whole_frames_beside(first) and round(first) != 0:
-            first = float(round(first))                # a whole frame (within 0.02): interpolating would only blur it
-        at_first = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
-        fitted = {first / ctx.rate_hz: (at_first, score(ctx, at_first, hyp))}
-        current = replace(at_first, extra_params=hyp.extra_params)
+        first = nearest_whole(tau * ctx.rate_hz)
+        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
+        fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz

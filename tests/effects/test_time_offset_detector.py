@@ -270,6 +270,19 @@ def test_the_walk_starts_beside_a_delay_at_it_when_whole_and_never_at_no_delay(s
         assert out == [1.0 if shift >= 0 else -1.0]
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-8.0, 8.0))
+def test_a_delay_within_the_tolerance_of_a_whole_frame_is_that_frame_but_never_no_delay(shift):
+    """Within WHOLE_FRAME_TRY of a whole frame other than 0 a delay is taken as that frame; otherwise it is kept."""
+    from identcheck.effects.time_offset import WHOLE_FRAME_TRY, nearest_whole
+
+    out = nearest_whole(shift)
+    if round(shift) != 0 and abs(round(shift) - shift) <= WHOLE_FRAME_TRY:
+        assert out == round(shift)
+    else:
+        assert out == shift
+
+
 def test_a_delay_counts_one_parameter_among_explanations_the_data_cannot_tell_apart():
     """Ranking equal explanations by their parameters counts a delay's one, not the samples its shift moved past
     the trial's end nor the noise interpolation removes (charged in its score): a pelvis 4 frames late had been
