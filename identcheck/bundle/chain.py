@@ -315,18 +315,29 @@ def score_statistics(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_
     """:func:`score_statistic` for each set of fields in `field_sets` (any iterable of lists of fields, read once: a
     generator keeps one set in memory at a time), one statistic per set, the refit's projection built once for them
     all (it costs a whole normal-equation build and the Schur complement; each field, a gradient pass)."""
+    return [quadratic_form(n, G) for n, G in score_moments(fit, weights, residual, field_sets)]
+
+
+def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets) -> list:
+    """For each set of fields in `field_sets` (as :func:`score_statistics` reads them), the score test's moments
+    ``(n, G)``: ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts. Any subset S of a set's
+    fields has the statistic ``n_Sᵀ G_SS⁺ n_S`` (:func:`quadratic_form`) without another pass over the data: what a
+    detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     pieces, inner = _refit_projection(fit, weights)
     out = []
     for fields in field_sets:
-        if not len(fields):
-            out.append(0.0)
-            continue
         n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
-        G = _gram([pieces(v) for v in fields], inner)
-        out.append(float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n))
+        out.append((n, _gram([pieces(v) for v in fields], inner)))
     return out
+
+
+def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:
+    """``nᵀ G⁺ n``, the score statistic of moments ``(n, G)`` (:func:`score_moments`); 0 for no fields."""
+    if not len(n):
+        return 0.0
+    return float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)
 
 
 # ---------------------------------------------------------------------- starting point

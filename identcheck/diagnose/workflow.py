@@ -309,7 +309,8 @@ def acts_on(where: dict) -> tuple:
 
 def place(name: str, where: dict) -> tuple:
     """What makes an effect's place itself: its name and the non-numeric parts of `where` (joint, segment,
-    markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude). An effect adopted at a place
+    markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude) and descriptions
+    (:data:`DESCRIPTIVE`). An effect adopted at a place
     is not proposed there again: the same terms a second time only repeat the first (a knee's translation adopted
     three times in a row, each refit creeping on a little further)."""
     def key(v):  # noqa: E306 - hashable, whatever `where` holds
@@ -322,7 +323,12 @@ def place(name: str, where: dict) -> tuple:
         if isinstance(v, (list, tuple, np.ndarray)):
             return len(v) > 0 and all(isinstance(x, (float, np.floating)) for x in v)
         return isinstance(v, (float, np.floating))
-    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not size(v)))
+    return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not size(v) and k not in DESCRIPTIVE))
+
+
+DESCRIPTIVE = frozenset({"modelled", "functions"})
+"""Keys of an effect's ``where`` that describe its model, not its place: a joint's translation is one place whichever
+of its functions the data ask for (:mod:`identcheck.bundle.score_selection`), and adopted once."""
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:

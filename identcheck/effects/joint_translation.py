@@ -14,7 +14,8 @@ cannot be absorbed and is modelled: six fields ``S_p ω`` for a ball joint (a hi
 abduction axis with abduction), one for a hinge (``θ a``: a screw along its axis; the part perpendicular to the
 axis is a shifted axis). The centre's motion quadratic and cubic in the angles is modelled in every direction:
 a knee rolling back (A sin θ, odd) shows through its cubic part, sin θ − θ, and its even companions. The report
-says which parts are modelled (``where["modelled"]``).
+says which parts are modelled (``where["modelled"]``), and which of the functions the data ask for
+(``where["functions"]``): only those are fitted (:mod:`identcheck.bundle.score_selection`).
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import Terms
-from identcheck.bundle.chain import score_statistics
+from identcheck.bundle.chain import score_moments
+from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
 from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets, world_coefficients
@@ -35,6 +37,24 @@ MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and th
             "linear part cannot be told from a shifted centre or axis and stays in the joint's fitted position")
 _SYMMETRIC = [np.outer(np.eye(3)[i], np.eye(3)[k]) + np.outer(np.eye(3)[k], np.eye(3)[i])
               for i in range(3) for k in range(i, 3)]      # the six symmetric 3 x 3 matrices (up to scale)
+
+
+LINEAR_NAME = {True: "θ along the axis", False: "ω, a symmetric part"}
+"""How ``where["functions"]`` names a linear field (:func:`linear_fields`) of a hinge (True) and of a ball joint."""
+
+
+def function_names(joint_type: str, k: int) -> list:
+    """The names of the k functions of :func:`~identcheck.bundle.hypothesis.angle_basis` (``linear=False,
+    cubic=True``) for a joint of `joint_type`, in its order: a hinge's ``θ²``, ``θ³``; a ball joint's products of its
+    rotation vector's parent-frame components ``ωx²``, ``ωx·ωy``, … then the cubes ``ωx³``, …; each angle scaled to
+    [−1, 1] over the trial, centred."""
+    symbols = ["θ"] if joint_type == "revolute" else ["ωx", "ωy", "ωz"]
+    i, j = np.triu_indices(len(symbols))
+    names = [symbols[a] + "²" if a == b else f"{symbols[a]}·{symbols[b]}" for a, b in zip(i, j)]
+    names += [s + "³" for s in symbols]
+    if len(names) != k:
+        raise ValueError(f"{k} functions for a {joint_type} joint's {len(names)} names")
+    return names
 
 
 ABSORBED_SHARE = 0.25
@@ -133,10 +153,15 @@ class JointTranslation(Effect):
 
     def propose(self, ctx, hyp) -> list:
         """Each joint's translation, its strength what the refit with it would gain to first order (a score test
-        over the translation's own displacement fields, :func:`~identcheck.bundle.chain.score_statistics`, net of
+        over the translation's own displacement fields, :func:`~identcheck.bundle.chain.score_moments`, net of
         its parameters). The markers' mean residual below the joint, regressed on the same functions, read a knee
         rolling back 10.7 mm in gait as 25 where the refit gained 247: a rigid refit takes up most of a smooth
-        translation in the joint's angle and the other segments' poses, and what is left shows on every marker."""
+        translation in the joint's angle and the other segments' poses, and what is left shows on every marker.
+
+        Only the functions the criterion asks for are proposed (:func:`~identcheck.bundle.score_selection.
+        forward_selection` over the functions, each in three directions, and the linear fields, each its own), and
+        ``where["functions"]`` names them (:func:`function_names`, :data:`LINEAR_NAME`): a hip pistoning with its
+        flexion needs one function, not the 31 parameters of all of them (see the selection module)."""
         ch, angles = hyp.chain, driving_angles(hyp, ctx.rate_hz)
         places = []
         for j in ch.joints:
@@ -144,13 +169,19 @@ class JointTranslation(Effect):
             lin = linear_fields(hyp, j, angles[j])
             places.append((j, basis, lin))
         # one joint's fields at a time (each (F, M, 3); a full body's joints' together ran to hundreds of MB)
-        stats = score_statistics(hyp.fit, hyp.weights, hyp.residuals(),
-                                 (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places))
+        moments = score_moments(hyp.fit, hyp.weights, hyp.residuals(),
+                                (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places))
         out = []
-        for (j, basis, lin), stat in zip(places, stats):
-            gain = ctx.bic_gain(ctx.smooth_share * stat, 3 * basis.shape[1] + len(lin))
-            out.append(Proposal(self.name, {"joint": j, "modelled": MODELLED}, float(gain),
-                                {"joint": j, "basis": basis, "linear": lin}))
+        for (j, basis, lin), (n, G) in zip(places, moments):
+            k = basis.shape[1]
+            units = [[3 * f, 3 * f + 1, 3 * f + 2] for f in range(k)] + [[3 * k + i] for i in range(len(lin))]
+            chosen = forward_selection(n, G, units, lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m))
+            functions = sorted(u for u in chosen.units if u < k)
+            linear = [lin[u - k] for u in sorted(chosen.units) if u >= k]
+            names = function_names(ch.types[j], k) + [LINEAR_NAME[ch.types[j] == "revolute"]] * len(lin)
+            where = {"joint": j, "modelled": MODELLED, "functions": [names[u] for u in sorted(chosen.units)]}
+            out.append(Proposal(self.name, where, chosen.gain,
+                                {"joint": j, "basis": basis[:, functions], "linear": linear}))
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
@@ -166,7 +197,8 @@ class JointTranslation(Effect):
         world = [(idx, np.broadcast_to(g[:, None, :], (len(g), len(idx), 3)).copy())
                  for g in in_world(hyp, j, proposal.payload.get("linear", []))]
         proposal.payload["world_fields"] = [f for _, f in world]      # how modelled_motion finds their terms
-        terms = Terms(centres=[(j, proposal.payload["basis"])], world=world)
+        basis = proposal.payload["basis"]
+        terms = Terms(centres=[(j, basis)] if basis.shape[1] else [], world=world)   # the linear part alone: no centre
         return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
 
     def modelled_motion(self, proposal, hyp) -> list:
@@ -177,11 +209,12 @@ class JointTranslation(Effect):
         j = proposal.payload["joint"]
         ch = hyp.chain
         linear = [np.nan_to_num(g) for g in proposal.payload.get("linear", [])]
-        found = term_offsets(hyp, "centres", proposal.payload["basis"])
-        if not found:
-            return []
-        offsets = found[0][1] + sum((c * linear[k] for k, c in
-                                     world_coefficients(hyp, proposal.payload.get("world_fields", []))), 0.0)
+        basis = proposal.payload["basis"]
+        found = term_offsets(hyp, "centres", basis) if basis.shape[1] else []
+        coefficients = world_coefficients(hyp, proposal.payload.get("world_fields", []))
+        if not found and not coefficients:
+            return []                       # the proposal's terms are not in `hyp`
+        offsets = (found[0][1] if found else 0.0) + sum((c * linear[k] for k, c in coefficients), 0.0)
         return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)]
 
     def evidence(self, ctx, before, after, proposal) -> dict:

@@ -1,0 +1,65 @@
+"""Forward selection on the score test's moments: the statistic of any subset follows from the moments of all the
+fields, it is what least squares on those fields explains, and the subset chosen is never worse by the criterion than
+the best single unit or all of them; a residual made of one unit's fields is told to be that unit alone."""
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.chain import quadratic_form
+from identcheck.bundle.score_selection import forward_selection
+
+
+def _problem(seed, n_units, width, n_obs=60):
+    rng = np.random.default_rng(seed)
+    sizes = rng.integers(1, width + 1, n_units)
+    X = rng.normal(size=(n_obs, int(sizes.sum())))
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    units = [list(range(edges[k], edges[k + 1])) for k in range(n_units)]
+    return rng, X, units
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.integers(1, 3))
+def test_the_statistic_of_a_subset_is_what_least_squares_on_it_explains(seed, n_units, width):
+    rng, X, units = _problem(seed, n_units, width)
+    r = rng.normal(size=len(X))
+    n, G = X.T @ r, X.T @ X
+    cols = sorted(c for u in rng.choice(n_units, rng.integers(1, n_units + 1), replace=False) for c in units[u])
+    fitted = X[:, cols] @ np.linalg.lstsq(X[:, cols], r, rcond=None)[0]
+    assert np.isclose(quadratic_form(n[cols], G[np.ix_(cols, cols)]), fitted @ fitted, rtol=1e-8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.integers(1, 3), st.floats(0.0, 5.0))
+def test_the_choice_beats_every_single_unit_and_the_whole_set(seed, n_units, width, penalty):
+    rng, X, units = _problem(seed, n_units, width)
+    r = rng.normal(size=len(X)) + X @ (rng.normal(size=X.shape[1]) * (rng.random(X.shape[1]) < 0.3))
+    n, G = X.T @ r, X.T @ X
+
+    def gain(stat, m):
+        return stat - penalty * m
+
+    sel = forward_selection(n, G, units, gain)
+    cols = list(sel.columns)
+    assert cols == sorted(c for u in sel.units for c in units[u])
+    assert len(set(sel.units)) == len(sel.units) >= 1
+    assert np.isclose(sel.gain, gain(quadratic_form(n[cols], G[np.ix_(cols, cols)]), len(cols)))
+    every = list(range(X.shape[1]))
+    assert sel.gain >= gain(quadratic_form(n, G), len(every)) - 1e-9
+    for u in units:
+        assert sel.gain >= gain(quadratic_form(n[u], G[np.ix_(u, u)]), len(u)) - 1e-9
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 7), st.integers(1, 3))
+def test_a_residual_of_one_units_fields_selects_that_unit_alone(seed, n_units, width):
+    rng, X, units = _problem(seed, n_units, width)
+    truth = int(rng.integers(n_units))
+    r = X[:, units[truth]] @ (rng.uniform(1.0, 3.0, len(units[truth])) * rng.choice([-1, 1], len(units[truth])))
+    n, G = X.T @ r, X.T @ X
+    sel = forward_selection(n, G, units, lambda stat, m: stat - 1e-3 * float(r @ r) * m)
+    assert sel.units == (truth,)
+
+
+def test_no_units_select_nothing():
+    sel = forward_selection(np.zeros(0), np.zeros((0, 0)), [], lambda stat, m: stat - m)
+    assert sel.units == () and sel.columns == () and sel.gain == 0.0
