@@ -233,8 +233,8 @@ def information_at(chain, terms, state, w: np.ndarray) -> np.ndarray:
 def _refit_projection(fit: Fit, weights: np.ndarray):
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
     per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement), as
-    ``(pieces, inner)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and
-    unweighted samples set to 0; ``inner`` takes two fields' pieces to the inner product of their unabsorbed
+    ``(pieces, inner, S_plus)``: ``pieces`` takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN
+    and unweighted samples set to 0; ``inner`` takes two fields' pieces to the inner product of their unabsorbed
     parts, ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur
     complement, the gauge left free)."""
     s = fit.state
@@ -259,7 +259,7 @@ def _refit_projection(fit: Fit, weights: np.ndarray):
     def inner(a, b) -> float:
         (va, za, ra), (vb, zb, rb) = a, b
         return float(np.sum(w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ S_plus @ rb)
-    return pieces, inner
+    return pieces, inner, S_plus
 
 
 def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
@@ -274,7 +274,7 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
     a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
-    pieces, inner = _refit_projection(fit, weights)
+    pieces, inner, _ = _refit_projection(fit, weights)
     out = []
     for v in fields:
         p = pieces(v)
@@ -286,7 +286,7 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
     """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
-    pieces, inner = _refit_projection(fit, weights)
+    pieces, inner, _ = _refit_projection(fit, weights)
     return _gram([pieces(v) for v in fields], inner)
 
 
@@ -325,12 +325,33 @@ def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_set
     detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    pieces, inner = _refit_projection(fit, weights)
+    pieces, inner, _ = _refit_projection(fit, weights)
     out = []
     for fields in field_sets:
         n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
         out.append((n, _gram([pieces(v) for v in fields], inner)))
     return out
+
+
+def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields, plain_gram: np.ndarray):
+    """:func:`score_moments` of one set of fields read one at a time (any iterable of (F, M, 3) arrays), their plain
+    Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of frames): only what a refit
+    absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
+    distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
+    pieces, _, S_plus = _refit_projection(fit, weights)
+    n, Z, reduced = [], [], []
+    for v in fields:
+        v0, z, red = pieces(v)
+        n.append(float(np.sum(w * v0 * r)))
+        Z.append(z.reshape(-1))
+        reduced.append(red)
+    if not n:
+        return np.zeros(0), np.zeros((0, 0))
+    Z, reduced = np.stack(Z), np.stack(reduced)
+    G = np.asarray(plain_gram, dtype=float) - Z @ Z.T - reduced @ S_plus @ reduced.T
+    return np.array(n), (G + G.T) / 2
 
 
 def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:

@@ -175,13 +175,15 @@ class JointTranslation(Effect):
         for (j, basis, lin), (n, G) in zip(places, moments):
             k = basis.shape[1]
             units = [[3 * f, 3 * f + 1, 3 * f + 2] for f in range(k)] + [[3 * k + i] for i in range(len(lin))]
-            chosen = forward_selection(n, G, units, lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m))
+            chosen = forward_selection(n, G, units, lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m),
+                                       per_param=np.log(ctx.n_obs))
             functions = sorted(u for u in chosen.units if u < k)
             linear = [lin[u - k] for u in sorted(chosen.units) if u >= k]
             names = function_names(ch.types[j], k) + [LINEAR_NAME[ch.types[j] == "revolute"]] * len(lin)
             where = {"joint": j, "modelled": MODELLED, "functions": [names[u] for u in sorted(chosen.units)]}
             out.append(Proposal(self.name, where, chosen.gain,
-                                {"joint": j, "basis": basis[:, functions], "linear": linear}))
+                                {"joint": j, "basis": basis[:, functions], "linear": linear,
+                                 "choice_params": chosen.choice_params}))
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
@@ -199,7 +201,8 @@ class JointTranslation(Effect):
         proposal.payload["world_fields"] = [f for _, f in world]      # how modelled_motion finds their terms
         basis = proposal.payload["basis"]
         terms = Terms(centres=[(j, basis)] if basis.shape[1] else [], world=world)   # the linear part alone: no centre
-        return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10)
+        return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10,
+                         extra_params=proposal.payload.get("choice_params", 0))
 
     def modelled_motion(self, proposal, hyp) -> list:
         """The joint's centre moving in its parent as fitted, RMS about its mean over the frames: its term quadratic

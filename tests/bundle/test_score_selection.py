@@ -1,11 +1,13 @@
 """Forward selection on the score test's moments: the statistic of any subset follows from the moments of all the
 fields, it is what least squares on those fields explains, and the subset chosen is never worse by the criterion than
 the best single unit or all of them; a residual made of one unit's fields is told to be that unit alone."""
+import math
+
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.chain import quadratic_form
-from identcheck.bundle.score_selection import forward_selection
+from identcheck.bundle.score_selection import choice_params, forward_selection
 
 
 def _problem(seed, n_units, width, n_obs=60):
@@ -29,8 +31,9 @@ def test_the_statistic_of_a_subset_is_what_least_squares_on_it_explains(seed, n_
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.integers(1, 3), st.floats(0.0, 5.0))
-def test_the_choice_beats_every_single_unit_and_the_whole_set(seed, n_units, width, penalty):
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.integers(1, 3), st.floats(0.0, 5.0),
+       st.one_of(st.none(), st.floats(0.5, 12.0)))
+def test_the_choice_beats_every_single_unit_and_the_whole_set(seed, n_units, width, penalty, per_param):
     rng, X, units = _problem(seed, n_units, width)
     r = rng.normal(size=len(X)) + X @ (rng.normal(size=X.shape[1]) * (rng.random(X.shape[1]) < 0.3))
     n, G = X.T @ r, X.T @ X
@@ -38,15 +41,28 @@ def test_the_choice_beats_every_single_unit_and_the_whole_set(seed, n_units, wid
     def gain(stat, m):
         return stat - penalty * m
 
-    sel = forward_selection(n, G, units, gain)
+    sel = forward_selection(n, G, units, gain, per_param)
     cols = list(sel.columns)
     assert cols == sorted(c for u in sel.units for c in units[u])
     assert len(set(sel.units)) == len(sel.units) >= 1
-    assert np.isclose(sel.gain, gain(quadratic_form(n[cols], G[np.ix_(cols, cols)]), len(cols)))
+    assert sel.choice_params == choice_params(n_units, len(sel.units), per_param)
+    assert np.isclose(sel.gain, gain(quadratic_form(n[cols], G[np.ix_(cols, cols)]), len(cols) + sel.choice_params))
     every = list(range(X.shape[1]))
-    assert sel.gain >= gain(quadratic_form(n, G), len(every)) - 1e-9
+    assert sel.gain >= gain(quadratic_form(n, G), len(every)) - 1e-9          # the whole set: no choice to charge
+    single = choice_params(n_units, 1, per_param)
     for u in units:
-        assert sel.gain >= gain(quadratic_form(n[u], G[np.ix_(u, u)]), len(u)) - 1e-9
+        assert sel.gain >= gain(quadratic_form(n[u], G[np.ix_(u, u)]), len(u) + single) - 1e-9
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 80), st.data(), st.floats(1.0, 20.0))
+def test_the_charge_for_a_choice_is_twice_the_log_of_the_subsets_in_whole_parameters(n_units, data, per_param):
+    k = data.draw(st.integers(0, n_units))
+    charge = choice_params(n_units, k, per_param)
+    subsets = 2.0 * math.log(math.comb(n_units, k))
+    assert charge * per_param >= subsets - 1e-9 and (charge - 1) * per_param < subsets
+    assert choice_params(n_units, k, None) == 0
+    assert choice_params(n_units, n_units, per_param) == 0 == choice_params(n_units, 0, per_param)
 
 
 @settings(max_examples=60, deadline=None)

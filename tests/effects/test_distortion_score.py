@@ -5,10 +5,11 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import fit_chain, initial_state, unabsorbed, unabsorbed_gram
+from identcheck.bundle.chain import (fit_chain, initial_state, score_moments, score_moments_streamed, score_statistic,
+                                     unabsorbed, unabsorbed_gram)
 from identcheck.bundle.hypothesis import Hypothesis
 from identcheck.bundle.model import Terms
-from identcheck.effects.spatial_distortion import explained, fields, strain_explained
+from identcheck.effects.spatial_distortion import FIELDS, field, fields, plain_gram, volume, where_fields_act
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -69,13 +70,37 @@ def test_the_score_statistic_is_what_a_refit_with_the_strain_explains(seed, stra
     the detector read before, 5-10 times less on such legs: the segments absorb most of a linear field)."""
     h, _ = _fitted_leg(seed % 1000, 300, noise_mm, strain_mm)
     res = np.where(h.weights[..., None] > 0, np.nan_to_num(h.residuals()), 0.0)
-    stat = strain_explained(h, res)
+    stat = score_statistic(h.fit, h.weights, res, fields(where_fields_act(h), 1))
     cols = np.arange(h.chain.n_markers)
     new = h.refit(terms=h.terms + Terms(world=[(cols, f) for f in fields(h.data, 1)]), max_iter=30)
     gain = h.rss - new.rss
     assert gain > 0
     assert abs(stat - gain) <= 0.1 * gain + 3 * noise_mm ** 2
-    assert explained(h.data, h.weights > 0, res)[1] <= stat * (1 + 1e-9)
+    X = np.stack([f.reshape(-1) for f in fields(where_fields_act(h), 1)], axis=1)
+    plain = X @ np.linalg.lstsq(X, res.reshape(-1), rcond=None)[0]
+    assert plain @ plain <= stat * (1 + 1e-9)
+
+
+@settings(max_examples=4, deadline=None)
+@given(st.integers(0, 2**16), st.floats(0.0, 4.0))
+def test_the_streamed_moments_are_the_moments(seed, strain_mm):
+    """The distortion's moments read one field at a time with the plain Gram matrix summed over chunks of frames
+    (:func:`score_moments_streamed`, :func:`plain_gram`) are those of all the fields held at once, with a tenth of
+    the samples unweighted; and :func:`field` is :func:`fields`' k-th."""
+    h, _ = _fitted_leg(seed % 1000, 120, 0.5, strain_mm)
+    w = np.where(np.random.default_rng(seed).uniform(size=h.weights.shape) < 0.1, 0.0, h.weights)
+    at = np.where((w > 0)[..., None], h.fit.pred, np.nan)
+    box = volume(at)
+    every = fields(at, 3, box)
+    assert len(every) == FIELDS[3] and all(np.array_equal(field(at, k, box), every[k]) for k in (0, 4, 5, 27, 52))
+    (n, G), = score_moments(h.fit, w, h.residuals(), [every])
+    plain = plain_gram(at, w > 0, box)
+    n2, G2 = score_moments_streamed(h.fit, w, h.residuals(), iter(every), plain)
+    np.testing.assert_allclose(n2, n, rtol=1e-9, atol=1e-9 * np.max(np.abs(n)))
+    # what a refit absorbs is nearly all of a linear field: G is a difference of near-equal sums (rounding ~1e-9 of
+    # the plain Gram matrix seen)
+    np.testing.assert_allclose(G2, G, rtol=1e-7, atol=1e-7 * float(np.max(np.abs(plain))))
+    assert np.max(np.abs(G2 - G)) < 1e-3 * np.max(np.abs(G))
 
 
 @settings(max_examples=4, deadline=None)
@@ -86,7 +111,6 @@ def test_fields_at_predicted_positions_do_not_fit_correlated_noise(seed, phi):
     what 5 parameters gain on noise (prewhitened, a χ²(5): below 30 in units of σ², p ≈ 10⁻⁵), below the
     criterion's cost of 5 ln(3N). Made at the measured positions they carry the noise itself and gained 30-80."""
     from identcheck.bundle.hypothesis import whitened_rss
-    from identcheck.effects.spatial_distortion import volume, where_fields_act
 
     model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
     data = simulate(model, n_frames=1200, noise_mm=0.0, seed=seed % 1000).trial.select(model.markers).as_array()
@@ -111,8 +135,8 @@ def test_fields_at_predicted_positions_do_not_fit_correlated_noise(seed, phi):
 
 def test_diagnose_names_a_few_millimetres_of_scale_error_along_one_axis():
     """A volume calibrated 0.4 % long along its vertical axis (about 4 mm over the leg's metre), 0.6 mm white
-    noise, 1500 frames: `diagnose` names a spatial distortion first, as the strain alone. Read by regressing the
-    residual on the raw fields (before the score statistic), the segments' poses had taken most of it up and
+    noise, 1500 frames: `diagnose` names a spatial distortion first, with strain fields alone. Read by regressing
+    the residual on the raw fields (before the score statistic), the segments' poses had taken most of it up and
     nothing was named."""
     import identcheck as ic
 

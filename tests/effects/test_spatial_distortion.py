@@ -1,4 +1,5 @@
-"""The distortion detector's least squares, accumulated chunk by chunk, is the least squares of the whole design."""
+"""The distortion detector's plain Gram matrix, accumulated chunk by chunk, is that of the whole design; each field
+is the one :func:`fields` lists at its place, named in :data:`FIELD_NAMES`."""
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
@@ -8,29 +9,51 @@ import identcheck.effects.spatial_distortion as sd
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), frames=st.integers(3, 60), markers=st.integers(3, 9),
        chunk=st.sampled_from([27, 100, 8192]), hidden=st.floats(0.0, 0.4), planar=st.booleans())
-def test_the_chunked_fit_explains_what_the_whole_design_explains(seed, frames, markers, chunk, hidden, planar):
+def test_the_chunked_gram_matrix_is_the_whole_designs(seed, frames, markers, chunk, hidden, planar):
     """Random marker clouds (some flat, so that fields coincide and the design loses rank), samples unseen at
-    random, residuals that are partly a random field of degree 3 and partly noise: for both degrees the squared norm
-    of the fit equals that of NumPy's least squares on the whole design, to 1e-8 of the residual's energy."""
+    random: the chunked ``XᵀX`` equals the whole design's to 1e-10 of its largest entry, for any chunk size."""
     rng = np.random.default_rng(seed)
     data = rng.uniform(-800, 800, (frames, markers, 3))
     if planar:
         data[..., 2] = 1000.0                              # no height: the z fields vanish or repeat others
     seen = rng.uniform(size=(frames, markers)) >= hidden
-    flds = sd.fields(data, 3)
-    true_field = np.einsum("k,kfmi->fmi", rng.normal(0, 2, len(flds)), np.stack(flds))
-    res = np.where(seen[..., None], true_field + rng.normal(0, 1, data.shape), 0.0)
+    box = sd.volume(data)
+    flds = sd.fields(data, 3, box)
     old_rows = sd.CHUNK_ROWS
     sd.CHUNK_ROWS = chunk
     try:
-        got = sd.explained(data, seen, res)
+        got = sd.plain_gram(data, seen, box)
     finally:
         sd.CHUNK_ROWS = old_rows
-    energy = float(np.sum(res ** 2))
-    for degree, k in sd.FIELDS.items():
-        X = np.stack([np.where(seen[..., None], f, 0.0).reshape(-1) for f in flds[:k]], axis=1)
-        coef = np.linalg.lstsq(X, res.reshape(-1), rcond=None)[0]
-        want = float(np.sum((X @ coef) ** 2))
-        assert abs(got[degree] - want) <= 1e-8 * max(energy, 1.0)
-        assert got[degree] <= energy * (1 + 1e-9)
-    assert got[2] <= got[3] * (1 + 1e-9) + 1e-9             # more fields never explain less
+    X = np.stack([np.where(seen[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
+    want = X.T @ X
+    assert got.shape == (sd.FIELDS[3], sd.FIELDS[3]) == (len(sd.FIELD_NAMES),) * 2
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * max(float(np.max(np.abs(want))), 1.0))
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_each_field_is_what_its_name_says(seed):
+    """At random points: a strain field is a symmetric traceless linear map of the normalised coordinates; a
+    monomial field ``m along d`` has only its d component, the monomial of the normalised coordinates."""
+    rng = np.random.default_rng(seed)
+    data = rng.uniform(-800, 800, (7, 5, 3))
+    centre, half = box = sd.volume(data)
+    u = (data - centre) / half
+    for k, name in enumerate(sd.FIELD_NAMES):
+        f = sd.field(data, k, box)
+        assert np.array_equal(f, sd.fields(data, 3, box)[k])
+        if name.startswith(("strain", "shear")):
+            E = np.linalg.lstsq(u.reshape(-1, 3), f.reshape(-1, 3), rcond=None)[0].T
+            np.testing.assert_allclose(f.reshape(-1, 3), u.reshape(-1, 3) @ E.T, atol=1e-9 * np.max(np.abs(f)))
+            np.testing.assert_allclose(E, E.T, atol=1e-9 * np.max(np.abs(E)))
+            assert abs(np.trace(E)) <= 1e-9 * np.max(np.abs(E))
+            continue
+        mono, axis = name.split(" along ")
+        d = "xyz".index(axis)
+        x, y, z = u[..., 0], u[..., 1], u[..., 2]
+        value = {"x^2": x * x, "y^2": y * y, "z^2": z * z, "xy": x * y, "xz": x * z, "yz": y * z, "x^3": x ** 3,
+                 "y^3": y ** 3, "z^3": z ** 3, "x^2y": x * x * y, "x^2z": x * x * z, "y^2x": y * y * x,
+                 "y^2z": y * y * z, "z^2x": z * z * x, "z^2y": z * z * y, "xyz": x * y * z}[mono]
+        np.testing.assert_allclose(f[..., d], value, rtol=1e-12, atol=1e-12)
+        assert not np.any(np.delete(f, d, axis=-1))
