@@ -309,7 +309,7 @@ def acts_on(where: dict) -> tuple:
 
 def place(name: str, where: dict) -> tuple:
     """What makes an effect's place itself: its name and the non-numeric parts of `where` (joint, segment,
-    markers, frames, degree), leaving out fitted sizes (a delay in ms, an amplitude) and descriptions
+    markers, frames), leaving out fitted sizes (a delay in ms, an amplitude) and descriptions of the model
     (:data:`DESCRIPTIVE`). An effect adopted at a place
     is not proposed there again: the same terms a second time only repeat the first (a knee's translation adopted
     three times in a row, each refit creeping on a little further)."""
@@ -326,9 +326,11 @@ def place(name: str, where: dict) -> tuple:
     return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not size(v) and k not in DESCRIPTIVE))
 
 
-DESCRIPTIVE = frozenset({"modelled", "functions"})
+DESCRIPTIVE = frozenset({"modelled", "functions", "fields", "degree"})
 """Keys of an effect's ``where`` that describe its model, not its place: a joint's translation is one place whichever
-of its functions the data ask for (:mod:`identcheck.bundle.score_selection`), and adopted once."""
+of its functions the data ask for, the volume's distortion one place whichever of its fields and of what degree
+(:mod:`identcheck.bundle.score_selection`); each adopted once, and a dropped one not proposed again in another
+form."""
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:

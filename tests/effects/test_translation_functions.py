@@ -64,10 +64,12 @@ def test_a_hip_moving_with_its_flexion_is_proposed_with_few_functions(seed, size
     assert prop.strength == pytest.approx(gained, rel=0.35)
 
 
-def test_the_functions_chosen_do_not_make_another_place():
+def test_the_functions_or_fields_chosen_do_not_make_another_place():
     where = {"joint": "hip", "modelled": "text", "functions": ["ωx³"]}
     assert place("joint_translation", where) == place("joint_translation", {"joint": "hip"})
     assert place("joint_translation", where) != place("joint_translation", {"joint": "knee"})
+    field = {"degree": 3, "fields": ["x^3 along z"], "amplitude_mm": 2.0}
+    assert place("spatial_distortion", field) == place("spatial_distortion", {"degree": 1, "fields": ["shear xy"]})
 
 
 @pytest.mark.parametrize("kind, names", [("revolute", ["θ²", "θ³"]),
