@@ -308,19 +308,14 @@ def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields:
     A detector that regresses the residual on the fields themselves understates this whenever the model's own
     unknowns take up part of each field (the joint angles, a shifted centre or axis, the segments' poses): that
     part is already gone from the residual, and the field's full norm in the denominator counts it again."""
-    return score_statistics(fit, weights, residual, [fields])[0]
-
-
-def score_statistics(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets: list) -> list:
-    """:func:`score_statistic` for each set of fields in `field_sets` (any iterable of lists of fields, read once: a
-    generator keeps one set in memory at a time), one statistic per set, the refit's projection built once for them
-    all (it costs a whole normal-equation build and the Schur complement; each field, a gradient pass)."""
-    return [quadratic_form(n, G) for n, G in score_moments(fit, weights, residual, field_sets)]
+    return quadratic_form(*score_moments(fit, weights, residual, [fields])[0])
 
 
 def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets) -> list:
-    """For each set of fields in `field_sets` (as :func:`score_statistics` reads them), the score test's moments
-    ``(n, G)``: ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts. Any subset S of a set's
+    """For each set of fields in `field_sets` (any iterable of lists of fields, read once: a generator keeps one set
+    in memory at a time; the refit's projection is built once for them all, at the cost of a whole normal-equation
+    build and the Schur complement, and each field costs a gradient pass), the score test's moments ``(n, G)``:
+    ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts. Any subset S of a set's
     fields has the statistic ``n_Sᵀ G_SS⁺ n_S`` (:func:`quadratic_form`) without another pass over the data: what a
     detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
     w = np.asarray(weights, dtype=float)[..., None]

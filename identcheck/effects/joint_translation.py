@@ -32,15 +32,21 @@ from identcheck.effects.injection import Change, cannot, normalised_angle, pick,
 from identcheck.effects.soft_tissue import same_motion_clusters
 
 
-MODELLED = ("the centre's motion quadratic and cubic in the joint angles, and the part linear in them that no "
-            "shifted centre or axis absorbs (along a hinge's axis; a ball joint's symmetric part); the rest of the "
-            "linear part cannot be told from a shifted centre or axis and stays in the joint's fitted position")
+MODELLED = ("the centre's motion in those of the functions (`functions`) the data ask for, chosen from every product "
+            "and cube of the joint angles and the part linear in them that no shifted centre or axis absorbs (along "
+            "a hinge's axis; a ball joint's symmetric part); the rest of the linear part cannot be told from a "
+            "shifted centre or axis and stays in the joint's fitted position")
 _SYMMETRIC = [np.outer(np.eye(3)[i], np.eye(3)[k]) + np.outer(np.eye(3)[k], np.eye(3)[i])
               for i in range(3) for k in range(i, 3)]      # the six symmetric 3 x 3 matrices (up to scale)
 
 
-LINEAR_NAME = {True: "θ along the axis", False: "ω, a symmetric part"}
-"""How ``where["functions"]`` names a linear field (:func:`linear_fields`) of a hinge (True) and of a ball joint."""
+def linear_names(joint_type: str, k: int) -> list:
+    """How ``where["functions"]`` names the k linear fields (:func:`linear_fields`) of a joint of `joint_type`: a
+    hinge's one ``θ along the axis``; a ball joint's ``ω, symmetric part 1``, … (combinations of the symmetric maps of
+    its rotation vector this motion keeps apart from a centre shift, in :func:`linear_fields`' order)."""
+    if joint_type == "revolute":
+        return ["θ along the axis"] * k
+    return [f"ω, symmetric part {i + 1}" for i in range(k)]
 
 
 def function_names(joint_type: str, k: int) -> list:
@@ -160,7 +166,7 @@ class JointTranslation(Effect):
 
         Only the functions the criterion asks for are proposed (:func:`~identcheck.bundle.score_selection.
         forward_selection` over the functions, each in three directions, and the linear fields, each its own), and
-        ``where["functions"]`` names them (:func:`function_names`, :data:`LINEAR_NAME`): a hip pistoning with its
+        ``where["functions"]`` names them (:func:`function_names`, :func:`linear_names`): a hip pistoning with its
         flexion needs one function, not the 31 parameters of all of them (see the selection module)."""
         ch, angles = hyp.chain, driving_angles(hyp, ctx.rate_hz)
         places = []
@@ -179,7 +185,7 @@ class JointTranslation(Effect):
                                        per_param=np.log(ctx.n_obs))
             functions = sorted(u for u in chosen.units if u < k)
             linear = [lin[u - k] for u in sorted(chosen.units) if u >= k]
-            names = function_names(ch.types[j], k) + [LINEAR_NAME[ch.types[j] == "revolute"]] * len(lin)
+            names = function_names(ch.types[j], k) + linear_names(ch.types[j], len(lin))
             where = {"joint": j, "modelled": MODELLED, "functions": [names[u] for u in sorted(chosen.units)]}
             out.append(Proposal(self.name, where, chosen.gain,
                                 {"joint": j, "basis": basis[:, functions], "linear": linear,

@@ -8,9 +8,11 @@ times 3-vectors (18) and the 10 cubic ones (30 more). Degree 3 holds the lens-li
 ``|u − c|² (u − c)`` about any centre c is a cubic polynomial in u; over the metre or so a subject occupies, most of
 what a lens changes in the segments' shapes is its strain. Of the 53 fields, only those the criterion asks for are
 proposed (forward selection on the score test's moments, the choice charged: :mod:`identcheck.bundle.score_selection`):
-a scale error along one axis needs one strain field, a lens a few of them and of the cubic ones. Detector: the score
-statistic of the fields, with what a rigid refit absorbs taken out (a segment's pose and constants absorb most of a
-linear field over the little volume it sweeps). Augmentation: the fields added to every prediction, their
+a scale error along the vertical axis (z) needs one strain field (along x or y two), a lens a few strains and cubic
+fields. Detector: the score statistic of the fields, with what a rigid refit absorbs taken out (a segment's pose and
+constants absorb most of a linear field over the little volume it sweeps), on the criterion's scale for a field as
+slow as the markers' motion under correlated noise (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`; the
+per-degree regressions before it read the plain residual). Augmentation: the fields added to every prediction, their
 coefficients fitted with everything else. A smooth field moves every marker by where it is, a slip one marker
 from one instant on: the two compete on that difference through the same criterion.
 """
@@ -81,17 +83,19 @@ CHUNK_ROWS = 8192
 """Rows of the design matrix (marker coordinates) formed at a time by :func:`plain_gram`."""
 
 
-def plain_gram(data: np.ndarray, seen: np.ndarray, box) -> np.ndarray:
-    """``XᵀX`` (53, 53) for X the 53 fields at the positions `data` (F, M, 3), 0 where not `seen`, as columns: the
-    plain part of the score test's Gram matrix (:func:`~identcheck.bundle.chain.score_moments_streamed`). X (F·M·3
-    rows: 80 MB for a 42-marker body at 1500 frames) is never formed whole, only chunks of frames."""
-    F, M = seen.shape
+def plain_gram(data: np.ndarray, weights: np.ndarray, box) -> np.ndarray:
+    """``XᵀWX`` (53, 53) for X the 53 fields at the positions `data` (F, M, 3) as columns, 0 where NaN, and W the
+    samples' `weights` (F, M; each marker's three coordinates alike): the plain part of the score test's Gram matrix
+    (:func:`~identcheck.bundle.chain.score_moments_streamed`). X (F·M·3 rows: 80 MB for a 42-marker body at 1500
+    frames) is never formed whole, only chunks of frames."""
+    F, M = weights.shape
     step = max(1, CHUNK_ROWS // max(3 * M, 1))
     out = np.zeros((FIELDS[3], FIELDS[3]))
     for f0 in range(0, F, step):
         f = slice(f0, f0 + step)
-        X = np.stack([np.where(seen[f, :, None], fld, 0.0).reshape(-1) for fld in fields(data[f], 3, box)], axis=1)
-        out += X.T @ X
+        w = np.repeat(np.asarray(weights[f], dtype=float).reshape(-1), 3)
+        X = np.stack([fld.reshape(-1) for fld in fields(data[f], 3, box)], axis=1)
+        out += X.T @ (w[:, None] * X)
     return out
 
 
@@ -125,8 +129,6 @@ class SpatialDistortion(Effect):
                                          "coefficients": coef, "monomials": list(MONOMIALS)},
                        clean=x + mono @ coef)
 
-    max_proposals = 3
-
     def propose(self, ctx, hyp) -> list:
         """One proposal: the fields the criterion asks for among the 53 (:func:`~identcheck.bundle.score_selection.
         forward_selection` on the score test's moments, each field its own unit, the choice charged), its strength
@@ -138,11 +140,10 @@ class SpatialDistortion(Effect):
         consistency test passes sets (50)."""
         if any(getattr(e, "effect", "") == self.name for e in hyp.effects):
             return []                        # the volume has its field already
-        w = hyp.weights > 0
-        at = where_fields_act(hyp)
+        at = where_fields_act(hyp)          # NaN where weighted out: every field is 0 there
         box = volume(at)
         n, G = score_moments_streamed(hyp.fit, hyp.weights, hyp.residuals(),
-                                      (field(at, k, box) for k in range(FIELDS[3])), plain_gram(at, w, box))
+                                      (field(at, k, box) for k in range(FIELDS[3])), plain_gram(at, hyp.weights, box))
         chosen = forward_selection(n, G, [[k] for k in range(FIELDS[3])],
                                    lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m),
                                    per_param=np.log(ctx.n_obs))

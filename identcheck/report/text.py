@@ -135,9 +135,18 @@ def fit_text(result) -> str:
     return "\n".join(lines)
 
 
+LIST_SHOWN = 6
+"""How many entries of a list in an effect's `where` the text report shows (a distortion may fit 53 fields)."""
+
+
 def _where_text(where: dict) -> str:
-    """An effect's `where` as ``key=value, ...`` for the text report (a long frame list left out)."""
-    return ", ".join(f"{key}={val}" for key, val in where.items() if key != "frames" or len(val) <= 4)
+    """An effect's `where` as ``key=value, ...`` for the text report (a long frame list left out, other long lists cut
+    to their first :data:`LIST_SHOWN` entries and a count; the JSON has them whole)."""
+    def shown(val):  # noqa: E306
+        if isinstance(val, list) and len(val) > LIST_SHOWN:
+            return f"{val[:LIST_SHOWN]} and {len(val) - LIST_SHOWN} more"
+        return val
+    return ", ".join(f"{key}={shown(val)}" for key, val in where.items() if key != "frames" or len(val) <= 4)
 
 
 def diagnose_text(diag) -> str:

@@ -86,15 +86,16 @@ def test_the_score_statistic_is_what_a_refit_with_the_strain_explains(seed, stra
 def test_the_streamed_moments_are_the_moments(seed, strain_mm):
     """The distortion's moments read one field at a time with the plain Gram matrix summed over chunks of frames
     (:func:`score_moments_streamed`, :func:`plain_gram`) are those of all the fields held at once, with a tenth of
-    the samples unweighted; and :func:`field` is :func:`fields`' k-th."""
+    the samples unweighted and the others weighted 0.3-1; and :func:`field` is :func:`fields`' k-th."""
     h, _ = _fitted_leg(seed % 1000, 120, 0.5, strain_mm)
-    w = np.where(np.random.default_rng(seed).uniform(size=h.weights.shape) < 0.1, 0.0, h.weights)
+    rng = np.random.default_rng(seed)
+    w = np.where(rng.uniform(size=h.weights.shape) < 0.1, 0.0, rng.uniform(0.3, 1.0, h.weights.shape))
     at = np.where((w > 0)[..., None], h.fit.pred, np.nan)
     box = volume(at)
     every = fields(at, 3, box)
     assert len(every) == FIELDS[3] and all(np.array_equal(field(at, k, box), every[k]) for k in (0, 4, 5, 27, 52))
     (n, G), = score_moments(h.fit, w, h.residuals(), [every])
-    plain = plain_gram(at, w > 0, box)
+    plain = plain_gram(at, w, box)
     n2, G2 = score_moments_streamed(h.fit, w, h.residuals(), iter(every), plain)
     np.testing.assert_allclose(n2, n, rtol=1e-9, atol=1e-9 * np.max(np.abs(n)))
     # what a refit absorbs is nearly all of a linear field: G is a difference of near-equal sums (rounding ~1e-9 of

@@ -1,5 +1,5 @@
-"""The distortion detector's plain Gram matrix, accumulated chunk by chunk, is that of the whole design; each field
-is the one :func:`fields` lists at its place, named in :data:`FIELD_NAMES`."""
+"""The distortion detector's plain Gram matrix, accumulated chunk by chunk, is that of the whole design (weights
+included); each field is the one :func:`fields` lists at its place, named in :data:`FIELD_NAMES`."""
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
@@ -11,22 +11,26 @@ import identcheck.effects.spatial_distortion as sd
        chunk=st.sampled_from([27, 100, 8192]), hidden=st.floats(0.0, 0.4), planar=st.booleans())
 def test_the_chunked_gram_matrix_is_the_whole_designs(seed, frames, markers, chunk, hidden, planar):
     """Random marker clouds (some flat, so that fields coincide and the design loses rank), samples unseen at
-    random: the chunked ``XᵀX`` equals the whole design's to 1e-10 of its largest entry, for any chunk size."""
+    random (NaN) and the others weighted 0.3-1: the chunked ``XᵀWX`` equals the whole design's to 1e-10 of its
+    largest entry, for any chunk size."""
     rng = np.random.default_rng(seed)
     data = rng.uniform(-800, 800, (frames, markers, 3))
     if planar:
         data[..., 2] = 1000.0                              # no height: the z fields vanish or repeat others
     seen = rng.uniform(size=(frames, markers)) >= hidden
+    weights = np.where(seen, rng.uniform(0.3, 1.0, seen.shape), 0.0)
+    data = np.where(seen[..., None], data, np.nan)
     box = sd.volume(data)
     flds = sd.fields(data, 3, box)
     old_rows = sd.CHUNK_ROWS
     sd.CHUNK_ROWS = chunk
     try:
-        got = sd.plain_gram(data, seen, box)
+        got = sd.plain_gram(data, weights, box)
     finally:
         sd.CHUNK_ROWS = old_rows
-    X = np.stack([np.where(seen[..., None], f, 0.0).reshape(-1) for f in flds], axis=1)
-    want = X.T @ X
+    X = np.stack([f.reshape(-1) for f in flds], axis=1)
+    assert not np.any(X[np.repeat(~seen.reshape(-1), 3)])               # every field is 0 where the data are NaN
+    want = X.T @ (np.repeat(weights.reshape(-1), 3)[:, None] * X)
     assert got.shape == (sd.FIELDS[3], sd.FIELDS[3]) == (len(sd.FIELD_NAMES),) * 2
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * max(float(np.max(np.abs(want))), 1.0))
 

@@ -61,3 +61,15 @@ def test_identify_text_puts_each_candidate_distance_under_its_marker():
     assert [head[a:b].strip() for a, b in spans] == ["candidate", "1e3", "RTH2", "RTIB"]
     assert [out[4][a:b].strip() for a, b in spans] == ["joint 0", "156.61", "82.83", "163.20"]
     assert [out[5][a:b].strip() for a, b in spans] == ["joint 1", "161.46", "85.39", "158.26"]
+
+
+def test_long_lists_in_an_effects_place_are_cut_in_the_text_report():
+    """A distortion may fit 53 fields: the text report shows the first few and how many more (the JSON has all); a
+    short list, and a long frame list (left out), as before."""
+    from identcheck.report.text import LIST_SHOWN, _where_text
+
+    names = [f"field {i}" for i in range(20)]
+    text = _where_text({"degree": 3, "fields": names})
+    assert f"and {20 - LIST_SHOWN} more" in text and names[LIST_SHOWN - 1] in text and names[LIST_SHOWN] not in text
+    assert _where_text({"joint": "hip", "functions": ["ωx³"]}) == "joint=hip, functions=['ωx³']"
+    assert "frames" not in _where_text({"markers": ["A"], "frames": list(range(10))})
