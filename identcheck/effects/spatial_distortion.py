@@ -7,11 +7,12 @@ rotation or uniform scale would be absorbed by the segments; 5 parameters), the 
 times 3-vectors (18) and the 10 cubic ones (30 more). Degree 3 holds the lens-like fields: a radial distortion
 ``|u − c|² (u − c)`` about any centre c is a cubic polynomial in u; over the metre or so a subject occupies, most of
 what a lens changes in the segments' shapes is its strain. Of the 53 fields, only those the criterion asks for are
-proposed (forward selection on the score test's moments, the choice charged: :mod:`identcheck.bundle.score_selection`):
-a scale error along the vertical axis (z) needs one strain field (along x or y two), a lens a few strains and cubic
-fields. Detector: the score statistic of the fields, with what a rigid refit absorbs taken out (a segment's pose and
-constants absorb most of a linear field over the little volume it sweeps), on the criterion's scale for a field as
-slow as the markers' motion under correlated noise (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`; the
+proposed (forward selection on the score test's moments, the choice charged: :mod:`identcheck.bundle.score_selection`),
+each strain on its own and the quadratic and the cubic fields each as one family (:data:`UNITS`): a scale error along
+the vertical axis (z) needs one strain field (along x or y two), a lens strains and the cubic family. Detector: the
+score statistic of the fields, with what a rigid refit absorbs taken out (a segment's pose and constants absorb most
+of a linear field over the little volume it sweeps), on the criterion's scale for a field as slow as the markers'
+motion under correlated noise (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`; the
 per-degree regressions before it read the plain residual). Augmentation: the fields added to every prediction, their
 coefficients fitted with everything else. A smooth field moves every marker by where it is, a slip one marker
 from one instant on: the two compete on that difference through the same criterion.
@@ -79,6 +80,12 @@ def fields(data: np.ndarray, degree: int = 2, box=None) -> list:
     return [field(data, k, box) for k in range(FIELDS[degree])]
 
 
+UNITS = [[k] for k in range(FIELDS[1])] + [list(range(FIELDS[1], FIELDS[2])), list(range(FIELDS[2], FIELDS[3]))]
+"""What the selection of fields chooses among: each strain on its own (a calibration can be off along one axis, or
+sheared between two, alone), the 18 quadratic fields together and the 30 cubic ones together. A monomial field alone
+is no shape a calibration error takes, only a piece of a basis for one; chosen one by one, three or four of them
+fitted what a few markers do where they happen to pass, and skin moving on a shank or thigh was named a distortion
+(held-out draw 52, trials 1 and 81: 3–4 quadratic and cubic fields, scoring 139 against the shank skin's 54)."""
 CHUNK_ROWS = 8192
 """Rows of the design matrix (marker coordinates) formed at a time by :func:`plain_gram`."""
 
@@ -131,7 +138,7 @@ class SpatialDistortion(Effect):
 
     def propose(self, ctx, hyp) -> list:
         """One proposal: the fields the criterion asks for among the 53 (:func:`~identcheck.bundle.score_selection.
-        forward_selection` on the score test's moments, each field its own unit, the choice charged), its strength
+        forward_selection` on the score test's moments over :data:`UNITS`, the choice charged), its strength
         what a refit with them gains to first order, smooth in time like the markers' motion
         (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`); ``where["degree"]`` the highest degree among
         them, ``where["fields"]`` their names (:data:`FIELD_NAMES`). The three nested families (5, 23 and 53 fields)
@@ -144,7 +151,7 @@ class SpatialDistortion(Effect):
         box = volume(at)
         n, G = score_moments_streamed(hyp.fit, hyp.weights, hyp.residuals(),
                                       (field(at, k, box) for k in range(FIELDS[3])), plain_gram(at, hyp.weights, box))
-        chosen = forward_selection(n, G, [[k] for k in range(FIELDS[3])],
+        chosen = forward_selection(n, G, UNITS,
                                    lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m),
                                    per_param=np.log(ctx.n_obs))
         columns = list(chosen.columns)

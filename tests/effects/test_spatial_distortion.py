@@ -61,3 +61,12 @@ def test_each_field_is_what_its_name_says(seed):
                  "y^2z": y * y * z, "z^2x": z * z * x, "z^2y": z * z * y, "xyz": x * y * z}[mono]
         np.testing.assert_allclose(f[..., d], value, rtol=1e-12, atol=1e-12)
         assert not np.any(np.delete(f, d, axis=-1))
+
+
+def test_the_units_chosen_among_are_the_strains_one_by_one_and_each_higher_degree_whole():
+    """Every field in exactly one unit; each strain its own; the quadratic and the cubic fields each one family."""
+    flat = sorted(k for u in sd.UNITS for k in u)
+    assert flat == list(range(sd.FIELDS[3]))
+    assert sd.UNITS[:sd.FIELDS[1]] == [[k] for k in range(sd.FIELDS[1])]
+    assert [len(u) for u in sd.UNITS[sd.FIELDS[1]:]] == [sd.FIELDS[2] - sd.FIELDS[1], sd.FIELDS[3] - sd.FIELDS[2]]
+    assert all(sd.FIELD_NAMES[k].startswith(("strain", "shear")) for k in range(sd.FIELDS[1]))
