@@ -104,7 +104,8 @@ def test_skin_the_effects_fit_still_widens_the_joints_beside_it(tmp_path):
 
 def test_a_moving_centre_the_effects_fit_widens_its_own_joint_only(tmp_path):
     """A knee whose centre moves with its angle (8-15 mm): diagnose fits the translation, finds its terms in the final
-    model, and gives the knee 1.5 times the fitted motion as model error, the hip none."""
+    model, and gives the knee 1.5 times the fitted motion as model error and says its distances are a convention of
+    where the fit places its moving centre, the hip neither."""
     from identcheck.io.model import Model
     from identcheck.simulate.rigid import simulate
     from identcheck.effects.registry import inject_effect
@@ -122,3 +123,8 @@ def test_a_moving_centre_the_effects_fit_widens_its_own_joint_only(tmp_path):
     joints = diag.to_dict()["joints"]
     assert joints["knee"]["practical"]["model_error_sd_mm"] >= round(1.5 * motions[0].rms_mm, 3) - 1e-3
     assert "model_error_sd_mm" not in joints["hip"]["practical"]
+    from identcheck.bundle.honest import MOVING_CENTRE_CAVEAT     # the knee's distances are said to be a convention
+    assert joints["knee"]["practical"]["reason"].endswith(MOVING_CENTRE_CAVEAT)
+    assert MOVING_CENTRE_CAVEAT not in joints["hip"]["practical"]["reason"]
+    from identcheck.report.text import diagnose_text                # and the terminal says it too
+    assert "knee: its centre moves with its angles" in diagnose_text(diag)
