@@ -7,7 +7,6 @@ the names and numbers in them.
 """
 from __future__ import annotations
 
-from identcheck.bundle.honest import MOVING_CENTRE_CAVEAT
 from identcheck.report.json_out import document
 
 MISSING = "-"       # what a table shows for a value the result does not have (None)
@@ -183,6 +182,8 @@ def diagnose_text(diag) -> str:
     if scale > 0:
         lines.append(f"   the uncertainties include a standard deviation of {100 * scale:.2g} % of every length: "
                      "the volume is distorted, and the uniform scale of its calibration is invisible to rigid bodies")
+    from identcheck.bundle.honest import MOVING_CENTRE_CAVEAT      # here: the terminal's start stays light
+
     for name, j in rep["joints"].items():
         if MOVING_CENTRE_CAVEAT in j.get("practical", {}).get("reason", ""):
             lines.append(f"   {name}: {MOVING_CENTRE_CAVEAT.lstrip('; ')}")
