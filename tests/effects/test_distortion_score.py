@@ -136,7 +136,7 @@ def test_fields_at_predicted_positions_do_not_fit_correlated_noise(seed, phi):
 
 def test_diagnose_names_a_few_millimetres_of_scale_error_along_one_axis():
     """A volume calibrated 0.4 % long along its vertical axis (about 4 mm over the leg's metre), 0.6 mm white
-    noise, 1500 frames: `diagnose` names a spatial distortion first, with strain fields alone. Read by regressing
+    noise, 1500 frames: `diagnose` names a spatial distortion first, as the one strain field a vertical scale is. Read by regressing
     the residual on the raw fields (before the score statistic), the segments' poses had taken most of it up and
     nothing was named."""
     import identcheck as ic
@@ -150,3 +150,5 @@ def test_diagnose_names_a_few_millimetres_of_scale_error_along_one_axis():
     report = ic.diagnose(model, sim.trial.replace(xyz=xyz)).to_dict()
     first = report["effects"][0]
     assert first["name"] == "spatial_distortion" and first["where"]["degree"] == 1
+    # a scale along z is, less its uniform part, the one strain field xx+yy-2zz: one parameter, not the five strains
+    assert first["where"]["fields"] == ["strain xx+yy-2zz"]
