@@ -21,10 +21,10 @@ from typing import TYPE_CHECKING
 from identcheck.errors import InputError
 from identcheck.io.model import Model
 from identcheck.plan import capture
-from identcheck.trial import FORMATS, Trial
 
 if TYPE_CHECKING:  # pragma: no cover
     from identcheck.simulate.rigid import Simulation
+    from identcheck.trial import Trial
 
 
 def _one_blas_thread(verb, with_scipy: bool = True):
@@ -83,6 +83,8 @@ def read_trial(trial) -> Trial:
     InputError
         Unreadable file, unknown extension, or bad content, naming the file.
     """
+    from identcheck.trial import Trial   # here, not at the top: a verb that reads no trial (plan) needs no NumPy
+
     return trial if isinstance(trial, Trial) else Trial.from_file(trial)
 
 
@@ -116,6 +118,8 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
         Bad model, bad arguments, an unknown output extension (checked before simulating),
         or an effect the model cannot carry.
     """
+    from identcheck.trial import FORMATS
+
     out_path = None if out is None else Path(out)
     if out_path is not None and out_path.suffix.lower() not in FORMATS:
         raise InputError([f"unknown trial file extension {out_path.suffix or '(none)'!r} (expected "

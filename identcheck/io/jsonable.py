@@ -8,19 +8,24 @@ changed through the documents it holds either.
 """
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from types import MappingProxyType
-
-import numpy as np
 
 
 def plain(value):
     """`value` with numpy arrays and scalars turned into lists, floats and ints, mappings into dicts and
-    tuples into lists (for JSON)."""
+    tuples into lists (for JSON).
+
+    NumPy is not imported for this: a value can hold NumPy's arrays or scalars only once NumPy is loaded, so a verb
+    that never loads it (``plan``) does not pay its import here."""
     if isinstance(value, Mapping):
         return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
+    np = sys.modules.get("numpy")
+    if np is None:
+        return value
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.integer):

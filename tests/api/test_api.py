@@ -218,12 +218,18 @@ assert not heavy, heavy
 
 def test_a_plan_without_noise_loads_no_scipy():
     """``plan``'s verdicts, motion and robustness analyses are exact arithmetic: SciPy stays unloaded (its import
-    was a third of the call); with ``noise_mm`` the practical verdicts fit, and SciPy is loaded under the BLAS limit."""
+    was a third of the call), and so does NumPy (a sixth: the trial readers are loaded when a trial is read); with
+    ``noise_mm`` the practical verdicts fit, and SciPy is loaded under the BLAS limit."""
     script = """
 import sys
 import identcheck as ic
 res = ic.plan("examples/body16.toml").to_dict()
 assert res["robustness"] and "scipy" not in sys.modules, sorted(m for m in sys.modules if m.startswith("scipy"))
+assert "numpy" not in sys.modules
+from identcheck import cli
+assert cli.main(["plan", "examples/knee_21.toml", "--json"]) in (0, 1) and "numpy" not in sys.modules  # 1: an answer
+from identcheck.io import Model, read_trc                         # the package's names still resolve, on use
+assert Model.__module__ == "identcheck.io.model" and read_trc.__module__ == "identcheck.io.trc"
 from identcheck import api
 assert api._plan_is_numerical(noise_mm=1.0) and api._plan_is_numerical(witness=True)
 assert not api._plan_is_numerical("m.toml", motion=False)
