@@ -6,6 +6,11 @@ variance explained, net of the parameters it costs, ranks the (marker, joints) p
 marker's position on its segment becomes ``local + basis(angles) @ B`` with B (K × 3) fitted with everything
 else. ``where`` names the joint (with two, ``joints`` names both and ``joint`` the first).
 
+Only the functions the criterion asks for are proposed and fitted (:func:`selected`: forward selection of
+:mod:`identcheck.bundle.score_selection` over the functions, each with a free 3-vector, the choice charged), and
+``where["functions"]`` names them (:func:`basis_names`): skin on a thigh moving with hip flexion needs one or two of
+the hip's nine functions, not 27 parameters a marker (42 with the knee's angle too).
+
 Skin also carries a whole marker cluster at once (a cluster on a plate, or the soft tissue under it): the
 mean of a segment's markers' residuals regressed the same way proposes the cluster moving together, one
 shared B for all its markers. A cluster moving on its segment is not a translating joint: it moves that
@@ -17,6 +22,7 @@ import numpy as np
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
+from identcheck.bundle.score_selection import Selection, forward_selection
 from identcheck.bundle.misfit import ModelledMotion
 from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets
 from identcheck.effects.injection import Change, cannot, marker_column, diameter, normalised_angle, pick, rotate, rotations, unit_vectors
@@ -42,6 +48,44 @@ def explained(resid: np.ndarray, basis: np.ndarray, fields: list = ()) -> float:
                   + [f[ok].reshape(-1, 1) for f in fields])                # each field times a scalar
     y = y.reshape(-1)
     return float(np.sum((X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2))
+
+
+def regression_moments(resid: np.ndarray, basis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The moments ``(n, G)`` of `resid` (F, 3) regressed on `basis` (F, K) times free 3-vectors plus a constant, over
+    the finite rows, in the form :func:`~identcheck.bundle.score_selection.forward_selection` reads: field ``3k + a``
+    is function k along axis a, ``n`` its inner product with the centred residual and ``G = XᵀX ⊗ I₃`` (X the
+    centred functions), so that ``n_Sᵀ G_SS⁺ n_S`` is the sum of squares the functions S explain (what
+    :func:`explained` gives for S). Both empty when the rows are too few for the whole basis."""
+    ok = np.all(np.isfinite(resid), axis=1)
+    K = basis.shape[1]
+    if int(ok.sum()) <= K + 2:
+        return np.zeros(0), np.zeros((0, 0))
+    y = resid[ok] - resid[ok].mean(axis=0)
+    X = basis[ok] - basis[ok].mean(axis=0)
+    return (X.T @ y).reshape(-1), np.kron(X.T @ X, np.eye(3))
+
+
+def selected(ctx, resid: np.ndarray, basis: np.ndarray, weight: float = 1.0) -> Selection:
+    """Which of `basis`'s functions (each with a free 3-vector) the criterion asks for to explain `resid` (F, 3): the
+    forward selection on :func:`regression_moments`, each subset's gain ``ctx.bic_gain(weight · explained, its
+    parameters + the choice's)`` (`weight`: how many markers share the residual, for a cluster's mean). Its ``units``
+    are the chosen functions (indices into the basis's columns); an empty selection when the rows are too few."""
+    n, G = regression_moments(resid, basis)
+    if not len(n):
+        return Selection((), (), float(ctx.bic_gain(0.0, 0)))
+    units = [[3 * k, 3 * k + 1, 3 * k + 2] for k in range(basis.shape[1])]
+    return forward_selection(n, G, units, lambda stat, m: ctx.bic_gain(weight * stat, m),
+                             per_param=float(np.log(ctx.n_obs)))
+
+
+def basis_names(chain, joints: tuple) -> list:
+    """The names of the functions of :func:`~identcheck.bundle.hypothesis.angle_basis` of `joints`' angles stacked in
+    that order (as :meth:`SoftTissue.propose` builds it), in its column order: each angle (a hinge's ``knee θ``, a
+    ball joint's rotation-vector components ``hip ωx`` …), then the products of two (``hip ωx·knee θ``, squares
+    ``knee θ²``); each angle scaled to [−1, 1] over the trial."""
+    symbols = [f"{j} {a}" for j in joints for a in (["θ"] if chain.types[j] == "revolute" else ["ωx", "ωy", "ωz"])]
+    i, k = np.triu_indices(len(symbols))
+    return symbols + [f"{symbols[a]}²" if a == b else f"{symbols[a]}·{symbols[b]}" for a, b in zip(i, k)]
 
 
 def same_motion_clusters(chain, joint: str) -> list:
@@ -117,7 +161,8 @@ class SoftTissue(Effect):
     def propose(self, ctx, hyp) -> list:
         """Three kinds of place on each segment: one marker, the cluster moving as one (one shared motion), and every
         marker of the segment each moving its own way (skin under a cluster of separate markers); for each, the
-        joints whose angles (:func:`drivers`) earn the most."""
+        joints whose angles (:func:`drivers`) earn the most, with only the functions of them the criterion asks for
+        (:func:`selected`; every marker its own for a segment's markers each moving their own way)."""
         seg_res = segment_residuals(hyp)
         angles = joint_angles(hyp)
         ch = hyp.chain
@@ -130,27 +175,38 @@ class SoftTissue(Effect):
 
         for seg, joints in drivers(ch):
             basis = angle_basis(np.column_stack([angles[j] for j in joints]))
-            K, cols = basis.shape[1], np.asarray(ch.seg_markers[seg])
+            names = basis_names(ch, joints)
+            cols = np.asarray(ch.seg_markers[seg])
             place = {"segment": seg, "joint": joints[0]} | ({"joints": list(joints)} if len(joints) > 1 else {})
-            payload = {"basis": basis, "joint": joints[0]}
-            own = [explained(seg_res[:, col], basis) for col in cols]
-            for col, found in zip(cols, own):
-                offer({"markers": [ch.labels[col]], **place}, ctx.bic_gain(found, 3 * K), {"col": int(col), **payload})
+
+            def chosen(sel):  # noqa: E306 - the payload and the named functions of one selection
+                funcs = sorted(sel.units)
+                return {"basis": basis[:, funcs], "choice_params": sel.choice_params}, [names[u] for u in funcs]
+            own = [selected(ctx, seg_res[:, col], basis) for col in cols]
+            for col, sel in zip(cols, own):
+                payload, functions = chosen(sel)
+                offer({"markers": [ch.labels[col]], **place, "functions": functions}, sel.gain,
+                      {"col": int(col), "joint": joints[0], **payload})
             if len(cols) < 2:
                 continue
-            names = [ch.labels[c] for c in cols]
-            offer({"markers": names, **place}, ctx.bic_gain(sum(own), 3 * K * len(cols)),
-                  {"col": cols, "each": True, **payload})
+            labels = [ch.labels[c] for c in cols]
+            each = [chosen(sel) for sel in own]
+            offer({"markers": labels, **place, "functions": [f"{ch.labels[c]}: {', '.join(f)}" for c, (_, f) in zip(cols, each)]},
+                  sum(sel.gain for sel in own),
+                  {"col": cols, "each": True, "joint": joints[0], "bases": [p["basis"] for p, _ in each],
+                   "basis": basis[:, :0], "choice_params": sum(p["choice_params"] for p, _ in each)})
             # the root's own pose takes up its cluster's common motion whole, which then shows on the
             # markers below its joints instead (in the root's frame, with the sign turned)
             # (for a joint a segment further, below the root's own joints: its cluster's motion shows there too)
-            own = [j for j in joints if seg in (ch.parent[j], ch.child[j])] or [
+            own_joints = [j for j in joints if seg in (ch.parent[j], ch.child[j])] or [
                 j for j in ch.joints if ch.parent[j] == seg]
-            seen = sorted(set().union(*(ch.downstream[j] for j in own))) if seg == ch.root else cols
+            seen = sorted(set().union(*(ch.downstream[j] for j in own_joints))) if seg == ch.root else cols
             mean = seen_mean(seg_res[:, seen] if seg != ch.root else np.einsum(
                 "fji,fkj->fki", hyp.fit.seg_R[seg], hyp.residuals()[:, seen]), axis=1)
-            offer({"markers": names, **place, "together": True},
-                  ctx.bic_gain(len(seen) * explained(mean, basis), 3 * K), {"col": cols, **payload})
+            sel = selected(ctx, mean, basis, weight=len(seen))
+            payload, functions = chosen(sel)
+            offer({"markers": labels, **place, "together": True, "functions": functions}, sel.gain,
+                  {"col": cols, "joint": joints[0], **payload})
         return sorted(best.values(), key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
@@ -167,15 +223,20 @@ class SoftTissue(Effect):
 
     def apply(self, ctx, hyp, proposal):
         col, basis = proposal.payload["col"], proposal.payload["basis"]
-        terms = [(int(c), basis) for c in col] if proposal.payload.get("each") else [(col, basis)]
-        return hyp.refit(terms=hyp.terms + Terms(markers=terms), effect=proposal)
+        if proposal.payload.get("each"):
+            terms = [(int(c), b) for c, b in zip(col, proposal.payload["bases"]) if b.shape[1]]
+        else:
+            terms = [(col, basis)] if basis.shape[1] else []
+        return hyp.refit(terms=hyp.terms + Terms(markers=terms), effect=proposal,
+                         extra_params=proposal.payload.get("choice_params", 0))
 
     def modelled_motion(self, proposal, hyp) -> list:
         """Each of the proposal's terms as the motion of its marker (or cluster) on its segment, RMS over the frames
         where one of its markers is seen."""
         mine = set(np.atleast_1d(proposal.payload["col"]).tolist())
+        bases = proposal.payload.get("bases") or [proposal.payload["basis"]]
         out = []
-        for cols, offsets in term_offsets(hyp, "markers", proposal.payload["basis"]):
+        for cols, offsets in [found for b in bases for found in term_offsets(hyp, "markers", b)]:
             cols = np.atleast_1d(cols)
             if set(cols.tolist()) <= mine:
                 seen = np.any(hyp.weights[:, cols] > 0, axis=1)
