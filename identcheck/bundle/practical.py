@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import joint_offsets
-from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
+from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor, poses_segment
 from identcheck.geometry.rotations import skew
 
 TOLERANCE_MM = 10.0
@@ -218,10 +218,17 @@ def centre_in_parent(chain, state, joint: str, n_params: int) -> tuple[np.ndarra
     return grad, free
 
 
-def own_pose(chain, segment: str) -> bool:
+def own_pose(chain, segment: str, fit=None) -> bool:
     """Whether a segment carries markers enough (three) to be posed in every frame by them alone, so that its
-    motion relative to a neighbour is measured, whatever the joint between them."""
-    return len(chain.seg_markers[segment]) >= MIN_MARKERS
+    motion relative to a neighbour is measured, whatever the joint between them; with `fit`, also not on one line
+    (their fitted places on the segment, :func:`~identcheck.geometry.poses.poses_segment`): a frame posed by three
+    markers within a millimetre of a line turns about it with the noise, and a knee that moved 60° below such a thigh
+    was said to have hardly moved (its shank markers 170 mm from one place in the thigh's frame, within the noise
+    that frame's roll amplified)."""
+    idx = chain.seg_markers[segment]
+    if len(idx) < MIN_MARKERS:
+        return False
+    return fit is None or poses_segment(fit.state.local[idx][None])
 
 
 def excursion_mm(chain, fit, frame_segment: str, moving_segment: str) -> tuple[np.ndarray, np.ndarray]:
@@ -286,9 +293,12 @@ def _motion_seen(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str]:
     ``"moved"`` (one segment posed, the other's markers move in its frame, by how much the text says) and
     ``"unmeasured"`` (neither posed and not shown still, or the other segment carries no marker)."""
     parent, child = chain.parent[joint], chain.child[joint]
-    posed = [s for s in (parent, child) if own_pose(chain, s)]
+    posed = [s for s in (parent, child) if own_pose(chain, s, fit)]
     n = {s: len(chain.seg_markers[s]) for s in (parent, child)}
     counts = f"{parent} carries {n[parent]} marker{'s' * (n[parent] != 1)}, {child} {n[child]}"
+    lined = [s for s in (parent, child) if n[s] >= MIN_MARKERS and s not in posed]
+    if lined:
+        counts += f"; {' and '.join(lined)}'s lie on one line"
     if not posed:
         if n[parent] and n[child] and n[parent] + n[child] >= MIN_MARKERS:
             spread = cross_spread_mm(fit, chain.seg_markers[parent], chain.seg_markers[child])
@@ -298,7 +308,7 @@ def _motion_seen(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str]:
         return "unmeasured", (
             f"{joint}'s rotation is not measured by the markers ({counts}: neither is posed by its own markers, and "
             f"the fitted angles follow the joint's geometry, which this trial leaves open): add markers to bring "
-            f"{parent} or {child} to three")
+            f"{parent} or {child} to three, off one line")
     frame = posed[0]                        # the parent when both are posed
     other = child if frame == parent else parent
     each, amplification = excursion_mm(chain, fit, frame, other)
@@ -312,8 +322,8 @@ def _motion_seen(chain, fit, joint: str, sigma_mm: float) -> tuple[str, str]:
         return "measured", ""
     return "moved", (f"{other}'s markers move up to {float(np.max(each)):.0f} mm in {frame}'s frame, but {other} is "
                      f"not posed by its own markers ({counts}), so how far {joint} turned depends on its geometry, "
-                     f"which this trial leaves open: add markers to bring {other} to three, or markers farther from "
-                     "the joint on it")
+                     f"which this trial leaves open: add markers to bring {other} to three, off one line, or markers "
+                     "farther from the joint on it")
 
 
 def _motion(chain, fit, joint: str, weak, seen: tuple) -> str:

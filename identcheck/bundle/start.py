@@ -14,7 +14,7 @@ from identcheck.bundle.chain import filled_poses, initial_state
 from identcheck.errors import DegenerateError
 from identcheck.estimate.closed_forms import fit_model
 from identcheck.estimate.joint import start_stride
-from identcheck.geometry.poses import refine_local, segment_poses
+from identcheck.geometry.poses import poses_segment, refine_local, segment_poses
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
 
@@ -33,8 +33,10 @@ def virtual_frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         idx = chain.seg_markers[seg]
         extra = [v for v in virtual.get(seg, {}).values() if np.isfinite(v).all(axis=1).any()]
         pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
-        if pts.shape[1] == 2:           # two points leave the roll about their line free: any roll will do
-            pts = np.concatenate([pts, _roll_point(pts[:, 0], pts[:, 1])[:, None]], axis=1)
+        if pts.shape[1] == 2 or (pts.shape[1] >= 3 and not poses_segment(pts)):
+            # two points, or points on one line, leave the roll about their line free: any roll will do
+            a, b = _farthest_pair(pts)
+            pts = np.concatenate([pts, _roll_point(pts[:, a], pts[:, b])[:, None]], axis=1)
         if pts.shape[1] < 3:
             raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
                                   "pose it (three are needed to start the whole-tree fit)", segment=seg)
@@ -59,6 +61,14 @@ def _start_poses(pts: np.ndarray) -> tuple:
         except ValueError:
             pass
     return refine_local(pts, tol=START_SHAPE_TOL_MM)
+
+
+def _farthest_pair(pts: np.ndarray) -> tuple[int, int]:
+    """The two of the points (F, m, 3) farthest apart on average (the line they fix is the best fixed)."""
+    mean = np.nanmean(pts, axis=0)
+    far = np.nan_to_num(np.linalg.norm(mean[:, None] - mean[None, :], axis=2))
+    a, b = np.unravel_index(int(np.argmax(far)), far.shape)
+    return int(a), int(b)
 
 
 def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -92,9 +102,10 @@ def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
 
 def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float, source: str = "<array>"):
     """A fresh starting state for `chain` on `data` (F, M, 3) in its marker order: from every segment's own poses
-    (:func:`~identcheck.bundle.chain.initial_state`) when each has three markers or more, otherwise from the
-    closed-form joints of `model` (:func:`closed_form_state`). `source` names the trial the data came from in
+    (:func:`~identcheck.bundle.chain.initial_state`) when each has three markers or more, not on one line
+    (:func:`~identcheck.geometry.poses.poses_segment`), otherwise from the closed-form joints of `model`
+    (:func:`closed_form_state`). `source` names the trial the data came from in
     what the closed forms may say about it."""
-    if all(len(chain.seg_markers[seg]) >= 3 for seg in chain.segments):
+    if all(poses_segment(data[:, chain.seg_markers[seg]]) for seg in chain.segments):
         return initial_state(chain, data)
     return closed_form_state(model, Trial.from_array(data, chain.labels, rate_hz, source=source), chain, data)

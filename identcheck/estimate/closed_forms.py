@@ -21,6 +21,7 @@ import numpy as np
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate import joint as E
+from identcheck.geometry.poses import poses_segment
 
 log = logging.getLogger("identcheck")
 SPHERE_MARGIN = 3.0        # a far marker decides among revolute (2,1) candidates by 3x and this many (2,1) rms
@@ -48,12 +49,40 @@ def _estimator(kind: str, p: int, q: int):
     return None
 
 
+def _posing_count(points: dict) -> int:
+    """How many of a link's points count in choosing its estimator: all of them when they pose the link
+    (:func:`~identcheck.geometry.poses.poses_segment`), at most two when they lie on one line (three anatomical thigh
+    markers, greater trochanter to epicondyle: the link's roll is not theirs to give, and an estimator that poses the
+    link by them alone is fed poses flipping by half turns)."""
+    if len(points) >= 3 and not poses_segment(np.stack(list(points.values()), axis=1)):
+        return 2
+    return len(points)
+
+
 def _choose(kind: str, parent: dict, child: dict):
-    """(estimator, parent markers, child markers) with the links ordered so that p >= q, or None."""
-    if len(parent) < len(child):
-        parent, child = child, parent
-    fn = _estimator(kind, len(parent), len(child))
-    return None if fn is None else (fn, list(parent.values()), list(child.values()))
+    """(estimator, parent markers, child markers) with the links ordered so that p >= q, or None; p and q count
+    the points that pose each link (:func:`_posing_count`), and every point is passed on (a two-point estimator
+    takes the first two: of points on one line, the two farthest apart)."""
+    p, q = _posing_count(parent), _posing_count(child)
+    if p < q:
+        parent, child, p, q = child, parent, q, p
+    fn = _estimator(kind, p, q)
+    if fn is None:
+        return None
+    return fn, _ends_first(parent, p), _ends_first(child, q)
+
+
+def _ends_first(points: dict, count: int) -> list:
+    """The points' trajectories, the two farthest apart first when only two of them pose the link (`count` 2 of
+    three or more on one line)."""
+    values = list(points.values())
+    if count >= 3 or len(values) <= 2:
+        return values
+    stacked = np.stack(values, axis=1)
+    mean = np.nanmean(stacked, axis=0)                                # (n, 3): the points' average place
+    far = np.linalg.norm(mean[:, None] - mean[None, :], axis=2)
+    a, b = np.unravel_index(np.nanargmax(far), far.shape)
+    return [values[a], values[b]] + [v for k, v in enumerate(values) if k not in (a, b)]
 
 
 def _markers(model, points: dict, virtual: dict, seg: str) -> dict:

@@ -25,6 +25,37 @@ REFINE_TOL_MM = 1e-9
 coordinate between iterations, mm."""
 
 
+OFF_LINE_MM = 5.0
+"""Markers closer than this to one line (RMS distance, :func:`off_line_mm`) do not pose their segment: its roll about
+that line is the noise over their distance from it (at 1 mm of noise and 5 mm, a tenth of a radian in every
+frame), and a fit started from such poses flips the roll by half turns from frame to frame. Three anatomical thigh
+markers (greater trochanter, lateral thigh, lateral epicondyle) lay within 0.8 mm of one line on a held-out trial
+(draw 54, trial 46): its clean rigid fit stopped at 4.5 times the noise floor with the hip's angle jumping by 118°
+between frames, and ``diagnose`` named an extra rotation of the knee."""
+
+
+def off_line_mm(points) -> float:
+    """How far points (F, m, 3) lie from one line: the RMS distance of the m points from their best-fitting line,
+    median over the frames that see every one of them (infinite for fewer than three points or no such frame:
+    nothing to judge)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 3 or pts.shape[1] < 3:
+        return 0.0
+    full = pts[np.all(np.isfinite(pts), axis=(1, 2))]
+    if not len(full):
+        return float("inf")
+    centred = full - full.mean(axis=1, keepdims=True)
+    s = np.linalg.svd(centred, compute_uv=False)                      # (F', 3), largest first
+    return float(np.median(np.sqrt((s[:, 1] ** 2 + s[:, 2] ** 2) / pts.shape[1])))
+
+
+def poses_segment(points) -> bool:
+    """Whether points (F, m, 3) fixed in one segment pose it: three or more, not all within :data:`OFF_LINE_MM` of one
+    line."""
+    pts = np.asarray(points, dtype=float)
+    return pts.ndim == 3 and pts.shape[1] >= MIN_MARKERS and off_line_mm(pts) >= OFF_LINE_MM
+
+
 @dataclass(frozen=True)
 class Poses:
     """Per-frame rigid poses of one segment: ``points[f] ≈ R[f] @ local.T + t[f]``."""
