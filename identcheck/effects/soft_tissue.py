@@ -191,7 +191,8 @@ class SoftTissue(Effect):
                 continue
             labels = [ch.labels[c] for c in cols]
             each = [chosen(sel) for sel in own]
-            offer({"markers": labels, **place, "functions": [f"{ch.labels[c]}: {', '.join(f)}" for c, (_, f) in zip(cols, each)]},
+            named = [f"{ch.labels[c]}: {', '.join(f)}" for c, (_, f) in zip(cols, each)]
+            offer({"markers": labels, **place, "functions": named},
                   sum(sel.gain for sel in own),
                   {"col": cols, "each": True, "joint": joints[0], "bases": [p["basis"] for p, _ in each],
                    "basis": basis[:, :0], "choice_params": sum(p["choice_params"] for p, _ in each)})

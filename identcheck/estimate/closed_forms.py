@@ -59,11 +59,10 @@ def _posing_count(points: dict) -> int:
     return len(points)
 
 
-def _choose(kind: str, parent: dict, child: dict):
+def _choose(kind: str, parent: dict, child: dict, p: int, q: int):
     """(estimator, parent markers, child markers) with the links ordered so that p >= q, or None; p and q count
     the points that pose each link (:func:`_posing_count`), and every point is passed on (a two-point estimator
     takes the first two: of points on one line, the two farthest apart)."""
-    p, q = _posing_count(parent), _posing_count(child)
     if p < q:
         parent, child, p, q = child, parent, q, p
     fn = _estimator(kind, p, q)
@@ -115,7 +114,7 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
         for name in list(pending):
             jt = model.joints[name]
             par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
-            p, q = len(par), len(chi)
+            p, q = _posing_count(par), _posing_count(chi)       # what poses each link: its case and its turn
             case = _case(jt.type, p, q)
             if fixed and name in fixed:
                 est = dataclasses.replace(fixed[name], unique=True, alternatives=[], ranked_out=[])
@@ -125,7 +124,7 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
                 pending.remove(name)
                 progressed = True
                 continue
-            chosen = _choose(jt.type, par, chi)
+            chosen = _choose(jt.type, par, chi, p, q)
             if chosen is None:
                 continue        # wait: a later joint may add virtual markers
             if jt.type == "revolute" and sorted((p, q)) == [1, 2]:
@@ -148,8 +147,8 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
             except InputError as exc:        # the estimators see arrays: name the file and the joint
                 raise exc.naming(trial.source, f"joint {name!r} ({case} with {', '.join(par)} | "
                                                f"{', '.join(chi)}): ") from None
-            if not est.unique and jt.type == "revolute" and len(P) == 2:
-                one_side = jt.child if len(par) >= len(chi) else jt.parent
+            if not est.unique and jt.type == "revolute" and max(p, q) == 2:
+                one_side = jt.child if p >= q else jt.parent
                 est = _decide_revolute21(model, name, one_side, est, C, points)
             done[name] = (est, {"case": case, "parent_markers": list(par), "child_markers": list(chi)})
             if est.unique:      # a joint among equally good alternatives must not be passed down as if known
@@ -165,8 +164,8 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
     for name in pending:
         jt = model.joints[name]
         par, chi = _markers(model, points, virtual, jt.parent), _markers(model, points, virtual, jt.child)
-        done[name] = (None, {"case": _case(jt.type, len(par), len(chi)), "parent_markers": list(par),
-                             "child_markers": list(chi)})
+        done[name] = (None, {"case": _case(jt.type, _posing_count(par), _posing_count(chi)),
+                             "parent_markers": list(par), "child_markers": list(chi)})
     return {n: done[n] for n in model.joint_order}, points
 
 

@@ -36,8 +36,8 @@ between frames, and ``diagnose`` named an extra rotation of the knee."""
 
 def off_line_mm(points) -> float:
     """How far points (F, m, 3) lie from one line: the RMS distance of the m points from their best-fitting line,
-    median over the frames that see every one of them (infinite for fewer than three points or no such frame:
-    nothing to judge)."""
+    median over the frames that see every one of them; 0 for fewer than three points (two always lie on one), and
+    infinite when no frame sees all of them (nothing to judge: they are taken to pose their segment, as before)."""
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 3 or pts.shape[1] < 3:
         return 0.0
