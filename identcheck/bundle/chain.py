@@ -350,10 +350,13 @@ def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, 
 
 
 def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:
-    """``nᵀ G⁺ n``, the score statistic of moments ``(n, G)`` (:func:`score_moments`); 0 for no fields."""
+    """``nᵀ G⁺ n``, the score statistic of moments ``(n, G)`` (:func:`score_moments`); 0 for no fields. With `n` a
+    matrix (k, w), the sum of the statistic over its w columns, ``trace(nᵀ G⁺ n)``: the moments of k functions each
+    with a free w-vector when every one of the w directions shares the Gram matrix `G` (k, k) — the statistic of the
+    kw fields ``nᵀ (G ⊗ I_w)⁺ n`` with the w-fold smaller matrix."""
     if not len(n):
         return 0.0
-    return float(n @ np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)
+    return float(np.sum(n * (np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)))
 
 
 # ---------------------------------------------------------------------- starting point

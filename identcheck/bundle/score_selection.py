@@ -16,14 +16,13 @@ from typing import Callable
 
 import numpy as np
 
-from identcheck.bundle.chain import quadratic_form
 
 
 @dataclass(frozen=True)
 class Selection:
     """The units chosen (indices into the units given, in the order they were added), the fields they hold (sorted
-    indices into the moments), the parameters charged for choosing them (:func:`choice_params`), and the
-    criterion's gain of those fields to first order, that charge included."""
+    indices into the moments: rows, when the moments are a matrix), the parameters charged for choosing them
+    (:func:`choice_params`), and the criterion's gain of those fields to first order, that charge included."""
 
     units: tuple
     columns: tuple
@@ -54,20 +53,57 @@ def forward_selection(n: np.ndarray, G: np.ndarray, units: list, gain: Callable[
     parameters, and the caller's proposal says so by its strength).
 
     Greedy, so not the best of all subsets, but never worse than the best single unit (the first step) or all of
-    them (the last), each with its charge; the number of statistics it evaluates is quadratic in the number of units,
-    each on the moments only. An empty `units` gives an empty selection with the gain of nothing, ``gain(0, 0)``."""
+    them (the last), each with its charge. Each step adds to the statistic of the chosen fields C what a unit U adds
+    to it, ``trace(r_Uᵀ D_U⁺ r_U)`` with ``r_U = n_U − G_UC G_CC⁺ n_C`` and ``D_U = G_UU − G_UC G_CC⁺ G_CU`` (the
+    moments of U with C regressed out: the statistic of C ∪ U is that of C plus this), so a step costs one
+    pseudo-inverse of the chosen fields' block, not one of every candidate's union (on a 42-marker body, skin's
+    selections had made 17 700 of them a round, 1.3 CPU s). An empty `units` gives an empty selection with the gain
+    of nothing, ``gain(0, 0)``.
+
+    With `n` a matrix (k, w), each row is a function with a free w-vector whose directions share the Gram matrix `G`
+    (k, k) (:func:`~identcheck.bundle.chain.quadratic_form`): a unit's rows count w fields each."""
+    width = n.shape[1] if np.ndim(n) == 2 else 1
+    moments = np.asarray(n, dtype=float).reshape(len(n), width)      # (fields, w): one column unless n is a matrix
     chosen: list = []
+    cols: list = []
+    stat = 0.0
     left = list(range(len(units)))
     best = Selection((), (), float(gain(0.0, 0)))
     while left:
         charge = choice_params(len(units), len(chosen) + 1, per_param)
-
-        def scored(u):  # noqa: E306 - the gain of the chosen units with u added
-            cols = sorted(c for k in chosen + [u] for c in units[k])
-            return float(gain(quadratic_form(n[cols], G[np.ix_(cols, cols)]), len(cols) + charge))
-        gains = [scored(u) for u in left]
+        if cols:
+            B = G[:, cols] @ np.linalg.pinv(G[np.ix_(cols, cols)], rcond=1e-10, hermitian=True)
+            resid, D = moments - B @ moments[cols], G - B @ G[cols, :]
+        else:
+            resid, D = moments, G
+        added = _added_each(resid, D, G, [units[u] for u in left])
+        gains = [float(gain(stat + a, width * (len(cols) + len(units[u])) + charge)) for a, u in zip(added, left)]
         k = int(np.argmax(gains))
+        stat += added[k]
+        cols += list(units[left[k]])
         chosen.append(left.pop(k))
         if gains[k] > best.gain or not best.units:
-            best = Selection(tuple(chosen), tuple(sorted(c for u in chosen for c in units[u])), gains[k], charge)
+            best = Selection(tuple(chosen), tuple(sorted(cols)), gains[k], charge)
     return best
+
+
+def _added_each(resid: np.ndarray, D: np.ndarray, G: np.ndarray, units: list) -> list:
+    """:func:`_added` for each of `units`, at once when every one is a single field (a skin term's functions)."""
+    if all(len(u) == 1 for u in units):
+        idx = np.array([u[0] for u in units])
+        d, g = np.diagonal(D)[idx], np.diagonal(G)[idx]
+        spanned = d <= 1e-10 * np.maximum(g, 1e-300)
+        return np.where(spanned, 0.0, np.sum(resid[idx] ** 2, axis=1) / np.where(spanned, 1.0, d)).tolist()
+    return [_added(resid, D, G, u) for u in units]
+
+
+def _added(resid: np.ndarray, D: np.ndarray, G: np.ndarray, unit: list) -> float:
+    """What unit `unit`'s fields add to the statistic given the chosen ones: ``trace(r_Uᵀ D_U⁺ r_U)`` (`resid`, `D`:
+    the moments and the Gram matrix with the chosen fields regressed out). A field the chosen ones already span
+    (its ``D`` within 1e-10 of its own ``G``, the pseudo-inverse's cut) adds nothing."""
+    if len(unit) == 1:
+        u = unit[0]
+        d = float(D[u, u])
+        return float(np.sum(resid[u] ** 2) / d) if d > 1e-10 * max(float(G[u, u]), 1e-300) else 0.0
+    r = resid[unit]
+    return float(np.sum(r * (np.linalg.pinv(D[np.ix_(unit, unit)], rcond=1e-10, hermitian=True) @ r)))

@@ -79,3 +79,59 @@ def test_a_residual_of_one_units_fields_selects_that_unit_alone(seed, n_units, w
 def test_no_units_select_nothing():
     sel = forward_selection(np.zeros(0), np.zeros((0, 0)), [], lambda stat, m: stat - m)
     assert sel.units == () and sel.columns == () and sel.gain == 0.0
+
+
+def _exhaustive_greedy(n, G, units, gain, per_param):
+    """Greedy forward selection written the plain way: every candidate's union statistic from its own block."""
+    chosen, left = [], list(range(len(units)))
+    best = (float(gain(0.0, 0)), ())
+    while left:
+        charge = choice_params(len(units), len(chosen) + 1, per_param)
+        gains = []
+        for u in left:
+            cols = sorted(c for k in chosen + [u] for c in units[k])
+            gains.append(gain(quadratic_form(n[cols], G[np.ix_(cols, cols)]), len(cols) + charge))
+        k = int(np.argmax(gains))
+        chosen.append(left.pop(k))
+        if gains[k] > best[0] or not best[1]:
+            best = (gains[k], tuple(chosen))
+    return best
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 7), st.integers(1, 3), st.booleans())
+def test_the_step_by_step_statistic_is_the_unions(seed, n_units, width, dependent):
+    """Each step adds what a unit adds with the chosen fields regressed out: the same choices and gains as computing
+    every candidate's union from its own block, also where some fields are combinations of others or zero."""
+    rng, X, units = _problem(seed, n_units, width)
+    if dependent and X.shape[1] > 2:
+        X[:, -1] = X[:, 0] - 2 * X[:, 1]
+        X[:, rng.integers(X.shape[1])] = 0.0
+    r = rng.normal(size=len(X)) + X @ (rng.normal(size=X.shape[1]) * (rng.random(X.shape[1]) < 0.4)) * 3
+    n, G = X.T @ r, X.T @ X
+
+    def gain(stat, m):
+        return stat - 2.0 * m
+
+    sel = forward_selection(n, G, units, gain, per_param=4.0)
+    plain_gain, plain_units = _exhaustive_greedy(n, G, units, gain, 4.0)
+    assert sel.units == plain_units and np.isclose(sel.gain, plain_gain, rtol=1e-7, atol=1e-7)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 8), st.integers(1, 4))
+def test_matrix_moments_are_the_kronecker_fields(seed, k, w):
+    """Moments as a matrix (k functions, each with a free w-vector sharing one Gram matrix) select what the k·w
+    fields with the Gram matrix ``G ⊗ I_w`` written out select, with the same gain."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(80, k))
+    Y = X @ (rng.normal(size=(k, w)) * (rng.random((k, 1)) < 0.5)) * 2 + rng.normal(size=(80, w))
+    N, A = X.T @ Y, X.T @ X
+
+    def gain(stat, m):
+        return stat - 3.0 * m
+
+    a = forward_selection(N, A, [[f] for f in range(k)], gain, per_param=3.0)
+    b = forward_selection(N.reshape(-1), np.kron(A, np.eye(w)), [[w * f + i for i in range(w)] for f in range(k)],
+                          gain, per_param=3.0)
+    assert a.units == b.units and np.isclose(a.gain, b.gain, rtol=1e-9)

@@ -27,22 +27,26 @@ LEG = EXAMPLES / "diagnose_leg.toml"
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(1, 6), st.data())
 def test_a_subsets_statistic_is_what_its_functions_explain(seed, k, data):
-    """``n_Sᵀ G_SS⁺ n_S`` of :func:`regression_moments` equals :func:`explained` with the functions S alone (a
-    constant always in), for any subset, with unseen rows left out."""
+    """``trace(N_Sᵀ A_SS⁺ N_S)`` of :func:`regression_moments` equals :func:`explained` with the functions S alone
+    (a constant always in), for any subset, with unseen rows left out; and it is the statistic of the 3|S| fields
+    with the Gram matrix ``A ⊗ I₃`` written out."""
     rng = np.random.default_rng(seed)
     basis = rng.normal(size=(120, k)) + rng.normal(size=k)
     resid = rng.normal(size=(120, 3)) + basis[:, :1] * rng.normal(size=3)
     resid[rng.random(120) < 0.1] = np.nan
     n, G = regression_moments(resid, basis)
     subset = data.draw(st.lists(st.integers(0, k - 1), min_size=1, max_size=k, unique=True))
-    cols = sorted(3 * f + a for f in subset for a in range(3))
-    assert np.isclose(quadratic_form(n[cols], G[np.ix_(cols, cols)]), explained(resid, basis[:, sorted(subset)]),
-                      rtol=1e-8, atol=1e-9)
+    rows = sorted(subset)
+    stat = quadratic_form(n[rows], G[np.ix_(rows, rows)])
+    assert np.isclose(stat, explained(resid, basis[:, rows]), rtol=1e-8, atol=1e-9)
+    cols = [3 * f + a for f in rows for a in range(3)]
+    flat, full = n.reshape(-1), np.kron(G, np.eye(3))
+    assert np.isclose(quadratic_form(flat[cols], full[np.ix_(cols, cols)]), stat, rtol=1e-8, atol=1e-9)
 
 
 def test_too_few_rows_give_no_moments():
     n, G = regression_moments(np.full((5, 3), np.nan), np.ones((5, 2)))
-    assert n.shape == (0,) and G.shape == (0, 0)
+    assert n.shape == (0, 3) and G.shape == (0, 0)
 
 
 def test_each_function_is_named_for_the_product_it_is():
