@@ -14,7 +14,7 @@ from identcheck.bundle.chain import filled_poses, initial_state
 from identcheck.errors import DegenerateError
 from identcheck.estimate.closed_forms import fit_model
 from identcheck.estimate.joint import start_stride
-from identcheck.geometry.poses import poses_segment, refine_local, segment_poses
+from identcheck.geometry.poses import farthest_pair, poses_segment, refine_local, segment_poses
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
 
@@ -35,7 +35,7 @@ def virtual_frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         pts = np.concatenate([data[:, idx]] + [e[:, None] for e in extra], axis=1) if extra else data[:, idx]
         if pts.shape[1] == 2 or (pts.shape[1] >= 3 and not poses_segment(pts)):
             # two points, or points on one line, leave the roll about their line free: any roll will do
-            a, b = _farthest_pair(pts)
+            a, b = farthest_pair(pts)
             pts = np.concatenate([pts, _roll_point(pts[:, a], pts[:, b])[:, None]], axis=1)
         if pts.shape[1] < 3:
             raise DegenerateError(f"segment {seg!r}: {len(idx)} marker(s) and {len(extra)} joint point(s) cannot "
@@ -61,14 +61,6 @@ def _start_poses(pts: np.ndarray) -> tuple:
         except ValueError:
             pass
     return refine_local(pts, tol=START_SHAPE_TOL_MM)
-
-
-def _farthest_pair(pts: np.ndarray) -> tuple[int, int]:
-    """The two of the points (F, m, 3) farthest apart on average (the line they fix is the best fixed)."""
-    mean = np.nanmean(pts, axis=0)
-    far = np.nan_to_num(np.linalg.norm(mean[:, None] - mean[None, :], axis=2))
-    a, b = np.unravel_index(int(np.argmax(far)), far.shape)
-    return int(a), int(b)
 
 
 def _roll_point(a: np.ndarray, b: np.ndarray) -> np.ndarray:

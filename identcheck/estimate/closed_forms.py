@@ -21,7 +21,7 @@ import numpy as np
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate import joint as E
-from identcheck.geometry.poses import poses_segment
+from identcheck.geometry.poses import farthest_pair, poses_segment
 
 log = logging.getLogger("identcheck")
 SPHERE_MARGIN = 3.0        # a far marker decides among revolute (2,1) candidates by 3x and this many (2,1) rms
@@ -77,10 +77,7 @@ def _ends_first(points: dict, count: int) -> list:
     values = list(points.values())
     if count >= 3 or len(values) <= 2:
         return values
-    stacked = np.stack(values, axis=1)
-    mean = np.nanmean(stacked, axis=0)                                # (n, 3): the points' average place
-    far = np.linalg.norm(mean[:, None] - mean[None, :], axis=2)
-    a, b = np.unravel_index(np.nanargmax(far), far.shape)
+    a, b = farthest_pair(np.stack(values, axis=1))
     return [values[a], values[b]] + [v for k, v in enumerate(values) if k not in (a, b)]
 
 

@@ -56,6 +56,15 @@ def poses_segment(points) -> bool:
     return pts.ndim == 3 and pts.shape[1] >= MIN_MARKERS and off_line_mm(pts) >= OFF_LINE_MM
 
 
+def farthest_pair(points) -> tuple[int, int]:
+    """The two of the points (F, m, 3) farthest apart, by their average places over the frames that see each (the
+    line two points fix on a segment is the best fixed when they are far apart)."""
+    mean = np.nanmean(np.asarray(points, dtype=float), axis=0)
+    far = np.nan_to_num(np.linalg.norm(mean[:, None] - mean[None, :], axis=2))
+    a, b = np.unravel_index(int(np.argmax(far)), far.shape)
+    return int(a), int(b)
+
+
 @dataclass(frozen=True)
 class Poses:
     """Per-frame rigid poses of one segment: ``points[f] ≈ R[f] @ local.T + t[f]``."""
