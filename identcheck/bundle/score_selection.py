@@ -17,7 +17,6 @@ from typing import Callable
 import numpy as np
 
 
-
 @dataclass(frozen=True)
 class Selection:
     """The units chosen (indices into the units given, in the order they were added), the fields they hold (sorted
@@ -88,22 +87,20 @@ def forward_selection(n: np.ndarray, G: np.ndarray, units: list, gain: Callable[
 
 
 def _added_each(resid: np.ndarray, D: np.ndarray, G: np.ndarray, units: list) -> list:
-    """:func:`_added` for each of `units`, at once when every one is a single field (a skin term's functions)."""
-    if all(len(u) == 1 for u in units):
-        idx = np.array([u[0] for u in units])
+    """What each of `units` adds to the statistic given the chosen fields: ``trace(r_Uᵀ D_U⁺ r_U)`` (`resid`, `D`: the
+    moments and the Gram matrix with the chosen fields regressed out). Single fields at once (a skin term's functions,
+    a translation's linear fields), ``r_u² / D_uu``; a field the chosen ones already span (its ``D`` within 1e-10 of
+    its own ``G``, the pseudo-inverse's cut) adds nothing. A unit of several fields through its block's
+    pseudo-inverse."""
+    out = np.zeros(len(units))
+    single = [i for i, u in enumerate(units) if len(u) == 1]
+    if single:
+        idx = np.array([units[i][0] for i in single])
         d, g = np.diagonal(D)[idx], np.diagonal(G)[idx]
         spanned = d <= 1e-10 * np.maximum(g, 1e-300)
-        return np.where(spanned, 0.0, np.sum(resid[idx] ** 2, axis=1) / np.where(spanned, 1.0, d)).tolist()
-    return [_added(resid, D, G, u) for u in units]
-
-
-def _added(resid: np.ndarray, D: np.ndarray, G: np.ndarray, unit: list) -> float:
-    """What unit `unit`'s fields add to the statistic given the chosen ones: ``trace(r_Uᵀ D_U⁺ r_U)`` (`resid`, `D`:
-    the moments and the Gram matrix with the chosen fields regressed out). A field the chosen ones already span
-    (its ``D`` within 1e-10 of its own ``G``, the pseudo-inverse's cut) adds nothing."""
-    if len(unit) == 1:
-        u = unit[0]
-        d = float(D[u, u])
-        return float(np.sum(resid[u] ** 2) / d) if d > 1e-10 * max(float(G[u, u]), 1e-300) else 0.0
-    r = resid[unit]
-    return float(np.sum(r * (np.linalg.pinv(D[np.ix_(unit, unit)], rcond=1e-10, hermitian=True) @ r)))
+        out[single] = np.where(spanned, 0.0, np.sum(resid[idx] ** 2, axis=1) / np.where(spanned, 1.0, d))
+    for i, u in enumerate(units):
+        if len(u) > 1:
+            r = resid[u]
+            out[i] = np.sum(r * (np.linalg.pinv(D[np.ix_(u, u)], rcond=1e-10, hermitian=True) @ r))
+    return out.tolist()

@@ -113,3 +113,36 @@ def test_a_marker_moving_with_one_of_the_hips_angles_pays_for_that_function(seed
     assert p.payload["basis"].shape[1] == len(p.where["functions"])
     after = EFFECTS["soft_tissue"].apply(ctx, h, p)
     assert after.n_params() - h.n_params() == 3 * len(p.where["functions"]) + p.payload["choice_params"]
+
+
+def test_skin_on_the_root_fits_every_function():
+    """The root's pose takes up its markers' common motion, so their residuals do not show what their skin terms will
+    fit: a proposal on the root carries every function of its driving angles and no charge for a choice, while one on
+    another segment chooses (here a pelvis marker and a thigh marker each moving with one of the hip's angles)."""
+    model = Model.from_toml(LEG)
+    sim = simulate(model, n_frames=800, noise_mm=0.5, seed=5)
+    rng = np.random.default_rng(5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ctx, h = workflow.start(model, sim.trial.recentred()[0])
+    basis = angle_basis(joint_angles(h)["hip"])
+    clean = sim.clean.as_array()
+    for seg in ("pelvis", "thigh"):
+        marker = model.segments[seg].markers[0]
+        shape = basis[:, 0] - basis[:, 0].mean()
+        move = np.outer(shape / np.abs(shape).max() * 8.0, rng.normal(size=3) / np.sqrt(3))
+        clean[:, marker_column(sim, marker)] += rotate(rotations(sim, seg), move)
+    trial = sim.trial.replace(xyz=clean + (sim.trial.as_array() - sim.clean.as_array()))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ctx, h = workflow.start(model, trial.recentred()[0])
+    chain = Skeleton.from_model(model)
+    props = EFFECTS["soft_tissue"].propose(ctx, h)
+    root = [p for p in props if p.where["segment"] == chain.root and len(p.where["markers"]) == 1]
+    other = [p for p in props if p.where["segment"] != chain.root and len(p.where["markers"]) == 1]
+    assert root and other
+    for p in root:
+        drivers = tuple(p.where.get("joints", [p.where["joint"]]))
+        assert p.where["functions"] == basis_names(chain, drivers) and p.payload["choice_params"] == 0
+    assert any(len(p.where["functions"]) < len(basis_names(chain, tuple(p.where.get("joints", [p.where["joint"]]))))
+               for p in other)
