@@ -9,10 +9,21 @@ everything else is refitted, and the interval is the set of values whose refitte
 ``χ²₁(0.95) = 3.84`` noise units of the minimum (Venzon and Moolgavkar, 1988; Raue et al., 2009, who call a
 parameter *practically non-identifiable* when such an interval does not close).
 
-Each side is walked outwards from the estimate in steps that double (warm-started refits), and the bound
-is interpolated in the signed root of Δχ², which is linear in the distance where the profile is a
-parabola. A side that stays below the threshold up to :data:`MAX_SPAN_MM` is *open*: its bound is ``None``
-(the data reject no larger value). A lower side that does not close is 0 (a distance is not negative).
+Each side is walked outwards from the estimate (warm-started refits), and the bound is interpolated in the
+signed root of Δχ², which is linear in the distance where the profile is a parabola. The distance is pulled by a
+soft spring, a few times the profile's own curvature (:data:`SPRING`), and each point of the profile is where the
+refit comes to rest, not where the spring pulls: a minimum of the data's cost plus any spring on the distance is
+the data's least cost at the distance it reaches (were any state with that distance cheaper, it would be cheaper
+with the spring too), so the spring's stiffness changes which point is found, never its value. A stiff spring
+(10⁴ per noise variance, as first written) made the refits ill-conditioned: Levenberg–Marquardt's damping on the
+constants scales with the spring's curvature, and on a knee turning about three axes (held-out draw 55, trial 0)
+the first refit of each side stopped at its 40-iteration cap still falling by 2–9 χ² an iteration, 237 χ² above
+the minimum where the converged profile is near 4: the interval came out 2.4 mm wide where the quadratic one is
+24 mm, and missed the truth. The next point is aimed with the parabola through the estimate and the last point
+(1.1 times where it puts the bound), the spring's curvature set from the same parabola. A side whose refit does
+not converge gives no bound: a refit stopped early overstates Δχ² (the profile is a minimum over everything
+else), so it would close the interval too soon (a refit that has not converged after :data:`MAX_ITER` iterations
+goes on once from where it stopped).
 
 A refit that lands more than one χ² unit below the minimum ends the walk there: the fit had not found the best
 joint, and the caller withdraws the interval whatever the rest of the walk would have given
@@ -34,7 +45,12 @@ MAX_ITER = 40             # LM iterations per refit (warm-started from the previ
 MIN_STEP_MM = 0.5
 MAX_STEP_MM = 160.0
 MAX_SPAN_MM = 1000.0      # beyond this a side is reported open
-STIFFNESS = 1e4           # spring weight per unit noise variance: holds the distance to ~1e-4 mm
+SPRING = 4.0
+"""The spring's curvature in χ² per mm² as a multiple of the profile's (as the parabola through the estimate and
+the last point measures it): the refit then comes to rest about 4/5 of the way to where the spring pulls."""
+AIM = 1.1
+"""Each point is aimed this far beyond where the parabola through the estimate and the last point puts the bound, so
+that one refit usually crosses it and the bound is interpolated, not extrapolated."""
 STEP_CHI2 = 1e-3
 """A refit stops when an iteration lowers the cost by less than this many χ² units (the fit's own relative
 1e-8 of the RSS is thousands of times finer than a 95 % bound needs on long trials). Measured on walking2's
@@ -90,41 +106,60 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
     """
     chain = fit.chain
     d0 = distance_gradients(chain, fit.state, n_params)[joint][marker][0]
-    weight = np.sqrt(STIFFNESS / scale)
     root = np.sqrt(PROFILE_CHI2)
     refits, lowest = 0, fit.rss
     tol = max(REL_TOL, STEP_CHI2 * scale / max(fit.rss, 1e-300))
+    first = float(np.clip(root * se if np.isfinite(se) and se > 0 else MAX_STEP_MM, MIN_STEP_MM, MAX_STEP_MM / 4))
     bounds = []
     for side in (-1.0, 1.0):
         state, prev_d, prev_q = fit.state, d0, 0.0
-        step = float(np.clip(1.96 * se if np.isfinite(se) else MAX_STEP_MM, MIN_STEP_MM, MAX_STEP_MM / 4))
+        curvature = (root / first) ** 2                # χ² per mm² of the parabola the standard error gives
+        reach = AIM * first                            # how far from the estimate the next point should rest
         bound = None
         for _ in range(MAX_POINTS):
-            target = max(prev_d + side * step, 0.0)
+            if side < 0:
+                reach = min(reach, d0)                 # a distance is not negative: aim at zero at most
+            # rest at `reach` under a spring SPRING times the profile's curvature: pull (1 + 1/SPRING) as far
+            target = d0 + side * reach * (1.0 + 1.0 / SPRING)
             if deadline is not None and time.monotonic() > deadline:
                 raise OutOfTime(f"{marker}'s distance to {joint}")
+            weight = np.sqrt(SPRING * curvature * scale)
             f = fit_chain(chain, data, state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
                           penalty=distance_penalty(chain, joint, marker, target, weight, n_params),
                           deadline=deadline)
+            if not f.converged and (deadline is None or time.monotonic() < deadline):
+                f = fit_chain(chain, data, f.state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
+                              penalty=distance_penalty(chain, joint, marker, target, weight, n_params),
+                              deadline=deadline)      # once more from where it stopped
             if deadline is not None and time.monotonic() > deadline:
                 raise OutOfTime(f"{marker}'s distance to {joint}")
             refits += 1
             lowest = min(lowest, f.rss)
             if lowest < fit.rss - scale:        # no minimum to profile about: the bounds would be withdrawn
                 return ProfileInterval(None, None, refits, float(lowest), better_fit=True)
+            if not f.converged:                 # its Δχ² is too large by an unknown amount: no bound from it
+                break
             d = distance_gradients(chain, f.state, n_params)[joint][marker][0]
             q = np.sqrt(max(f.rss - fit.rss, 0.0) / scale)
-            if q >= root:
+            if q >= root and side * (d - prev_d) > 0:
                 frac = (root - prev_q) / (q - prev_q) if q > prev_q else 1.0
                 bound = prev_d + frac * (d - prev_d)
                 break
-            if target <= 0.0:
-                bound = 0.0
+            if side < 0 and reach >= d0:
+                bound = 0.0                     # aimed at zero and still within the bound: 0 (the widest) it is
                 break
-            state, prev_d, prev_q = f.state, d, q
-            if abs(d - d0) >= MAX_SPAN_MM:
+            moved = abs(d - d0)
+            if side * (d - prev_d) > 0:
+                state, prev_d, prev_q = f.state, d, q
+            if moved >= MAX_SPAN_MM:
                 break
-            step = min(2 * step, MAX_STEP_MM)
+            # the parabola through the estimate and this point: its curvature, and where it puts the bound
+            if moved > 0 and q > 0:
+                curvature = max((q / moved) ** 2, (root / MAX_SPAN_MM) ** 2)
+                aim = AIM * root / np.sqrt(curvature)
+            else:
+                aim = 2.0 * max(moved, reach)
+            reach = float(np.clip(aim, moved + MIN_STEP_MM, moved + MAX_STEP_MM))
         if bound is None and side < 0:      # not closed above 0: 0 is the honest lower bound
             bound = 0.0
         bounds.append(None if bound is None else float(bound))

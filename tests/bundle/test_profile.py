@@ -194,3 +194,67 @@ def test_a_profile_about_no_minimum_stops_at_its_first_better_fit(tmp_path_facto
     se = cov.se(distance_gradients(chain, fit.state, P)[joint][marker][1])
     ok = profile_interval(fit, data, joint, marker, scale, se, P)
     assert not ok.better_fit and ok.lowest_rss >= fit.rss - scale
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10 ** 5), marker_index=st.integers(0, 5))
+def test_the_bounds_are_where_the_converged_profile_crosses(tmp_path_factory, seed, marker_index):
+    """Each bound of a profile interval is a point of the profile itself: the distance held there by a stiff spring
+    and every other unknown refitted to convergence (as the profile was first computed) leaves the data's cost
+    χ²₁(0.95) above the minimum, within 0.25 χ² (the walk interpolates between refits in the root of Δχ²)."""
+    from identcheck.bundle.profile import PROFILE_CHI2
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, cov = _fit(model, seed, frames=120, noise=1.0)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    per = distance_gradients(chain, fit.state, P)[joint]
+    marker = sorted(per)[marker_index % len(per)]
+    scale = cov.sigma_mm ** 2
+    pi = profile_interval(fit, data, joint, marker, scale, cov.se(per[marker][1]), P)
+    assert pi.lo is not None and pi.hi is not None and not pi.better_fit
+    for bound in (pi.lo, pi.hi):
+        pen = distance_penalty(chain, joint, marker, bound, np.sqrt(1e4 / scale), P)
+        held = fit_chain(chain, data, fit.state, max_iter=400, tol=1e-13, penalty=pen)
+        assert abs(distance_gradients(chain, held.state, P)[joint][marker][0] - bound) < 1e-2
+        assert abs((held.rss - fit.rss) / scale - PROFILE_CHI2) < 0.25
+
+
+def test_a_refit_that_does_not_converge_bounds_nothing(tmp_path_factory, monkeypatch):
+    """Refits stopped after one iteration overstate how far the cost rises (the profile is a minimum over every
+    other unknown): such a side claims no bound (the lower one 0, the upper one open), never a narrow interval."""
+    import identcheck.bundle.profile as profile
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, cov = _fit(model, 5, frames=120, noise=1.0)
+    P = len(cov.information)
+    joint = chain.joints[0]
+    marker, (_, g) = next(iter(distance_gradients(chain, fit.state, P)[joint].items()))
+    scale = cov.sigma_mm ** 2
+    monkeypatch.setattr(profile, "MAX_ITER", 1)
+    pi = profile.profile_interval(fit, data, joint, marker, scale, cov.se(g), P)
+    assert (pi.lo, pi.hi) == (0.0, None)
+
+
+def test_a_better_fit_met_by_one_profile_withdraws_every_profile_about_that_minimum(tmp_path_factory, monkeypatch):
+    """Profiles all measure Δχ² from one minimum: when the first profile meets a fit better than it, every distance
+    that would be profiled is unbounded, and the profiles not yet begun are not run (one thread: one call)."""
+    import identcheck.bundle.honest as honest
+    from identcheck.bundle.profile import ProfileInterval
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, _ = _fit(model, 13)
+    best = honest.minimum(fit, data)
+    monkeypatch.setattr(honest, "TOLERANCE_MM", 0.0)           # every joint counts as wide: profiles are due
+    monkeypatch.setenv("IDENTCHECK_THREADS", "1")
+    calls = []
+
+    def better(*args, **kwargs):
+        calls.append(args[3])
+        return ProfileInterval(None, None, 1, fit.rss - 10 * best.cov.sigma_mm ** 2, better_fit=True)
+
+    monkeypatch.setattr(honest, "profile_interval", better)
+    out = honest.honest_intervals(best, data, best.cov.sigma_mm ** 2)
+    joint = chain.joints[0]
+    assert len(calls) == 1 and len(out[joint]) > 1
+    assert all(iv == [0.0, None] and how == "unbounded" for iv, how in out[joint].values())
