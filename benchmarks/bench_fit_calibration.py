@@ -89,7 +89,8 @@ def fit_and_score(stem: str, model: Path, trc: Path, truth: dict) -> dict:
             half = np.inf if ci[1] is None else (ci[1] - ci[0]) / 2
             err = abs(est - true)
             rows.append({"joint": name, "marker": m, "verdict": verdict, "covered": bool(covered), "half": half,
-                         "err": err, "wrong": verdict == "determined" and err > max(WRONG_FACTOR * half, WRONG_MIN_MM)})
+                         "err": err, "wrong": verdict == "determined" and err > max(WRONG_FACTOR * half, WRONG_MIN_MM),
+                         "method": j.get("interval_method", {}).get(m)})
     misfit = any(w.get("kind") == "model_misfit" for w in res.get("warnings", []))
     return {"stem": stem, "rows": rows, "seconds": seconds, "misfit_flagged": misfit}
 
