@@ -39,7 +39,7 @@ def jump_limit_deg(rate_hz: float) -> float:
 def _turns_deg(fit, joint: str) -> np.ndarray | None:
     """Turn of `joint` between consecutive frames (F-1,), degrees; None when the markers do not measure its angle."""
     chain, s = fit.chain, fit.state
-    if not all(posed_by_itself(chain, seg) for seg in (chain.parent[joint], chain.child[joint])):
+    if not all(posed_by_itself(chain, seg, fit) for seg in (chain.parent[joint], chain.child[joint])):
         return None
     if chain.types[joint] == "revolute":
         d = np.diff(s.theta[joint])

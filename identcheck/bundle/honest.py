@@ -23,6 +23,7 @@ from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.practical import TOLERANCE_MM, Z95, free_markers, hardly_moved, judge, single_axis
 from identcheck.bundle.profile import OutOfTime, profile_interval
 from identcheck.bundle.uncertainty import covariance, distance_gradients
+from identcheck.geometry.poses import poses_segment
 from identcheck.skeleton import Skeleton
 
 SIGMA_FLOOR_MM = 0.01
@@ -119,13 +120,25 @@ NO_BOUND = ("unbounded", "not_profiled")
 computed within :data:`PROFILE_BUDGET_S`."""
 
 
-def posed_by_itself(chain: Skeleton, segment: str) -> bool:
+def posed_by_itself(chain: Skeleton, segment: str, fit=None) -> bool:
     """Whether a segment's pose in each frame follows from its own markers plus the points its parent joint
     fixes on it (a ball's centre: one; a hinge's axis: two), as three points do. When it does not, the
     segment's roll in every frame is a free unknown seen only through the joints below it: an incidental
     parameter per frame, which biases the likelihood towards joints whose marker orbits absorb noise (on
-    simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820)."""
-    return len(chain.seg_markers[segment]) + points_fixed_from_above(chain, segment) >= 3
+    simulated 3 pelvis / 1 thigh / 1 shank legs, wrong knees beat the truth's basin by Δχ² 150-820).
+
+    With `fit`, the points must also not lie on one line (their fitted places in the segment's frame,
+    :func:`~identcheck.geometry.poses.poses_segment`): three markers along a femur, or two and the hip's centre,
+    leave the segment's roll about that line to the noise, as one marker does. A hinge's axis is a line already:
+    any marker off it poses the segment, and that is not checked."""
+    idx = chain.seg_markers[segment]
+    if len(idx) + points_fixed_from_above(chain, segment) < 3:
+        return False
+    up = [j for j in chain.joints if chain.child[j] == segment]
+    if fit is None or (up and chain.types[up[0]] == "revolute"):
+        return True
+    points = fit.state.local[idx] if not up else np.vstack([fit.state.local[idx], fit.state.c_child[up[0]][None]])
+    return poses_segment(points[None])
 
 
 def points_fixed_from_above(chain: Skeleton, segment: str) -> int:
@@ -135,12 +148,13 @@ def points_fixed_from_above(chain: Skeleton, segment: str) -> int:
     return 0 if not up else (2 if chain.types[up[0]] == "revolute" else 1)
 
 
-def posed_above(chain: Skeleton, joint: str) -> bool:
+def posed_above(chain: Skeleton, joint: str, fit=None) -> bool:
     """Whether every segment from the root down to `joint`'s parent is posed by itself
-    (:func:`posed_by_itself`): otherwise a per-frame roll seen only through the joints below reaches `joint`."""
+    (:func:`posed_by_itself`, with `fit`: its points not on one line): otherwise a per-frame roll seen only through
+    the joints below reaches `joint`."""
     seg = chain.parent[joint]
     while True:
-        if not posed_by_itself(chain, seg):
+        if not posed_by_itself(chain, seg, fit):
             return False
         up = [j for j in chain.joints if chain.child[j] == seg]
         if not up:
@@ -194,7 +208,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         misfit = j in best.model_error
         if not (free or wide or misfit):
             continue
-        if free or not posed_above(chain, j) or (misfit and skin_unseen(chain, j)):
+        if free or not posed_above(chain, j, fit) or (misfit and skin_unseen(chain, j)):
             out[j] = {m: ([0.0, None], "unbounded") for m in dist}
             continue
         if misfit:

@@ -299,7 +299,7 @@ def _without_incidental_rolls(best: Minimum, others: list, data, model_error: di
     the spread of its estimates (simulated minimal legs, white and AR(1) noise, 10 replicates each: the hip's
     standard error switched between 0.2 and 1.4 mm from one noise draw to the next)."""
     chain = best.fit.chain
-    cut = [j for j in chain.joints if not posed_by_itself(chain, chain.parent[j])]
+    cut = [j for j in chain.joints if not posed_by_itself(chain, chain.parent[j], best.fit)]
     if not cut:
         return best
     below = set(cut) | {k for c in cut for k in joints_below(chain, c)}
@@ -393,7 +393,7 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
                      "delta_chi2": round(delta, 3), "p_value": float(f"{p:.3g}")}
                     for m, delta, p in differing if delta > REJECT_CHI2]
         judged = best
-        if alts and not posed_above(chain, j):
+        if alts and not posed_above(chain, j, best.fit):
             # candidates the likelihood cannot tell apart, compared through a segment whose roll in every frame
             # only they see (the incidental-parameter bias): their own intervals are not to be trusted either
             # (minimal legs: ambiguous knees 90-280 mm off at ±3-8 mm, the truth among none of them); a fit that did
@@ -402,7 +402,7 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
                                               j: {m: ([0.0, None], "unbounded") for m in best.distances[j]}})
         out[j] = joint_answer(judged, j, alts, rejected)
         if j in undecidable and claims_a_joint(out[j]):
-            out[j] = _undecided_twins(out[j], rejected, *undecidable[j], bounded=posed_above(chain, j))
+            out[j] = _undecided_twins(out[j], rejected, *undecidable[j], bounded=posed_above(chain, j, best.fit))
     return out
 
 
@@ -455,7 +455,7 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
     shown = ", ".join(f"{m.marker} ({m.explained_mm:.2g} mm)" for m in moving[:6]) + (" ..." if len(moving) > 6 else "")
     joints = sorted(best.model_error)
     chain = best.fit.chain
-    weak = [s for s in chain.segments if not posed_by_itself(chain, s)]
+    weak = [s for s in chain.segments if not posed_by_itself(chain, s, best.fit)]
     cause = ("skin motion, or a joint that is not rigid" if not weak else
              f"skin motion, a joint that is not rigid, or the fit's own bias where {', '.join(weak)} "
              f"{'is' if len(weak) == 1 else 'are'} posed only through the joints")

@@ -85,11 +85,14 @@ def test_fast_turns_are_not_jumps(seed, share, rate):
     chain = SimpleNamespace(joints=["h", "b"], types={"h": "revolute", "b": "spherical"},
                             parent={"h": "p", "b": "p"}, child={"h": "c", "b": "d"},
                             seg_markers={"p": np.array([0, 1, 2]), "c": np.array([3]), "d": np.array([4, 5, 6])})
-    fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"h": theta}, rel_R={"b": rel}))
+    local = rng.normal(size=(7, 3)) * 100.0             # markers spread on their segments (not on one line)
+    fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"h": theta}, rel_R={"b": rel}, local=local,
+                                                             c_child={"b": np.zeros(3)}))
     assert angle_jumps(fit, np.zeros((F, 7, 3)), rate) == {}
     theta2 = theta.copy()
     theta2[F // 2:] += np.pi                            # half a turn in one frame: a jump
-    fit2 = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"h": theta2}, rel_R={"b": rel}))
+    fit2 = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"h": theta2}, rel_R={"b": rel}, local=local,
+                                                              c_child={"b": np.zeros(3)}))
     assert set(angle_jumps(fit2, np.zeros((F, 7, 3)), rate)) == {"h"}
 
 
@@ -107,8 +110,10 @@ def test_a_hinge_below_a_segment_not_posed_by_itself_is_not_judged():
     chain = SimpleNamespace(joints=["hip", "knee"], types={"hip": "spherical", "knee": "revolute"},
                             parent={"hip": "pelvis", "knee": "thigh"}, child={"hip": "thigh", "knee": "shank"},
                             seg_markers={"pelvis": np.array([0, 1, 2]), "thigh": np.array([3]), "shank": np.array([4])})
+    spread = np.random.default_rng(1).normal(size=(5, 3)) * 100.0     # markers' places, not on one line
     fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={"knee": theta}, rel_R={"hip": np.tile(np.eye(3),
-                                                                                                  (F, 1, 1))}))
+                                                                                                  (F, 1, 1))},
+                                                             local=spread, c_child={"hip": np.zeros(3)}))
     assert angle_jumps(fit, np.zeros((F, 5, 3)), 100.0) == {}
 
 
@@ -133,7 +138,9 @@ def test_a_jump_where_the_markers_do_not_pose_both_segments_is_not_judged(seed, 
     chain = SimpleNamespace(joints=["hip"], types={"hip": "spherical"}, parent={"hip": "pelvis"},
                             child={"hip": "thigh"},
                             seg_markers={"pelvis": np.array([0, 1, 2, 3]), "thigh": np.array([4, 5, 6])})
-    fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={}, rel_R={"hip": rel}))
+    fit = SimpleNamespace(chain=chain, state=SimpleNamespace(theta={}, rel_R={"hip": rel},
+                                                             local=rng.normal(size=(7, 3)) * 100.0,
+                                                             c_child={"hip": np.zeros(3)}))
     data = rng.normal(size=(F, 7, 3))
     gap = slice(k + 1 - width // 2, k + 1 + width // 2)
     if hidden == "parent":              # the pelvis keeps `left` of its four markers: fewer than three
