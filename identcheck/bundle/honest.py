@@ -185,10 +185,10 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
       interval stays (a profile of a wrong likelihood would not be better);
     - otherwise the profile likelihood (:mod:`identcheck.bundle.profile`), method ``profile``; an upper
       side that does not close within its span is ``None``; a profile that meets a better fit than the
-      minimum (the fit had not found the best joint) makes every profiled interval about that minimum unbounded
-      (they all measure Δχ² from it), and the profiles not yet begun are not run (held-out draw 55, trial 0: a
-      knee turning about three axes whose fit still crept by 0.02 χ² an iteration; each of its seven profiles
-      found a fit 1-3 χ² better, 3-13 s apiece).
+      minimum (the fit had not found the best joint) makes every profiled interval of that joint unbounded (they
+      all measure Δχ² from a minimum that is not one along it), and its profiles not yet begun are not run
+      (held-out draw 55, trial 0: a knee turning about three axes whose fit still crept by 0.02 χ² an iteration;
+      each of its seven profiles found a fit 1-3 χ² better, 3-13 s apiece).
     A fit that did not converge (:func:`identcheck.bundle.converge.converged_fit`) is no maximum of the likelihood:
     every distance is ``unbounded`` and nothing is profiled (its profiles had met fits better than the "minimum",
     a minute of refits to learn that).
@@ -216,11 +216,11 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         out[j] = {}
         jobs += [(j, m, se) for m, (d, se) in dist.items()]
 
-    no_minimum = threading.Event()       # a profile met a better fit: no interval about this "minimum" holds
+    no_minimum = {j: threading.Event() for j in out}     # a profile of the joint met a better fit than the minimum
 
     def profiled(job):
         j, m, se = job
-        if no_minimum.is_set():
+        if no_minimum[j].is_set():
             return ([0.0, None], "unbounded")
         if time.monotonic() - start > PROFILE_BUDGET_S:
             return ([0.0, None], "not_profiled")
@@ -232,17 +232,16 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         except OutOfTime:
             return ([0.0, None], "not_profiled")
         if pi.better_fit or pi.lowest_rss < fit.rss - scale:
-            no_minimum.set()
+            no_minimum[j].set()
             return ([0.0, None], "unbounded")
         return ([round(pi.lo, 3), None if pi.hi is None else round(pi.hi, 3)], "profile")
 
     with ThreadPoolExecutor(max(1, min(profile_threads(), len(jobs)))) as pool:
         for (j, m, _), answer in zip(jobs, pool.map(profiled, jobs)):
             out[j][m] = answer
-    if no_minimum.is_set():
-        for j, m, _ in jobs:
-            if out[j][m][1] == "profile":
-                out[j][m] = ([0.0, None], "unbounded")
+    for j, m, _ in jobs:
+        if no_minimum[j].is_set() and out[j][m][1] == "profile":
+            out[j][m] = ([0.0, None], "unbounded")
     return out
 
 

@@ -14,16 +14,22 @@ signed root of Δχ², which is linear in the distance where the profile is a pa
 soft spring, a few times the profile's own curvature (:data:`SPRING`), and each point of the profile is where the
 refit comes to rest, not where the spring pulls: a minimum of the data's cost plus any spring on the distance is
 the data's least cost at the distance it reaches (were any state with that distance cheaper, it would be cheaper
-with the spring too), so the spring's stiffness changes which point is found, never its value. A stiff spring
-(10⁴ per noise variance, as first written) made the refits ill-conditioned: Levenberg–Marquardt's damping on the
-constants scales with the spring's curvature, and on a knee turning about three axes (held-out draw 55, trial 0)
-the first refit of each side stopped at its 40-iteration cap still falling by 2–9 χ² an iteration, 237 χ² above
-the minimum where the converged profile is near 4: the interval came out 2.4 mm wide where the quadratic one is
-24 mm, and missed the truth. The next point is aimed with the parabola through the estimate and the last point
-(1.1 times where it puts the bound), the spring's curvature set from the same parabola. A side whose refit does
-not converge gives no bound: a refit stopped early overstates Δχ² (the profile is a minimum over everything
-else), so it would close the interval too soon (a refit that has not converged after :data:`MAX_ITER` iterations
-goes on once from where it stopped).
+with the spring too), so the spring's stiffness changes which point is found, never its value. At rest the spring's
+pull also gives the profile's slope there (:func:`slope_at_rest`). A stiff spring (10⁴ per noise variance, as
+first written) made the refits ill-conditioned: Levenberg–Marquardt's damping on the constants scales with the
+spring's curvature, and on a knee turning about three axes (held-out draw 55, trial 0) the first refit of each side
+stopped at its 40-iteration cap still falling by 2–9 χ² an iteration, 237 χ² above the minimum where the converged
+profile is near 4: the interval came out 2.4 mm wide where the quadratic one is 24 mm, and missed the truth.
+
+The next point is aimed by Newton's step in √Δχ² from the last point inside the bound (its value and slope), 1.1
+times as far (:data:`AIM`), and the spring set to rest there by the same local model; a refit that covers less than
+half the way asked stiffens the spring tenfold (a profile steeper than its local parabola had held the walk at one
+place). Once a point lies beyond the bound, points are aimed at the bound interpolated between the nearest points
+either side until the outer one is within :data:`REFINE_CHI2` of it (√Δχ² curving upwards makes a line through far
+points too narrow). A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
+profile is a minimum over everything else), so it would close the interval too soon (one that has not converged
+after :data:`MAX_ITER` iterations goes on once from where it stopped); without a point beyond the bound the side
+claims none.
 
 A refit that lands more than one χ² unit below the minimum ends the walk there: the fit had not found the best
 joint, and the caller withdraws the interval whatever the rest of the walk would have given
@@ -46,11 +52,20 @@ MIN_STEP_MM = 0.5
 MAX_STEP_MM = 160.0
 MAX_SPAN_MM = 1000.0      # beyond this a side is reported open
 SPRING = 4.0
-"""The spring's curvature in χ² per mm² as a multiple of the profile's (as the parabola through the estimate and
-the last point measures it): the refit then comes to rest about 4/5 of the way to where the spring pulls."""
+"""The spring's curvature in χ² per mm² as a multiple of the profile's (the larger of what the parabola through the
+estimate and the last point, and the slope there, say): the refit then comes to rest about 4/5 of the way to where
+the spring pulls."""
 AIM = 1.1
-"""Each point is aimed this far beyond where the parabola through the estimate and the last point puts the bound, so
-that one refit usually crosses it and the bound is interpolated, not extrapolated."""
+"""Each point is aimed this far beyond where Newton's step puts the bound, so that a refit usually crosses it and the
+bound is interpolated, not extrapolated."""
+REFINE_CHI2 = 1.0
+"""A point beyond the bound by more than this (Δχ² above χ²₁(0.95)) is not used to interpolate the bound: a point
+aimed at the interpolated bound is fitted first."""
+STALL = 0.5
+"""A refit that covers less than this share of the way it was aimed stiffens the spring tenfold for the next."""
+MAX_CURVATURE = (np.sqrt(3.841) / MIN_STEP_MM) ** 2
+"""χ² per mm²: a profile this steep puts the bound within :data:`MIN_STEP_MM`; a curvature read above it from a point
+that hardly moved is capped here (it would make the spring stiff again)."""
 STEP_CHI2 = 1e-3
 """A refit stops when an iteration lowers the cost by less than this many χ² units (the fit's own relative
 1e-8 of the RSS is thousands of times finer than a 95 % bound needs on long trials). Measured on walking2's
@@ -71,6 +86,20 @@ class ProfileInterval:
     refits: int
     lowest_rss: float          # the smallest data RSS met on the way (below the minimum's: a better fit exists)
     better_fit: bool = False   # a refit beat the minimum by more than one χ² unit: the walk stopped there
+
+
+def slope_at_rest(kappa: float, pull_mm: float) -> float:
+    """The profile's slope (χ² per mm, outwards) where a refit under a spring of curvature `kappa` (χ² per mm²)
+    came to rest `pull_mm` short of the spring's target: there the data's cost and the spring balance,
+    ``P'(d) = 2 κ (target − d)``."""
+    return 2.0 * kappa * pull_mm
+
+
+def crossing(inner: tuple, outer: tuple, root: float) -> float:
+    """Where √Δχ² reaches `root` on the line through the points (distance out from the estimate, √Δχ²) `inner`
+    (below it) and `outer` (at or above it)."""
+    (x0, q0), (x1, q1) = inner[:2], outer[:2]
+    return x0 + ((root - q0) / (q1 - q0) if q1 > q0 else 1.0) * (x1 - x0)
 
 
 def distance_penalty(chain, joint: str, marker: str, target: float, weight: float, n_params: int):
@@ -110,57 +139,72 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
     refits, lowest = 0, fit.rss
     tol = max(REL_TOL, STEP_CHI2 * scale / max(fit.rss, 1e-300))
     first = float(np.clip(root * se if np.isfinite(se) and se > 0 else MAX_STEP_MM, MIN_STEP_MM, MAX_STEP_MM / 4))
+
+    def refit(state, target: float, weight: float):
+        pen = distance_penalty(chain, joint, marker, target, weight, n_params)
+        f = fit_chain(chain, data, state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol, penalty=pen,
+                      deadline=deadline)
+        if not f.converged and (deadline is None or time.monotonic() < deadline):
+            f = fit_chain(chain, data, f.state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
+                          penalty=pen, deadline=deadline)      # once more from where it stopped
+        if deadline is not None and time.monotonic() > deadline:
+            raise OutOfTime(f"{marker}'s distance to {joint}")
+        return f
+
     bounds = []
     for side in (-1.0, 1.0):
-        state, prev_d, prev_q = fit.state, d0, 0.0
-        curvature = (root / first) ** 2                # χ² per mm² of the parabola the standard error gives
-        reach = AIM * first                            # how far from the estimate the next point should rest
-        bound = None
+        inner = (0.0, 0.0, fit.state)       # the farthest point inside the bound: (how far out, √Δχ², state)
+        outer = None                        # the nearest point beyond it: (how far out, √Δχ²)
+        a = (root / first) ** 2             # the profile's half second derivative (χ²/mm²), as the parabola says
+        slope, stiff, zero = 0.0, 1.0, False
         for _ in range(MAX_POINTS):
+            if deadline is not None and time.monotonic() > deadline:
+                raise OutOfTime(f"{marker}'s distance to {joint}")
+            moved, q = inner[0], inner[1]
+            newton = (root - q) * 2.0 * q / slope if q > 0 and slope > 0 else root / np.sqrt(a) - moved
+            if outer is None:
+                reach = moved + float(np.clip(AIM * newton, MIN_STEP_MM, MAX_STEP_MM))
+            else:
+                # inside the bracket: Newton's step from the inner point where it falls short of the outer one (it
+                # passes the bound where √Δχ² curves upwards, as the line between the two falls short of it), else
+                # halfway from the line's crossing to the outer point
+                chord = crossing(inner, outer, root)
+                reach = moved + newton if moved + newton < outer[0] else (chord + outer[0]) / 2.0
+                span = outer[0] - moved                # the curvature the two points and the slope imply
+                a = float(np.clip(max(a, (outer[1] ** 2 - q ** 2 - slope * span) / span ** 2), a, MAX_CURVATURE))
             if side < 0:
                 reach = min(reach, d0)                 # a distance is not negative: aim at zero at most
-            # rest at `reach` under a spring SPRING times the profile's curvature: pull (1 + 1/SPRING) as far
-            target = d0 + side * reach * (1.0 + 1.0 / SPRING)
-            if deadline is not None and time.monotonic() > deadline:
-                raise OutOfTime(f"{marker}'s distance to {joint}")
-            weight = np.sqrt(SPRING * curvature * scale)
-            f = fit_chain(chain, data, state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
-                          penalty=distance_penalty(chain, joint, marker, target, weight, n_params),
-                          deadline=deadline)
-            if not f.converged and (deadline is None or time.monotonic() < deadline):
-                f = fit_chain(chain, data, f.state, terms=fit.terms, weights=weights, max_iter=MAX_ITER, tol=tol,
-                              penalty=distance_penalty(chain, joint, marker, target, weight, n_params),
-                              deadline=deadline)      # once more from where it stopped
-            if deadline is not None and time.monotonic() > deadline:
-                raise OutOfTime(f"{marker}'s distance to {joint}")
+            kappa = min(SPRING * stiff * a, SPRING * stiff * MAX_CURVATURE)
+            force = slope + 2.0 * a * (reach - moved)  # the profile's slope expected where the refit should rest
+            target = d0 + side * (reach + force / (2.0 * kappa))
+            f = refit(inner[2], target, np.sqrt(kappa * scale))
             refits += 1
             lowest = min(lowest, f.rss)
             if lowest < fit.rss - scale:        # no minimum to profile about: the bounds would be withdrawn
                 return ProfileInterval(None, None, refits, float(lowest), better_fit=True)
-            if not f.converged:                 # its Δχ² is too large by an unknown amount: no bound from it
+            if not f.converged:                 # its Δχ² is too large by an unknown amount: no point from it
                 break
-            d = distance_gradients(chain, f.state, n_params)[joint][marker][0]
-            q = np.sqrt(max(f.rss - fit.rss, 0.0) / scale)
-            if q >= root and side * (d - prev_d) > 0:
-                frac = (root - prev_q) / (q - prev_q) if q > prev_q else 1.0
-                bound = prev_d + frac * (d - prev_d)
-                break
-            if side < 0 and reach >= d0:
-                bound = 0.0                     # aimed at zero and still within the bound: 0 (the widest) it is
-                break
-            moved = abs(d - d0)
-            if side * (d - prev_d) > 0:
-                state, prev_d, prev_q = f.state, d, q
-            if moved >= MAX_SPAN_MM:
-                break
-            # the parabola through the estimate and this point: its curvature, and where it puts the bound
-            if moved > 0 and q > 0:
-                curvature = max((q / moved) ** 2, (root / MAX_SPAN_MM) ** 2)
-                aim = AIM * root / np.sqrt(curvature)
+            out = side * (distance_gradients(chain, f.state, n_params)[joint][marker][0] - d0)
+            q_new = np.sqrt(max(f.rss - fit.rss, 0.0) / scale)
+            if q_new >= root:
+                if outer is None or out < outer[0]:
+                    outer = (out, q_new)
+            elif out > moved:
+                if out - moved < STALL * (reach - moved):
+                    stiff *= 10.0
+                slope = max(slope_at_rest(kappa, side * (target - d0) - out), 0.0)
+                a = float(np.clip(max(q_new ** 2 / out ** 2, slope / (2.0 * out)), (root / MAX_SPAN_MM) ** 2,
+                                  MAX_CURVATURE))
+                inner = (out, q_new, f.state)
+                zero = side < 0 and out >= d0 - MIN_STEP_MM     # at zero, still inside the bound
             else:
-                aim = 2.0 * max(moved, reach)
-            reach = float(np.clip(aim, moved + MIN_STEP_MM, moved + MAX_STEP_MM))
-        if bound is None and side < 0:      # not closed above 0: 0 is the honest lower bound
-            bound = 0.0
-        bounds.append(None if bound is None else float(bound))
+                stiff *= 10.0                            # no way made at all
+            if zero or inner[0] >= MAX_SPAN_MM:
+                break
+            if outer is not None and outer[1] ** 2 <= PROFILE_CHI2 + REFINE_CHI2:
+                break
+        if outer is not None:
+            bounds.append(float(d0 + side * crossing(inner, outer, root)))
+        else:
+            bounds.append(0.0 if side < 0 else None)    # not closed: 0 is the honest lower bound, no upper one
     return ProfileInterval(bounds[0], bounds[1], refits, float(lowest))

@@ -101,7 +101,7 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
             verdict, why = "undetermined", f"the motion leaves {', '.join(free)}'s distances free"
         elif Z95 * worst[1] > TOLERANCE_MM:
             verdict, why = "undetermined", f"{worst[0]}'s distance would be ±{Z95 * worst[1]:.1f} mm (95 %)"
-            if not posed_by_itself(chain, chain.parent[j]):
+            if not posed_by_itself(chain, chain.parent[j], best.fit):
                 why += (f"; {chain.parent[j]} is not posed by its own markers, so its roll in every frame is seen only "
                         "through this joint and fit will report the distances unbounded")
         elif any(r["rejection_probability"] < POWER for r in rivals):

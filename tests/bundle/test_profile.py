@@ -258,3 +258,93 @@ def test_a_better_fit_met_by_one_profile_withdraws_every_profile_about_that_mini
     joint = chain.joints[0]
     assert len(calls) == 1 and len(out[joint]) > 1
     assert all(iv == [0.0, None] and how == "unbounded" for iv, how in out[joint].values())
+
+
+def _one_dimensional(monkeypatch, profile, d0=100.0, scale=1.0):
+    """The profile walk on a problem with one unknown, the distance itself, whose cost above the minimum is
+    `profile(d − d0)` χ² units: each refit rests exactly where the cost plus the spring is least (a fine grid and
+    a golden-section polish), as a converged refit would. Returns a stand-in minimum for :func:`profile_interval`."""
+    from types import SimpleNamespace
+
+    import identcheck.bundle.profile as walk
+
+    def rest(state, penalty):
+        target, weight = penalty
+        kappa = weight ** 2 / scale
+        total = lambda d: profile(d - d0) + kappa * (d - target) ** 2     # noqa: E731
+        grid = np.linspace(0.0, 3 * d0 + abs(target), 20001)
+        d = grid[np.argmin(total(grid))]
+        lo, hi = max(d - 1e-2 * d0, 0.0), d + 1e-2 * d0
+        g = (np.sqrt(5) - 1) / 2
+        for _ in range(80):
+            a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+            lo, hi = (lo, b) if total(a) < total(b) else (a, hi)
+        return (lo + hi) / 2
+
+    def fit_chain(chain, data, state, terms=None, weights=None, max_iter=0, tol=0.0, penalty=None, deadline=None):
+        d = rest(state, penalty)
+        return SimpleNamespace(state=d, rss=scale * float(profile(d - d0)), converged=True)
+
+    monkeypatch.setattr(walk, "fit_chain", fit_chain)
+    monkeypatch.setattr(walk, "distance_penalty", lambda chain, j, m, target, weight, n: (target, weight))
+    monkeypatch.setattr(walk, "distance_gradients", lambda chain, state, n: {"j": {"m": (state, None)}})
+    return SimpleNamespace(chain=None, state=d0, rss=0.0, terms=None)
+
+
+@settings(max_examples=60, deadline=None)
+@given(power=st.sampled_from([2.0, 3.0, 4.0, 6.0]), widths=st.tuples(st.floats(0.5, 40.0), st.floats(0.5, 40.0)),
+       se_factor=st.floats(0.05, 20.0), wall=st.booleans())
+def test_the_walk_finds_the_bound_of_profiles_of_any_steepness(power, widths, se_factor, wall):
+    """Profiles |x/w|^p on either side (p = 2 a parabola, up to 6), or nearly flat up to a wall, with the standard
+    error that sizes the first step off by up to 20 times either way: each side's bound is where Δχ² reaches
+    χ²₁(0.95) within 0.6 χ² (the line through the nearest points either side of it), never a side left open or at 0
+    that closes within the walk's span (a profile steeper than its local parabola had held the walk at one place
+    and returned [0, None])."""
+    from identcheck.bundle.profile import PROFILE_CHI2
+
+    def profile(x):
+        u = np.abs(x) / np.where(np.asarray(x) < 0, widths[0], widths[1])
+        if wall:                                     # a slope of 0.5 χ² a width, then a wall
+            return 0.5 * u + np.maximum(u - 3.0, 0.0) ** 2 * 50.0
+        return u ** power
+
+    d0 = 150.0
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        best = _one_dimensional(monkeypatch, profile, d0=d0)
+        pi = profile_interval(best, None, "j", "m", 1.0, se_factor * min(widths), 1)
+    assert pi.lo is not None and pi.hi is not None and pi.lo > 0.0
+    for bound in (pi.lo, pi.hi):
+        assert abs(profile(bound - d0) - PROFILE_CHI2) < 0.6, (bound, profile(bound - d0))
+
+
+def test_a_better_fit_on_another_thread_withdraws_the_profiles_of_that_joint_already_made(tmp_path_factory,
+                                                                                          monkeypatch):
+    """Two threads: the first profile of the joint gives an interval, the second meets a better fit; when both are in,
+    every profiled distance of the joint is unbounded, the one finished first included."""
+    import threading as th
+
+    import identcheck.bundle.honest as honest
+    from identcheck.bundle.profile import ProfileInterval
+
+    model = _hip33(tmp_path_factory)
+    _, chain, data, fit, _ = _fit(model, 17)
+    best = honest.minimum(fit, data)
+    monkeypatch.setattr(honest, "TOLERANCE_MM", 0.0)           # every joint counts as wide: profiles are due
+    monkeypatch.setenv("IDENTCHECK_THREADS", "2")
+    first_done = th.Event()
+    order = []
+
+    def profile(fit_, data_, joint, marker, *args, **kwargs):
+        if not order:
+            order.append(marker)
+            first_done.set()
+            return ProfileInterval(1.0, 2.0, 1, fit.rss)
+        first_done.wait(10.0)
+        order.append(marker)
+        return ProfileInterval(None, None, 1, fit.rss - 10 * best.cov.sigma_mm ** 2, better_fit=True)
+
+    monkeypatch.setattr(honest, "profile_interval", profile)
+    out = honest.honest_intervals(best, data, best.cov.sigma_mm ** 2)
+    joint = chain.joints[0]
+    assert len(order) >= 2
+    assert all(iv == [0.0, None] and how == "unbounded" for iv, how in out[joint].values())
