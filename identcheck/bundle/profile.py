@@ -21,12 +21,13 @@ spring's curvature, and on a knee turning about three axes (held-out draw 55, tr
 stopped at its 40-iteration cap still falling by 2–9 χ² an iteration, 237 χ² above the minimum where the converged
 profile is near 4: the interval came out 2.4 mm wide where the quadratic one is 24 mm, and missed the truth.
 
-The next point is aimed by Newton's step in √Δχ² from the last point inside the bound (its value and slope), 1.1
-times as far (:data:`AIM`), and the spring set to rest there by the same local model; a refit that covers less than
-half the way asked stiffens the spring tenfold (a profile steeper than its local parabola had held the walk at one
-place). Once a point lies beyond the bound, points are aimed at the bound interpolated between the nearest points
-either side until the outer one is within :data:`REFINE_CHI2` of it (√Δχ² curving upwards makes a line through far
-points too narrow). A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
+The next point is aimed by Newton's step in √Δχ² from the last point inside the bound (its value and slope) at a
+little beyond the bound (:data:`AIM_CHI2`), and the spring set to rest there by the same local model; a refit that
+covers less than half the way asked stiffens the spring tenfold (a profile steeper than its local parabola had held
+the walk at one place). Once a point lies beyond the bound, points are aimed inside the bracket until the points
+either side are both within :data:`REFINE_CHI2` of it, and the bound is the line between them (√Δχ² curving upwards
+makes a line through far points too narrow); a walk that runs out of points first takes its nearest point beyond
+the bound as the bound. A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
 profile is a minimum over everything else), so it would close the interval too soon (one that has not converged
 after :data:`MAX_ITER` iterations goes on once from where it stopped); without a point beyond the bound the side
 claims none.
@@ -55,12 +56,15 @@ SPRING = 4.0
 """The spring's curvature in χ² per mm² as a multiple of the profile's (the larger of what the parabola through the
 estimate and the last point, and the slope there, say): the refit then comes to rest about 4/5 of the way to where
 the spring pulls."""
-AIM = 1.1
-"""Each point is aimed this far beyond where Newton's step puts the bound, so that a refit usually crosses it and the
-bound is interpolated, not extrapolated."""
 REFINE_CHI2 = 1.0
 """A point beyond the bound by more than this (Δχ² above χ²₁(0.95)) is not used to interpolate the bound: a point
-aimed at the interpolated bound is fitted first."""
+aimed nearer is fitted first."""
+AIM_CHI2 = PROFILE_CHI2 + 0.75 * REFINE_CHI2
+"""Where each point is aimed (Δχ²): three quarters of the way from the bound to the farthest point beyond it that
+ends the walk, so that a refit falling short or long still crosses the bound and ends it. Aimed at a fixed ratio
+beyond Newton's step instead (1.1 times), the points near the bound crept up on it from inside (Δχ² 3.63, 3.80,
+3.79, 3.87 on a knee of held-out draw 55, trial 8), a refit each; and a refit that stays inside the bound when
+aimed beyond it doubles the spring's stiffness for the next."""
 STALL = 0.5
 """A refit that covers less than this share of the way it was aimed stiffens the spring tenfold for the next."""
 MAX_CURVATURE = (np.sqrt(3.841) / MIN_STEP_MM) ** 2
@@ -93,6 +97,20 @@ def slope_at_rest(kappa: float, pull_mm: float) -> float:
     came to rest `pull_mm` short of the spring's target: there the data's cost and the spring balance,
     ``P'(d) = 2 κ (target − d)``."""
     return 2.0 * kappa * pull_mm
+
+
+def bracketed(inner: tuple, outer: tuple) -> bool:
+    """Whether the line through the points (distance out, √Δχ²) `inner` and `outer` (its slope at rest third) either
+    side of the bound places the bound: the outer point within :data:`REFINE_CHI2` of it, and either the inner one
+    too, or the line's slope within a fifth of √Δχ²'s own at the outer point (√Δχ² is then nearly straight between
+    them, as a parabola's is; where it curves upwards the line crosses too soon: a flat profile running into a wall,
+    its points at Δχ² 0.5 and 4.4, had been closed 7 mm inside its bound)."""
+    if outer[1] ** 2 > PROFILE_CHI2 + REFINE_CHI2:
+        return False
+    if inner[1] ** 2 >= PROFILE_CHI2 - REFINE_CHI2:
+        return True
+    line = (outer[1] - inner[1]) / max(outer[0] - inner[0], 1e-12)
+    return abs(outer[2] - line) <= 0.2 * line
 
 
 def crossing(inner: tuple, outer: tuple, root: float) -> float:
@@ -154,20 +172,20 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
     bounds = []
     for side in (-1.0, 1.0):
         inner = (0.0, 0.0, fit.state)       # the farthest point inside the bound: (how far out, √Δχ², state)
-        outer = None                        # the nearest point beyond it: (how far out, √Δχ²)
+        outer = None                        # the nearest point beyond it: (how far out, √Δχ², its slope)
         a = (root / first) ** 2             # the profile's half second derivative (χ²/mm²), as the parabola says
         slope, stiff, zero = 0.0, 1.0, False
         for _ in range(MAX_POINTS):
             if deadline is not None and time.monotonic() > deadline:
                 raise OutOfTime(f"{marker}'s distance to {joint}")
             moved, q = inner[0], inner[1]
-            newton = (root - q) * 2.0 * q / slope if q > 0 and slope > 0 else root / np.sqrt(a) - moved
+            aim_q = np.sqrt(AIM_CHI2)
+            newton = (aim_q - q) * 2.0 * q / slope if q > 0 and slope > 0 else aim_q / np.sqrt(a) - moved
             if outer is None:
-                reach = moved + float(np.clip(AIM * newton, MIN_STEP_MM, MAX_STEP_MM))
+                reach = moved + float(np.clip(newton, MIN_STEP_MM, MAX_STEP_MM))
             else:
-                # inside the bracket: Newton's step from the inner point where it falls short of the outer one (it
-                # passes the bound where √Δχ² curves upwards, as the line between the two falls short of it), else
-                # halfway from the line's crossing to the outer point
+                # inside the bracket: Newton's step from the inner point where it falls short of the outer one, else
+                # halfway from where the line between them crosses the bound to the outer point
                 chord = crossing(inner, outer, root)
                 reach = moved + newton if moved + newton < outer[0] else (chord + outer[0]) / 2.0
                 span = outer[0] - moved                # the curvature the two points and the slope imply
@@ -186,13 +204,16 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
                 break
             out = side * (distance_gradients(chain, f.state, n_params)[joint][marker][0] - d0)
             q_new = np.sqrt(max(f.rss - fit.rss, 0.0) / scale)
+            pull = side * (target - d0) - out            # how far short of the spring's target it rests
             if q_new >= root:
                 if outer is None or out < outer[0]:
-                    outer = (out, q_new)
+                    outer = (out, q_new, slope_at_rest(kappa, pull) / (2.0 * q_new))
             elif out > moved:
                 if out - moved < STALL * (reach - moved):
                     stiff *= 10.0
-                slope = max(slope_at_rest(kappa, side * (target - d0) - out), 0.0)
+                elif outer is None:
+                    stiff *= 2.0                          # aimed beyond the bound and still inside it
+                slope = max(slope_at_rest(kappa, pull), 0.0)
                 a = float(np.clip(max(q_new ** 2 / out ** 2, slope / (2.0 * out)), (root / MAX_SPAN_MM) ** 2,
                                   MAX_CURVATURE))
                 inner = (out, q_new, f.state)
@@ -201,10 +222,13 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
                 stiff *= 10.0                            # no way made at all
             if zero or inner[0] >= MAX_SPAN_MM:
                 break
-            if outer is not None and outer[1] ** 2 <= PROFILE_CHI2 + REFINE_CHI2:
+            if outer is not None and bracketed(inner, outer):
                 break
         if outer is not None:
-            bounds.append(float(d0 + side * crossing(inner, outer, root)))
+            # the line between the nearest points either side, when both are near the bound; else the outer point
+            # itself (the bound lies between them, and where √Δχ² curves upwards a line through a far point crosses
+            # too soon)
+            bounds.append(float(d0 + side * (crossing(inner, outer, root) if bracketed(inner, outer) else outer[0])))
         else:
             bounds.append(0.0 if side < 0 else None)    # not closed: 0 is the honest lower bound, no upper one
     return ProfileInterval(bounds[0], bounds[1], refits, float(lowest))
