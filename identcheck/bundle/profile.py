@@ -67,7 +67,7 @@ beyond Newton's step instead (1.1 times), the points near the bound crept up on 
 aimed beyond it doubles the spring's stiffness for the next."""
 STALL = 0.5
 """A refit that covers less than this share of the way it was aimed stiffens the spring tenfold for the next."""
-MAX_CURVATURE = (np.sqrt(3.841) / MIN_STEP_MM) ** 2
+MAX_CURVATURE = (np.sqrt(PROFILE_CHI2) / MIN_STEP_MM) ** 2
 """χ² per mm²: a profile this steep puts the bound within :data:`MIN_STEP_MM`; a curvature read above it from a point
 that hardly moved is capped here (it would make the spring stiff again)."""
 STEP_CHI2 = 1e-3
@@ -188,7 +188,7 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
                 # halfway from where the line between them crosses the bound to the outer point
                 chord = crossing(inner, outer, root)
                 reach = moved + newton if moved + newton < outer[0] else (chord + outer[0]) / 2.0
-                span = outer[0] - moved                # the curvature the two points and the slope imply
+                span = max(outer[0] - moved, 1e-9)     # the curvature the two points and the slope imply
                 a = float(np.clip(max(a, (outer[1] ** 2 - q ** 2 - slope * span) / span ** 2), a, MAX_CURVATURE))
             if side < 0:
                 reach = min(reach, d0)                 # a distance is not negative: aim at zero at most
