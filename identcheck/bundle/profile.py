@@ -25,9 +25,10 @@ The next point is aimed by Newton's step in √Δχ² from the last point inside
 little beyond the bound (:data:`AIM_CHI2`), and the spring set to rest there by the same local model; a refit that
 covers less than half the way asked stiffens the spring tenfold (a profile steeper than its local parabola had held
 the walk at one place). Once a point lies beyond the bound, points are aimed inside the bracket until the points
-either side are both within :data:`REFINE_CHI2` of it, and the bound is the line between them (√Δχ² curving upwards
-makes a line through far points too narrow); a walk that runs out of points first takes its nearest point beyond
-the bound as the bound. A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
+either side place it (:func:`bracketed`: the outer one within :data:`REFINE_CHI2` of the bound, √Δχ² nearly
+straight between them by its slopes at both), and the bound is where the line between them or the tangent at the
+outer point reaches it, the farther (:func:`crossing`); a walk that runs out of points first takes its nearest point
+beyond the bound as the bound. A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
 profile is a minimum over everything else), so it would close the interval too soon (one that has not converged
 after :data:`MAX_ITER` iterations goes on once from where it stopped); without a point beyond the bound the side
 claims none.
@@ -100,24 +101,27 @@ def slope_at_rest(kappa: float, pull_mm: float) -> float:
 
 
 def bracketed(inner: tuple, outer: tuple) -> bool:
-    """Whether the line through the points (distance out, √Δχ²) `inner` and `outer` (its slope at rest third) either
-    side of the bound places the bound: the outer point within :data:`REFINE_CHI2` of it, and either the inner one
-    too, or the line's slope within a fifth of √Δχ²'s own at the outer point (√Δχ² is then nearly straight between
-    them, as a parabola's is; where it curves upwards the line crosses too soon: a flat profile running into a wall,
-    its points at Δχ² 0.5 and 4.4, had been closed 7 mm inside its bound)."""
+    """Whether the line through the points (distance out, √Δχ², …, the slope of √Δχ² there) `inner` and `outer`
+    either side of the bound places the bound: the outer point within :data:`REFINE_CHI2` of it, and the line's slope
+    within a fifth of √Δχ²'s own at both points (√Δχ² is then nearly straight between them, as a parabola's is). A
+    flat profile running into a wall, its points at Δχ² 0.5 and 4.4, had been closed 7 mm inside its bound by the
+    line; points both within 1 χ² of the bound but far apart on a plateau, 53 mm inside it."""
     if outer[1] ** 2 > PROFILE_CHI2 + REFINE_CHI2:
         return False
-    if inner[1] ** 2 >= PROFILE_CHI2 - REFINE_CHI2:
-        return True
     line = (outer[1] - inner[1]) / max(outer[0] - inner[0], 1e-12)
-    return abs(outer[2] - line) <= 0.2 * line
+    return all(np.isfinite(end[-1]) and abs(end[-1] - line) <= 0.2 * line for end in (inner, outer))
 
 
 def crossing(inner: tuple, outer: tuple, root: float) -> float:
-    """Where √Δχ² reaches `root` on the line through the points (distance out from the estimate, √Δχ²) `inner`
-    (below it) and `outer` (at or above it)."""
+    """Where √Δχ² reaches `root` between the points (distance out from the estimate, √Δχ², …, its slope there)
+    `inner` (below it) and `outer` (at or above it): the farther of where the line through them and where the
+    tangent at the outer point reach it, never past the outer point. Whether √Δχ² curves up or down between them,
+    the farther of the two is not inside the true crossing (the line crosses late on a curve bending down, the
+    tangent at the far end on one bending up)."""
     (x0, q0), (x1, q1) = inner[:2], outer[:2]
-    return x0 + ((root - q0) / (q1 - q0) if q1 > q0 else 1.0) * (x1 - x0)
+    line = x0 + ((root - q0) / (q1 - q0) if q1 > q0 else 1.0) * (x1 - x0)
+    tangent = x1 - (q1 - root) / outer[-1] if np.isfinite(outer[-1]) and outer[-1] > 0 else x1
+    return float(min(max(line, tangent), x1))
 
 
 def distance_penalty(chain, joint: str, marker: str, target: float, weight: float, n_params: int):
@@ -171,9 +175,11 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
 
     bounds = []
     for side in (-1.0, 1.0):
-        inner = (0.0, 0.0, fit.state)       # the farthest point inside the bound: (how far out, √Δχ², state)
-        outer = None                        # the nearest point beyond it: (how far out, √Δχ², its slope)
         a = (root / first) ** 2             # the profile's half second derivative (χ²/mm²), as the parabola says
+        # the farthest point inside the bound (how far out, √Δχ², state, the slope of √Δχ² there: the parabola's at
+        # the estimate), and the nearest point beyond it (how far out, √Δχ², the slope of √Δχ²)
+        inner = (0.0, 0.0, fit.state, np.sqrt(a))
+        outer = None
         slope, stiff, zero = 0.0, 1.0, False
         for _ in range(MAX_POINTS):
             if deadline is not None and time.monotonic() > deadline:
@@ -197,6 +203,8 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
             target = d0 + side * (reach + force / (2.0 * kappa))
             f = refit(inner[2], target, np.sqrt(kappa * scale))
             refits += 1
+            if not np.isfinite(f.rss):
+                break
             lowest = min(lowest, f.rss)
             if lowest < fit.rss - scale:        # no minimum to profile about: the bounds would be withdrawn
                 return ProfileInterval(None, None, refits, float(lowest), better_fit=True)
@@ -216,7 +224,7 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
                 slope = max(slope_at_rest(kappa, pull), 0.0)
                 a = float(np.clip(max(q_new ** 2 / out ** 2, slope / (2.0 * out)), (root / MAX_SPAN_MM) ** 2,
                                   MAX_CURVATURE))
-                inner = (out, q_new, f.state)
+                inner = (out, q_new, f.state, slope / (2.0 * q_new) if q_new > 0 else np.sqrt(a))
                 zero = side < 0 and out >= d0 - MIN_STEP_MM     # at zero, still inside the bound
             else:
                 stiff *= 10.0                            # no way made at all
@@ -225,9 +233,8 @@ def profile_interval(fit, data, joint: str, marker: str, scale: float, se: float
             if outer is not None and bracketed(inner, outer):
                 break
         if outer is not None:
-            # the line between the nearest points either side, when both are near the bound; else the outer point
-            # itself (the bound lies between them, and where √Δχ² curves upwards a line through a far point crosses
-            # too soon)
+            # between the nearest points either side when they place it (:func:`bracketed`); else the outer point
+            # itself (the bound lies between them, and a line through far points may cross too soon)
             bounds.append(float(d0 + side * (crossing(inner, outer, root) if bracketed(inner, outer) else outer[0])))
         else:
             bounds.append(0.0 if side < 0 else None)    # not closed: 0 is the honest lower bound, no upper one

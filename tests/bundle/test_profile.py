@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from identcheck.bundle.chain import fit_chain, initial_state
 from identcheck.bundle.profile import OutOfTime, distance_penalty, profile_interval
@@ -349,3 +349,27 @@ def test_a_better_fit_on_another_thread_withdraws_the_profiles_of_that_joint_alr
     joint = chain.joints[0]
     assert len(order) >= 2
     assert all(iv == [0.0, None] and how == "unbounded" for iv, how in out[joint].values())
+
+
+@settings(max_examples=40, deadline=None)
+@example(level=3.24, rise=10.8, start=185.8, width=34.5, power=1.0, skew=1.0, se=0.131)   # found by review
+@example(level=2.93, rise=5.7, start=148.0, width=0.7, power=2.0, skew=0.75, se=0.30)
+@given(level=st.floats(2.0, 3.8), rise=st.floats(1.0, 30.0), start=st.floats(5.0, 200.0), width=st.floats(0.5, 40.0),
+       power=st.sampled_from([1.0, 2.0, 4.0]), skew=st.floats(0.3, 3.0), se=st.floats(0.1, 100.0))
+def test_no_bound_lies_inside_a_profile_that_levels_off_and_rises_again(level, rise, start, width, power, skew, se):
+    """Profiles that rise to a level below χ²₁(0.95), stay there, and rise again beyond it (a plateau, where two
+    points both near the bound can lie far apart): a bound may be wide or open, never more than 0.6 χ² inside the
+    profile's (the line through two such points had closed one 53 mm inside, at Δχ² 3.0)."""
+    from identcheck.bundle.profile import PROFILE_CHI2
+
+    def profile(x):
+        u = np.where(np.asarray(x) < 0, -np.asarray(x) * skew, np.asarray(x))
+        return level * (1 - np.exp(-u / rise)) + (np.maximum(u - start, 0.0) / width) ** power
+
+    d0 = 300.0
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        best = _one_dimensional(monkeypatch, profile, d0=d0)
+        pi = profile_interval(best, None, "j", "m", 1.0, se, 1)
+    for bound in (pi.lo, pi.hi):
+        if bound is not None and bound != 0.0:
+            assert profile(bound - d0) > PROFILE_CHI2 - 0.6, (bound, profile(bound - d0))
