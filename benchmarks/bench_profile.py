@@ -72,7 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--key", default=KEY)
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     a = ap.parse_args(argv)
-    cases = [("fit", ROOT / "examples" / "real_walking2_legs.toml", ROOT / "examples" / "real" / "opensim_walking2.c3d")]
+    real = ROOT / "examples"
+    cases = [("fit", real / "real_walking2_legs.toml", real / "real" / "opensim_walking2.c3d")]
     cases += [("diagnose", a.diagnose / f"{s}.toml", a.diagnose / f"{s}.trc") for s in a.trials]
     rows, summary = [], []
     with worktree.checkout(a.baseline) as base:

@@ -28,10 +28,10 @@ the walk at one place). Once a point lies beyond the bound, points are aimed ins
 either side place it (:func:`bracketed`: the outer one within :data:`REFINE_CHI2` of the bound, √Δχ² nearly
 straight between them by its slopes at both), and the bound is where the line between them or the tangent at the
 outer point reaches it, the farther (:func:`crossing`); a walk that runs out of points first takes its nearest point
-beyond the bound as the bound. A refit that does not converge gives no new point: a refit stopped early overstates Δχ² (the
-profile is a minimum over everything else), so it would close the interval too soon (one that has not converged
-after :data:`MAX_ITER` iterations goes on once from where it stopped); without a point beyond the bound the side
-claims none.
+beyond the bound as the bound. A refit that does not converge gives no new point: a refit stopped early overstates
+Δχ² (the profile is a minimum over everything else), so it would close the interval too soon (one that has not
+converged after :data:`MAX_ITER` iterations goes on once from where it stopped); without a point beyond the bound
+the side claims none.
 
 A refit that lands more than one χ² unit below the minimum ends the walk there: the fit had not found the best
 joint, and the caller withdraws the interval whatever the rest of the walk would have given
