@@ -128,7 +128,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             C, h = C + D.T @ D, h + D.T @ r_p
         k = A.shape[1]
         scaleA = np.trace(A, axis1=1, axis2=2)[:, None] / k + 1e-12
-        improved = False
+        improved, promise = False, 0.0
         for attempt in range(12):
             damp_q = lam * np.diagonal(A, axis1=1, axis2=2) + 1e-9 * scaleA                  # (F, k)
             damp_c = lam * np.diag(C) + CONSTANT_RIDGE * (np.trace(C) / max(len(C), 1))      # (P,)
@@ -140,6 +140,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             trial = apply_step(chain, terms, s, R, dq, dc)
             R2, t2, c2, p2 = forward(chain, terms, trial)
             new = _cost(p2, y, w) + pen(trial)
+            if attempt == 0:
+                promise = promised_drop(g, h, dq, dc, damp_q, damp_c)
             if new <= cost:
                 improved = True
                 drop = cost - new
@@ -157,7 +159,12 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             lam *= 4
         if on_iteration:
             on_iteration(it, cost)
-        if not improved or done:
+        if not improved:
+            # no damping found a lower cost: a minimum when the least damped step promised no more than the
+            # tolerance, else a stall (a valley Gauss-Newton's model does not hold in), which is not convergence
+            converged = stalled_at_minimum(promise, cost, tol if fast_tol is None else max(tol, fast_tol))
+            break
+        if done:
             converged = True
             break
         if deadline is not None and time.monotonic() > deadline:
@@ -177,6 +184,15 @@ def promised_drop(g, h, dq, dc, damp_q, damp_c) -> float:
     gradients (g per frame, h of the constants) as the normal equations give them (half the cost's gradient) and D the
     damping added to the diagonal (``(N + D)δ = −[g; h]`` makes ``−2gᵀδ − δᵀNδ`` equal to it)."""
     return float(-(np.sum(g * dq) + h @ dc) + np.sum(damp_q * dq * dq) + damp_c @ (dc * dc))
+
+
+def stalled_at_minimum(promise: float, cost: float, tol: float) -> bool:
+    """Whether an iteration in which no damping lowered the cost ends at a minimum: when the least damped step
+    promised to lower the cost (:func:`promised_drop`) by at most `tol` times it, what is left is below what the fit
+    was asked to resolve (a step that large is lost in the rounding of the cost); a larger promise the steps could
+    not deliver is a stall, and a stalled fit is not a converged one (a refit of the profile likelihood stopped
+    there would overstate Δχ² and close its interval too soon)."""
+    return promise <= tol * max(cost, 1e-300)
 
 
 def damping_factor(drop: float, promised: float) -> float:

@@ -13,6 +13,8 @@ from identcheck.bundle.chain import _cost, _extend, _prepare, fit_chain, initial
 from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
 from identcheck.bundle.model import Terms, apply_step, forward
 from identcheck.bundle.normal import eliminate_frames
+from identcheck.bundle.profile import distance_penalty
+from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -170,3 +172,35 @@ def test_the_damping_follows_how_much_of_its_promise_a_step_kept(promised, share
     else:
         assert factor == 1.0
     assert chain_mod.damping_factor(min(1.0, share + 0.3) * promised, promised) <= factor
+
+
+def _wrong_way_spring(chain, fit, P, pull_mm):
+    """A spring on a marker distance whose Jacobian points the wrong way: every step the normal equations propose
+    raises its cost, so no damping lowers the cost (a stall)."""
+    joint = chain.joints[0]
+    marker, (d0, _) = next(iter(distance_gradients(chain, fit.state, P)[joint].items()))
+    right = distance_penalty(chain, joint, marker, d0 + pull_mm, 1.0, P)
+
+    def wrong(state):
+        r, D = right(state)
+        return r, -D
+    return wrong
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 10_000), pull=st.floats(5.0, 40.0))
+def test_a_fit_no_damping_can_move_is_converged_only_at_a_minimum(seed, pull):
+    """A fit whose every step raises the cost stops; it is called converged when the step on offer promised next to
+    nothing (refitting from a minimum), and not when the step promised a drop it could not deliver (a spring pulling
+    the distance `pull` mm away, its Jacobian turned the wrong way): a stall is not a minimum."""
+    sim = simulate(MODEL, n_frames=120, noise_mm=0.5, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.trial.select(chain.labels).as_array()
+    fit = fit_chain(chain, data, initial_state(chain, data), max_iter=300)
+    assert fit.converged
+    again = fit_chain(chain, data, fit.state, max_iter=5)
+    assert again.converged and again.iterations <= 2
+    P = len(covariance(fit, data).information)
+    stalled = fit_chain(chain, data, fit.state, max_iter=5, penalty=_wrong_way_spring(chain, fit, P, pull))
+    assert stalled.iterations == 1
+    assert not stalled.converged
