@@ -17,7 +17,7 @@ from identcheck.bundle.anatomical_angles import anatomical_angles
 from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.converge import converged_fit
 from identcheck.bundle.model import Fit, State, Terms, forward
-from identcheck.bundle.start import start_state
+from identcheck.bundle.start import better_start, start_state
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.noise import NoiseFloor
 
@@ -39,6 +39,10 @@ class Context:
     noise: NoiseFloor
     n_samples: int               # visible marker samples of the raw trial
     source: str = ""
+    every_start: bool = False
+    """Fresh starts (:meth:`Hypothesis.restarted`) are taken from the best of the closed-form combinations
+    (:func:`~identcheck.bundle.start.better_start`), not the first: set when the rigid fit's first combination
+    settled above another's (the first is then known to lead this trial's fits astray)."""
 
     @property
     def n_obs(self) -> int:
@@ -112,14 +116,18 @@ class Hypothesis:
                   chain: Skeleton | None = None, max_iter: int = SCREEN_ITER, **changes) -> "Hypothesis | None":
         """This hypothesis (terms and their parameters) refitted to `data` and `weights` (default: its own), on
         `chain` (default: its own), from a fresh start of the poses and constants
-        (:func:`~identcheck.bundle.start.start_state` on the samples of weight > 0), or None when they cannot start
-        one. `changes`: as :meth:`refit` takes them (``extra_params``, ``effect``)."""
+        (:func:`~identcheck.bundle.start.start_state` on the samples of weight > 0, or the best combination of the
+        closed-form starts when :attr:`Context.every_start`), or None when they cannot start one. `changes`: as
+        :meth:`refit` takes them (``extra_params``, ``effect``)."""
         data = self.data if data is None else data
         weights = self.weights if weights is None else weights
         chain = chain or self.chain
         seen = np.where((weights > 0)[..., None], data, np.nan)
         try:
-            state = start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
+            state = better_start(ctx.model, chain, seen, weights, ctx.rate_hz, ctx.source) \
+                if ctx.every_start else None
+            if state is None:
+                state = start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
         except (DegenerateError, InputError):
             return None
         return self.refit(data=data, weights=weights, chain=chain, state=state, max_iter=max_iter, **changes)

@@ -110,6 +110,14 @@ class State:
                      self.root_R.copy(), self.root_t.copy(), cp(self.rel_R), cp(self.theta),
                      [p.copy() for p in self.term_params])
 
+    def at_frames(self, idx) -> "State":
+        """A copy with the per-frame motion of the frames `idx` only (the constants as they are)."""
+        cp = lambda d: {k: np.array(v) for k, v in d.items()}  # noqa: E731
+        at = lambda d: {k: np.array(v[idx]) for k, v in d.items()}  # noqa: E731
+        return State(self.local.copy(), cp(self.c_parent), cp(self.c_child), cp(self.axis), cp(self.rest),
+                     self.root_R[idx].copy(), self.root_t[idx].copy(), at(self.rel_R), at(self.theta),
+                     [p.copy() for p in self.term_params])
+
 
 @dataclass
 class Fit:

@@ -23,7 +23,7 @@ from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
 from identcheck.bundle.model import null_count
 from identcheck.bundle.honest import assess, joint_answer
-from identcheck.bundle.start import start_state
+from identcheck.bundle.start import better_start, start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
@@ -42,8 +42,9 @@ scale (a hip centre pistoning in the pelvis: the markers' mean residual seen fro
 where the fit scored 22 930, and skin on the thigh, estimated 5 020, scored 20 013 and was named instead). An
 effect's further places are not fitted this round when their strength is below 1/SKIP_RATIO of the best score
 fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
-lag is several frames) or is marked ``always_fit`` (a swap's strength is read from distances, not from the
-residual; a hinge's extra rotation's are a bound and a first-order reading)."""
+lag is several frames) or it or the proposal is marked ``always_fit`` (a swap's strength is read from distances,
+not from the residual; a hinge's extra rotation's are a bound and a first-order reading; a marker's delay read from
+its distances to its segment-mates)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
@@ -285,7 +286,20 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     state = _naming(files, start_state, model, chain, data, trial.rate_hz)
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)
-    return ctx, Hypothesis(chain, fit.terms, data, weights, fit)
+    h = Hypothesis(chain, fit.terms, data, weights, fit)
+    if not consistency(ctx, h)["consistent"]:
+        # a gap above the noise may be a wrong minimum of the rigid model, not an effect: the other closed-form
+        # starts ``fit`` uses are tried, and a lower fit from one is the rigid model's (:func:`better_start`)
+        if progress:
+            progress("the rigid-joint fit leaves a gap: trying the other closed-form starts")
+        other = _naming(files, better_start, model, chain, data, weights, trial.rate_hz, trial.source)
+        if other is not None:
+            again = restarted_stuck_frames(fit_chain(chain, data, other, weights=weights, max_iter=BASE_ITER), data,
+                                           weights)
+            if again.rss < fit.rss:
+                h = Hypothesis(chain, again.terms, data, weights, again)
+                ctx = replace(ctx, every_start=True)
+    return ctx, h
 
 
 def creep(ctx: Context, h: Hypothesis) -> float:
@@ -369,7 +383,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                     log.debug("%s %s skipped: adopted already", eff.name, prop.where)
                     continue
                 if (eff.name in placed and prop.strength * SKIP_RATIO < best and eff is not leader
-                        and not eff.always_fit):
+                        and not (eff.always_fit or prop.always_fit)):
                     # (each effect's first place, other places of the leader, and effects whose strength is no
                     # estimate of their score: always)
                     log.debug("%s %s skipped: its detector strength is far below the best fit", eff.name, prop.where)

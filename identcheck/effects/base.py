@@ -54,6 +54,9 @@ class Proposal:
     where: dict
     strength: float
     payload: dict = field(default_factory=dict)
+    always_fit: bool = False
+    """Fitted whatever the best score so far, as every proposal of an effect marked ``always_fit`` is: its strength
+    is read another way than the effect's other proposals' (a delay read from distances), not on their scale."""
 
 
 class Effect:

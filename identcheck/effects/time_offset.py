@@ -7,6 +7,9 @@ own, e.g. one camera's, is a delay too). The velocity is a central difference ov
 displacement is partly taken up by the model (a single marker's by its segment's pose and its own position, with
 three markers most of it; a lagging limb segment's almost whole by the joint angles): the residual is regressed
 on the part of the velocity field a refit of the model does not absorb (:func:`identcheck.bundle.chain.unabsorbed`).
+A single marker's lag is also read without the joint model, from its distances to its segment-mates
+(:func:`lag_from_rigidity`): where its segment is posed through the joint by two markers, the rigid fit bends the
+limb to the lag and the residual regression reads it wrongly.
 Augmentation: the segment's trajectories are shifted back by τ (cubic spline through its visible samples), τ
 refined by Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter) from the better
 of the current fit and a fresh start (the current fit's angles are bent to the lag); whole-frame delays beside it are
@@ -79,6 +82,33 @@ def smooth_velocity(data: np.ndarray, rate_hz: float, span_s: float = VELOCITY_S
     if data.shape[0] > 2 * h:
         out[h:-h] = (data[2 * h:] - data[:-2 * h]) * (rate_hz / (2 * h))
     return out
+
+
+def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: list) -> tuple[float, float]:
+    """The delay τ (s) of `marker` against its segment-mates `mates` (columns of `data` (F, M, 3), `vel` their
+    velocities, :func:`smooth_velocity`) that best keeps their distances constant, read from the data alone, and the
+    squared distance change (mm²) it explains (0 when nothing can be read).
+
+    A marker whose stream lags by τ is seen at ``x(t) − τ·v(t)``: its distance to a mate on time changes by
+    ``−τ·u·v`` (u the unit vector from the mate), which no pose, joint or segment length can take up. The joint
+    model's residuals can hide it: on a thigh posed by two markers and the hip, a lag of one marker bends the pose and
+    the knee, the residual is spread over every marker of the limb, and regressed on the lagging marker's velocity it
+    read −1.7 ms for a 30 ms lag (held-out draw 56, trial 89: the knee was given two extra rotations instead).
+    Linearised in τ and fitted to each distance's departures from its mean."""
+    num = den = 0.0
+    for j in mates:
+        diff = data[:, marker] - data[:, j]
+        dist = np.linalg.norm(diff, axis=1)
+        along = np.sum(diff * vel[:, marker], axis=1) / np.maximum(dist, 1e-9)     # u·v
+        ok = np.isfinite(dist) & np.isfinite(along)
+        if ok.sum() < 10:
+            continue
+        dd, a = dist[ok] - dist[ok].mean(), along[ok] - along[ok].mean()
+        num += float(dd @ a)
+        den += float(a @ a)
+    if den <= 0.0:
+        return 0.0, 0.0
+    return -num / den, num * num / den
 
 
 def _only(vel: np.ndarray, idx: list) -> np.ndarray:
@@ -182,17 +212,51 @@ class TimeOffset(Effect):
                 where["markers"] = [ch.labels[idx[0]]]
             out.append(Proposal(self.name, where, float(gain), {"segment": seg, "columns": idx, "tau": tau}))
         # every segment (the linearised detector cannot tell which segment lags when the lag is several
-        # frames: each is fitted), then the two strongest single markers
+        # frames: each is fitted), then the two strongest single markers, and the two whose distances to their
+        # segment-mates say they lag (:func:`rigidity_proposals`) when those are others
         whole = sorted((p for p in out if "markers" not in p.where), key=lambda p: -p.strength)
-        single = sorted((p for p in out if "markers" in p.where), key=lambda p: -p.strength)
-        return whole + single[:2]
+        single = sorted((p for p in out if "markers" in p.where), key=lambda p: -p.strength)[:2]
+        named = {p.where["markers"][0] for p in single}
+        rigid = [p for p in self.rigidity_proposals(ctx, hyp, vel) if p.where["markers"][0] not in named]
+        return whole + single + rigid[:2]
+
+    def rigidity_proposals(self, ctx, hyp, vel) -> list:
+        """Single markers whose distances to their segment-mates change with their velocity as a lag makes them
+        (:func:`lag_from_rigidity`, read without the joint model), strongest first: those whose change earns the
+        delay's parameter (the distance's noise is twice a coordinate's variance) and is at least
+        :data:`MIN_DELAY_FRAMES`. Their strength is what the lag moves the marker by, ``τ²·Σ|v|²`` over σ², less
+        the parameter: the score a delay undone on that marker would gain before the model takes up any of it
+        (what the distances explain is only their share along the lines to the mates). Both are smooth in time, so
+        both are counted at the share serially correlated noise leaves of them (:attr:`Context.smooth_share`).
+        They are fitted whatever the best score so far (``always_fit``), from the delay they read (no Newton step on
+        the residuals that hid it)."""
+        ch = hyp.chain
+        out = []
+        for seg in ch.segments:
+            idx = list(ch.seg_markers[seg])
+            for c in idx if len(idx) > 1 else []:
+                tau, explained = lag_from_rigidity(hyp.data, vel, c, [j for j in idx if j != c])
+                if (ctx.bic_gain(explained / 2.0 * ctx.smooth_share, 1) <= 0
+                        or abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES):
+                    continue
+                seen = np.isfinite(vel[:, c]).all(axis=1) & (hyp.weights[:, c] > 0)
+                moved = tau * tau * float(np.sum(vel[seen, c] ** 2))
+                where = {"segment": seg, "delay_ms": 1000 * tau, "markers": [ch.labels[c]]}
+                payload = {"segment": seg, "columns": [c], "tau": tau, "from_rigidity": True}
+                out.append(Proposal(self.name, where, ctx.bic_gain(moved * ctx.smooth_share, 1), payload,
+                                    always_fit=True))
+        return sorted(out, key=lambda p: -p.strength)
 
     def apply(self, ctx, hyp, proposal):
         idx = proposal.payload["columns"]
         tau = proposal.payload["tau"]
         base = hyp.data
         current = hyp
-        for _ in range(NEWTON_STEPS):
+        # a delay read from the distances alone (:meth:`rigidity_proposals`) is not refined on the joint model's
+        # residuals: those are what hid it (Newton from 2.2 frames went back to -0.07, the rigid fit's own lag, and
+        # the whole frames near it were refitted from that bent fit: 4 frames scored 13 079 where 3 frames refitted
+        # from a start with the lag undone scores 44 101; held-out draw 56, trial 89)
+        for _ in range(0 if proposal.payload.get("from_rigidity") else NEWTON_STEPS):
             data = base.copy()
             data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
             vel = shifted(base[:, idx], ctx.rate_hz, tau, derivative=1)

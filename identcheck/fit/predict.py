@@ -45,7 +45,7 @@ STARTS_BUDGET_S = 600.0
 """Seconds the noise-free fit may go on starting candidates (``fit`` itself stops at 90 s): the rivals a plan
 reports are the minima those starts reach, so each one-joint change of the candidates should be fitted. Pham's
 body at 1000 frames tried 6 of its 16 first starts in 90 s, and the twins of its right knee and of its elbows
-went unreported. The number of starts stays capped (:data:`identcheck.fit.whole_tree.MAX_STARTS`, or one per
+went unreported. The number of starts stays capped (:data:`identcheck.bundle.starts.MAX_STARTS`, or one per
 one-joint change), each one bounded in time; the one-joint changes left out are said (``rivals_note``)."""
 
 

@@ -15,8 +15,9 @@ inflation of the trial's correlated residuals (:mod:`identcheck.bundle.uncertain
 Every centre along its weak line: a sphere fitted to one or two child markers over a small arc (gait: a hip
 through one thigh marker) fixes the direction to the centre far better than its distance, and the whole-tree
 fit from that one start can settle in a wrong minimum. Each such centre also starts fits with its distance
-from those markers scaled by :data:`RADIAL_FACTORS` (held-out minimal gait trial: the closed-form start
-settled with the hip 100 mm off, while a minimum near the truth fitted better by Δχ² 139).
+from those markers scaled by :data:`~identcheck.bundle.starts.RADIAL_FACTORS` (held-out minimal gait trial: the
+closed-form start settled with the hip 100 mm off, while a minimum near the truth fitted better by Δχ² 139); the
+combinations are made in :mod:`identcheck.bundle.starts`.
 
 Practical identifiability (:mod:`identcheck.bundle.practical`): from the sandwich covariance, each joint is
 ``determined`` (unique, and every marker distance's 95 % interval within ±:data:`~identcheck.bundle.practical.TOLERANCE_MM`),
@@ -26,8 +27,6 @@ that would help.
 """
 from __future__ import annotations
 
-import itertools
-import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -42,16 +41,12 @@ from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, j
 from identcheck.bundle.misfit import angle_dependence, model_error_sd
 from identcheck.bundle.model import n_const
 from identcheck.bundle.start import state_from_joints
+from identcheck.bundle.starts import candidates, start_combinations
 from identcheck.bundle.uncertainty import covariance, distance_gradients
 from identcheck.errors import DegenerateError, InputError
-from identcheck.geometry.poses import segment_poses
 from identcheck.skeleton import Skeleton
 
-MAX_STARTS = 16          # candidate combinations started (more when the one-joint changes alone exceed it)
 STARTS_BUDGET_S = 90.0   # no new start after this many seconds (the ones left out are counted and reported)
-RADIAL_FACTORS = (0.6, 1.7, 2.5)
-"""A centre seen by at most two markers on one side also starts fits at these multiples of its distance from
-their centroid (along the line through them, fixed on that side)."""
 MAX_RIVALS = 4           # other minima refitted for the joints above an unbounded one (the best ones)
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
 SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
@@ -79,94 +74,6 @@ def skeleton_of(model, trial) -> Skeleton:
         if m in col and np.isfinite(data[:, col[m]]).all(axis=1).any():
             seen.add(m)
     return Skeleton.from_model(model, markers=seen)
-
-
-def candidates(closed_form: dict) -> dict:
-    """joint -> list of closed-form JointEstimates to start from (one for a unique joint, all for an
-    ambiguous one, including those a far marker ranked lower)."""
-    out = {}
-    for name, (est, _info) in closed_form.items():
-        if est is None:
-            continue
-        out[name] = [est] + list(est.alternatives) + list(est.ranked_out)
-    return out
-
-
-def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
-    """Copies of a spherical closed-form estimate with its centre moved along the line from the centroid of the
-    sparser side's markers (one or two) through it, to :data:`RADIAL_FACTORS` times that distance.
-
-    The line is taken on the side with three markers or more, where a pose is measured (the centroid averaged
-    into its frame), so the moved centre is a rigid point of that side; with no such side it is scaled about
-    the centroid in every frame (a rigid point of the sparse side). No copies for a revolute joint, or when both
-    sides carry three markers or more (the fit is well conditioned there)."""
-    if est.kind != "spherical" or est.centre is None:
-        return []
-    sides = sorted([chain.seg_markers[chain.parent[joint]], chain.seg_markers[chain.child[joint]]], key=len)
-    sparse, rich = sides
-    if len(sparse) == 0 or len(sparse) > 2:
-        return []
-    with np.errstate(invalid="ignore"):
-        anchor = np.mean(data[:, sparse], axis=1)          # NaN where one of them is unseen
-    moved = [anchor + k * (est.centre - anchor) for k in RADIAL_FACTORS]
-    if len(rich) >= 3:
-        poses = segment_poses(data[:, rich])
-        c_loc, a_loc = poses.body_fixed(est.centre), poses.body_fixed(anchor)
-        if np.isfinite(c_loc).all() and np.isfinite(a_loc).all():
-            moved = [poses.to_world((a_loc + k * (c_loc - a_loc))[None])[:, 0] for k in RADIAL_FACTORS]
-    return [replace(est, centre=c, estimator=f"{est.estimator}, distance ×{k:g}", alternatives=[], ranked_out=[],
-                    unique=False)
-            for k, c in zip(RADIAL_FACTORS, moved) if np.isfinite(c).all(axis=1).sum() >= 3]
-
-
-def _by_changes(cands: dict, names: list, cap: int) -> tuple[list, int]:
-    """(index tuples into ``cands`` (joint -> candidates), how many more combinations exist): the first
-    combination, then those that change one joint, then (up to ``cap`` in all) those that change several."""
-    sizes = [len(cands[n]) for n in names]
-    first = (0,) * len(names)
-    head = [first] + [first[:k] + (i,) + first[k + 1:] for k, size in enumerate(sizes) for i in range(1, size)]
-    several = (idx for idx in itertools.product(*map(range, sizes)) if sum(i > 0 for i in idx) > 1)
-    rest = list(itertools.islice(several, max(cap - len(head), 0)))
-    return head + rest, math.prod(sizes) - len(head) - len(rest)
-
-
-def _starts(chain, closed_form: dict, restart, data=None) -> tuple[list, int, str, int]:
-    """Start assignments (joint -> JointEstimate), how many were left out, why none could be made, and how many
-    of the assignments (after the first) change one joint's candidate.
-    Every combination of the candidates of the ambiguous joints, those that change one joint of the first
-    combination first (each joint's every candidate is tried, whatever the number of ambiguous joints: on
-    a body with four hinges of four candidates each, their twins come before the 243 combinations that
-    change several hinges at once); joints the closed form left without a start because a joint above them
-    was ambiguous are started from each of that joint's candidates in turn (``restart(fixed)`` reruns the
-    closed form with those candidates taken as the joints). With `data`, the combinations that change one
-    joint are followed by the first's copies with one weak centre moved (:func:`radial_variants`). The cap
-    :data:`MAX_STARTS` never leaves out a one-joint change."""
-    cands = candidates(closed_form)
-    names = list(cands)
-    singles = sum(len(cands[n]) - 1 for n in names)
-    cap = max(MAX_STARTS, 1 + singles)
-    chosen, unlisted = _by_changes(cands, names, cap)
-    combos = [dict(zip(names, (cands[n][i] for n, i in zip(names, idx)))) for idx in chosen]
-    missing = [j for j in chain.joints if j not in cands]
-    if not missing and combos and data is not None:     # the first combination with one weak centre moved
-        moved = [{**combos[0], n: v} for n in names for v in radial_variants(chain, data, n, combos[0][n])]
-        combos = combos[:1 + singles] + moved + combos[1 + singles:]
-    if missing:
-        ambiguous = [n for n in names if len(cands[n]) > 1]
-        if not ambiguous or restart is None:
-            return [], 0, f"no closed-form start for {', '.join(missing)}", 0
-        combos = []
-        for idx in itertools.product(*[range(len(cands[n])) for n in ambiguous]):
-            if len(combos) >= MAX_STARTS:
-                break
-            fixed = {n: cands[n][i] for n, i in zip(ambiguous, idx)}
-            again = restart(fixed)
-            if all(again.get(j, (None,))[0] is not None for j in chain.joints):
-                combos.append({j: again[j][0] for j in chain.joints})
-        if not combos:
-            return [], 0, f"no closed-form start for {', '.join(missing)}, from any candidate of {', '.join(ambiguous)}", 0
-        cap, unlisted, singles = MAX_STARTS, 0, 0
-    return combos[:cap], max(len(combos) - cap, 0) + unlisted, "", singles
 
 
 def without_subtrees(model, joints) -> tuple:
@@ -230,7 +137,7 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
     segment the start could not pose or move)."""
     chain = skeleton_of(model, trial)
     data = trial.select(chain.labels).as_array()
-    combos, left_out, why, singles = _starts(chain, closed_form, restart, data)
+    combos, left_out, why, singles = start_combinations(chain, closed_form, restart, data)
     if not combos:
         return TreeFit(None, problem=why), {j for j in chain.joints if j not in candidates(closed_form)}
     minima, problems, tried, singles_cut = [], [], 0, 0

@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
 from identcheck.estimate.joint import JointEstimate
-from identcheck.fit.whole_tree import RADIAL_FACTORS, radial_variants
+from identcheck.bundle.starts import RADIAL_FACTORS, radial_variants
 
 
 def _two_segments(seed: int, n_parent: int, n_child: int, frames: int = 120):
@@ -100,7 +100,7 @@ def test_every_one_joint_change_is_started_before_any_combination(sizes, cap):
     those left out makes up the product of the candidate counts."""
     import math
 
-    from identcheck.fit.whole_tree import _by_changes
+    from identcheck.bundle.starts import by_changes as _by_changes
 
     names = [f"j{k}" for k in range(len(sizes))]
     cands = {n: list(range(s)) for n, s in zip(names, sizes)}
