@@ -42,11 +42,18 @@ class Context:
     every_start: bool = False
     """Fresh starts (:meth:`Hypothesis.restarted`) are taken from the best of the closed-form combinations
     (:func:`~identcheck.bundle.start.better_start`), not the first: set when the rigid fit's first combination
-    settled above another's (the first is then known to lead this trial's fits astray)."""
+    settled above another's by more than :attr:`start_margin` (the first is then known to lead this trial's fits
+    astray)."""
 
     @property
     def n_obs(self) -> int:
         return 3 * self.n_samples
+
+    @property
+    def start_margin(self) -> float:
+        """mm²: how much lower one start's fit must end than another's to count as another minimum (the noise's
+        variance times one parameter's charge, ``ln 3N``); starts that reach one minimum differ by 1e-10 of it."""
+        return float(self.noise.sigma_mm ** 2 * np.log(self.n_obs))
 
     def rss(self, h: "Hypothesis") -> float:
         """What a hypothesis leaves unexplained, as the noise model sees it: its residual sum of squares
@@ -123,11 +130,10 @@ class Hypothesis:
         weights = self.weights if weights is None else weights
         chain = chain or self.chain
         seen = np.where((weights > 0)[..., None], data, np.nan)
+        state = better_start(ctx.model, chain, seen, weights, ctx.rate_hz, ctx.start_margin, ctx.source) \
+            if ctx.every_start else None
         try:
-            state = better_start(ctx.model, chain, seen, weights, ctx.rate_hz, ctx.source) \
-                if ctx.every_start else None
-            if state is None:
-                state = start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
+            state = state if state is not None else start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
         except (DegenerateError, InputError):
             return None
         return self.refit(data=data, weights=weights, chain=chain, state=state, max_iter=max_iter, **changes)

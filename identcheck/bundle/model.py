@@ -105,17 +105,15 @@ class State:
     term_params: list = field(default_factory=list)   # one (K, 3) per term, markers then centres
 
     def copy(self) -> "State":
-        cp = lambda d: {k: np.array(v) for k, v in d.items()}  # noqa: E731
-        return State(self.local.copy(), cp(self.c_parent), cp(self.c_child), cp(self.axis), cp(self.rest),
-                     self.root_R.copy(), self.root_t.copy(), cp(self.rel_R), cp(self.theta),
-                     [p.copy() for p in self.term_params])
+        return self.at_frames(slice(None))
 
     def at_frames(self, idx) -> "State":
-        """A copy with the per-frame motion of the frames `idx` only (the constants as they are)."""
+        """A copy with the per-frame motion of the frames `idx` only (every frame: ``slice(None)``), the constants
+        as they are."""
         cp = lambda d: {k: np.array(v) for k, v in d.items()}  # noqa: E731
         at = lambda d: {k: np.array(v[idx]) for k, v in d.items()}  # noqa: E731
         return State(self.local.copy(), cp(self.c_parent), cp(self.c_child), cp(self.axis), cp(self.rest),
-                     self.root_R[idx].copy(), self.root_t[idx].copy(), at(self.rel_R), at(self.theta),
+                     np.array(self.root_R[idx]), np.array(self.root_t[idx]), at(self.rel_R), at(self.theta),
                      [p.copy() for p in self.term_params])
 
 

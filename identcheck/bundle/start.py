@@ -12,7 +12,7 @@ import numpy as np
 
 from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
 from identcheck.bundle.starts import start_combinations
-from identcheck.errors import DegenerateError
+from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.closed_forms import fit_model
 from identcheck.estimate.joint import start_stride
 from identcheck.geometry.poses import farthest_pair, poses_segment, refine_local, segment_poses
@@ -114,14 +114,19 @@ PICK_ITER = 40
 """Iterations of each of those fits: the starts that reach the noise had been the highest after 8 (see
 :func:`better_start`), and converged within 35."""
 
+_CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
 
-def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float,
+
+def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float, margin: float,
                  source: str = "<array>", max_iter: int = PICK_ITER):
-    """The state, fitted `max_iter` iterations to every frame, from another combination of the closed-form
-    candidates (:func:`start_combinations`, those ``fit`` starts from) whose fit to spread frames
-    (:data:`PICK_FRAMES`, `max_iter` iterations each) ends lower than the first combination's, the one
-    :func:`start_state` takes; None when none does, or when every segment is posed by its own markers (no closed
-    form is needed to start).
+    """The state, fitted `max_iter` iterations to every frame, from the combination of the closed-form candidates
+    (:func:`start_combinations`, those ``fit`` starts from, joints below an ambiguous one restarted from each of its
+    candidates) whose fit to spread frames (:data:`PICK_FRAMES`, `max_iter` iterations each) ends lowest, when that
+    is below the first combination's by more than `margin` (mm², on those frames: a caller passes the noise's
+    variance times the charge of a parameter, since combinations that reach the same minimum differ by 1e-10 of it
+    and which of them comes out lower is chance); None otherwise, when every segment is posed by
+    its own markers (no closed form is needed to start), or when the closed forms cannot start any (this is an
+    improvement on a start the caller has: it never raises for want of one).
 
     Why: the first combination can settle in a wrong minimum whose gap passes for an effect. A thigh marker 9 mm
     off the femur's line and a knee marker on the hinge, a clean simulated trial: from the first combination the
@@ -132,22 +137,25 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
     if all(poses_segment(data[:, chain.seg_markers[seg]]) for seg in chain.segments):
         return None
     trial = Trial.from_array(data, chain.labels, rate_hz, source=source)
-    fitted, _ = fit_model(model, trial)
-    combos = start_combinations(chain, fitted, None, data)[0]
+    try:
+        fitted, _ = fit_model(model, trial)
+        combos = start_combinations(chain, fitted, lambda fixed: fit_model(model, trial, fixed=fixed)[0], data)[0]
+    except _CANNOT_START:
+        return None
     if len(combos) < 2:
         return None
-    idx = np.arange(0, len(data), max(len(data) // PICK_FRAMES, 1))
-    best, best_rss = None, np.inf
-    for k, combo in enumerate(combos):
+    idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), PICK_FRAMES)).astype(int))
+    ends = []                                    # (rss on the spread frames, start state) per combination
+    for combo in combos:
         try:
             state = state_from_joints(model, chain, data, combo)
-        except DegenerateError:
-            continue
-        rss = fit_chain(chain, data[idx], state.at_frames(idx), weights=weights[idx], max_iter=max_iter).rss
-        if rss < best_rss:
-            best, best_rss = (k, state), rss
-    if best is None or best[0] == 0:
+            ends.append((fit_chain(chain, data[idx], state.at_frames(idx), weights=weights[idx],
+                                   max_iter=max_iter).rss, state))
+        except _CANNOT_START:
+            ends.append((np.inf, None))
+    k = min(range(len(ends)), key=lambda i: ends[i][0])
+    if k == 0 or not ends[k][0] < ends[0][0] - margin:
         return None
     # fitted on all frames before it is handed on: a caller's short refit (a candidate screened in 8 iterations)
     # from the bare start would judge it where it is still highest
-    return fit_chain(chain, data, best[1], weights=weights, max_iter=max_iter).state
+    return fit_chain(chain, data, ends[k][1], weights=weights, max_iter=max_iter).state

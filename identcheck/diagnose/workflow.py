@@ -292,11 +292,11 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         # starts ``fit`` uses are tried, and a lower fit from one is the rigid model's (:func:`better_start`)
         if progress:
             progress("the rigid-joint fit leaves a gap: trying the other closed-form starts")
-        other = _naming(files, better_start, model, chain, data, weights, trial.rate_hz, trial.source)
+        other = better_start(model, chain, data, weights, trial.rate_hz, ctx.start_margin, trial.source)
         if other is not None:
             again = restarted_stuck_frames(fit_chain(chain, data, other, weights=weights, max_iter=BASE_ITER), data,
                                            weights)
-            if again.rss < fit.rss:
+            if again.rss < fit.rss - ctx.start_margin:
                 h = Hypothesis(chain, again.terms, data, weights, again)
                 ctx = replace(ctx, every_start=True)
     return ctx, h

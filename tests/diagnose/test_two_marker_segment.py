@@ -119,8 +119,9 @@ def test_a_clean_leg_whose_first_closed_form_start_misleads_is_diagnosed_clean(t
 
 def test_another_start_is_offered_only_when_it_fits_lower(tmp_path):
     """:func:`better_start` on that clean trial: a state whose fit reaches the noise where the first combination's
-    stays far above it; on the trial's own first combination's fit it offers nothing better than itself, and on a
-    leg posed by its own markers it offers nothing (no closed form is needed to start)."""
+    stays far above it. On the leg of this file with a two-marker thigh placed at random (four combinations, the
+    first as low as any) it offers nothing, nor on a leg posed by its own markers (no closed form is needed to
+    start)."""
     from identcheck.bundle.chain import fit_chain
     from identcheck.bundle.start import better_start, start_state
     from identcheck.skeleton import Skeleton
@@ -131,16 +132,26 @@ def test_another_start_is_offered_only_when_it_fits_lower(tmp_path):
     data = trial.select(chain.labels).as_array()
     weights = np.ones(data.shape[:2])
     first = fit_chain(chain, data, start_state(model, chain, data, trial.rate_hz), weights=weights, max_iter=300)
-    other = better_start(model, chain, data, weights, trial.rate_hz)
+    margin = 0.8 ** 2 * np.log(data.size)          # the noise's variance times a parameter's charge
+    other = better_start(model, chain, data, weights, trial.rate_hz, margin)
     assert other is not None
     best = fit_chain(chain, data, other, weights=weights, max_iter=300)
     floor = 0.8 ** 2 * data.size
     assert best.rss < 1.2 * floor < 5 * floor < first.rss
+    path = tmp_path / "two_marker_thigh.toml"
+    path.write_text(MODEL)
+    placed = Model.from_toml(path)
+    sim = simulate(placed, n_frames=1000, noise_mm=0.0, seed=2, rom_deg=60.0)
+    xyz = sim.trial.as_array() + np.random.default_rng(2).normal(0, 0.8, sim.trial.as_array().shape)
+    trial, _ = sim.trial.replace(xyz=xyz).recentred()
+    chain = Skeleton.from_model(placed)
+    data = trial.select(chain.labels).as_array()
+    assert better_start(placed, chain, data, np.ones(data.shape[:2]), trial.rate_hz, margin) is None
     posed = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
     sim = simulate(posed, n_frames=200, noise_mm=0.5, seed=1)
     chain = Skeleton.from_model(posed)
     data = sim.trial.select(chain.labels).as_array()
-    assert better_start(posed, chain, data, np.ones(data.shape[:2]), sim.trial.rate_hz) is None
+    assert better_start(posed, chain, data, np.ones(data.shape[:2]), sim.trial.rate_hz, margin) is None
 
 
 def test_one_marker_late_on_a_thigh_whose_first_start_misleads_is_named_alone(tmp_path):
