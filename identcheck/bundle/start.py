@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
-from identcheck.bundle.starts import start_combinations
+from identcheck.bundle.starts import candidates, start_combinations
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.closed_forms import fit_model
 from identcheck.estimate.joint import start_stride
@@ -124,7 +124,8 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
     candidates) whose fit to spread frames (:data:`PICK_FRAMES`, `max_iter` iterations each) ends lowest, when that
     is below the first combination's by more than `margin` (mm², on those frames: a caller passes the noise's
     variance times the charge of a parameter, since combinations that reach the same minimum differ by 1e-10 of it
-    and which of them comes out lower is chance); None otherwise, when every segment is posed by
+    and which of them comes out lower is chance; when a joint had no closed form of its own the first combination is
+    not :func:`start_state`'s, and the lowest is offered for the caller to compare); None otherwise, when every segment is posed by
     its own markers (no closed form is needed to start), or when the closed forms cannot start any (this is an
     improvement on a start the caller has: it never raises for want of one).
 
@@ -154,7 +155,10 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
         except _CANNOT_START:
             ends.append((np.inf, None))
     k = min(range(len(ends)), key=lambda i: ends[i][0])
-    if k == 0 or not ends[k][0] < ends[0][0] - margin:
+    # the first combination is :func:`start_state`'s unless a joint had no closed form of its own (then every
+    # combination restarts it, and the first is no baseline: the best is offered, for the caller to compare)
+    own = all(j in candidates(fitted) for j in chain.joints)
+    if not np.isfinite(ends[k][0]) or (own and (k == 0 or not ends[k][0] < ends[0][0] - margin)):
         return None
     # fitted on all frames before it is handed on: a caller's short refit (a candidate screened in 8 iterations)
     # from the bare start would judge it where it is still highest

@@ -96,16 +96,18 @@ def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: lis
     model's residuals can hide it: on a thigh posed by two markers and the hip, a lag of one marker bends the pose and
     the knee, the residual is spread over every marker of the limb, and regressed on the lagging marker's velocity it
     read −1.7 ms for a 30 ms lag (held-out draw 56, trial 89: the knee was given two extra rotations instead).
-    Gauss-Newton on the distances' departures from their means, the marker's trajectory shifted by the delay so far
-    (:func:`shifted`) and the velocity as the derivative (`steps` at most).
+    The delay: Gauss-Newton on the distances' departures from their means, the marker's trajectory shifted by the
+    delay so far (:func:`shifted`) and the velocity as the derivative (`steps` at most).
 
-    The χ² is what undoing τ removes from the distances' departures over the variance of what it leaves, inflated by
+    The χ² is what the delay explains of the distances' departures, linear in it at no shift (a spline a fraction of
+    a frame away would smooth the noise, a shift by whole frames re-index it), over the variance of what is left with
+    it undone, inflated by
     that remainder's serial correlation (``(1 + ρ)/(1 − ρ)``, ρ its lag-1 coefficient) and by ``(m + 1)/2`` for m
     mates (their distances share the marker's noise). Skin moving with the motion also changes distances in step
     with the velocity, slowly: measured against the frame-to-frame noise, that passed for a lag of 0.4–2 frames on
     four markers of the real walking2 trial, which has none. Against the distances' own scatter its χ² is at most 5
-    on that trial's markers but one (14, read as 0.16 of a frame); the 30 ms lag of draw 56, trial 89, under AR(1)
-    noise of coefficient 0.87, reads 25 ms at χ² 30."""
+    on that trial's markers but one (14.5, read as 0.16 of a frame); the 30 ms lag of draw 56, trial 89, under AR(1)
+    noise of coefficient 0.87, reads 25 ms at χ² 26.5."""
     def departures(x):
         """Each mate's distance departures from its mean, and the regressor u·v (pairs, F), NaN where unused."""
         dd, a = [], []
@@ -126,8 +128,8 @@ def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: lis
         return data[:, marker] if tau == 0.0 else shifted(data[:, [marker]], rate_hz, tau)[:, 0]
 
     tau = 0.0
-    before, a = departures(data[:, marker])
-    left = before
+    before, a0 = departures(data[:, marker])
+    left, a = before, a0
     for _ in range(steps):
         den = float(np.nansum(a * a))
         if not den > 0.0:
@@ -137,11 +139,17 @@ def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: lis
         left, a = departures(moved(tau))
         if abs(step) * rate_hz < 0.01:
             break
-    both_ends = np.isfinite(left) & np.isfinite(before)
-    if both_ends.sum() < 10:
+    # what the delay explains is read at no shift, linear in it: undone through a spline a fraction of a frame away,
+    # the delay would also smooth the marker's noise (a quarter of its variance at half a frame), which passes for
+    # explained (a clean, slowly moving cluster read 0.2-0.4 frames at chi2 52-126); undone by whole frames, the
+    # samples are re-indexed and what that changes is a difference of two noise sums, which grows with the trial.
+    # What it leaves is read with the delay undone: the linear fit's own remainder carries the lag's second-order
+    # part, slow and serially correlated, which had held a clean 2-frame lag below the charge
+    den = float(np.nansum(a0 * a0))
+    if not den > 0.0:
         return 0.0, 0.0
-    removed = float(np.sum(np.where(both_ends, before ** 2 - left ** 2, 0.0)))
-    rest = np.where(both_ends, left, np.nan)
+    num = float(np.nansum(before * a0))
+    removed, rest = num * num / den, left
     pairs = np.isfinite(rest[:, 1:]) & np.isfinite(rest[:, :-1])
     rho = float(np.sum(np.where(pairs, rest[:, 1:] * rest[:, :-1], 0.0)) /
                 max(float(np.sum(np.where(pairs, rest[:, 1:] ** 2, 0.0))), 1e-300))
@@ -253,7 +261,7 @@ class TimeOffset(Effect):
         # frames: each is fitted), then the two strongest single markers, and the two whose distances to their
         # segment-mates say they lag (:meth:`rigidity_proposals`)
         whole = sorted((p for p in out if "markers" not in p.where), key=lambda p: -p.strength)
-        rigid = self.rigidity_proposals(ctx, hyp, vel)[:2]
+        rigid = self.rigidity_proposals(ctx, hyp)[:2]
         read = {p.where["markers"][0]: p.payload["tau"] for p in rigid}
         single = sorted((p for p in out if "markers" in p.where), key=lambda p: -p.strength)[:2]
         # a marker's delay read from its distances too is fitted from there (not through Newton's step on the
@@ -262,7 +270,7 @@ class TimeOffset(Effect):
                   or abs(p.payload["tau"] - read[p.where["markers"][0]]) * ctx.rate_hz > 1.0]
         return whole + rigid + single
 
-    def rigidity_proposals(self, ctx, hyp, vel) -> list:
+    def rigidity_proposals(self, ctx, hyp) -> list:
         """Single markers whose distances to their segment-mates change with their velocity as a lag makes them
         (:func:`lag_from_rigidity`, read without the joint model), strongest first: those whose χ² against the
         distances' own scatter earns the delay's parameter (``ln 3N``) and whose delay is at least
@@ -274,15 +282,17 @@ class TimeOffset(Effect):
         the residuals that hid it)."""
         ch = hyp.chain
         out = []
+        seen = hyp.weights > 0
+        data = np.where(seen[..., None], hyp.data, np.nan)      # samples set aside (outliers) feed no spline
+        vel = smooth_velocity(data, ctx.rate_hz)
         for seg in ch.segments:
             idx = list(ch.seg_markers[seg])
             for c in idx if len(idx) > 1 else []:
-                tau, chi2 = lag_from_rigidity(hyp.data, vel, c, [j for j in idx if j != c], ctx.rate_hz,
-                                              hyp.weights > 0)
+                tau, chi2 = lag_from_rigidity(data, vel, c, [j for j in idx if j != c], ctx.rate_hz, seen)
                 if chi2 <= np.log(ctx.n_obs) or abs(tau) * ctx.rate_hz < MIN_DELAY_FRAMES:
                     continue
-                seen = np.isfinite(vel[:, c]).all(axis=1) & (hyp.weights[:, c] > 0)
-                moved = tau * tau * float(np.sum(vel[seen, c] ** 2))
+                moving = np.isfinite(vel[:, c]).all(axis=1)
+                moved = tau * tau * float(np.sum(vel[moving, c] ** 2))
                 where = {"segment": seg, "delay_ms": 1000 * tau, "markers": [ch.labels[c]]}
                 payload = {"segment": seg, "columns": [c], "tau": tau, "from_rigidity": True}
                 out.append(Proposal(self.name, where, ctx.bic_gain(moved * ctx.smooth_share, 1), payload,

@@ -199,6 +199,8 @@ def test_a_fit_no_damping_can_move_is_converged_only_at_a_minimum(seed, pull):
     data = sim.trial.select(chain.labels).as_array()
     fit = fit_chain(chain, data, initial_state(chain, data), max_iter=300)
     assert fit.converged
+    again = fit_chain(chain, data, fit.state, max_iter=5)
+    assert again.converged and again.iterations <= 2          # from a minimum: converged at once
     P = len(covariance(fit, data).information)
     stalled = fit_chain(chain, data, fit.state, max_iter=5, penalty=_wrong_way_spring(chain, fit, P, pull))
     assert stalled.iterations == 1 and not stalled.converged

@@ -124,6 +124,8 @@ def test_another_start_is_offered_only_when_it_fits_lower(tmp_path):
     start)."""
     from identcheck.bundle.chain import fit_chain
     from identcheck.bundle.start import better_start, start_state
+    from identcheck.bundle.starts import start_combinations
+    from identcheck.estimate.closed_forms import fit_model
     from identcheck.skeleton import Skeleton
 
     model, trial = _on_its_line(tmp_path, 1)
@@ -146,6 +148,8 @@ def test_another_start_is_offered_only_when_it_fits_lower(tmp_path):
     trial, _ = sim.trial.replace(xyz=xyz).recentred()
     chain = Skeleton.from_model(placed)
     data = trial.select(chain.labels).as_array()
+    fitted, _ = fit_model(placed, trial)
+    assert len(start_combinations(chain, fitted, None, data)[0]) == 4      # so the comparison is what says None
     assert better_start(placed, chain, data, np.ones(data.shape[:2]), trial.rate_hz, margin) is None
     posed = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.toml")
     sim = simulate(posed, n_frames=200, noise_mm=0.5, seed=1)
