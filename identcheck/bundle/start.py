@@ -125,9 +125,9 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
     is below the first combination's by more than `margin` (mm², on those frames: a caller passes the noise's
     variance times the charge of a parameter, since combinations that reach the same minimum differ by 1e-10 of it
     and which of them comes out lower is chance; when a joint had no closed form of its own the first combination is
-    not :func:`start_state`'s, and the lowest is offered for the caller to compare); None otherwise, when every segment is posed by
-    its own markers (no closed form is needed to start), or when the closed forms cannot start any (this is an
-    improvement on a start the caller has: it never raises for want of one).
+    not :func:`start_state`'s, and the lowest is offered for the caller to compare); None otherwise, when every
+    segment is posed by its own markers (no closed form is needed to start), or when the closed forms cannot start
+    any (this is an improvement on a start the caller has: it never raises for want of one).
 
     Why: the first combination can settle in a wrong minimum whose gap passes for an effect. A thigh marker 9 mm
     off the femur's line and a knee marker on the hinge, a clean simulated trial: from the first combination the
