@@ -105,7 +105,7 @@ def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float, source
 
 
 PICK_FRAMES = 120
-"""Start combinations are compared by fits to about this many frames, evenly spread (every k-th frame): the
+"""Start combinations are compared by fits to this many frames (all when fewer), evenly spread over the trial: the
 constants a start settles on decide its minimum (a few dozen of them), and an eighth of a 1000-frame trial costs an
 eighth of a fit."""
 
