@@ -17,7 +17,7 @@ from identcheck.bundle.anatomical_angles import anatomical_angles
 from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.converge import converged_fit
 from identcheck.bundle.model import Fit, State, Terms, forward
-from identcheck.bundle.start import better_start, start_state
+from identcheck.bundle.start import PICK_ITER, better_start, start_state
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.noise import NoiseFloor
 
@@ -132,6 +132,10 @@ class Hypothesis:
         seen = np.where((weights > 0)[..., None], data, np.nan)
         state = better_start(ctx.model, chain, seen, weights, ctx.rate_hz, ctx.start_margin, ctx.source) \
             if ctx.every_start else None
+        if state is not None:
+            # fitted as far as the combinations were compared before the caller's short refit (a candidate screened
+            # in 8 iterations): from the bare start it would be judged where it is still highest
+            state = fit_chain(chain, data, state, weights=weights, max_iter=PICK_ITER).state
         try:
             state = state if state is not None else start_state(ctx.model, chain, seen, ctx.rate_hz, ctx.source)
         except (DegenerateError, InputError):

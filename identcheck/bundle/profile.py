@@ -103,12 +103,12 @@ def slope_at_rest(kappa: float, pull_mm: float) -> float:
 def bracketed(inner: tuple, outer: tuple) -> bool:
     """Whether the line through the points (distance out, √Δχ², …, the slope of √Δχ² there) `inner` and `outer`
     either side of the bound places the bound: the outer point within :data:`REFINE_CHI2` of it, and the line's slope
-    within a fifth of √Δχ²'s own at both points (at the outer one only when the inner one is the estimate, whose slope
-    the standard error only guesses: on walking2's knees the sandwich's standard error is not the profile's, and
-    asking it refitted every bound; :func:`crossing` then still takes the farther of the line and the outer tangent)
-    (√Δχ² is then nearly straight between them, as a parabola's is). A
-    flat profile running into a wall, its points at Δχ² 0.5 and 4.4, had been closed 7 mm inside its bound by the
-    line; points both within 1 χ² of the bound but far apart on a plateau, 53 mm inside it."""
+    within a fifth of √Δχ²'s own at both points, so that √Δχ² is nearly straight between them, as a parabola's is.
+    When the inner point is the estimate only the outer slope is asked: the estimate's is the standard error's guess
+    (on walking2's knees the sandwich's standard error is not the profile's, and asking it refitted every bound), and
+    :func:`crossing` still takes the farther of the line and the outer tangent. A flat profile running into a wall,
+    its points at Δχ² 0.5 and 4.4, had been closed 7 mm inside its bound by the line; points both within 1 χ² of the
+    bound but far apart on a plateau, 53 mm inside it."""
     if outer[1] ** 2 > PROFILE_CHI2 + REFINE_CHI2:
         return False
     line = (outer[1] - inner[1]) / max(outer[0] - inner[0], 1e-12)

@@ -119,7 +119,7 @@ _CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
 
 def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float, margin: float,
                  source: str = "<array>", max_iter: int = PICK_ITER):
-    """The state, fitted `max_iter` iterations to every frame, from the combination of the closed-form candidates
+    """The starting state (every frame, not yet fitted) of the combination of the closed-form candidates
     (:func:`start_combinations`, those ``fit`` starts from, joints below an ambiguous one restarted from each of its
     candidates) whose fit to spread frames (:data:`PICK_FRAMES`, `max_iter` iterations each) ends lowest, when that
     is below the first combination's by more than `margin` (mm², on those frames: a caller passes the noise's
@@ -160,6 +160,4 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
     own = all(j in candidates(fitted) for j in chain.joints)
     if not np.isfinite(ends[k][0]) or (own and (k == 0 or not ends[k][0] < ends[0][0] - margin)):
         return None
-    # fitted on all frames before it is handed on: a caller's short refit (a candidate screened in 8 iterations)
-    # from the bare start would judge it where it is still highest
-    return fit_chain(chain, data, ends[k][1], weights=weights, max_iter=max_iter).state
+    return ends[k][1]

@@ -293,7 +293,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         if progress:
             progress("the rigid-joint fit leaves a gap: trying the other closed-form starts")
         other = better_start(model, chain, data, weights, trial.rate_hz, ctx.start_margin, trial.source)
-        if other is not None:
+        if other is not None:              # fitted as far as the first (compared after the same iterations)
             again = restarted_stuck_frames(fit_chain(chain, data, other, weights=weights, max_iter=BASE_ITER), data,
                                            weights)
             if again.rss < fit.rss - ctx.start_margin:
