@@ -9,6 +9,7 @@ rotate axially, segment-wide delays, lens-like and shear volume distortions, out
 - single-effect trials: the true effect named first ("first"), named at all ("any"), or missed;
 - two-effect trials: both named;
 - clean trials: nothing named;
+- effects named that a single- or two-effect trial does not hold;
 - a confusion table (true effect -> first named effect, ``none`` when nothing was named), with the
   magnitude of each miss, so detection limits can be read off.
 
@@ -212,6 +213,7 @@ def summarise(results: list) -> dict:
         "pairs": {"trials": len(pairs), "both_named": sum(all(t in r["named"] for t in r["truth"]) for r in pairs),
                   "one_named": sum(any(t in r["named"] for t in r["truth"]) for r in pairs)},
         "clean": {"trials": len(clean), "nothing_named": sum(not r["named"] for r in clean)},
+        "named_not_in_truth": named_not_in_truth(single + pairs),
         "per_effect": per_effect,
         "confusion": {k: dict(v) for k, v in sorted(confusion.items())},
         "misses": misses,
@@ -219,6 +221,14 @@ def summarise(results: list) -> dict:
         "joints": joints_summary(ok),
         "median_seconds": sorted(r["seconds"] for r in results)[len(results) // 2] if results else None,
     }
+
+
+def named_not_in_truth(rows: list) -> dict:
+    """Effects named on trials that do not hold them (single- and two-effect trials; clean trials are counted apart):
+    how many trials name at least one, and how often each effect is so named."""
+    extra = [[n for n in r["named"] if n not in r["truth"]] for r in rows]
+    return {"trials": len(rows), "with_any": sum(bool(e) for e in extra),
+            "by_effect": dict(sorted(Counter(n for e in extra for n in e).items()))}
 
 
 def joints_summary(rows: list) -> dict:
@@ -330,6 +340,9 @@ def main(argv=None) -> int:
     print(f"pairs: {s['pairs']['both_named']}/{s['pairs']['trials']} both named, "
           f"{s['pairs']['one_named']}/{s['pairs']['trials']} at least one")
     print(f"clean: {s['clean']['nothing_named']}/{s['clean']['trials']} with nothing named")
+    x = s["named_not_in_truth"]
+    print(f"effects named that the trial does not hold: on {x['with_any']}/{x['trials']} single and two-effect trials "
+          f"{x['by_effect']}")
     print(f"single effects named first or tied with the first (indistinguishable): "
           f"{s['named_first_or_indistinguishable']}/{s['single']['trials']}")
     print(f"where right: {s['where_right']['right']}/{s['where_right']['trials']} of the effects named first")

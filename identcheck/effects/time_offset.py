@@ -36,6 +36,21 @@ WHOLE_FRAME_TRY = 0.02   # a delay farther than this (frames) from a whole frame
 SHIFTED_ITER = 8         # iterations of a refit with a delay undone
 MAX_WHOLE_FRAME_STEPS = 6
 """How many frames the whole-frame search (:func:`best_whole_frame`) may walk from where Newton ended."""
+PLACEBO_SEED = 20261205
+"""Seed of the noise :func:`realignment_sd` draws (with the shifted markers' columns): the same trial is charged the
+same."""
+REALIGN_BLOCK = 10
+"""Frames per block in :func:`spread_of_gains`."""
+RESHUFFLE_Z = 3.0
+"""A delay undone is charged this many standard deviations of what re-aligning the noise alone gains
+(:func:`realignment_sd`). Shifting a marker's samples against its mates' pairs each frame's noise with another
+frame's: the gain has mean zero and a spread that grows with the trial (√F), not the χ²₁ of one parameter that
+``ln 3N`` pays for. Under serially correlated noise a slow marker's true motion over a frame costs little
+(prewhitening keeps a (1 − φ)/(1 + φ) share of it), and the spread alone passed for delays: on a clean functional
+trial (AR(1), φ 0.83, 1714 frames) shifting RASI one frame gained 325, the whole pelvis three frames 228, and other
+markers' shifts spread ±120 about zero; on that trial's smoothed motion with fresh noise such a shift's gain spread
+87 about −19 (40 shifts). Three standard deviations keep a false delay rare over the few dozen shifts a search
+tries."""
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
@@ -155,6 +170,56 @@ def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: lis
                 max(float(np.sum(np.where(pairs, rest[:, 1:] ** 2, 0.0))), 1e-300))
     spread = float(np.nanmean(rest * rest)) * ((1.0 + rho) / (1.0 - rho) if 0.0 < rho < 1.0 else 1.0)
     return tau, max(removed, 0.0) / max(spread * (len(mates) + 1) / 2.0, 1e-300)
+
+
+def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
+    """The standard deviation, in units of σ², of what shifting the markers `idx` by `frames` (whole frames; 0 is
+    read as one) gains by re-aligning the noise alone. Measured on a placebo: the model's own trajectories (no lag)
+    plus noise drawn as the trial's noise is estimated (σ, lag-1 coefficient; a fixed seed), fitted from `hyp`
+    with the markers' noise as drawn and with it shifted, as a delay's refit is, and the spread of the second fit's
+    per-frame gains over the first (:meth:`Context.rss_per_frame`) read by :func:`spread_of_gains`. Read from a
+    real delay's own gains, the spread counted the lag's signal (a few frames' delay was charged more parameters
+    than the trial has samples); from the trial's residuals shifted, it read 0.7× the spread fresh noise gives
+    (the residuals are smaller than the noise by what the poses absorb)."""
+    k = float(np.round(frames)) or 1.0
+    seen = hyp.weights > 0
+    rng = np.random.default_rng([PLACEBO_SEED, *idx])
+    noise = ar1_noise(rng, hyp.data.shape, ctx.noise.sigma_mm, max(float(ctx.noise.lag1), 0.0))
+    drawn = np.where(seen[..., None], hyp.fit.pred + noise, np.nan)
+    moved = drawn.copy()
+    moved[:, idx] = hyp.fit.pred[:, idx] + shifted(np.where(seen[:, idx, None], noise[:, idx], np.nan), ctx.rate_hz,
+                                                   k / ctx.rate_hz)
+    kept = np.isfinite(moved).all(axis=2)
+    fits = [hyp.refit(data=np.where(kept[..., None], x, hyp.fit.pred), weights=np.where(kept, hyp.weights, 0.0),
+                      max_iter=SHIFTED_ITER) for x in (drawn, moved)]
+    return spread_of_gains((ctx.rss_per_frame(fits[0]) - ctx.rss_per_frame(fits[1])) / ctx.noise.sigma_mm ** 2)
+
+
+def ar1_noise(rng, shape: tuple, sigma: float, phi: float) -> np.ndarray:
+    """Noise of standard deviation `sigma` whose series along the first axis are AR(1) with lag-1 coefficient
+    `phi` (white when 0), started in its stationary state."""
+    e = np.empty(shape)
+    e[0] = rng.normal(0.0, sigma, shape[1:])
+    step = rng.normal(0.0, sigma * np.sqrt(1.0 - phi * phi), shape)
+    for t in range(1, shape[0]):
+        e[t] = phi * e[t - 1] + step[t]
+    return e
+
+
+def spread_of_gains(d: np.ndarray, block: int = REALIGN_BLOCK) -> float:
+    """The standard deviation of ``Σ d`` that noise gives, read from the differences of the sums of successive
+    blocks of `block` frames of the per-frame gains `d` (F,): ``√(Σ ΔD_b² / 2)``, scaled to all F frames.
+    Re-aligned noise changes one block's gain independently of the next (products of innovations of different
+    frames); the differences leave out the mean gain (what the placebo's refit loses or gains throughout). Blocks,
+    not frames: prewhitening makes a frame's gain share its innovations with the next one's, and per frame the
+    spread read 1.75× too wide (fresh AR(1) noise on a smoothed trial, 40 shifts of one marker by a frame: the
+    gains spread 87; blocks of 10 frames read 102, of 20 frames 99, single frames 152)."""
+    d = np.asarray(d, dtype=float)
+    n = len(d) // block
+    if n < 2:
+        return float(np.sqrt(np.sum(d * d)))
+    sums = d[:n * block].reshape(n, block).sum(axis=1)
+    return float(np.sqrt(np.sum(np.diff(sums) ** 2) / 2.0 * len(d) / (n * block)))
 
 
 def _only(vel: np.ndarray, idx: list) -> np.ndarray:
@@ -333,13 +398,14 @@ class TimeOffset(Effect):
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = nearest_whole(tau * ctx.rate_hz)
-        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
+        null_sd = realignment_sd(ctx, hyp, idx, first)
+        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True, null_sd=null_sd)
         fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz
             if t not in fitted:
-                fit = self._shifted_fit(ctx, hyp, current, idx, t)
+                fit = self._shifted_fit(ctx, hyp, current, idx, t, null_sd=null_sd)
                 fitted[t] = fit, score(ctx, fit, hyp)
             return fitted[t][1]
 
@@ -357,9 +423,11 @@ class TimeOffset(Effect):
         return 1.0
 
     @staticmethod
-    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False):
+    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False, *, null_sd: float):
         """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
-        charged for the delay, the samples the shift moves out of view and what interpolation removes from noise.
+        charged for the delay, the samples the shift moves out of view, what interpolation removes from noise and
+        :data:`RESHUFFLE_Z` times `null_sd`, the spread of what re-aligning the noise alone gains
+        (:func:`realignment_sd`; 0 charges nothing for it).
 
         A sample the shift would take from beyond the end of its marker's visible span has nothing to be compared
         with and is set aside; it is charged what noise alone would leave in it (3 in units of σ², so that setting
@@ -384,7 +452,8 @@ class TimeOffset(Effect):
         per_param = np.log(ctx.n_obs)
         smoothed = 3 * moved * interpolation_loss(tau * ctx.rate_hz) / per_param
         out_of_view = 3 * int(np.sum(lost & (hyp.weights > 0))) / per_param
-        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + out_of_view + smoothed
+        realigned = RESHUFFLE_Z * null_sd / per_param
+        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + out_of_view + smoothed + realigned
         return new
 
     def evidence(self, ctx, before, after, proposal) -> dict:
