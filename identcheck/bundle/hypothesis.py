@@ -60,9 +60,9 @@ class Context:
         prewhitened with the noise's lag-1 coefficient (:func:`whitened_rss`; the plain RSS for white noise)."""
         return h.rss if self.noise.lag1 <= 0 else whitened_rss(h.residuals(), h.weights, self.noise.lag1)
 
-    def rss_per_frame(self, h: "Hypothesis") -> np.ndarray:
-        """The terms of :meth:`rss` summed over each frame (F,) (:func:`whitened_per_frame`)."""
-        return whitened_per_frame(h.residuals(), h.weights, max(float(self.noise.lag1), 0.0))
+    def rss_terms(self, h: "Hypothesis") -> np.ndarray:
+        """The terms of :meth:`rss` of each sample (F, M) (:func:`whitened_terms`)."""
+        return whitened_terms(h.residuals(), h.weights, max(float(self.noise.lag1), 0.0))
 
     @property
     def smooth_share(self) -> float:
@@ -88,7 +88,7 @@ class Hypothesis:
     data: np.ndarray
     weights: np.ndarray
     fit: Fit
-    extra_params: int = 0        # discrete choices and set-aside samples, counted as parameters
+    extra_params: float = 0      # discrete choices, set-aside samples and charges, counted as parameters
     effects: list = field(default_factory=list)
 
     @property
@@ -195,17 +195,17 @@ def whitened_rss(resid: np.ndarray, weights: np.ndarray, phi: float) -> float:
     formula with this in place of the RSS. Smooth residual is worth (1 − φ)/(1 + φ) of its plain sum of
     squares, so slow correlated noise no longer passes for soft tissue or a translating joint, while a
     spike or a step is worth as much as before or more."""
-    return float(np.sum(whitened_per_frame(resid, weights, phi)))
+    return float(np.sum(whitened_terms(resid, weights, phi)))
 
 
-def whitened_per_frame(resid: np.ndarray, weights: np.ndarray, phi: float) -> np.ndarray:
-    """The terms of :func:`whitened_rss` summed over each frame's markers and coordinates (F,): where in the trial
-    a change of the fit gains or loses (``phi`` 0: the weighted squared residual)."""
+def whitened_terms(resid: np.ndarray, weights: np.ndarray, phi: float) -> np.ndarray:
+    """The terms of :func:`whitened_rss` summed over each sample's three coordinates (F, M): where in the trial, and
+    on which marker, a change of the fit gains or loses (``phi`` 0: the weighted squared residual)."""
     w = np.asarray(weights, dtype=float)
     e = np.where((w > 0)[..., None], resid * np.sqrt(np.maximum(w, 0.0))[..., None], np.nan)
     prev = np.concatenate([np.full_like(e[:1], np.nan), e[:-1]])
     innov = np.where(np.isfinite(prev), e - phi * prev, np.sqrt(1 - phi ** 2) * e)
-    return np.nansum(innov ** 2, axis=(1, 2)) / (1 - phi ** 2)
+    return np.nansum(innov ** 2, axis=2) / (1 - phi ** 2)
 
 
 def score(ctx: Context, new: Hypothesis, old: Hypothesis) -> float:

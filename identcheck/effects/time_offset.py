@@ -42,19 +42,20 @@ same."""
 PLACEBO_ITER = 1
 """Iterations of :func:`realignment_sd`'s two refits: its data lie within the noise of the model's own trajectories,
 and one step from the fit reaches their minimum (on a development trial the spreads read after 1, 2 and 8 iterations
-agree within 0.2 %; 1 costs 0.2 s a placebo there, 2 iterations 0.5 s)."""
+agree within 0.2 %; a placebo cost 0.2 s there with 1, 0.5 s with 2 and 0.7 s with 8)."""
 REALIGN_BLOCK = 10
 """Frames per block in :func:`spread_of_gains`."""
 RESHUFFLE_Z = 3.0
 """A delay undone is charged this many standard deviations of what re-aligning the noise alone gains
 (:func:`realignment_sd`). Shifting a marker's samples against its mates' pairs each frame's noise with another
-frame's: the gain has mean zero and a spread that grows with the trial (√F), not the χ²₁ of one parameter that
-``ln 3N`` pays for. Under serially correlated noise a slow marker's true motion over a frame costs little
-(prewhitening keeps a (1 − φ)/(1 + φ) share of it), and the spread alone passed for delays: on a clean functional
-trial (AR(1), φ 0.83, 1714 frames) shifting RASI one frame gained 325, the whole pelvis three frames 228, and other
-markers' shifts spread ±120 about zero; on that trial's smoothed motion with fresh noise such a shift's gain spread
-87 about −19 (40 shifts). Three standard deviations keep a false delay rare over the few dozen shifts a search
-tries."""
+frame's: the gain has a mean near zero (less what the motion moved off costs) and a spread that grows with the
+trial (√F), not the χ²₁ of one parameter that ``ln 3N`` pays for. Under serially correlated noise a slow marker's
+true motion over a frame costs little (prewhitening keeps a (1 − φ)/(1 + φ) share of it), and the spread alone
+passed for delays: on a clean functional trial of held-out development draw 57 (AR(1), φ 0.83, 1714 frames, its
+outliers taken out) shifting RASI one frame gained 325 and the whole pelvis three frames 228. On that trial's
+smoothed motion with fresh noise (40 draws), shifting RASI by −1 and +1 frame gained −6 ± 75 and −13 ± 91, the whole
+pelvis −18 ± 84 and −4 ± 81; :func:`realignment_sd` read 98, 94, 85 and 82. Three standard deviations keep a false
+delay rare over the few dozen shifts a search tries."""
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
@@ -176,16 +177,24 @@ def lag_from_rigidity(data: np.ndarray, vel: np.ndarray, marker: int, mates: lis
     return tau, max(removed, 0.0) / max(spread * (len(mates) + 1) / 2.0, 1e-300)
 
 
+def usable(hyp, idx: list) -> np.ndarray:
+    """The samples of the markers `idx` a delay's shift is read through (F, len(idx), 3): `hyp`'s data, NaN where
+    its weight is 0. A sample set aside (an outlier) feeds no spline: shifted by whole frames its value had landed
+    in a neighbouring frame of full weight, and the good sample shifted into its frame was left out."""
+    return np.where((hyp.weights[:, idx] > 0)[..., None], hyp.data[:, idx], np.nan)
+
+
 def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
     """The standard deviation, in units of σ², of what shifting the markers `idx` by `frames` (whole frames; 0 is
     read as one) gains by re-aligning the noise alone. Measured on a placebo: the model's own trajectories (no lag)
     plus noise drawn as the trial's noise is estimated (σ, lag-1 coefficient; a fixed seed), fitted from `hyp`
     with the markers' noise as drawn and with it shifted (:data:`PLACEBO_ITER`), and the spread of the second fit's
-    per-frame gains over the first (:meth:`Context.rss_per_frame`) read by :func:`spread_of_gains`. Read from a
-    real delay's own gains, the spread counted the lag's signal (a few frames' delay was charged more parameters
-    than the trial has samples); from the trial's residuals shifted, it read 0.7× the spread fresh noise gives
-    (the residuals are smaller than the noise by what the poses absorb)."""
-    k = float(np.round(frames)) or 1.0
+    gains over the first read by :func:`spread_of_gains`, each shifted marker's gains (:meth:`Context.rss_terms`)
+    moved back to the frames its noise was drawn at (:func:`aligned_gains`). Read from a real delay's own gains,
+    the spread counted the lag's signal (a few frames' delay was charged more parameters than the trial has
+    samples); from the trial's residuals shifted, it read 0.7× the spread fresh noise gives (the residuals are
+    smaller than the noise by what the poses absorb)."""
+    k = int(np.round(frames)) or 1
     seen = hyp.weights > 0
     rng = np.random.default_rng([PLACEBO_SEED, *idx])
     noise = ar1_noise(rng, hyp.data.shape, ctx.noise.sigma_mm, max(float(ctx.noise.lag1), 0.0))
@@ -196,7 +205,31 @@ def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
     kept = np.isfinite(moved).all(axis=2)
     fits = [hyp.refit(data=np.where(kept[..., None], x, hyp.fit.pred), weights=np.where(kept, hyp.weights, 0.0),
                       max_iter=PLACEBO_ITER) for x in (drawn, moved)]
-    return spread_of_gains((ctx.rss_per_frame(fits[0]) - ctx.rss_per_frame(fits[1])) / ctx.noise.sigma_mm ** 2)
+    d = aligned_gains(ctx.rss_terms(fits[0]), ctx.rss_terms(fits[1]), idx, k)
+    return spread_of_gains(d / ctx.noise.sigma_mm ** 2)
+
+
+def aligned_gains(before: np.ndarray, after: np.ndarray, idx: list, k: int) -> np.ndarray:
+    """Per-frame gains (F,) of `after` over `before` (per-sample terms, (F, M)) where the columns `idx` of `after`
+    hold samples taken `k` frames later (``after[t]`` from ``t + k``): those columns' terms are moved to the frame
+    their samples came from, and the frames one of the two lacks are left out of both. A shifted marker's own noise
+    then meets itself: its terms, which cancel over the whole trial but not over a block of frames, leave the
+    spread, and what is left is the re-pairing of its noise with the other markers'. Without the alignment a
+    segment whose pose takes out only its markers' mean read 95 where its shifts' gains spread 6, and a
+    development trial's pelvis 119-124 where they spread 81-84."""
+    a, b = before.copy(), after.copy()
+    F = len(a)
+    if abs(k) >= F:
+        return np.zeros(F)
+    moved = np.zeros_like(b[:, idx])
+    if k > 0:
+        moved[k:] = b[:F - k, idx]
+        a[:k, idx] = 0.0
+    else:
+        moved[:F + k] = b[-k:, idx]
+        a[F + k:, idx] = 0.0
+    b[:, idx] = moved
+    return np.sum(a - b, axis=1)
 
 
 def ar1_noise(rng, shape: tuple, sigma: float, phi: float) -> np.ndarray:
@@ -211,19 +244,18 @@ def ar1_noise(rng, shape: tuple, sigma: float, phi: float) -> np.ndarray:
 
 
 def spread_of_gains(d: np.ndarray, block: int = REALIGN_BLOCK) -> float:
-    """The standard deviation of ``Σ d`` that noise gives, read from the differences of the sums of successive
-    blocks of `block` frames of the per-frame gains `d` (F,): ``√(Σ ΔD_b² / 2)``, scaled to all F frames.
-    Re-aligned noise changes one block's gain independently of the next (products of innovations of different
-    frames); the differences leave out the mean gain (what the placebo's refit loses or gains throughout). Blocks,
-    not frames: prewhitening makes a frame's gain share its innovations with the next one's, and per frame the
-    spread read 1.75× too wide (fresh AR(1) noise on a smoothed trial, 40 shifts of one marker by a frame: the
-    gains spread 87; blocks of 10 frames read 102, of 20 frames 99, single frames 152)."""
+    """The standard deviation of ``Σ d`` that noise gives, from the per-frame gains `d` (F,): the variance of a sum
+    over `block` frames read from the differences of successive blocks' sums (``Σ ΔD_b² / 2(n − 1)``), times the
+    blocks in F frames. Re-paired noise changes one block's gain independently of the next (products of noise of
+    different frames); the differences leave out the mean gain (what the placebo's refit loses or gains
+    throughout). Blocks, not frames: a frame's gain shares its innovations with the next one's under serially
+    correlated noise. Fewer than two blocks: the frames' own squares."""
     d = np.asarray(d, dtype=float)
     n = len(d) // block
     if n < 2:
         return float(np.sqrt(np.sum(d * d)))
     sums = d[:n * block].reshape(n, block).sum(axis=1)
-    return float(np.sqrt(np.sum(np.diff(sums) ** 2) / 2.0 * len(d) / (n * block)))
+    return float(np.sqrt(np.sum(np.diff(sums) ** 2) / (2.0 * (n - 1)) * len(d) / block))
 
 
 def _only(vel: np.ndarray, idx: list) -> np.ndarray:
@@ -379,8 +411,8 @@ class TimeOffset(Effect):
         # from a start with the lag undone scores 44 101; held-out draw 56, trial 89)
         for _ in range(0 if proposal.payload.get("from_rigidity") else NEWTON_STEPS):
             data = base.copy()
-            data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
-            vel = shifted(base[:, idx], ctx.rate_hz, tau, derivative=1)
+            data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
+            vel = shifted(usable(hyp, idx), ctx.rate_hz, tau, derivative=1)
             term = (idx, np.nan_to_num(vel))           # corrected(t) + dτ·v ≈ measured at t + τ + dτ
             stepped = current.refit(data=data, terms=hyp.terms + Terms(world=[term]), max_iter=3)
             dtau = -float(stepped.fit.state.term_params[-1][0])
@@ -443,7 +475,7 @@ class TimeOffset(Effect):
         start, the better kept (:meth:`Hypothesis.refit_corrected`)."""
         base = hyp.data
         data = base.copy()
-        data[:, idx] = shifted(base[:, idx], ctx.rate_hz, tau)
+        data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
         lost = np.isfinite(base).all(axis=2) & ~np.isfinite(data).all(axis=2)
         weights = np.where(lost, 0.0, hyp.weights)
         if fresh:

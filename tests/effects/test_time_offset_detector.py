@@ -413,6 +413,26 @@ def test_the_spread_of_gains_reads_the_noise_and_not_the_mean_gain(seed, n, s, m
     assert spread_of_gains(d + mean * s) == pytest.approx(spread_of_gains(d), rel=1e-6)
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(20, 200), st.integers(2, 6), st.integers(-6, 6).filter(bool))
+def test_a_shifted_markers_own_terms_meet_themselves_and_leave_no_gain(seed, n, m, k):
+    """Per-sample terms of a fit, and the same terms with some markers' taken `k` frames later (a placebo whose
+    shift re-pairs no noise): the aligned per-frame gains are zero on every frame, where the plain per-frame
+    differences are not."""
+    from identcheck.effects.time_offset import aligned_gains
+
+    rng = np.random.default_rng(seed)
+    before = rng.exponential(1.0, (n, m))
+    idx = sorted(rng.choice(m, int(rng.integers(1, m + 1)), replace=False).tolist())
+    after = before.copy()
+    src = np.arange(n) + k
+    ok = (src >= 0) & (src < n)
+    after[:, idx] = 0.0
+    after[np.flatnonzero(ok)[:, None], idx] = before[src[ok]][:, idx]
+    assert np.allclose(aligned_gains(before, after, idx, k), 0.0, atol=1e-12)
+    assert not np.allclose(np.sum(before - after, axis=1), 0.0)
+
+
 @settings(max_examples=20, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.floats(0.1, 3.0), st.floats(0.0, 0.9))
 def test_placebo_noise_has_the_estimated_size_and_serial_correlation(seed, sigma, phi):
