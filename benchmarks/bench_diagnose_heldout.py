@@ -224,9 +224,10 @@ def summarise(results: list) -> dict:
 
 
 def named_not_in_truth(rows: list) -> dict:
-    """Effects named on trials that do not hold them (single- and two-effect trials; clean trials are counted apart):
-    how many trials name at least one, and how often each effect is so named."""
-    extra = [[n for n in r["named"] if n not in r["truth"]] for r in rows]
+    """Effects named on trials that do not hold them, or named more often than the trial holds them (a second delay
+    beside the true one), on single- and two-effect trials (clean trials are counted apart): how many trials name at
+    least one, and how often each effect is so named."""
+    extra = [list((Counter(r["named"]) - Counter(r["truth"])).elements()) for r in rows]
     return {"trials": len(rows), "with_any": sum(bool(e) for e in extra),
             "by_effect": dict(sorted(Counter(n for e in extra for n in e).items()))}
 

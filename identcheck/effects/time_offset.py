@@ -46,16 +46,16 @@ agree within 0.2 %; a placebo cost 0.2 s there with 1, 0.5 s with 2 and 0.7 s wi
 REALIGN_BLOCK = 10
 """Frames per block in :func:`spread_of_gains`."""
 RESHUFFLE_Z = 3.0
-"""A delay undone is charged this many standard deviations of what re-aligning the noise alone gains
-(:func:`realignment_sd`). Shifting a marker's samples against its mates' pairs each frame's noise with another
-frame's: the gain has a mean near zero (less what the motion moved off costs) and a spread that grows with the
-trial (√F), not the χ²₁ of one parameter that ``ln 3N`` pays for. Under serially correlated noise a slow marker's
-true motion over a frame costs little (prewhitening keeps a (1 − φ)/(1 + φ) share of it), and the spread alone
-passed for delays: on a clean functional trial of held-out development draw 57 (AR(1), φ 0.83, 1714 frames, its
-outliers taken out) shifting RASI one frame gained 325 and the whole pelvis three frames 228. On that trial's
-smoothed motion with fresh noise (40 draws), shifting RASI by −1 and +1 frame gained −6 ± 75 and −13 ± 91, the whole
-pelvis −18 ± 84 and −4 ± 81; :func:`realignment_sd` read 98, 94, 85 and 82. Three standard deviations keep a false
-delay rare over the few dozen shifts a search tries."""
+"""A delay is adopted only when its score stands this many standard deviations clear of what re-aligning the noise
+alone gains (:func:`realignment_sd`, :meth:`TimeOffset.implausible`). Shifting a marker's samples against its mates'
+pairs each frame's noise with another frame's: the gain has a mean near zero (less what the motion moved off costs)
+and a spread that grows with the trial (√F), not the χ²₁ of one parameter that ``ln 3N`` pays for. Under serially
+correlated noise a slow marker's true motion over a frame costs little (prewhitening keeps a (1 − φ)/(1 + φ) share
+of it), and the spread alone passed for delays: on a clean functional trial of held-out development draw 57 (AR(1),
+φ 0.83, 1714 frames, its outliers taken out) shifting RASI one frame scored 312 and the whole pelvis three frames
+169. On that trial's smoothed motion with fresh noise (40 draws), shifting RASI by −1 and +1 frame gained −6 ± 75
+and −13 ± 91, the whole pelvis −18 ± 84 and −4 ± 81; :func:`realignment_sd` read 98, 94, 85 and 82. Three standard
+deviations keep a false delay rare over the few dozen shifts a search tries."""
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
@@ -434,14 +434,13 @@ class TimeOffset(Effect):
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = nearest_whole(tau * ctx.rate_hz)
-        null_sd = realignment_sd(ctx, hyp, idx, first)
-        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True, null_sd=null_sd)
+        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
         fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz
             if t not in fitted:
-                fit = self._shifted_fit(ctx, hyp, current, idx, t, null_sd=null_sd)
+                fit = self._shifted_fit(ctx, hyp, current, idx, t)
                 fitted[t] = fit, score(ctx, fit, hyp)
             return fitted[t][1]
 
@@ -451,7 +450,24 @@ class TimeOffset(Effect):
         new.effects = hyp.effects + [proposal]
         proposal.where["delay_ms"] = round(1000 * tau, 2)
         proposal.payload["tau"] = tau
+        # whether the delay stands out of what shifting the noise alone gains (:meth:`implausible`); its score stays
+        # the criterion's, so that it is compared with the effects that take up the same lag on equal terms
+        noise_sd = realignment_sd(ctx, hyp, idx, nearest_whole(tau * ctx.rate_hz))
+        proposal.payload["noise_sd"] = noise_sd
+        proposal.payload["beyond_noise"] = fitted[tau][1] - RESHUFFLE_Z * noise_sd
         return new
+
+    def implausible(self, proposal: Proposal) -> str:
+        """A delay whose score does not stand :data:`RESHUFFLE_Z` standard deviations clear of what shifting the
+        noise alone gains (:func:`realignment_sd`) is not adopted: noise may have made it. A gate, not a charge on the
+        score: charged, delays of near-equivalent segments (a thigh 20 ms late, a shank 20 ms early) were ranked by
+        their segments' spreads rather than by how well they fit, and the true one lost (held-out draw 59 trial 109,
+        draw 60 trial 43: 0.2 % apart in score, the thigh's spread the larger)."""
+        margin = proposal.payload.get("beyond_noise")
+        if margin is None or margin > 0.0:
+            return ""
+        return (f"its score does not stand {RESHUFFLE_Z:g} standard deviations ({proposal.payload['noise_sd']:.0f}) "
+                f"clear of what shifting the noise alone gains")
 
     def own_params(self, proposal: Proposal, before, after) -> float:
         """One: the delay. The noise that interpolating between frames averages away is charged in the score, but is
@@ -459,11 +475,9 @@ class TimeOffset(Effect):
         return 1.0
 
     @staticmethod
-    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False, *, null_sd: float):
+    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False):
         """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
-        charged for the delay, the samples the shift moves out of view, what interpolation removes from noise and
-        :data:`RESHUFFLE_Z` times `null_sd`, the spread of what re-aligning the noise alone gains
-        (:func:`realignment_sd`; 0 charges nothing for it).
+        charged for the delay, the samples the shift moves out of view and what interpolation removes from noise.
 
         A sample the shift would take from beyond the end of its marker's visible span has nothing to be compared
         with and is set aside; it is charged what noise alone would leave in it (3 in units of σ², so that setting
@@ -488,8 +502,7 @@ class TimeOffset(Effect):
         per_param = np.log(ctx.n_obs)
         smoothed = 3 * moved * interpolation_loss(tau * ctx.rate_hz) / per_param
         out_of_view = 3 * int(np.sum(lost & (hyp.weights > 0))) / per_param
-        realigned = RESHUFFLE_Z * null_sd / per_param
-        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + out_of_view + smoothed + realigned
+        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + out_of_view + smoothed
         return new
 
     def evidence(self, ctx, before, after, proposal) -> dict:
