@@ -80,7 +80,9 @@ it."""
 @dataclass(frozen=True)
 class Step:
     """One adopted effect: what, where, the gap before and after (mm), its score (the criterion's gain),
-    the evidence for the figures, and the other candidates of its round as (name, where, score)."""
+    the evidence for the figures, and the other candidates of its round as (name, where, score), less those that
+    cannot be what they claim (:meth:`identcheck.effects.base.Effect.implausible`: a delay noise alone may have made
+    is no explanation as good as the step's)."""
 
     name: str
     where: dict
@@ -510,12 +512,20 @@ def simplest_among_equals(tried: list, h: Hypothesis, bar: float) -> list:
     return head + tried[n:]
 
 
+def rivals(tried: list, chosen, most: int = 8) -> tuple:
+    """The round's candidates `tried` ((score, effect, proposal, hypothesis)) other than the `chosen` proposal, as
+    (name, where, score), at most `most`, less those that cannot be what they claim
+    (:meth:`identcheck.effects.base.Effect.implausible`): a delay noise alone may have made is no explanation as
+    good as the one adopted, however close its score."""
+    return tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not chosen and not e.implausible(p))[:most]
+
+
 def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list, progress) -> Hypothesis:
     """The round's chosen candidate (fitted to convergence already), recorded as the next step (with the round's
-    other candidates and the effects no data could tell from it), and announced."""
+    other plausible candidates and the effects no data could tell from it), and announced."""
     sc, eff, prop, cand = adopted
     steps.append(Step(eff.name, prop.where, h.gap(ctx), cand.gap(ctx), sc, eff.evidence(ctx, h, cand, prop),
-                      tuple((e.name, p.where, s) for s, e, p, _ in tried if p is not prop)[:8],
+                      rivals(tried, prop),
                       tuple(eff.alike(h.chain, prop.where))))
     if progress:
         progress(f"adopted {eff.name} {prop.where}: gap {h.gap(ctx):.3g} -> {cand.gap(ctx):.3g} mm "

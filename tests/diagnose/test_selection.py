@@ -504,3 +504,24 @@ def test_a_correction_after_a_term_does_not_raise_the_bar_by_that_term(trial):
         diag = _patched(monkeypatch, model, tr, [first, swap, second], max_steps=3, worst_joint=worst)
     assert [s.name for s in diag.steps] == ["first", "swap"]
     assert [r.name for r in diag.not_adopted] == ["second"]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(-100.0, 1e5), st.booleans()), min_size=1, max_size=12), st.integers(1, 8))
+def test_a_candidate_that_cannot_be_what_it_claims_is_never_listed_as_an_equal_explanation(cands, most):
+    """The round's other candidates recorded with an adopted step (what `indistinguishable_from` is read from): every
+    plausible one but the chosen, in order, at most `most`; none that its effect calls implausible (a delay noise
+    alone may have made), whatever its score."""
+
+    class Claim(Effect):
+        name = "claim"
+
+        def implausible(self, proposal):
+            return "noise may have made it" if proposal.payload["noise"] else ""
+
+    eff = Claim()
+    tried = [(sc, eff, Proposal("claim", {"i": i}, 1.0, {"noise": noise}), None) for i, (sc, noise) in enumerate(cands)]
+    chosen = tried[0][2]
+    out = workflow.rivals(tried, chosen, most)
+    expected = [(eff.name, p.where, sc) for sc, _, p, _ in tried[1:] if not p.payload["noise"]][:most]
+    assert list(out) == expected
