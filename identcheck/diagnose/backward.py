@@ -67,9 +67,9 @@ def redundant(ctx, trail: list, adopted: list, judge, polish_iter: int) -> Redun
 
     `trail` holds the hypotheses of the search: the rigid fit, then the hypothesis after each adopted effect. The
     model without effect k is rebuilt from the hypothesis before it, the effects after it applied again in their
-    order (those before it are as they were). ``judge(without) -> (gain, needed)`` is the forward rule asked of an
-    effect given the others: what the full hypothesis gains over `without` (criterion units), and whether the search
-    would adopt an effect gaining that much there. The model without the effect is refitted for `polish_iter`
+    order (those before it are as they were). ``judge(without, effect) -> (gain, needed)`` is the forward rule asked
+    of the adopted `effect` given the others: what the full hypothesis gains over `without` (criterion units), and
+    whether the search would adopt that effect gaining that much there. The model without the effect is refitted for `polish_iter`
     iterations after the augmentations' own fits, not to convergence: further iterations only lower its residual, so
     an effect found unnecessary there is unnecessary at convergence too, and one kept is kept with the benefit of the
     doubt. An effect whose removal the rebuild cannot fit (a singular system, an effect that no longer applies) is
@@ -80,7 +80,7 @@ def redundant(ctx, trail: list, adopted: list, judge, polish_iter: int) -> Redun
             tail, hyps = rebuild(ctx, trail[k], adopted[k + 1:], polish_iter)
         except (np.linalg.LinAlgError, ValueError):
             continue
-        gain, needed = judge(hyps[-1])
+        gain, needed = judge(hyps[-1], adopted[k])
         log.debug("backward check: %s %s gains %.1f given the others (%s)", adopted[k].effect.name,
                   adopted[k].proposal.where, gain, "kept" if needed else "not needed")
         if needed:

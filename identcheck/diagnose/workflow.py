@@ -405,15 +405,19 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                     best, leader = sc, eff
             # errors the data show without the joint model come first among those that earn their parameters
             tried.sort(key=lambda x: (not (x[0] > bar and x[1].read_without_joints(x[2])), -x[0]))
-            tried = simplest_among_equals(tried, h, bar)
+            # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike
+            plausible = []
+            for sc, eff, prop, cand in tried:
+                why = eff.implausible(prop)
+                if why and sc > bar:
+                    log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
+                elif not why:
+                    plausible.append((sc, eff, prop, cand))
+            tried = simplest_among_equals(plausible, h, bar)
             adopted = None
             for sc, eff, prop, cand in tried:
                 if sc <= bar:
                     break
-                why = eff.implausible(prop)
-                if why:
-                    log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
-                    continue
                 if progress:
                     progress(f"step {len(steps) + 1}: fitting {eff.name} {prop.where} further, to check the "
                              f"joints stay determined")
@@ -436,7 +440,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             continue
         before = len(dropped_steps)
         while len(adopted_effects) > 1:       # each pass drops one effect or ends: bounded
-            red = redundant(ctx, trail, adopted_effects, lambda without: needed(ctx, without, h), CREEP_ITER)
+            red = redundant(ctx, trail, adopted_effects, lambda without, a: needed(ctx, without, h, a), CREEP_ITER)
             if red is None:
                 break
             gone = steps[red.index]
@@ -533,7 +537,7 @@ def _adopt(ctx: Context, h: Hypothesis, adopted: tuple, tried: list, steps: list
     return cand
 
 
-def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, bool]:
+def needed(ctx: Context, without: Hypothesis, full: Hypothesis, adopted: Adopted | None = None) -> tuple[float, bool]:
     """The forward step's rule, asked of an adopted effect given the others: (what `full` gains over `without`, the
     hypothesis without the effect; would the search adopt an effect gaining that much there?). Yes when it earns
     its parameters and the gap without it is not consistent with noise, when it gains decisively
@@ -541,10 +545,11 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis) -> tuple[float, 
     their worst white-noise standard error grows beyond :data:`SD_GROWTH` times theirs with it and beyond
     :data:`MAX_SD_MM` (measured from the full model here, where the forward step measures from the rigid fit). The
     joints are then reported by fit's rules, which may still call them undetermined (a real knee whose ball joint was
-    dropped for skin terms driven by its angle: ±20 mm)."""
+    dropped for skin terms driven by its angle: ±20 mm). The gain must also stand clear of what noise alone gives
+    the `adopted` effect (:meth:`identcheck.effects.base.Effect.stands_out`), as it had to when it was adopted."""
     gain = score(ctx, full, without)
     bar = DECISIVE_GAIN if consistency(ctx, without)["consistent"] else 0.0
-    if gain > bar:
+    if gain > bar and (adopted is None or adopted.effect.stands_out(adopted.proposal, gain)):
         return gain, True
     limit = max(SD_GROWTH * worst_sd(ctx, full), MAX_SD_MM)
     return gain, bool(undetermined(without) > undetermined(full) or worst_sd(ctx, without) > limit)

@@ -121,6 +121,13 @@ class Effect:
         calibrated capture volume is something else the field is absorbing."""
         return ""
 
+    def stands_out(self, proposal: Proposal, gain: float) -> bool:
+        """Whether `gain` (criterion units), what the fitted effect gains, stands clear of what noise alone would give
+        this effect beyond the criterion's charge for its parameters: always, unless the effect knows its gain's
+        spread under noise (a delay, :meth:`identcheck.effects.time_offset.TimeOffset.stands_out`). The backward
+        check keeps an adopted effect by the forward rule and this."""
+        return True
+
     def evidence(self, ctx, before, after, proposal: Proposal) -> dict:
         """Arrays that show the effect (for the figures): by default the proposal's own."""
         return dict(proposal.payload.get("evidence", {}))

@@ -37,7 +37,7 @@ SHIFTED_ITER = 8         # iterations of a refit with a delay undone
 MAX_WHOLE_FRAME_STEPS = 6
 """How many frames the whole-frame search (:func:`best_whole_frame`) may walk from where Newton ended."""
 PLACEBO_SEED = 20261205
-"""Seed of the noise :func:`realignment_sd` draws (with the shifted markers' columns): the same trial is charged the
+"""Seed of the noise :func:`realignment_sd` draws (with the shifted markers' columns): the same trial is judged the
 same."""
 PLACEBO_ITER = 1
 """Iterations of :func:`realignment_sd`'s two refits: its data lie within the noise of the model's own trajectories,
@@ -45,7 +45,7 @@ and one step from the fit reaches their minimum (on a development trial the spre
 agree within 0.2 %; a placebo cost 0.2 s there with 1, 0.5 s with 2 and 0.7 s with 8)."""
 REALIGN_BLOCK = 10
 """Frames per block in :func:`spread_of_gains`."""
-RESHUFFLE_Z = 3.0
+REALIGN_Z = 3.0
 """A delay is adopted only when its score stands this many standard deviations clear of what re-aligning the noise
 alone gains (:func:`realignment_sd`, :meth:`TimeOffset.implausible`). Shifting a marker's samples against its mates'
 pairs each frame's noise with another frame's: the gain has a mean near zero (less what the motion moved off costs)
@@ -194,7 +194,7 @@ def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
     the spread counted the lag's signal (a few frames' delay was charged more parameters than the trial has
     samples); from the trial's residuals shifted, it read 0.7× the spread fresh noise gives (the residuals are
     smaller than the noise by what the poses absorb)."""
-    k = int(np.round(frames)) or 1
+    k = int(np.round(frames)) or (1 if frames >= 0 else -1)
     seen = hyp.weights > 0
     rng = np.random.default_rng([PLACEBO_SEED, *idx])
     noise = ar1_noise(rng, hyp.data.shape, ctx.noise.sigma_mm, max(float(ctx.noise.lag1), 0.0))
@@ -205,14 +205,17 @@ def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
     kept = np.isfinite(moved).all(axis=2)
     fits = [hyp.refit(data=np.where(kept[..., None], x, hyp.fit.pred), weights=np.where(kept, hyp.weights, 0.0),
                       max_iter=PLACEBO_ITER) for x in (drawn, moved)]
-    d = aligned_gains(ctx.rss_terms(fits[0]), ctx.rss_terms(fits[1]), idx, k)
+    d = aligned_gains(ctx.rss_terms(fits[0]), ctx.rss_terms(fits[1]), idx, k, kept & seen)
     return spread_of_gains(d / ctx.noise.sigma_mm ** 2)
 
 
-def aligned_gains(before: np.ndarray, after: np.ndarray, idx: list, k: int) -> np.ndarray:
+def aligned_gains(before: np.ndarray, after: np.ndarray, idx: list, k: int, fitted: np.ndarray | None = None
+                  ) -> np.ndarray:
     """Per-frame gains (F,) of `after` over `before` (per-sample terms, (F, M)) where the columns `idx` of `after`
     hold samples taken `k` frames later (``after[t]`` from ``t + k``): those columns' terms are moved to the frame
-    their samples came from, and the frames one of the two lacks are left out of both. A shifted marker's own noise
+    their samples came from, and the frames one of the two lacks are left out of both (`fitted` (F, M): the samples
+    both fits weigh, all by default; a frame the shift empties is weighed by neither, and its sample's term from the
+    other frame had stood alone). A shifted marker's own noise
     then meets itself: its terms, which cancel over the whole trial but not over a block of frames, leave the
     spread, and what is left is the re-pairing of its noise with the other markers'. Without the alignment a
     segment whose pose takes out only its markers' mean read 95 where its shifts' gains spread 6, and a
@@ -221,14 +224,14 @@ def aligned_gains(before: np.ndarray, after: np.ndarray, idx: list, k: int) -> n
     F = len(a)
     if abs(k) >= F:
         return np.zeros(F)
-    moved = np.zeros_like(b[:, idx])
+    ok = np.ones(a.shape, dtype=bool) if fitted is None else np.asarray(fitted, dtype=bool)
+    moved, both = np.zeros_like(b[:, idx]), np.zeros((F, len(idx)), dtype=bool)
     if k > 0:
-        moved[k:] = b[:F - k, idx]
-        a[:k, idx] = 0.0
+        moved[k:], both[k:] = b[:F - k, idx], ok[:F - k, idx] & ok[k:, idx]
     else:
-        moved[:F + k] = b[-k:, idx]
-        a[F + k:, idx] = 0.0
-    b[:, idx] = moved
+        moved[:F + k], both[:F + k] = b[-k:, idx], ok[-k:, idx] & ok[:F + k, idx]
+    a[:, idx] = np.where(both, a[:, idx], 0.0)
+    b[:, idx] = np.where(both, moved, 0.0)
     return np.sum(a - b, axis=1)
 
 
@@ -451,14 +454,21 @@ class TimeOffset(Effect):
         proposal.where["delay_ms"] = round(1000 * tau, 2)
         proposal.payload["tau"] = tau
         # whether the delay stands out of what shifting the noise alone gains (:meth:`implausible`); its score stays
-        # the criterion's, so that it is compared with the effects that take up the same lag on equal terms
-        noise_sd = realignment_sd(ctx, hyp, idx, nearest_whole(tau * ctx.rate_hz))
+        # the criterion's, so that it is compared with the effects that take up the same lag on equal terms (a
+        # delay that does not earn its parameter at all needs no placebo)
+        best = fitted[tau][1]
+        noise_sd = realignment_sd(ctx, hyp, idx, nearest_whole(tau * ctx.rate_hz)) if best > 0.0 else 0.0
         proposal.payload["noise_sd"] = noise_sd
-        proposal.payload["beyond_noise"] = fitted[tau][1] - RESHUFFLE_Z * noise_sd
+        proposal.payload["beyond_noise"] = best - REALIGN_Z * noise_sd
         return new
 
+    def stands_out(self, proposal: Proposal, gain: float) -> bool:
+        """A gain of this delay stands :data:`REALIGN_Z` spreads of what shifting the noise alone gains clear
+        (the spread its fit measured, :func:`realignment_sd`)."""
+        return gain - REALIGN_Z * float(proposal.payload.get("noise_sd") or 0.0) > 0.0
+
     def implausible(self, proposal: Proposal) -> str:
-        """A delay whose score does not stand :data:`RESHUFFLE_Z` standard deviations clear of what shifting the
+        """A delay whose score does not stand :data:`REALIGN_Z` standard deviations clear of what shifting the
         noise alone gains (:func:`realignment_sd`) is not adopted: noise may have made it. A gate, not a charge on the
         score: charged, delays of near-equivalent segments (a thigh 20 ms late, a shank 20 ms early) were ranked by
         their segments' spreads rather than by how well they fit, and the true one lost (held-out draw 59 trial 109,
@@ -466,7 +476,7 @@ class TimeOffset(Effect):
         margin = proposal.payload.get("beyond_noise")
         if margin is None or margin > 0.0:
             return ""
-        return (f"its score does not stand {RESHUFFLE_Z:g} standard deviations ({proposal.payload['noise_sd']:.0f}) "
+        return (f"its score does not stand {REALIGN_Z:g} standard deviations ({proposal.payload['noise_sd']:.0f}) "
                 f"clear of what shifting the noise alone gains")
 
     def own_params(self, proposal: Proposal, before, after) -> float:
