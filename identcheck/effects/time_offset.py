@@ -185,15 +185,15 @@ def usable(hyp, idx: list) -> np.ndarray:
 
 
 def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
-    """The standard deviation, in units of σ², of what shifting the markers `idx` by `frames` (whole frames; under
-    half a frame, one frame its way) gains by re-aligning the noise alone. Measured on a placebo: the model's own trajectories
-    (no lag) plus noise drawn as the trial's noise is estimated (σ, lag-1 coefficient; a fixed seed), fitted from `hyp`
-    with the markers' noise as drawn and with it shifted (:data:`PLACEBO_ITER`), and the spread of the second fit's
-    gains over the first read by :func:`spread_of_gains`, each shifted marker's gains (:meth:`Context.rss_terms`) moved
-    back to the frames its noise was drawn at (:func:`aligned_gains`). Read from a real delay's own gains, the spread
-    counted the lag's signal (a few frames' delay was charged more parameters than the trial has samples); from the
-    trial's residuals shifted, it read 0.7× the spread fresh noise gives (the residuals are smaller than the noise by
-    what the poses absorb)."""
+    """The standard deviation, in units of σ², of what shifting the markers `idx` by `frames` (whole frames; under half
+    a frame, one frame its way) gains by re-aligning the noise alone. Measured on a placebo: the model's own
+    trajectories (no lag) plus noise drawn as the trial's noise is estimated (σ, lag-1 coefficient; a fixed seed),
+    fitted from `hyp` with the markers' noise as drawn and with it shifted (:data:`PLACEBO_ITER`), and the spread of
+    the second fit's gains over the first read by :func:`spread_of_gains`, each shifted marker's gains
+    (:meth:`Context.rss_terms`) moved back to the frames its noise was drawn at (:func:`aligned_gains`). Read from a
+    real delay's own gains, the spread counted the lag's signal (a few frames' delay was charged more parameters
+    than the trial has samples); from the trial's residuals shifted, it read 0.7× the spread fresh noise gives (the
+    residuals are smaller than the noise by what the poses absorb)."""
     k = int(np.round(frames)) or (1 if frames >= 0 else -1)
     seen = hyp.weights > 0
     rng = np.random.default_rng([PLACEBO_SEED, *idx])
