@@ -459,7 +459,7 @@ class TimeOffset(Effect):
         best = fitted[tau][1]
         noise_sd = realignment_sd(ctx, hyp, idx, nearest_whole(tau * ctx.rate_hz)) if best > 0.0 else 0.0
         proposal.payload["noise_sd"] = noise_sd
-        proposal.payload["beyond_noise"] = best - REALIGN_Z * noise_sd
+        proposal.payload["score"] = best
         return new
 
     def stands_out(self, proposal: Proposal, gain: float) -> bool:
@@ -473,8 +473,7 @@ class TimeOffset(Effect):
         score: charged, delays of near-equivalent segments (a thigh 20 ms late, a shank 20 ms early) were ranked by
         their segments' spreads rather than by how well they fit, and the true one lost (held-out draw 59 trial 109,
         draw 60 trial 43: 0.2 % apart in score, the thigh's spread the larger)."""
-        margin = proposal.payload.get("beyond_noise")
-        if margin is None or margin > 0.0:
+        if "score" not in proposal.payload or self.stands_out(proposal, proposal.payload["score"]):
             return ""
         return (f"its score does not stand {REALIGN_Z:g} standard deviations ({proposal.payload['noise_sd']:.0f}) "
                 f"clear of what shifting the noise alone gains")

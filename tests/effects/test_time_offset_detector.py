@@ -491,5 +491,5 @@ def test_a_delay_is_adopted_and_kept_by_one_rule(score, spread):
 
     eff = TimeOffset()
     prop = Proposal(eff.name, {"segment": "s", "delay_ms": 10.0}, 1.0,
-                    {"noise_sd": spread, "beyond_noise": score - REALIGN_Z * spread})
+                    {"noise_sd": spread, "score": score})
     assert (eff.implausible(prop) == "") == eff.stands_out(prop, score) == (score > REALIGN_Z * spread)
