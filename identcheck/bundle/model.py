@@ -148,13 +148,20 @@ def second_axis(axis: np.ndarray, beta: float) -> np.ndarray:
     return np.cos(beta) * b1 + np.sin(beta) * b2
 
 
-def hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
-    """Each revolute joint's ``Rot(a, θ) Exp(ψ u)`` (F, 3, 3), the second rotations of ``terms.rotations``
-    included: the relative rotation is this times the rest rotation."""
+def second_rotations(terms: Terms, s: State) -> dict:
+    """Each hinge's second rotation vector (F, 3), in the hinge's frame before its turn: the sum of ``ψ u`` over the
+    joint's ``terms.rotations`` (two of them turn it about any axis across the hinge)."""
     n0 = len(terms.markers) + len(terms.centres)
     extra = {}
     for (j, basis, beta), p in zip(terms.rotations, s.term_params[n0:n0 + len(terms.rotations)]):
         extra[j] = extra.get(j, 0.0) + (basis @ p[:-1])[:, 0, None] * second_axis(s.axis[j], beta + p[-1, 0])
+    return extra
+
+
+def hinge_turns(chain: Skeleton, terms: Terms, s: State) -> dict:
+    """Each revolute joint's ``Rot(a, θ) Exp(ψ u)`` (F, 3, 3), the second rotations of ``terms.rotations``
+    included (:func:`second_rotations`): the relative rotation is this times the rest rotation."""
+    extra = second_rotations(terms, s)
     turns = {j: hinge_matrix(s.axis[j], s.theta[j]) for j in chain.joints if chain.types[j] == "revolute"}
     return {j: turn @ rotvec_matrix(extra[j]) if j in extra else turn for j, turn in turns.items()}
 

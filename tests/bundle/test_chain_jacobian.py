@@ -1,5 +1,5 @@
 """The whole-chain fit's analytic derivatives are the derivatives of its forward kinematics: every effect
-term (marker offsets, centre offsets, a hinge's second rotation, world fields) checked against central
+term (marker offsets, centre offsets, a hinge's second rotations, world fields) checked against central
 finite differences at random states."""
 from __future__ import annotations
 
@@ -20,8 +20,11 @@ MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.t
 
 
 @settings(max_examples=6, deadline=None)
-@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, 3.2), size=st.floats(0.0, 0.3))
-def test_constants_jacobian_matches_finite_differences(seed, beta, size):
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, 3.2), size=st.floats(0.0, 0.3),
+       second=st.floats(0.3, 2.8), two=st.booleans())
+def test_constants_jacobian_matches_finite_differences(seed, beta, size, second, two):
+    """`two`: the hinge turns about two axes across it (a ball joint's extra rotations), so that the second
+    rotation's vector is not along either axis and a profile's derivative is not a turn about its own axis."""
     sim = simulate(MODEL, n_frames=40, seed=seed)
     chain = Skeleton.from_model(MODEL)
     data = sim.trial.as_array()
@@ -33,7 +36,7 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size):
     seg0 = chain.seg_markers[chain.marker_seg[0]]
     terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1)))), (np.array(seg0), tb[:, :2])],
                   centres=[(ball, tb[:, :3])],
-                  rotations=[(hinge, tb, beta)],
+                  rotations=[(hinge, tb, beta)] + ([(hinge, tb[:, :4], beta + second)] if two else []),
                   world=[(np.arange(chain.n_markers), rng.normal(size=data.shape)),   # a run of two on every marker
                          (np.arange(chain.n_markers), rng.normal(size=data.shape)),
                          (np.array([0, 2]), rng.normal(size=(40, 2, 3)))])
@@ -54,20 +57,28 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size):
 
 
 @settings(max_examples=4, deadline=None)
-@given(seed=st.integers(0, 10_000))
-def test_per_frame_jacobian_matches_finite_differences(seed):
-    """The per-frame columns (the root's pose, each joint's angles) against central differences of the step."""
+@given(seed=st.integers(0, 10_000), turned=st.booleans())
+def test_per_frame_jacobian_matches_finite_differences(seed, turned):
+    """The per-frame columns (the root's pose, each joint's angles) against central differences of the step; with
+    `turned`, the hinge also turns about two axes across it (fitted profiles of up to 0.3 rad)."""
     sim = simulate(MODEL, n_frames=12, seed=seed)
     chain = Skeleton.from_model(MODEL)
     s = initial_state(chain, sim.trial.as_array())
-    R, t, centre, pred = forward(chain, Terms(), s)
-    lay, blocks = jacobian_blocks(chain, Terms(), s, R, centre, pred)
+    terms = Terms()
+    if turned:
+        hinge = next(j for j in chain.joints if chain.types[j] == "revolute")
+        tb = time_basis(12, 100.0, 0.05)
+        terms = Terms(rotations=[(hinge, tb, 0.3), (hinge, tb, 1.9)])
+        rng = np.random.default_rng(seed)
+        s.term_params = [rng.normal(size=sh) * 0.3 for sh in terms.shapes()]
+    R, t, centre, pred = forward(chain, terms, s)
+    lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
     J, G = dense_jacobians(lay, blocks, chain.n_markers)
     h = 1e-6
     for p in range(lay.k):
         dq = np.zeros((12, lay.k))
         dq[:, p] = h
-        up = forward(chain, Terms(), apply_step(chain, Terms(), s, R, dq, np.zeros(lay.P)))[3]
-        down = forward(chain, Terms(), apply_step(chain, Terms(), s, R, -dq, np.zeros(lay.P)))[3]
+        up = forward(chain, terms, apply_step(chain, terms, s, R, dq, np.zeros(lay.P)))[3]
+        down = forward(chain, terms, apply_step(chain, terms, s, R, -dq, np.zeros(lay.P)))[3]
         numeric = (up - down) / (2 * h)
         assert np.allclose(J[..., p], numeric, atol=1e-4 * (1 + np.abs(numeric).max())), p
