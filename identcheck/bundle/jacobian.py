@@ -204,7 +204,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         u = second_axis(s.axis[j], beta + s.term_params[n_mc + r][-1, 0])
         P = chain.parent[j]
         # v, the hinge's whole second rotation, is along u when the hinge has one; with two (a ball joint's) it is
-        # not, and u alone was wrong by O(|v|): fits crawled, 50-100 iterations at ρ ≈ 0.5 (held-out knee as a ball)
+        # not, and u alone was wrong by O(|v|): fits crawled, 8-100 iterations at ρ ≈ 0.5 (a development knee as a ball)
         turn_u = left_jacobian_times(vectors[j], u)
         second[n_mc + r] = (np.einsum("fij,fjk,fk->fi", R[P], hinge_matrix(s.axis[j], s.theta[j]), turn_u),
                             np.einsum("fij,fj->fi", R[P], turn_rate(chain, terms, s, j, turn_beta(n_mc + r))))

@@ -149,8 +149,9 @@ def second_axis(axis: np.ndarray, beta: float) -> np.ndarray:
 
 
 def second_rotations(terms: Terms, s: State) -> dict:
-    """Each hinge's second rotation vector (F, 3), in the hinge's frame before its turn: the sum of ``ψ u`` over the
-    joint's ``terms.rotations`` (two of them turn it about any axis across the hinge)."""
+    """Each hinge's second rotation vector v (F, 3), in the hinge's turned frame (``Rot(a, θ) Exp(v)``; in the world
+    ``R_P Rot(a, θ) v``): the sum of ``ψ u`` over the joint's ``terms.rotations`` (two of them turn it about any axis
+    across the hinge)."""
     n0 = len(terms.markers) + len(terms.centres)
     extra = {}
     for (j, basis, beta), p in zip(terms.rotations, s.term_params[n0:n0 + len(terms.rotations)]):

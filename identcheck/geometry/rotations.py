@@ -18,18 +18,18 @@ def rotvec_matrix(w: np.ndarray) -> np.ndarray:
 
 
 def left_jacobian_times(v: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """``J_l(v) u`` (F, 3) for rotation vectors v (F, 3) and vectors u (3,) or (F, 3): the rotation vector, in the
-    frame the rotation acts from, of how ``Exp(v)`` turns as v moves along u (``Exp(v + εu) ≈ Exp(ε J_l(v) u)
-    Exp(v)``), with ``J_l(v) = I + (1 − cos φ)/φ² [v]× + (φ − sin φ)/φ³ [v]×²``, φ = |v|. It is u itself only when v
-    is along u; written with the series below φ = 1e-4, where the closed form loses its digits."""
+    """``J_l(v) u`` (F, 3) for rotation vectors v (F, 3) and vectors u (3,) or (F, 3): how ``Exp(v)`` turns as v moves
+    along u, as a left perturbation (``Exp(v + εu) ≈ Exp(ε J_l(v) u) Exp(v)``: a rotation vector in the frame Exp(v)
+    maps into), with ``J_l(v) = I + (1 − cos φ)/φ² [v]× + (φ − sin φ)/φ³ [v]×²``, φ = |v|. It is u itself only when v
+    is along u. Below φ = 1e-2 the two coefficients are their Taylor series to φ⁴ (φ − sin φ loses digits there)."""
     v = np.asarray(v, dtype=float)
     u = np.broadcast_to(np.asarray(u, dtype=float), v.shape)
     phi2 = np.einsum("fi,fi->f", v, v)
     phi = np.sqrt(phi2)
-    small = phi < 1e-4
+    small = phi < 1e-2
     safe = np.where(small, 1.0, phi)
-    a = np.where(small, 0.5 - phi2 / 24, (1 - np.cos(safe)) / safe ** 2)
-    b = np.where(small, 1 / 6 - phi2 / 120, (safe - np.sin(safe)) / safe ** 3)
+    a = np.where(small, 0.5 - phi2 / 24 + phi2 ** 2 / 720, (1 - np.cos(safe)) / safe ** 2)
+    b = np.where(small, 1 / 6 - phi2 / 120 + phi2 ** 2 / 5040, (safe - np.sin(safe)) / safe ** 3)
     vxu = np.cross(v, u)
     return u + a[:, None] * vxu + b[:, None] * np.cross(v, vxu)
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from identcheck.bundle.chain import initial_state
 from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
@@ -22,6 +22,7 @@ MODEL = Model.from_toml(Path(__file__).parents[2] / "examples" / "diagnose_leg.t
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 10_000), beta=st.floats(0.0, 3.2), size=st.floats(0.0, 0.3),
        second=st.floats(0.3, 2.8), two=st.booleans())
+@example(seed=0, beta=0.4, size=0.3, second=1.6, two=True)
 def test_constants_jacobian_matches_finite_differences(seed, beta, size, second, two):
     """`two`: the hinge turns about two axes across it (a ball joint's extra rotations), so that the second
     rotation's vector is not along either axis and a profile's derivative is not a turn about its own axis."""
