@@ -61,17 +61,22 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size, second,
 @given(seed=st.integers(0, 10_000), turned=st.booleans())
 def test_per_frame_jacobian_matches_finite_differences(seed, turned):
     """The per-frame columns (the root's pose, each joint's angles) against central differences of the step; with
-    `turned`, the hinge also turns about two axes across it (fitted profiles of up to 0.3 rad)."""
+    `turned`, every kind of effect term is on (a marker's and a centre's offsets, world fields) and the hinge also
+    turns about two axes across it (fitted profiles of up to 0.3 rad)."""
     sim = simulate(MODEL, n_frames=12, seed=seed)
     chain = Skeleton.from_model(MODEL)
-    s = initial_state(chain, sim.trial.as_array())
+    data = sim.trial.as_array()
+    s = initial_state(chain, data)
     terms = Terms()
     if turned:
-        hinge = next(j for j in chain.joints if chain.types[j] == "revolute")
-        tb = time_basis(12, 100.0, 0.05)
-        terms = Terms(rotations=[(hinge, tb, 0.3), (hinge, tb, 1.9)])
         rng = np.random.default_rng(seed)
-        s.term_params = [rng.normal(size=sh) * 0.3 for sh in terms.shapes()]
+        hinge = next(j for j in chain.joints if chain.types[j] == "revolute")
+        ball = next(j for j in chain.joints if chain.types[j] == "spherical")
+        tb = time_basis(12, 100.0, 0.05)
+        terms = Terms(markers=[(0, tb[:, :2])], centres=[(ball, tb[:, :3])],
+                      rotations=[(hinge, tb, 0.3), (hinge, tb, 1.9)],
+                      world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
+        s.term_params = [rng.normal(size=sh) * (0.3 if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
     R, t, centre, pred = forward(chain, terms, s)
     lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred)
     J, G = dense_jacobians(lay, blocks, chain.n_markers)
