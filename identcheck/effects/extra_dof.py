@@ -28,10 +28,10 @@ import numpy as np
 
 from identcheck.bundle.chain import convert_joint
 from identcheck.errors import DegenerateError
-from identcheck.bundle.model import Terms, forward, second_axis, tangents
+from identcheck.bundle.model import Terms, forward, second_axis, second_rotations, tangents
 from identcheck.bundle.hypothesis import time_basis
 from identcheck.effects.base import Effect, Proposal
-from identcheck.geometry.rotations import hinge_matrix
+from identcheck.geometry.rotations import hinge_matrix, left_jacobian_times
 from identcheck.simulate.rigid import smooth_profile
 from identcheck.effects.injection import Change, cannot, extra_rotation_world, pick, rotations, subtree, subtree_columns, unit
 
@@ -51,12 +51,16 @@ def off_axis_deg(h, joint: str) -> np.ndarray:
     return np.rad2deg(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
 
 
-def pivot_at_markers(chain, state, joint: str):
+def pivot_at_markers(chain, state, joint: str, terms: Terms | None = None):
     """The same rigid state with the hinge's point (``c_parent``, ``c_child``) moved along its axis to the point
     nearest the mean of both segments' markers (seen from the parent): for a rigid hinge where on its axis
     the point sits is a free choice, but a second rotation turns about it, and a knee's play is about the knee,
-    not about wherever the hinge fit left its point (hundreds of millimetres away along the axis)."""
+    not about wherever the hinge fit left its point (hundreds of millimetres away along the axis). A hinge that
+    already turns about a second axis (in `terms`) keeps its point: the fit has placed it, and moving it would move
+    the markers."""
     s = state.copy()
+    if terms is not None and any(j == joint for j, _, _ in terms.rotations):
+        return s
     P, C = chain.parent[joint], chain.child[joint]
     a = s.axis[joint]
     rel = hinge_matrix(a, s.theta[joint]) @ s.rest[joint]
@@ -80,7 +84,7 @@ def frame_rotations(hyp, joint: str, pivoted=None) -> tuple[np.ndarray, np.ndarr
     :func:`pivot_at_markers`, when the caller has it already."""
     ch = hyp.chain
     idx = ch.downstream[joint]
-    pivoted = pivot_at_markers(ch, hyp.fit.state, joint) if pivoted is None else pivoted
+    pivoted = pivot_at_markers(ch, hyp.fit.state, joint, hyp.terms) if pivoted is None else pivoted
     _, _, centre, _ = forward(ch, hyp.terms, pivoted)
     seen = (hyp.weights[:, idx] > 0) & np.all(np.isfinite(hyp.data[:, idx]), axis=2)
     r = np.where(seen[..., None], np.nan_to_num(hyp.residuals()[:, idx]), 0.0)
@@ -106,11 +110,16 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     to the hinge (searched every 2°, each direction weighted by how far it moves the markers; across the axis
     already `taken` when there is one)."""
     ch = hyp.chain
-    s = pivot_at_markers(ch, hyp.fit.state, joint)
+    s = pivot_at_markers(ch, hyp.fit.state, joint, hyp.terms)
     omega, L = frame_rotations(hyp, joint, s)
     frame = np.einsum("fij,fjk->fik", hyp.fit.seg_R[ch.parent[joint]], hinge_matrix(s.axis[joint], s.theta[joint]))
     E = np.stack(tangents(s.axis[joint]), axis=1)                   # (3, 2): the plane, in the turning frame
-    W = np.einsum("fji,jk->fik", frame, E)                          # (F, 3, 2): the plane's axes in the world
+    v = second_rotations(hyp.terms, s).get(joint)
+    if v is None:
+        E = np.broadcast_to(E, (len(frame), 3, 2))
+    else:                   # a rotation added to one already fitted turns the child about J_l(v) e, not e
+        E = np.stack([left_jacobian_times(v, e) for e in E.T], axis=2)             # (F, 3, 2)
+    W = np.einsum("fij,fjk->fik", frame, E)                         # (F, 3, 2): the plane's axes in the world
     plane = np.einsum("fji,fj->fi", W, omega)                       # (F, 2)
     lever = np.einsum("fji,fjk,fkl->fil", W, L, W)                   # (F, 2, 2)
     moved = np.any(omega != 0, axis=1)
@@ -228,13 +237,15 @@ class ExtraDof(Effect):
             # those two directions out of the count), so no axis is chosen and nothing more is charged
             added = [(j, proposal.payload["basis"], b) for b in proposal.payload["betas"]]
             new = hyp.refit(terms=hyp.terms + Terms(rotations=added),
-                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j), effect=proposal, max_iter=12)
+                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms), effect=proposal,
+                            max_iter=12)
             ranges = [round(float(np.rad2deg(np.ptp(t[1] @ _own_params(new, t)[:-1, 0]))), 1) for t in added]
             proposal.where["range_deg"] = ranges
             return new
         if "basis" in proposal.payload:
             term = (j, proposal.payload["basis"], proposal.payload["beta"])
-            new = hyp.refit(terms=hyp.terms + Terms(rotations=[term]), state=pivot_at_markers(hyp.chain, hyp.fit.state, j),
+            new = hyp.refit(terms=hyp.terms + Terms(rotations=[term]),
+                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms),
                             extra_params=1, effect=proposal, max_iter=12)
             p = _own_params(new, term)
             proposal.where["range_deg"] = round(float(np.rad2deg(np.ptp(term[1] @ p[:-1, 0]))), 1)

@@ -146,3 +146,25 @@ def test_one_marker_lagging_on_its_own_is_named_a_time_offset_of_that_marker(see
     assert diag.steps and diag.steps[0].name == "time_offset"
     assert diag.steps[0].where.get("markers") == [sim.clean.labels[col]]
     assert diag.steps[0].where["delay_ms"] == pytest.approx(30.0, abs=3.0)
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, np.pi))
+def test_the_pivot_moves_freely_on_a_plain_hinge_and_stays_on_a_turned_one(seed, beta):
+    """On a rigid hinge the point may slide along the axis without moving a marker, so the second rotation is
+    started about the knee; once the hinge turns about a second axis the fit has placed that point, and moving it
+    would move the markers: it stays."""
+    sim = simulate(MODEL, n_frames=80, seed=seed)
+    chain = Skeleton.from_model(MODEL)
+    data = sim.clean.as_array()
+    rigid = fit_chain(chain, data, initial_state(chain, data), max_iter=30).state
+    moved = pivot_at_markers(chain, rigid, "knee")
+    np.testing.assert_allclose(forward(chain, Terms(), moved)[3], forward(chain, Terms(), rigid)[3], atol=1e-6)
+    basis = time_basis(80, sim.clean.rate_hz)
+    terms = Terms(rotations=[("knee", basis, beta)])
+    turned = rigid.copy()
+    turned.term_params = [np.vstack([np.random.default_rng(seed).normal(size=(basis.shape[1], 1)) * 0.1, [[0.0]]])]
+    kept = pivot_at_markers(chain, turned, "knee", terms)
+    np.testing.assert_array_equal(kept.c_parent["knee"], turned.c_parent["knee"])
+    np.testing.assert_array_equal(kept.c_child["knee"], turned.c_child["knee"])
+    np.testing.assert_allclose(forward(chain, terms, kept)[3], forward(chain, terms, turned)[3], atol=1e-12)
