@@ -215,11 +215,10 @@ def aligned_gains(before: np.ndarray, after: np.ndarray, idx: list, k: int, fitt
     hold samples taken `k` frames later (``after[t]`` from ``t + k``): those columns' terms are moved to the frame
     their samples came from, and the frames one of the two lacks are left out of both (`fitted` (F, M): the samples
     both fits weigh, all by default; a frame the shift empties is weighed by neither, and its sample's term from the
-    other frame had stood alone). A shifted marker's own noise
-    then meets itself: its terms, which cancel over the whole trial but not over a block of frames, leave the
-    spread, and what is left is the re-pairing of its noise with the other markers'. Without the alignment a
-    segment whose pose takes out only its markers' mean read 95 where its shifts' gains spread 6, and a
-    development trial's pelvis 119-124 where they spread 81-84."""
+    other frame had stood alone). A shifted marker's own noise then meets itself: its terms, which cancel over the
+    whole trial but not over a block of frames, leave the spread, and what is left is the re-pairing of its noise
+    with the other markers'. Without the alignment a segment whose pose takes out only its markers' mean read 95
+    where its shifts' gains spread 6, and a development trial's pelvis 119-124 where they spread 81-84."""
     a, b = before.copy(), after.copy()
     F = len(a)
     if abs(k) >= F:
