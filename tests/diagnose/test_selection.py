@@ -525,3 +525,24 @@ def test_a_candidate_that_cannot_be_what_it_claims_is_never_listed_as_an_equal_e
     out = workflow.rivals(tried, chosen, most)
     expected = [(eff.name, p.where, sc) for sc, _, p, _ in tried[1:] if not p.payload["noise"]][:most]
     assert list(out) == expected
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.floats(0.1, workflow.DECISIVE_GAIN - 0.1), st.floats(1.0, 1e3), st.booleans())
+def test_an_effect_with_its_own_calibrated_test_needs_only_to_earn_its_parameters(trial, gain, strength, tested):
+    """Where the gap passes the consistency test, an effect with its own trial-wide test (``tested``: gross errors)
+    is adopted once its fitted score earns its parameters, below the decisive bar, even when another effect scores
+    higher and short of the bar; without its own test it is not, and neither is adopted."""
+    model, tr = trial
+    own = _StandIn("own", [({"markers": ["RKNE"]}, strength, gain)])
+    own.tested = tested
+    higher = _StandIn("higher", [({"joint": "knee"}, strength, (gain + workflow.DECISIVE_GAIN) / 2)])
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        diag = _patched(monkeypatch, model, tr, [own, higher], max_steps=2, consistent=True)
+    assert [s.name for s in diag.steps] == (["own"] if tested else [])
+
+
+def test_the_effects_with_their_own_calibrated_test_are_the_gross_errors():
+    assert {name for name, eff in workflow.EFFECTS.items() if eff.tested} == {"outliers"}
+    assert all(eff.bar(workflow.DECISIVE_GAIN) == (0.0 if eff.tested else workflow.DECISIVE_GAIN)
+               for eff in workflow.EFFECTS.values())
