@@ -370,6 +370,7 @@ def main(argv=None) -> int:
         lim = d["limit"]
         print(f"  {name:<20} " + (f"chi2 >= {lim['visible_chi2']:g} ({lim['named']}/{lim['trials']}, "
                                   f"magnitudes from {lim['magnitude_mm_from']} mm)" if lim else "not reached"))
+    a.out.parent.mkdir(parents=True, exist_ok=True)
     try:
         limits_figure(s["detection_limits"], a.out.parent / "diagnose_detection_limits.png")
     except ImportError:
