@@ -56,12 +56,22 @@ this is adopted even then (the gain is 2 ln of a Bayes factor: 50 is far beyond 
 fitted gain: a proposal of a nested effect (:attr:`identcheck.effects.base.Effect.nested`) is fitted whenever its
 detector's estimate earns its parameters at all, since the estimates are first order and read low (a knee rolling
 back 10.7 mm in gait, on a trial the test passed: estimated 25, fitted 247; a hip pistoning under correlated noise:
-28 and 94). An effect with its own test calibrated over the trial (:attr:`identcheck.effects.base.Effect.tested`:
-gross errors) is held to its fitted gain earning its parameters instead."""
+28 and 94). An effect acting on a few samples (:attr:`identcheck.effects.base.Effect.sparse`: gross errors) is held
+to :data:`EQUIVALENT_GAIN` instead (:func:`bar_for`)."""
 EQUIVALENT_GAIN = 10.0
 EQUIVALENT_FRACTION = 0.02
 """Two effects whose scores differ by less than the larger of these (criterion units, fraction of the score)
 explain the trial equally well: the report names both (``indistinguishable_from``)."""
+
+
+def bar_for(effect, bar: float) -> float:
+    """The fitted gain `effect` must exceed when the round's bar is `bar` (:data:`DECISIVE_GAIN` where the gap is
+    consistent with noise, else 0), forward and in the backward check alike: that bar, or for an effect acting on a
+    few samples (:attr:`identcheck.effects.base.Effect.sparse`) at most :data:`EQUIVALENT_GAIN`. Its samples have
+    each failed a trial-wide bound and paid their own parameters, which the consistency test cannot judge; what is
+    asked of it beyond that is to gain more than the margin within which two explanations are equal, so that a
+    sample or two barely beyond the bound is no finding."""
+    return min(bar, EQUIVALENT_GAIN) if effect.sparse else bar
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
 SD_GROWTH = 5.0
@@ -405,20 +415,23 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if not eff.implausible(prop) and sc > best:
                     best, leader = sc, eff
             # errors the data show without the joint model come first among those that earn their parameters
-            tried.sort(key=lambda x: (not (x[0] > x[1].bar(bar) and x[1].read_without_joints(x[2])), -x[0]))
+            tried.sort(key=lambda x: (not (x[0] > bar_for(x[1], bar) and x[1].read_without_joints(x[2])), -x[0]))
             # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike
             plausible = []
             for sc, eff, prop, cand in tried:
                 why = eff.implausible(prop)
-                if why and sc > eff.bar(bar):
+                if why and sc > bar_for(eff, bar):
                     log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
                 elif not why:
                     plausible.append((sc, eff, prop, cand))
             tried = simplest_among_equals(plausible, h, bar)
-            adopted = None
+            adopted, closed = None, False
             for sc, eff, prop, cand in tried:
-                if sc <= eff.bar(bar):
-                    continue          # (the tried are in order of score: only an effect with its own test follows)
+                # the first candidate short of the round's bar closes the round to all but the sparse effects, held
+                # to their own (bar_for): what follows scores less, or is a simpler explanation moved ahead of it
+                closed = closed or sc <= bar
+                if sc <= bar_for(eff, bar) or (closed and not eff.sparse):
+                    continue
                 if progress:
                     progress(f"step {len(steps) + 1}: fitting {eff.name} {prop.where} further, to check the "
                              f"joints stay determined")
@@ -506,7 +519,7 @@ def simplest_among_equals(tried: list, h: Hypothesis, bar: float) -> list:
     (:meth:`identcheck.effects.base.Effect.own_params`): a pelvis delayed 4 frames had also been charged the 48 of
     the 16 samples its shift moves past the trial's end, and lost to the same translation at a higher score (held-out
     draw 46, trial 102: 145 413 against 145 133)."""
-    if not tried or tried[0][0] <= tried[0][1].bar(bar) or (tried[0][1].read_without_joints(tried[0][2])):
+    if not tried or tried[0][0] <= bar_for(tried[0][1], bar) or (tried[0][1].read_without_joints(tried[0][2])):
         return tried
     top = tried[0][0]
     margin = max(EQUIVALENT_GAIN, EQUIVALENT_FRACTION * top)
@@ -542,21 +555,17 @@ def needed(ctx: Context, without: Hypothesis, full: Hypothesis, adopted: Adopted
     """The forward step's rule, asked of an adopted effect given the others: (what `full` gains over `without`, the
     hypothesis without the effect; would the search adopt an effect gaining that much there?). Yes when it earns
     its parameters and the gap without it is not consistent with noise, when it gains decisively
-    (:data:`DECISIVE_GAIN`) all the same (an effect with its own calibrated test: when it gains more than
-    :data:`EQUIVALENT_GAIN`, :meth:`identcheck.effects.base.Effect.bar`), or when the joints need it to be
-    determined: without it they are not, or their worst white-noise standard error grows beyond :data:`SD_GROWTH`
-    times theirs with it and beyond :data:`MAX_SD_MM` (measured from the full model here, where the forward step
-    measures from the rigid fit). The joints are then reported by fit's rules, which may still call them undetermined
-    (a real knee whose ball joint was dropped for skin terms driven by its angle: ±20 mm). The gain must also stand
-    clear of what noise alone gives the `adopted` effect (:meth:`identcheck.effects.base.Effect.stands_out`), as it
-    had to when it was adopted."""
+    (:data:`DECISIVE_GAIN`; an effect acting on a few samples, :data:`EQUIVALENT_GAIN`: :func:`bar_for`) all the
+    same, or when the joints need it to be determined: without it they are not, or their worst white-noise standard
+    error grows beyond :data:`SD_GROWTH` times theirs with it and beyond :data:`MAX_SD_MM` (measured from the full
+    model here, where the forward step measures from the rigid fit). The joints are then reported by fit's rules,
+    which may still call them undetermined (a real knee whose ball joint was dropped for skin terms driven by its
+    angle: ±20 mm). The gain must also stand clear of what noise alone gives the `adopted` effect
+    (:meth:`identcheck.effects.base.Effect.stands_out`), as it had to when it was adopted."""
     gain = score(ctx, full, without)
     bar = DECISIVE_GAIN if consistency(ctx, without)["consistent"] else 0.0
-    if adopted is not None and adopted.effect.tested:
-        # held to earning its parameters, but a gain within the margin of explanations alike is a tie with none:
-        # gross errors the later effects set aside as well (a second round of outliers whose rounds took in the
-        # first's 15 samples: 0.0) are not needed
-        bar = max(adopted.effect.bar(bar), EQUIVALENT_GAIN)
+    if adopted is not None:
+        bar = bar_for(adopted.effect, bar)
     if gain > bar and (adopted is None or adopted.effect.stands_out(adopted.proposal, gain)):
         return gain, True
     limit = max(SD_GROWTH * worst_sd(ctx, full), MAX_SD_MM)

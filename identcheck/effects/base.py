@@ -78,20 +78,15 @@ class Effect:
     marker shifted a frame either way gained 87 and 92 in the prewhitened criterion while its plain sum of squares
     grew by 184 mm² one way. Such an effect is fitted there only when its estimate itself clears the decisive bar."""
 
-    tested = False
-    """Whether this effect's detector proposes only what its own test, calibrated over the whole trial, finds beyond
-    the noise (gross errors: a sample beyond a bound noise alone passes in about 1 trial of 100). A gap the
-    consistency test passes is then no evidence against it, and the decisive bar is not asked of it: that test sums a
-    few gross samples into tens of thousands of ordinary ones (held-out draw 63, trial 43: eight samples at χ²₃
-    33-93, 9 mm jumps under 1.2 mm of noise, left the ratio at 0.99 where the test's limit was 1.15; set aside they
-    gained 23 and were named nothing). Its fitted gain must still earn its parameters. Measured on 480 clean
-    simulated legs (1500 frames, 0.3-1.5 mm, white or AR(1) noise of lag-1 coefficient 0.5-0.9): 3 were named
-    outliers (one sample each), none before."""
-
-    def bar(self, decisive: float) -> float:
-        """The fitted gain this effect must exceed when the round's bar is `decisive` (0 where the gap is not
-        consistent with noise): that bar, or 0 for an effect with its own calibrated test (:attr:`tested`)."""
-        return 0.0 if self.tested else decisive
+    sparse = False
+    """Whether this effect acts on a few samples, each paying for its own parameters (gross errors: three per sample
+    set aside, five per brief burst). Every sample it sets aside has failed a trial-wide bound on its own (χ²₃ beyond
+    what noise passes at 0.5 % over the trial, about 32 on a 1500-frame leg) and is charged 3 ln N (about 31) in the
+    score. The whole-trial consistency test cannot repeat that judgment: it sums a few gross samples into tens of
+    thousands of ordinary ones (held-out draw 63, trial 43: eight 9 mm jumps under 1.2 mm of noise, χ²₃ 33-93 each,
+    left its ratio at 0.99 under a limit of 1.15; set aside they gained 23, below the decisive bar, and nothing was
+    named). Where that test passes, such an effect is held to a smaller bar
+    (:func:`identcheck.diagnose.workflow.bar_for`)."""
 
     def propose(self, ctx, hyp) -> list:
         """Proposals, strongest first, from the residuals of hypothesis `hyp` (empty: no sign of it)."""

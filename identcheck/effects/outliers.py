@@ -179,7 +179,7 @@ def _where(ctx, mask) -> dict:
 class Outliers(Effect):
     name = "outliers"
     max_proposals = 2            # samples set aside one by one, and brief runs at one offset
-    tested = True                # each proposal is what a trial-wide test at 0.5 % finds beyond the noise
+    sparse = True                # a few samples, each beyond a trial-wide bound and charged its own parameters
 
     def inject(self, sim, rng) -> Change:
         """A fraction 0.3-1 % (at least 3) of the visible samples get a gross error of 15-60 mm."""
