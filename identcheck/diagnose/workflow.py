@@ -62,16 +62,6 @@ EQUIVALENT_GAIN = 10.0
 EQUIVALENT_FRACTION = 0.02
 """Two effects whose scores differ by less than the larger of these (criterion units, fraction of the score)
 explain the trial equally well: the report names both (``indistinguishable_from``)."""
-
-
-def bar_for(effect, bar: float) -> float:
-    """The fitted gain `effect` must exceed when the round's bar is `bar` (:data:`DECISIVE_GAIN` where the gap is
-    consistent with noise, else 0), forward and in the backward check alike: that bar, or for an effect acting on a
-    few samples (:attr:`identcheck.effects.base.Effect.sparse`) at most :data:`EQUIVALENT_GAIN`. Its samples have
-    each failed a trial-wide bound and paid their own parameters, which the consistency test cannot judge; what is
-    asked of it beyond that is to gain more than the margin within which two explanations are equal, so that a
-    sample or two barely beyond the bound is no finding."""
-    return min(bar, EQUIVALENT_GAIN) if effect.sparse else bar
 MAX_SD_MM = 10.0
 """A joint whose marker distances have a standard error beyond this is not determined in practice."""
 SD_GROWTH = 5.0
@@ -358,6 +348,16 @@ DESCRIPTIVE = frozenset({"modelled", "functions", "fields", "degree"})
 of its functions the data ask for, the volume's distortion one place whichever of its fields and of what degree
 (:mod:`identcheck.bundle.score_selection`); each adopted once, and a dropped one not proposed again in another
 form."""
+
+
+def bar_for(effect, bar: float) -> float:
+    """The fitted gain `effect` must exceed when the round's bar is `bar` (:data:`DECISIVE_GAIN` where the gap is
+    consistent with noise, else 0), forward and in the backward check alike: that bar, or for an effect acting on a
+    few samples (:attr:`identcheck.effects.base.Effect.sparse`) at most :data:`EQUIVALENT_GAIN`. Its samples have
+    each failed a trial-wide bound and paid their own parameters, which the consistency test cannot judge; what is
+    asked of it beyond that is to gain more than the margin within which two explanations are equal, so that a
+    sample or two barely beyond the bound is no finding."""
+    return min(bar, EQUIVALENT_GAIN) if effect.sparse else bar
 
 
 def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnosis:
