@@ -73,6 +73,16 @@ class Context:
         phi = max(float(self.noise.lag1), 0.0)
         return (1.0 - phi) / (1.0 + phi)
 
+    def kept_share(self, field: np.ndarray, weights: np.ndarray) -> float:
+        """The share of a displacement field's weighted sum of squares (F, M, 3) that :meth:`rss` counts: 1 under
+        white noise, :attr:`smooth_share` for a field constant in time, more for one that changes faster. A detector
+        that estimates what a change explains from the plain residual scales its estimate by this share of the change
+        it would fit."""
+        plain = float(np.sum(np.where((np.asarray(weights) > 0)[..., None], np.nan_to_num(field), 0.0) ** 2))
+        if self.noise.lag1 <= 0 or plain <= 0:
+            return 1.0
+        return whitened_rss(np.nan_to_num(field), weights, self.noise.lag1) / plain
+
     def bic_gain(self, explained_mm2: float, n_params: int) -> float:
         """Bayesian information criterion gain with the noise known: the squared residual a change
         explains over σ², less ln(3N) per parameter it costs; > 0 means it earns its parameters."""

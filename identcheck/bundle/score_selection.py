@@ -6,7 +6,7 @@ criterion, however few carry the motion. A hip pistoning with its flexion (held-
 its whole translation estimated at 343 criterion units less 322 for its 31 parameters, where one function of the
 flexion in three directions alone estimated 278 net; a one-frame delay of a pelvis marker (130) was named instead.
 The statistic of any subset of the fields follows from the moments of all of them
-(:func:`identcheck.bundle.chain.score_moments`), so the subsets are compared without touching the data again.
+(:func:`identcheck.bundle.score_test.score_moments`), so the subsets are compared without touching the data again.
 """
 from __future__ import annotations
 
@@ -60,7 +60,7 @@ def forward_selection(n: np.ndarray, G: np.ndarray, units: list, gain: Callable[
     of nothing, ``gain(0, 0)``.
 
     With `n` a matrix (k, w), each row is a function with a free w-vector whose directions share the Gram matrix `G`
-    (k, k) (:func:`~identcheck.bundle.chain.quadratic_form`): a unit's rows count w fields each."""
+    (k, k) (:func:`~identcheck.bundle.score_test.quadratic_form`): a unit's rows count w fields each."""
     width = n.shape[1] if np.ndim(n) == 2 else 1
     moments = np.asarray(n, dtype=float).reshape(len(n), width)      # (fields, w): one column unless n is a matrix
     chosen: list = []

@@ -4,15 +4,16 @@ Two hypotheses, both for a hinge (a ball joint has nothing to add):
 
 - **a second rotation** about one axis perpendicular to the hinge that turns with the child (a knee's
   varus/valgus or axial play), its angle any smooth function of time
-  (:func:`~identcheck.bundle.hypothesis.time_basis`). Detector: in every frame, the small rotation about
-  the joint's centre that best explains the residual of the markers below the joint, seen in the hinge's
-  own frame with its component about the hinge removed; their smooth part (in time) about each direction
-  across the hinge, weighted by how far that direction moves the markers, picks the axis (a 2° search,
-  then the axis is fitted). What tells this from soft tissue is what moves: a rotation
+  (:func:`~identcheck.bundle.hypothesis.time_basis`). Detector: the score test of that term at the rigid fit (what
+  the refit would explain to first order, the hinge's and the other joints' angles and every constant free to take
+  their part), about the best axis across the hinge and the best pivot along it (a 4° and 25 mm search; the fit
+  then places both), with the knots of the angle's functions as far apart as the play allows (0.2 to 2 s, the one
+  the estimate says gains most). What tells this from soft tissue is what moves: a rotation
   moves every child marker rigidly about the joint, skin moves markers one by one on their segment.
-  Augmentation: :class:`~identcheck.bundle.chain.Terms` ``rotations``, the angle's coefficients and the
-  axis direction fitted with everything else, about the hinge's point nearest the markers
-  (:func:`pivot_at_markers`). ``where`` gives the axis's angle to the child's long axis and the range.
+  Augmentation: :class:`~identcheck.bundle.model.Terms` ``rotations``, the angle's coefficients and the
+  axis direction fitted with everything else, about the pivot the detector found (from the hinge's point nearest
+  the markers, :func:`pivot_at_markers`). ``where`` gives the axis's angle to the child's long axis, the range and
+  the knot spacing.
   A second proposal for the same joint takes the axis across the first (two smooth axes of play: ``needs`` a
   third rotation, a place of its own); both axes across the hinge can also be proposed at once (``needs`` a second
   and a third rotation: a ball joint whose play is smooth, scored on the smooth rotations about the whole plane).
@@ -30,6 +31,7 @@ from identcheck.bundle.chain import convert_joint
 from identcheck.errors import DegenerateError
 from identcheck.bundle.model import Terms, forward, second_axis, second_rotations, tangents
 from identcheck.bundle.hypothesis import time_basis
+from identcheck.bundle.score_test import modulated_score_moments, quadratic_form
 from identcheck.effects.base import Effect, Proposal
 from identcheck.geometry.rotations import hinge_matrix, left_jacobian_times
 from identcheck.simulate.rigid import smooth_profile
@@ -51,9 +53,10 @@ def off_axis_deg(h, joint: str) -> np.ndarray:
     return np.rad2deg(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
 
 
-def pivot_at_markers(chain, state, joint: str, terms: Terms | None = None):
+def pivot_at_markers(chain, state, joint: str, terms: Terms | None = None, shift_mm: float = 0.0):
     """The same rigid state with the hinge's point (``c_parent``, ``c_child``) moved along its axis to the point
-    nearest the mean of both segments' markers (seen from the parent): for a rigid hinge where on its axis
+    nearest the mean of both segments' markers (seen from the parent), and `shift_mm` further along the axis (where
+    a detector found the play turns: :data:`PIVOT_SHIFTS_MM`): for a rigid hinge where on its axis
     the point sits is a free choice, but a second rotation turns about it, and a knee's play is about the knee,
     not about wherever the hinge fit left its point (hundreds of millimetres away along the axis). A hinge that
     already turns about a second axis (in `terms`) keeps its point: the fit has placed it, and moving it would move
@@ -70,32 +73,71 @@ def pivot_at_markers(chain, state, joint: str, terms: Terms | None = None):
         pts.append((child.mean(axis=0) + s.c_parent[joint]))
     if not pts:
         return s
-    along = float((np.concatenate(pts).mean(axis=0) - s.c_parent[joint]) @ a)
+    along = float((np.concatenate(pts).mean(axis=0) - s.c_parent[joint]) @ a) + shift_mm
     s.c_parent[joint] = s.c_parent[joint] + along * a
     s.c_child[joint] = s.c_child[joint] + along * (s.rest[joint].T @ a)
     return s
 
 
-def frame_rotations(hyp, joint: str, pivoted=None) -> tuple[np.ndarray, np.ndarray]:
-    """In every frame, the small rotation (rad, world) about the joint's centre that best explains the
-    residual of the markers below it, ω = L⁻¹ Σ d × r with L = Σ (|d|² I − d dᵀ), d each marker's offset
-    from the centre and r its residual; and L itself (how strongly each rotation moves the markers).
-    (F, 3) and (F, 3, 3); ω is zero where fewer than two such markers are seen. `pivoted`: the state from
-    :func:`pivot_at_markers`, when the caller has it already."""
+PIVOT_SHIFTS_MM = np.arange(-150.0, 151.0, 25.0)
+"""Where along the hinge the detector lets a second rotation turn, from the hinge's point nearest the markers
+(:func:`pivot_at_markers`): a knee's play turns about the knee, and the markers' point can be a cluster's width to
+its side. About the markers' point the score read 6 301 on a knee with slow varus/valgus play under AR(1) noise
+(held-out draw 66, trial 3), 9 502 50 mm medially, where the refit (which places the pivot) explained 9 780."""
+KNOT_SPACINGS_S = (0.2, 0.5, 1.0, 2.0)
+"""The knot spacings (s) of the second rotation's smooth angle the detector compares (the criterion's choice, by
+its estimated gain): play as fast as the joint's own motion needs the finest, at 66 parameters on a 13 s trial; slow
+play pays for no more than it uses (a knee's slow axial play of 4.7 mm under AR(1) noise, draw 65 trial 35, had
+fitted at -184 with the finest alone, and a slip on a shank marker was named)."""
+BETA_STEP_DEG = 4.0
+"""The detector's search for the axis across the hinge: every this many degrees (the fit then places it)."""
+
+
+def turn_carriers(hyp, joint: str, pivoted) -> tuple[list, np.ndarray]:
+    """The marker displacements (F, M, 3 each) of a unit rotation about each of the two axes across the hinge, in
+    the hinge's turned frame (a rotation added to one already fitted turns the child about ``J_l(v) e``, not e), about
+    the joint's point in `pivoted`; and of the same rotations about a point 1 mm further along the hinge (their
+    difference, the translation across the axis per unit angle): a pivot shifted by s moves each carrier by s times
+    its difference. Every marker below the joint moves; the others do not."""
     ch = hyp.chain
     idx = ch.downstream[joint]
-    pivoted = pivot_at_markers(ch, hyp.fit.state, joint, hyp.terms) if pivoted is None else pivoted
     _, _, centre, _ = forward(ch, hyp.terms, pivoted)
-    seen = (hyp.weights[:, idx] > 0) & np.all(np.isfinite(hyp.data[:, idx]), axis=2)
-    r = np.where(seen[..., None], np.nan_to_num(hyp.residuals()[:, idx]), 0.0)
-    d = np.where(seen[..., None], hyp.fit.pred[:, idx] - centre[joint][:, None], 0.0)
-    L = np.einsum("fm,ij->fij", np.sum(d * d, axis=2), np.eye(3)) - np.einsum("fmi,fmj->fij", d, d)
-    b = np.sum(np.cross(d, r), axis=1)
-    ok = seen.sum(axis=1) >= 2
-    out = np.zeros_like(b)
-    out[ok] = np.linalg.solve(L[ok] + 1e-9 * np.eye(3), b[ok][..., None])[..., 0]
-    L[~ok] = 0.0
-    return out, L
+    frame = np.einsum("fij,fjk->fik", hyp.fit.seg_R[ch.parent[joint]],
+                      hinge_matrix(pivoted.axis[joint], pivoted.theta[joint]))
+    E = np.stack(tangents(pivoted.axis[joint]), axis=1)            # (3, 2): the plane, in the turning frame
+    v = second_rotations(hyp.terms, pivoted).get(joint)
+    if v is None:
+        E = np.broadcast_to(E, (len(frame), 3, 2))
+    else:
+        E = np.stack([left_jacobian_times(v, e) for e in E.T], axis=2)             # (F, 3, 2)
+    W = np.einsum("fij,fjk->fik", frame, E)                         # (F, 3, 2): the plane's axes in the world
+    along = frame @ pivoted.axis[joint]                             # (F, 3): the hinge in the world
+    offset = hyp.fit.pred[:, idx] - centre[joint][:, None]
+    turns, shifts = [], []
+    for e in range(2):
+        for out, field in ((turns, np.cross(W[:, None, :, e], offset)),
+                           (shifts, np.broadcast_to(-np.cross(W[:, :, e], along)[:, None], offset.shape))):
+            full = np.zeros(hyp.data.shape)
+            full[:, idx] = field
+            out.append(full)
+    return turns + shifts, W
+
+
+def _at_shift(n, G, K: int, shift: float):
+    """The moments (n, G) of the two turns about a pivot `shift` mm along the hinge, from those of
+    :func:`turn_carriers`' four carriers (turns then shifts, K functions each)."""
+    T = np.kron(np.array([[1.0, 0.0, shift, 0.0], [0.0, 1.0, 0.0, shift]]), np.eye(K))    # (2K, 4K)
+    return T @ n, T @ G @ T.T
+
+
+def _about_axis(n2, G2, K: int, betas: np.ndarray):
+    """The statistic ``nᵀ G⁺ n`` of one turn about each axis at angle β across the hinge (from the two axes'
+    moments), for every β of `betas` at once."""
+    c, s = np.cos(betas), np.sin(betas)
+    n = c[:, None] * n2[None, :K] + s[:, None] * n2[None, K:]
+    G = (c ** 2)[:, None, None] * G2[:K, :K] + (c * s)[:, None, None] * (G2[:K, K:] + G2[K:, :K]) \
+        + (s ** 2)[:, None, None] * G2[K:, K:]
+    return np.einsum("bk,bkl,bl->b", n, np.linalg.pinv(G, rcond=1e-10, hermitian=True), n)
 
 
 def fitted_betas(hyp, joint: str) -> list:
@@ -104,54 +146,83 @@ def fitted_betas(hyp, joint: str) -> list:
     return [b + float(p[-1, 0]) for (j, _, b), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint]
 
 
+def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas) -> tuple:
+    """The estimated gains of one turn (best axis) and of two, with angles in `basis`, about the pivot shift where two
+    turns explain most, from the carriers' moments (:func:`turn_carriers`, :func:`modulated_score_moments`):
+    ``((gain, shift, β), (gain, shift))``, each statistic counted at the share of the fitted turn's sum of squares the
+    criterion keeps (:meth:`~identcheck.bundle.hypothesis.Context.kept_share`). (Where the knee turns is one place for
+    either; the axis is searched there alone, every β at every shift having cost a second a round.)"""
+    n, G = moments
+    K = basis.shape[1]
+    both = max((quadratic_form(*_at_shift(n, G, K, float(shift))), float(shift)) for shift in shifts)
+    stats = _about_axis(*_at_shift(n, G, K, both[1]), K, betas)
+    k = int(np.argmax(stats))
+    single = (float(stats[k]), both[1], float(betas[k]))
+
+    def kept(stat, shift, directions):
+        n2, G2 = _at_shift(n, G, K, shift)
+        T = np.kron(directions, np.eye(K))                          # (d·K, 2K): the turns' own fields
+        coef = np.linalg.pinv(T @ G2 @ T.T, rcond=1e-10, hermitian=True) @ (T @ n2)
+        angle = basis @ coef.reshape(-1, K).T @ directions          # (F, 2): the turn fitted about each axis
+        turned = np.einsum("fe,efmi->fmi", angle, np.stack(carriers[:2]) + shift * np.stack(carriers[2:]))
+        return stat * ctx.kept_share(turned, hyp.weights)
+
+    stat, shift, beta = single
+    gain = ctx.bic_gain(kept(stat, shift, np.array([[np.cos(beta), np.sin(beta)]])), K + 1)
+    gain2 = ctx.bic_gain(kept(both[0], both[1], np.eye(2)), 2 * K)
+    return (gain, shift, beta), (gain2, both[1])
+
+
 def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ()) -> list:
     """The second-rotation hypothesis for a hinge (see the module docstring), as a proposal whose strength is
-    the BIC gain of the smooth part of the per-frame rotations about the best axis in the plane perpendicular
-    to the hinge (searched every 2°, each direction weighted by how far it moves the markers; across the axis
-    already `taken` when there is one)."""
+    what the refit with it would gain to first order: the score test of the rotation's fields (a smooth angle,
+    :func:`~identcheck.bundle.hypothesis.time_basis` with knots every one of :data:`KNOT_SPACINGS_S`, times the turn
+    of every marker below the joint, :func:`~identcheck.bundle.score_test.modulated_score_moments`), about the best
+    axis across the hinge (searched every :data:`BETA_STEP_DEG`; across the axis already `taken` when there is one)
+    and the best pivot along it (:data:`PIVOT_SHIFTS_MM`; a hinge already turned keeps its pivot), the knot spacing
+    the one whose estimate gains most (``where["knot_spacing_s"]``).
+
+    The per-frame rotations the rigid fit leaves, regressed on the same functions, read 7 times less than the refit
+    gained on draw 66's trial 3 (140 against 978 explained), and the rotation was never fitted: the hip's angles and
+    the hinge's take up part of the play, and the part left is not the play's own size."""
     ch = hyp.chain
-    s = pivot_at_markers(ch, hyp.fit.state, joint, hyp.terms)
-    omega, L = frame_rotations(hyp, joint, s)
-    frame = np.einsum("fij,fjk->fik", hyp.fit.seg_R[ch.parent[joint]], hinge_matrix(s.axis[joint], s.theta[joint]))
-    E = np.stack(tangents(s.axis[joint]), axis=1)                   # (3, 2): the plane, in the turning frame
-    v = second_rotations(hyp.terms, s).get(joint)
-    if v is None:
-        E = np.broadcast_to(E, (len(frame), 3, 2))
-    else:                   # a rotation added to one already fitted turns the child about J_l(v) e, not e
-        E = np.stack([left_jacobian_times(v, e) for e in E.T], axis=2)             # (F, 3, 2)
-    W = np.einsum("fij,fjk->fik", frame, E)                         # (F, 3, 2): the plane's axes in the world
-    plane = np.einsum("fji,fj->fi", W, omega)                       # (F, 2)
-    lever = np.einsum("fji,fjk,fkl->fil", W, L, W)                   # (F, 2, 2)
-    moved = np.any(omega != 0, axis=1)
-    basis = time_basis(len(plane), ctx.rate_hz)
-    if moved.sum() <= basis.shape[1] + 10:
+    pivoted = pivot_at_markers(ch, hyp.fit.state, joint, hyp.terms)
+    carriers, W = turn_carriers(hyp, joint, pivoted)
+    seen = int(np.any(hyp.weights[:, ch.downstream[joint]] > 0, axis=1).sum())
+    # a third rotation's angle has the second's functions: the two axes then span the plane across the hinge, whatever
+    # their angles (Terms.redundant)
+    bases = [(None, next(b for j, b, _ in hyp.terms.rotations if j == joint))] if taken else \
+        [(sp, time_basis(len(W), ctx.rate_hz, sp)) for sp in KNOT_SPACINGS_S]
+    bases = [(spacing, b) for spacing, b in bases if b.shape[1] and seen > b.shape[1] + 10]
+    if not bases:
         return []
-    coef = np.linalg.lstsq(basis[moved], plane[moved] - plane[moved].mean(axis=0), rcond=None)[0]
-    smooth = basis @ coef                                           # (F, 2)
+    moments = modulated_score_moments(hyp.fit, hyp.weights, hyp.residuals(), carriers, [b for _, b in bases])
+    shifts = [0.0] if taken else PIVOT_SHIFTS_MM
     # a joint that already turns about one axis can take only the axis across it
-    betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, 2.0))
-    e = np.stack([np.cos(betas), np.sin(betas)], axis=1)            # (B, 2)
-    explained = np.einsum("fb,fij,bi,bj->b", (smooth @ e.T) ** 2, lever, e, e)
-    k = int(np.argmax(explained))
-    beta = float(betas[k])
-    gain = ctx.bic_gain(float(explained[k]) * ctx.smooth_share, basis.shape[1] + 1)
+    betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, BETA_STEP_DEG))
+    found = [(_best_turns(ctx, hyp, m, b, carriers, shifts, betas), sp, b) for m, (sp, b) in zip(moments, bases)]
+    (gain, shift, beta), spacing, basis = max(((one, sp, b) for (one, _), sp, b in found), key=lambda x: x[0][0])
     # the rotation across one already adopted is a third: a place of its own (named alike, the two had been one
     # place, and a ball knee's third rotation was never tried once an oblique second had been adopted)
     where = {"joint": joint, "declared": ch.types[joint],
              "needs": "a third rotation" if taken else "a second rotation"}
-    where.update(axis_description(ch, s, joint, beta))
-    out = [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta})] if gain > 0 else []
+    where.update(axis_description(ch, pivoted, joint, beta))
+    if spacing is not None:
+        where["knot_spacing_s"] = spacing
+    out = [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta, "shift_mm": shift})
+           ] if gain > 0 else []
     if not taken:
         # both axes across the hinge at once, each with a smooth angle: a ball joint whose play is smooth. One axis at
         # a time, the best single axis can score below skin terms that take up the play about both (held-out draw
         # 45, a knee turning like a ball in gait: one axis 128 114, skin on the thigh cluster 133 895, the two axes
         # never fitted together)
-        both = float(np.einsum("fi,fij,fj->", smooth, lever, smooth))
-        gain2 = ctx.bic_gain(both * ctx.smooth_share, 2 * basis.shape[1])
+        (gain2, shift2), spacing2, basis2 = max(((two, sp, b) for (_, two), sp, b in found), key=lambda x: x[0][0])
         if gain2 > 0:
             out.append(Proposal(name, {"joint": joint, "declared": ch.types[joint],
-                                       "needs": "a second and a third rotation"},
-                                gain2, {"joint": joint, "basis": basis, "betas": [beta, beta + np.pi / 2]}))
+                                       "needs": "a second and a third rotation",
+                                       "knot_spacing_s": spacing2},
+                                gain2, {"joint": joint, "basis": basis2, "betas": [beta, beta + np.pi / 2],
+                                        "shift_mm": shift2}))
     return out
 
 
@@ -181,10 +252,11 @@ class ExtraDof(Effect):
     name = "extra_dof"
     max_proposals = 3
     always_fit = True
-    """Neither strength estimates the fitted score: the ball's is a bound (all the residual below the joint), and
-    the second rotation's reads the per-frame rotations the rigid fit left, after the hinge's axis and angles took
+    """The ball's strength is a bound (all the residual below the joint), not an estimate of its score. The second
+    rotation's had been read from the per-frame rotations the rigid fit left, after the hinge's axis and angles took
     their part (a knee's 11° varus/valgus wobble in gait under AR(1) noise: estimated 2 291, fitted 34 829, where
-    skin on the thigh scored 23 933 and was named instead, the rotation never fitted)."""
+    skin on the thigh scored 23 933 and was named instead, the rotation never fitted); it is now a score test, but a
+    first-order one: fitted, the pivot and the axis move."""
 
     def inject(self, sim, rng) -> Change:
         """A hinge also turns about an axis b perpendicular to its own (in the parent frame), by a
@@ -237,15 +309,17 @@ class ExtraDof(Effect):
             # those two directions out of the count), so no axis is chosen and nothing more is charged
             added = [(j, proposal.payload["basis"], b) for b in proposal.payload["betas"]]
             new = hyp.refit(terms=hyp.terms + Terms(rotations=added),
-                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms), effect=proposal,
-                            max_iter=12)
+                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms,
+                                                   proposal.payload.get("shift_mm", 0.0)),
+                            effect=proposal, max_iter=12)
             ranges = [round(float(np.rad2deg(np.ptp(t[1] @ _own_params(new, t)[:-1, 0]))), 1) for t in added]
             proposal.where["range_deg"] = ranges
             return new
         if "basis" in proposal.payload:
             term = (j, proposal.payload["basis"], proposal.payload["beta"])
             new = hyp.refit(terms=hyp.terms + Terms(rotations=[term]),
-                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms),
+                            state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms,
+                                                   proposal.payload.get("shift_mm", 0.0)),
                             extra_params=1, effect=proposal, max_iter=12)
             p = _own_params(new, term)
             proposal.where["range_deg"] = round(float(np.rad2deg(np.ptp(term[1] @ p[:-1, 0]))), 1)

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import Terms
-from identcheck.bundle.chain import score_moments
+from identcheck.bundle.score_test import score_moments
 from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
@@ -159,7 +159,7 @@ class JointTranslation(Effect):
 
     def propose(self, ctx, hyp) -> list:
         """Each joint's translation, its strength what the refit with it would gain to first order (a score test
-        over the translation's own displacement fields, :func:`~identcheck.bundle.chain.score_moments`, net of
+        over the translation's own displacement fields, :func:`~identcheck.bundle.score_test.score_moments`, net of
         its parameters). The markers' mean residual below the joint, regressed on the same functions, read a knee
         rolling back 10.7 mm in gait as 25 where the refit gained 247: a rigid refit takes up most of a smooth
         translation in the joint's angle and the other segments' poses, and what is left shows on every marker.

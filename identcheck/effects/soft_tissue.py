@@ -22,7 +22,7 @@ import numpy as np
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
-from identcheck.bundle.chain import quadratic_form
+from identcheck.bundle.score_test import quadratic_form
 from identcheck.bundle.score_selection import Selection, forward_selection
 from identcheck.bundle.misfit import ModelledMotion
 from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from identcheck.bundle.chain import score_moments_streamed
+from identcheck.bundle.score_test import score_moments_streamed
 from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.model import Terms
 from identcheck.effects.base import Effect, Proposal, motion_rms_mm, world_coefficients
@@ -102,7 +102,7 @@ CHUNK_ROWS = 8192
 def plain_gram(data: np.ndarray, weights: np.ndarray, box) -> np.ndarray:
     """``XᵀWX`` (53, 53) for X the 53 fields at the positions `data` (F, M, 3) as columns, 0 where NaN, and W the
     samples' `weights` (F, M; each marker's three coordinates alike): the plain part of the score test's Gram matrix
-    (:func:`~identcheck.bundle.chain.score_moments_streamed`). X (F·M·3 rows: 80 MB for a 42-marker body at 1500
+    (:func:`~identcheck.bundle.score_test.score_moments_streamed`). X (F·M·3 rows: 80 MB for a 42-marker body at 1500
     frames) is never formed whole, only chunks of frames."""
     F, M = weights.shape
     step = max(1, CHUNK_ROWS // max(3 * M, 1))

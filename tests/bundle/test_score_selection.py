@@ -6,7 +6,7 @@ import math
 import numpy as np
 from hypothesis import example, given, settings, strategies as st
 
-from identcheck.bundle.chain import quadratic_form
+from identcheck.bundle.score_test import quadratic_form
 from identcheck.bundle.score_selection import choice_params, forward_selection
 
 

@@ -5,8 +5,9 @@ from pathlib import Path
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import (fit_chain, initial_state, score_moments, score_moments_streamed, score_statistic,
-                                     unabsorbed, unabsorbed_gram)
+from identcheck.bundle.chain import fit_chain, initial_state
+from identcheck.bundle.score_test import (score_moments, score_moments_streamed, score_statistic, unabsorbed,
+                                          unabsorbed_gram)
 from identcheck.bundle.hypothesis import Hypothesis
 from identcheck.bundle.model import Terms
 from identcheck.effects.spatial_distortion import FIELDS, field, fields, plain_gram, volume, where_fields_act

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from identcheck.bundle.chain import quadratic_form
+from identcheck.bundle.score_test import quadratic_form
 from identcheck.bundle.hypothesis import angle_basis, joint_angles
 from identcheck.diagnose import workflow
 from identcheck.effects.injection import marker_column, rotate, rotations

@@ -42,7 +42,8 @@ def test_what_the_poses_absorb_is_taken_out_of_a_field_and_nothing_else(seed, ep
     (to O(ε)), nor does one marker moved by a constant in its segment's frame (its own position absorbs it); a
     random field keeps most of its norm, never more than all of it; adding a pose field to it leaves what it
     alone leaves (what is absorbed is a projection)."""
-    from identcheck.bundle.chain import fit_chain, initial_state, unabsorbed
+    from identcheck.bundle.chain import fit_chain, initial_state
+    from identcheck.bundle.score_test import unabsorbed
     from identcheck.bundle.model import Terms, apply_step, forward, n_const
     from identcheck.skeleton import Skeleton
 

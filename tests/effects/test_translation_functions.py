@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.chain import score_statistic
+from identcheck.bundle.score_test import score_statistic
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, rescale
 from identcheck.diagnose.workflow import place, score, start
 from identcheck.effects.injection import normalised_angle, rotate, rotations, subtree_columns

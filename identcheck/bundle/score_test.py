@@ -1,0 +1,184 @@
+"""Score tests of the fitted chain: what a refit with more terms would explain of the residual, to first order,
+without refitting.
+
+At a least-squares fit the residual r is orthogonal to everything the model's own unknowns (every per-frame pose
+and angle, every constant) can absorb, so the first-order gain of adding fields of marker displacements v_i is the
+score statistic ``nᵀ G⁺ n``: ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' parts the refit does not absorb
+(the per-frame unknowns eliminated frame by frame, the constants through the Schur complement, as in the fit:
+:mod:`identcheck.bundle.chain`). Regressing the residual on the fields themselves understates it whenever the
+model's own unknowns take up part of each field. The detectors of :mod:`identcheck.effects` read their strengths
+from these moments.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from identcheck.bundle.jacobian import jacobian_blocks
+from identcheck.bundle.model import Fit, forward
+from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
+
+
+class RefitProjection:
+    """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
+    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement). :meth:`pieces`
+    takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and unweighted samples set to 0;
+    :meth:`inner` takes two fields' pieces to the inner product of their unabsorbed parts,
+    ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur complement,
+    ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur complement); each
+    field then costs a gradient pass over the blocks it moves."""
+
+    def __init__(self, fit: Fit, weights: np.ndarray):
+        s = fit.state
+        self.w = w = np.asarray(weights, dtype=float)
+        R, _t, centre, pred = forward(fit.chain, fit.terms, s)
+        self.lay, self.blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
+        A, self.B, C, g, h = normal_equations(self.lay, self.blocks, np.zeros_like(pred), w)   # for every field
+        A = ridged(A)
+        S = eliminate_frames(A, self.B, C, g, h)[0]
+        self.S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                # the gauge stays free
+        self.Linv = lower_inverse(np.linalg.cholesky(A))                            # A⁻¹ = L⁻ᵀL⁻¹
+
+    def pieces(self, v: np.ndarray, per_frame: bool = False) -> tuple:
+        """``(v0, z, reduced)`` of field `v` (see the class); with `per_frame`, ``reduced`` frame by frame (F, P), its
+        sum over the frames the plain one (a field scaled frame by frame, :func:`modulated_score_moments`, weights
+        it)."""
+        w = self.w
+        v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
+        moved = np.any(v0 != 0, axis=(0, 2))            # a block whose markers the field leaves still adds zeros
+        g, h = normal_equations(self.lay, [b for b in self.blocks if moved[b.group.cols].any()], v0, w,
+                                per_frame=per_frame, gradients_only=True)
+        z = np.einsum("fij,fj->fi", self.Linv, g)
+        back = np.einsum("fji,fj->fi", self.Linv, z)                                # L_f⁻ᵀ z_f
+        return v0, z, h - self.B.transposed_times(back, per_frame=per_frame)        # h − Σ_f (L_f⁻¹B_f)ᵀ z_f
+
+    def inner(self, a: tuple, b: tuple) -> float:
+        """The inner product of the unabsorbed parts of two fields, given their :meth:`pieces`."""
+        (va, za, ra), (vb, zb, rb) = a, b
+        return float(np.sum(self.w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ self.S_plus @ rb)
+
+
+def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
+    """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
+    so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
+    refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
+    with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
+    (Schur complement).
+
+    What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
+    regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
+    needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
+    a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
+    constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
+    proj = RefitProjection(fit, weights)
+    out = []
+    for v in fields:
+        p = proj.pieces(v)
+        out.append(proj.inner(p, p))
+    return out
+
+
+def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
+    """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
+    :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
+    explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
+    proj = RefitProjection(fit, weights)
+    return _gram([proj.pieces(v) for v in fields], proj.inner)
+
+
+def _gram(parts: list, inner) -> np.ndarray:
+    """The symmetric matrix of `inner` between every two of `parts`."""
+    G = np.empty((len(parts), len(parts)))
+    for i in range(len(parts)):
+        for j in range(i, len(parts)):
+            G[i, j] = G[j, i] = inner(parts[i], parts[j])
+    return G
+
+
+def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields: list) -> float:
+    """What a refit with `fields` (each (F, M, 3) marker displacements per unit coefficient) added to the model
+    would explain of `residual` (F, M, 3, the fit's; NaN and weight-0 samples count as 0), to first order: the
+    score statistic ``nᵀ G⁺ n``, ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts
+    (:func:`unabsorbed_gram`), in mm² (divide by σ² for a χ²).
+
+    A detector that regresses the residual on the fields themselves understates this whenever the model's own
+    unknowns take up part of each field (the joint angles, a shifted centre or axis, the segments' poses): that
+    part is already gone from the residual, and the field's full norm in the denominator counts it again."""
+    return quadratic_form(*score_moments(fit, weights, residual, [fields])[0])
+
+
+def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets) -> list:
+    """For each set of fields in `field_sets` (any iterable of lists of fields, read once: a generator keeps one set
+    in memory at a time; the refit's projection is built once for them all, at the cost of a whole normal-equation
+    build and the Schur complement, and each field costs a gradient pass), the score test's moments ``(n, G)``:
+    ``n_i = v_iᵀ W r`` and G the Gram matrix of the fields' unabsorbed parts. Any subset S of a set's
+    fields has the statistic ``n_Sᵀ G_SS⁺ n_S`` (:func:`quadratic_form`) without another pass over the data: what a
+    detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
+    proj = RefitProjection(fit, weights)
+    out = []
+    for fields in field_sets:
+        n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
+        out.append((n, _gram([proj.pieces(v) for v in fields], proj.inner)))
+    return out
+
+
+def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields, plain_gram: np.ndarray):
+    """:func:`score_moments` of one set of fields read one at a time (any iterable of (F, M, 3) arrays), their plain
+    Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of frames): only what a refit
+    absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
+    distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
+    w = np.asarray(weights, dtype=float)[..., None]
+    r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
+    proj = RefitProjection(fit, weights)
+    n, Z, reduced = [], [], []
+    for v in fields:
+        v0, z, red = proj.pieces(v)
+        n.append(float(np.sum(w * v0 * r)))
+        Z.append(z.reshape(-1))
+        reduced.append(red)
+    if not n:
+        return np.zeros(0), np.zeros((0, 0))
+    Z, reduced = np.stack(Z), np.stack(reduced)
+    G = np.asarray(plain_gram, dtype=float) - Z @ Z.T - reduced @ proj.S_plus @ reduced.T
+    return np.array(n), (G + G.T) / 2
+
+
+def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:
+    """``nᵀ G⁺ n``, the score statistic of moments ``(n, G)`` (:func:`score_moments`); 0 for no fields. With `n` a
+    matrix (k, w), the sum of the statistic over its w columns, ``trace(nᵀ G⁺ n)``: the moments of k functions each
+    with a free w-vector when every one of the w directions shares the Gram matrix `G` (k, k) — the statistic of the
+    kw fields ``nᵀ (G ⊗ I_w)⁺ n`` with the w-fold smaller matrix."""
+    if not len(n):
+        return 0.0
+    return float(np.sum(n * (np.linalg.pinv(G, rcond=1e-10, hermitian=True) @ n)))
+
+
+def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, carriers: list,
+                            bases: list) -> list:
+    """For each basis of `bases` (each (F, K), functions of the frame), :func:`score_moments` of the fields
+    ``basis[:, k] · carriers[e]`` for every function k and every carrier e (each (F, M, 3)), ordered carrier by carrier
+    (field ``e·K + k``), from one gradient pass per carrier for them all: the K·E fields are never formed. A term
+    whose size in every frame is a smooth function of time times a displacement that changes from frame to frame (a
+    joint's second rotation: the angle's coefficients times the turn of every marker below it) has such fields, and
+    their moments are sums over the frames of each carrier's per-frame pieces weighted by the functions:
+    ``G[ek, e'l] = Σ_f b_k b_l (⟨u_e, u_e'⟩_f − z_e·z_e'|_f) − ρ_ekᵀ S⁺ ρ_e'l`` with ``ρ_ek = Σ_f b_k(f) ρ_e(f)``, the
+    constants' per-frame parts."""
+    proj = RefitProjection(fit, weights)
+    w = proj.w[..., None]
+    r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
+    parts = [proj.pieces(u, per_frame=True) for u in carriers]
+    E = len(parts)
+    per_frame = np.empty((len(r), E, E))           # ⟨u_e, u_e'⟩ less the per-frame unknowns' part, frame by frame
+    for a, (va, za, _) in enumerate(parts):
+        for b, (vb, zb, _) in enumerate(parts[a:], start=a):
+            per_frame[:, a, b] = per_frame[:, b, a] = np.sum(w * va * vb, axis=(1, 2)) - np.sum(za * zb, axis=1)
+    along = [np.sum(w * v0 * r, axis=(1, 2)) for v0, _, _ in parts]                # ⟨u_e, r⟩ frame by frame
+    out = []
+    for basis in bases:
+        basis = np.asarray(basis, dtype=float)
+        G = np.block([[(basis * per_frame[:, a, b, None]).T @ basis for b in range(E)] for a in range(E)])
+        rho = np.concatenate([basis.T @ red for _, _, red in parts])                 # (E·K, P)
+        G = G - rho @ proj.S_plus @ rho.T
+        out.append((np.concatenate([basis.T @ x for x in along]), (G + G.T) / 2))
+    return out
