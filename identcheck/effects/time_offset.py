@@ -6,7 +6,8 @@ own, e.g. one camera's, is a delay too). The velocity is a central difference ov
 (:func:`smooth_velocity`): a derivative through the noisy samples would dilute the regression. A lag's
 displacement is partly taken up by the model (a single marker's by its segment's pose and its own position, with
 three markers most of it; a lagging limb segment's almost whole by the joint angles): the residual is regressed
-on the part of the velocity field a refit of the model does not absorb (:func:`identcheck.bundle.score_test.unabsorbed`).
+on the part of the velocity field a refit of the model does not absorb
+(:func:`identcheck.bundle.score_test.unabsorbed`).
 A single marker's lag is also read without the joint model, from its distances to its segment-mates
 (:func:`lag_from_rigidity`): where its segment is posed through the joint by two markers, the rigid fit bends the
 limb to the lag and the residual regression reads it wrongly.
