@@ -78,7 +78,8 @@ class Context:
         white noise, :attr:`smooth_share` for a field constant in time, more for one that changes faster. A detector
         that estimates what a change explains from the plain residual scales its estimate by this share of the change
         it would fit."""
-        plain = float(np.sum(np.where((np.asarray(weights) > 0)[..., None], np.nan_to_num(field), 0.0) ** 2))
+        w = np.asarray(weights, dtype=float)
+        plain = float(np.sum(np.where((w > 0)[..., None], w[..., None] * np.nan_to_num(field) ** 2, 0.0)))
         if self.noise.lag1 <= 0 or plain <= 0:
             return 1.0
         return whitened_rss(np.nan_to_num(field), weights, self.noise.lag1) / plain

@@ -343,11 +343,11 @@ def place(name: str, where: dict) -> tuple:
     return (name,) + tuple(sorted((k, key(v)) for k, v in where.items() if not size(v) and k not in DESCRIPTIVE))
 
 
-DESCRIPTIVE = frozenset({"modelled", "functions", "fields", "degree"})
+DESCRIPTIVE = frozenset({"modelled", "functions", "fields", "degree", "knot_spacing_s"})
 """Keys of an effect's ``where`` that describe its model, not its place: a joint's translation is one place whichever
 of its functions the data ask for, the volume's distortion one place whichever of its fields and of what degree
-(:mod:`identcheck.bundle.score_selection`); each adopted once, and a dropped one not proposed again in another
-form."""
+(:mod:`identcheck.bundle.score_selection`), a hinge's second rotation one place whatever the knots of its angle;
+each adopted once, and a dropped one not proposed again in another form."""
 
 
 def bar_for(effect, bar: float) -> float:

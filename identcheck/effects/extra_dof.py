@@ -31,6 +31,7 @@ from identcheck.bundle.chain import convert_joint
 from identcheck.errors import DegenerateError
 from identcheck.bundle.model import Terms, forward, second_axis, second_rotations, tangents
 from identcheck.bundle.hypothesis import time_basis
+from identcheck.bundle.score_selection import choice_params
 from identcheck.bundle.score_test import modulated_score_moments, quadratic_form
 from identcheck.effects.base import Effect, Proposal
 from identcheck.geometry.rotations import hinge_matrix, left_jacobian_times
@@ -130,14 +131,24 @@ def _at_shift(n, G, K: int, shift: float):
     return T @ n, T @ G @ T.T
 
 
-def _about_axis(n2, G2, K: int, betas: np.ndarray):
+def _about_axis(n2, G2, K: int, betas: np.ndarray, absorbed=None):
     """The statistic ``nᵀ G⁺ n`` of one turn about each axis at angle β across the hinge (from the two axes'
-    moments), for every β of `betas` at once."""
+    moments), for every β of `betas` at once; without the profile `absorbed` (K,) when given."""
     c, s = np.cos(betas), np.sin(betas)
     n = c[:, None] * n2[None, :K] + s[:, None] * n2[None, K:]
     G = (c ** 2)[:, None, None] * G2[:K, :K] + (c * s)[:, None, None] * (G2[:K, K:] + G2[K:, :K]) \
         + (s ** 2)[:, None, None] * G2[K:, K:]
+    if absorbed is not None and np.linalg.norm(absorbed) > 0:
+        u = np.asarray(absorbed, dtype=float) / np.linalg.norm(absorbed)
+        P = np.eye(K) - np.outer(u, u)
+        n, G = n @ P, P @ G @ P
     return np.einsum("bk,bkl,bl->b", n, np.linalg.pinv(G, rcond=1e-10, hermitian=True), n)
+
+
+def fitted_profile(hyp, joint: str) -> np.ndarray:
+    """The coefficients (K,) of the angle of the second rotation fitted for `joint` (the first, if several)."""
+    n0 = len(hyp.terms.markers) + len(hyp.terms.centres)
+    return next(p[:-1, 0] for (j, _, _), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint)
 
 
 def fitted_betas(hyp, joint: str) -> list:
@@ -146,16 +157,20 @@ def fitted_betas(hyp, joint: str) -> list:
     return [b + float(p[-1, 0]) for (j, _, b), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint]
 
 
-def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas) -> tuple:
+def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas, charged: int, absorbed=None) -> tuple:
     """The estimated gains of one turn (best axis) and of two, with angles in `basis`, about the pivot shift where two
     turns explain most, from the carriers' moments (:func:`turn_carriers`, :func:`modulated_score_moments`):
     ``((gain, shift, β), (gain, shift))``, each statistic counted at the share of the fitted turn's sum of squares the
-    criterion keeps (:meth:`~identcheck.bundle.hypothesis.Context.kept_share`). (Where the knee turns is one place for
-    either; the axis is searched there alone, every β at every shift having cost a second a round.)"""
+    criterion keeps (:meth:`~identcheck.bundle.hypothesis.Context.kept_share`), each charged as its refit is (`charged`
+    parameters beyond the angles' functions). (Where the knee turns is one place for either; the axis is searched
+    there alone, every β at every shift having cost a second a round.) `absorbed`: coefficients (K,) of a profile
+    the fit already takes up about every axis searched (a third rotation's, the second's own profile: turning it is
+    the second's angle β), left out of the statistic (rounding leaves its eigenvalue above the cutoff, and its
+    inverse had read a third rotation 100 times above what its refit gained)."""
     n, G = moments
     K = basis.shape[1]
     both = max((quadratic_form(*_at_shift(n, G, K, float(shift))), float(shift)) for shift in shifts)
-    stats = _about_axis(*_at_shift(n, G, K, both[1]), K, betas)
+    stats = _about_axis(*_at_shift(n, G, K, both[1]), K, betas, absorbed)
     k = int(np.argmax(stats))
     single = (float(stats[k]), both[1], float(betas[k]))
 
@@ -168,8 +183,8 @@ def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas) -> tuple:
         return stat * ctx.kept_share(turned, hyp.weights)
 
     stat, shift, beta = single
-    gain = ctx.bic_gain(kept(stat, shift, np.array([[np.cos(beta), np.sin(beta)]])), K + 1)
-    gain2 = ctx.bic_gain(kept(both[0], both[1], np.eye(2)), 2 * K)
+    gain = ctx.bic_gain(kept(stat, shift, np.array([[np.cos(beta), np.sin(beta)]])), K + 1 + charged)
+    gain2 = ctx.bic_gain(kept(both[0], both[1], np.eye(2)), 2 * K + charged - 1)
     return (gain, shift, beta), (gain2, both[1])
 
 
@@ -200,7 +215,12 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     shifts = [0.0] if taken else PIVOT_SHIFTS_MM
     # a joint that already turns about one axis can take only the axis across it
     betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, BETA_STEP_DEG))
-    found = [(_best_turns(ctx, hyp, m, b, carriers, shifts, betas), sp, b) for m, (sp, b) in zip(moments, bases)]
+    # the refit of one turn charges one parameter beyond its angle's functions and β (apply), and one more for the
+    # knots chosen among several (the extended criterion's charge, score_selection.choice_params)
+    choice = choice_params(len(bases), 1, np.log(ctx.n_obs)) if len(bases) > 1 else 0
+    absorbed = fitted_profile(hyp, joint) if taken else None
+    found = [(_best_turns(ctx, hyp, m, b, carriers, shifts, betas, 1 + choice, absorbed), sp, b)
+             for m, (sp, b) in zip(moments, bases)]
     (gain, shift, beta), spacing, basis = max(((one, sp, b) for (one, _), sp, b in found), key=lambda x: x[0][0])
     # the rotation across one already adopted is a third: a place of its own (named alike, the two had been one
     # place, and a ball knee's third rotation was never tried once an oblique second had been adopted)
@@ -209,8 +229,8 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     where.update(axis_description(ch, pivoted, joint, beta))
     if spacing is not None:
         where["knot_spacing_s"] = spacing
-    out = [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta, "shift_mm": shift})
-           ] if gain > 0 else []
+    out = [Proposal(name, where, gain, {"joint": joint, "basis": basis, "beta": beta, "shift_mm": shift,
+                                        "choice_params": choice})] if gain > 0 else []
     if not taken:
         # both axes across the hinge at once, each with a smooth angle: a ball joint whose play is smooth. One axis at
         # a time, the best single axis can score below skin terms that take up the play about both (held-out draw
@@ -222,7 +242,7 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
                                        "needs": "a second and a third rotation",
                                        "knot_spacing_s": spacing2},
                                 gain2, {"joint": joint, "basis": basis2, "betas": [beta, beta + np.pi / 2],
-                                        "shift_mm": shift2}))
+                                        "shift_mm": shift2, "choice_params": choice}))
     return out
 
 
@@ -311,7 +331,7 @@ class ExtraDof(Effect):
             new = hyp.refit(terms=hyp.terms + Terms(rotations=added),
                             state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms,
                                                    proposal.payload.get("shift_mm", 0.0)),
-                            effect=proposal, max_iter=12)
+                            extra_params=proposal.payload.get("choice_params", 0), effect=proposal, max_iter=12)
             ranges = [round(float(np.rad2deg(np.ptp(t[1] @ _own_params(new, t)[:-1, 0]))), 1) for t in added]
             proposal.where["range_deg"] = ranges
             return new
@@ -320,7 +340,8 @@ class ExtraDof(Effect):
             new = hyp.refit(terms=hyp.terms + Terms(rotations=[term]),
                             state=pivot_at_markers(hyp.chain, hyp.fit.state, j, hyp.terms,
                                                    proposal.payload.get("shift_mm", 0.0)),
-                            extra_params=1, effect=proposal, max_iter=12)
+                            extra_params=1 + proposal.payload.get("choice_params", 0), effect=proposal,
+                            max_iter=12)
             p = _own_params(new, term)
             proposal.where["range_deg"] = round(float(np.rad2deg(np.ptp(term[1] @ p[:-1, 0]))), 1)
             proposal.where.update(axis_description(new.chain, new.fit.state, j, term[2] + float(p[-1, 0])))
