@@ -85,6 +85,11 @@ PIVOT_SHIFTS_MM = np.arange(-150.0, 151.0, 25.0)
 (:func:`pivot_at_markers`): a knee's play turns about the knee, and the markers' point can be a cluster's width to
 its side. About the markers' point the score read 6 301 on a knee with slow varus/valgus play under AR(1) noise
 (held-out draw 66, trial 3), 9 502 50 mm medially, where the refit (which places the pivot) explained 9 780."""
+MAX_PLAY_DEG = 90.0
+"""A hinge's fitted turn about a second axis ranging over more than this is not play about that axis (the widest a
+human hinge allows, a flexed knee's axial rotation, is about half of it): the rotation's shape is taking up something
+else, such as a single marker's skin motion on a segment its own markers cannot pose (the real right knee with one
+shank marker: an axial 'play' of 130°)."""
 KNOT_SPACINGS_S = (0.2, 0.5, 1.0, 2.0)
 """The knot spacings (s) of the second rotation's smooth angle the detector compares (the criterion's choice, by
 its estimated gain): play as fast as the joint's own motion needs the finest, at 66 parameters on a 13 s trial; slow
@@ -352,6 +357,15 @@ class ExtraDof(Effect):
         if new is None:
             raise DegenerateError(f"joint {j!r} as {chain.types[j]}: its samples cannot start a fit")
         return new
+
+    def implausible(self, proposal) -> str:
+        """A second (or third) rotation fitted over more than :data:`MAX_PLAY_DEG` is not play; a ball joint has no
+        such bound (it is the joint's own motion)."""
+        ranges = np.atleast_1d(proposal.where.get("range_deg", []))
+        if not len(ranges) or float(np.max(ranges)) <= MAX_PLAY_DEG:
+            return ""
+        return (f"its second rotation ranges over {float(np.max(ranges)):.0f} deg (> {MAX_PLAY_DEG:g} deg): not play "
+                f"about a second axis")
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]

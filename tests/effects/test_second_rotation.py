@@ -249,3 +249,15 @@ def test_the_detector_reads_the_second_axis_in_the_world(seed):
         found = [p for p in ExtraDof().propose(ctx, h) if "beta" in p.payload][0].payload["beta"]
         errors.append(abs((np.rad2deg(found - beta) + 90.0) % 180.0 - 90.0))
     assert max(errors) < 50.0, errors
+
+
+@given(ranges=st.lists(st.floats(0.0, 360.0), min_size=1, max_size=2))
+def test_a_second_rotation_wider_than_play_is_not_what_it_claims(ranges):
+    """A fitted second (or second and third) rotation is implausible exactly when one of its ranges is beyond
+    MAX_PLAY_DEG; a ball joint (no range) never is."""
+    from identcheck.effects.base import Proposal
+    from identcheck.effects.extra_dof import MAX_PLAY_DEG
+    where = {"joint": "knee", "needs": "a second rotation", "range_deg": ranges if len(ranges) > 1 else ranges[0]}
+    why = ExtraDof().implausible(Proposal("extra_dof", where, 1.0, {}))
+    assert bool(why) == (max(ranges) > MAX_PLAY_DEG)
+    assert not ExtraDof().implausible(Proposal("extra_dof", {"joint": "knee", "needs": "spherical"}, 1.0, {}))
