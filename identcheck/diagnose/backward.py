@@ -73,12 +73,21 @@ def redundant(ctx, trail: list, adopted: list, judge, polish_iter: int) -> Redun
     iterations after the augmentations' own fits, not to convergence: further iterations only lower its residual, so
     an effect found unnecessary there is unnecessary at convergence too, and one kept is kept with the benefit of the
     doubt. An effect whose removal the rebuild cannot fit (a singular system, an effect that no longer applies) is
-    kept."""
+    kept, and so is one without which a later effect, applied again, is not what it claims
+    (:meth:`identcheck.effects.base.Effect.implausible`)."""
     found = None
     for k in range(len(adopted) - 1):
         try:
             tail, hyps = rebuild(ctx, trail[k], adopted[k + 1:], polish_iter)
         except (np.linalg.LinAlgError, ValueError):
+            continue
+        why = next((a.effect.implausible(a.proposal) for a in tail if a.effect.implausible(a.proposal)), "")
+        if why:
+            # without it a later effect cannot be what it claims (a knee's second rotation taking up the skin motion
+            # the dropped effect had modelled, beyond play): the effect is kept, as the forward search would not
+            # adopt what remained
+            log.debug("backward check: %s %s kept: without it %s", adopted[k].effect.name, adopted[k].proposal.where,
+                      why)
             continue
         gain, needed = judge(hyps[-1], adopted[k])
         log.debug("backward check: %s %s gains %.1f given the others (%s)", adopted[k].effect.name,

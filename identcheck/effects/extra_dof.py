@@ -143,11 +143,17 @@ def _about_axis(n2, G2, K: int, betas: np.ndarray, absorbed=None):
     n = c[:, None] * n2[None, :K] + s[:, None] * n2[None, K:]
     G = (c ** 2)[:, None, None] * G2[:K, :K] + (c * s)[:, None, None] * (G2[:K, K:] + G2[K:, :K]) \
         + (s ** 2)[:, None, None] * G2[K:, K:]
-    if absorbed is not None and np.linalg.norm(absorbed) > 0:
-        u = np.asarray(absorbed, dtype=float) / np.linalg.norm(absorbed)
-        P = np.eye(K) - np.outer(u, u)
-        n, G = n @ P, P @ G @ P
+    P = _without(absorbed, K)
+    n, G = n @ P, P @ G @ P
     return np.einsum("bk,bkl,bl->b", n, np.linalg.pinv(G, rcond=1e-10, hermitian=True), n)
+
+
+def _without(absorbed, K: int) -> np.ndarray:
+    """The projection (K, K) of the angle's coefficients off the profile `absorbed` (the identity without one)."""
+    if absorbed is None or not np.linalg.norm(absorbed) > 0:
+        return np.eye(K)
+    u = np.asarray(absorbed, dtype=float) / np.linalg.norm(absorbed)
+    return np.eye(K) - np.outer(u, u)
 
 
 def fitted_profile(hyp, joint: str) -> np.ndarray:
@@ -181,7 +187,8 @@ def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas, charged: int,
 
     def kept(stat, shift, directions):
         n2, G2 = _at_shift(n, G, K, shift)
-        T = np.kron(directions, np.eye(K))                          # (d·K, 2K): the turns' own fields
+        # (d·K, 2K): the turns' own fields (one turn's without the absorbed profile)
+        T = np.kron(directions, _without(absorbed, K) if len(directions) == 1 else np.eye(K))
         coef = np.linalg.pinv(T @ G2 @ T.T, rcond=1e-10, hermitian=True) @ (T @ n2)
         angle = basis @ coef.reshape(-1, K).T @ directions          # (F, 2): the turn fitted about each axis
         turned = np.einsum("fe,efmi->fmi", angle, np.stack(carriers[:2]) + shift * np.stack(carriers[2:]))
@@ -221,10 +228,11 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     # a joint that already turns about one axis can take only the axis across it
     betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, BETA_STEP_DEG))
     # the refit of one turn charges one parameter beyond its angle's functions and β (apply), and one more for the
-    # knots chosen among several (the extended criterion's charge, score_selection.choice_params)
+    # knots chosen among several (the extended criterion's charge, score_selection.choice_params); a third rotation's
+    # refit two fewer: with it the two axes' angles change no prediction (Terms.redundant)
     choice = choice_params(len(bases), 1, np.log(ctx.n_obs)) if len(bases) > 1 else 0
     absorbed = fitted_profile(hyp, joint) if taken else None
-    found = [(_best_turns(ctx, hyp, m, b, carriers, shifts, betas, 1 + choice, absorbed), sp, b)
+    found = [(_best_turns(ctx, hyp, m, b, carriers, shifts, betas, -1 if taken else 1 + choice, absorbed), sp, b)
              for m, (sp, b) in zip(moments, bases)]
     (gain, shift, beta), spacing, basis = max(((one, sp, b) for (one, _), sp, b in found), key=lambda x: x[0][0])
     # the rotation across one already adopted is a third: a place of its own (named alike, the two had been one

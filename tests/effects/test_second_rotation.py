@@ -175,8 +175,12 @@ def test_a_third_rotation_s_strength_is_what_its_refit_gains(seed, beta, peak):
     first = next(p for p in eff.propose(ctx, h) if "beta" in p.payload)
     h1 = eff.apply(ctx, h, first).polish()
     (third,) = [p for p in eff.propose(ctx, h1) if "basis" in p.payload]
-    gained = score(ctx, eff.apply(ctx, h1, third), h1)
-    charge = (third.payload["basis"].shape[1] + 2) * np.log(ctx.n_obs)
+    h2 = eff.apply(ctx, h1, third)
+    gained = score(ctx, h2, h1)
+    # what the refit charges: the third's functions (its β and the one more apply counts, less the two angles the
+    # pair of axes leaves free)
+    charge = (h2.n_params() - h1.n_params()) * np.log(ctx.n_obs)
+    assert h2.n_params() - h1.n_params() == third.payload["basis"].shape[1]
     assert abs(third.strength - gained) <= 0.25 * (gained + charge)
 
 
