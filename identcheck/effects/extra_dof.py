@@ -83,8 +83,9 @@ def pivot_at_markers(chain, state, joint: str, terms: Terms | None = None, shift
 PIVOT_SHIFTS_MM = np.arange(-150.0, 151.0, 25.0)
 """Where along the hinge the detector lets a second rotation turn, from the hinge's point nearest the markers
 (:func:`pivot_at_markers`): a knee's play turns about the knee, and the markers' point can be a cluster's width to
-its side. About the markers' point the score read 6 301 on a knee with slow varus/valgus play under AR(1) noise
-(held-out draw 66, trial 3), 9 502 50 mm medially, where the refit (which places the pivot) explained 9 780."""
+its side. On a knee with slow varus/valgus play under AR(1) noise (held-out draw 66, trial 3) the single axis's
+estimated gain read −69 about the markers' point and 260 50 mm medially, where the refit (which places the pivot
+itself) gained 265."""
 MAX_PLAY_DEG = 90.0
 """A hinge's fitted turn about a second axis ranging over more than this is not play about that axis (the widest a
 human hinge allows, a flexed knee's axial rotation, is about half of it): the rotation's shape is taking up something
