@@ -157,16 +157,21 @@ def _without(absorbed, K: int) -> np.ndarray:
     return np.eye(K) - np.outer(u, u)
 
 
+def _fitted_rotations(hyp, joint: str) -> list:
+    """(β as proposed, fitted parameters: the angle's coefficients then β's change) of each second rotation fitted
+    for `joint`, in order."""
+    n0 = len(hyp.terms.markers) + len(hyp.terms.centres)
+    return [(b, p) for (j, _, b), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint]
+
+
 def fitted_profile(hyp, joint: str) -> np.ndarray:
     """The coefficients (K,) of the angle of the second rotation fitted for `joint` (the first, if several)."""
-    n0 = len(hyp.terms.markers) + len(hyp.terms.centres)
-    return next(p[:-1, 0] for (j, _, _), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint)
+    return _fitted_rotations(hyp, joint)[0][1][:-1, 0]
 
 
 def fitted_betas(hyp, joint: str) -> list:
     """The angles β of the second rotations already fitted for `joint`."""
-    n0 = len(hyp.terms.markers) + len(hyp.terms.centres)
-    return [b + float(p[-1, 0]) for (j, _, b), p in zip(hyp.terms.rotations, hyp.fit.state.term_params[n0:]) if j == joint]
+    return [b + float(p[-1, 0]) for b, p in _fitted_rotations(hyp, joint)]
 
 
 def _best_turns(ctx, hyp, moments, basis, carriers, shifts, betas, charged: int, absorbed=None) -> tuple:
