@@ -327,6 +327,53 @@ def exchanges(data: np.ndarray, chain) -> list:
     return out
 
 
+def _end_turns(x: np.ndarray, local: np.ndarray, a: int, b: int) -> list:
+    """The segment's turn across each end of the span a..b (deg), its points `x` (F, m, 3) posed with the body-fixed
+    `local` (m, 3): between the posed frame nearest the end inside the span and the one nearest it outside, each
+    within :data:`LOOKBACK` frames (an end with no such pair, or the trial's own end, gives nothing)."""
+    F, out = len(x), []
+    for inside, outside in ((range(a, min(b, a + LOOKBACK) + 1), range(a - 1, max(a - 1 - LOOKBACK, -1), -1)),
+                            (range(b, max(a, b - LOOKBACK) - 1, -1), range(b + 1, min(b + 1 + LOOKBACK, F)))):
+        rows = list(inside) + list(outside)
+        if not len(outside):
+            continue
+        poses = segment_poses(x[rows], local)
+        p = next((k for k in range(len(inside)) if poses.valid[k]), None)
+        q = next((k for k in range(len(inside), len(rows)) if poses.valid[k]), None)
+        if p is not None and q is not None:
+            out.append(float(_angle_deg(poses.R[p], poses.R[q])))
+    return out
+
+
+def exchange_flips(data: np.ndarray, chain, cols: tuple, span: tuple, local: np.ndarray | None = None) -> bool:
+    """Whether exchanging the labels of markers `cols` over rows `span` turns a segment they sit on by more than
+    :data:`FLIP_DEG` across an end of the span, and more than as labelled: the exchanged markers are then posed only by
+    turning the segment over (their shape is its mirror image, or nearly), and the exchange is no swap. `local` (M, 3): the markers' body-fixed positions
+    (each segment's :func:`~identcheck.geometry.poses.reference_shape` by default). Segments with fewer than three
+    markers, or without a pose near an end, say nothing.
+
+    Why: distances cannot tell a segment from its mirror image. Three thigh markers on the real walking2 trial whose
+    distances were off by 7 mm RMS for 4 frames fitted their distances better with two of them exchanged; the exchange
+    turned the thigh by 179 deg at both ends, and each such candidate, refitted in every round of ``diagnose``, scored
+    −7 million. A true exchange undoes the turn its swap made (measured on held-out swaps: at most 40 deg after,
+    from up to 180 as labelled)."""
+    (i, j), (a, b) = cols, span
+    x = data.copy()
+    x[a:b + 1, [i, j]] = x[a:b + 1, [j, i]]
+    for seg in {chain.marker_seg[i], chain.marker_seg[j]}:
+        idx = list(chain.seg_markers[seg])
+        if len(idx) < 3:
+            continue
+        try:
+            shape = reference_shape(data[:, idx]) if local is None else local[idx]
+        except ValueError:
+            continue
+        labelled, exchanged = _end_turns(data[:, idx], shape, a, b), _end_turns(x[:, idx], shape, a, b)
+        if exchanged and max(exchanged) > FLIP_DEG and max(exchanged) > max(labelled, default=0.0):
+            return True
+    return False
+
+
 def fits_exchanged(found: dict) -> bool:
     """Whether a swap :func:`detect` found fits exchanged within its margin over most of its span (median frame):
     a real swap does; an artefact on one marker (a bad gap edge) or an echo of another swap can merely fit better."""
