@@ -348,9 +348,9 @@ def _end_turns(x: np.ndarray, local: np.ndarray, a: int, b: int) -> list:
 def exchange_flips(data: np.ndarray, chain, cols: tuple, span: tuple, local: np.ndarray | None = None) -> bool:
     """Whether exchanging the labels of markers `cols` over rows `span` turns a segment they sit on by more than
     :data:`FLIP_DEG` across an end of the span, and more than as labelled: the exchanged markers are then posed only by
-    turning the segment over (their shape is its mirror image, or nearly), and the exchange is no swap. `local` (M, 3): the markers' body-fixed positions
-    (each segment's :func:`~identcheck.geometry.poses.reference_shape` by default). Segments with fewer than three
-    markers, or without a pose near an end, say nothing.
+    turning the segment over (their shape is its mirror image, or nearly), and the exchange is no swap. `local`
+    (M, 3): the markers' body-fixed positions (each segment's :func:`~identcheck.geometry.poses.reference_shape` by
+    default). Segments with fewer than three markers, or without a pose near an end, say nothing.
 
     Why: distances cannot tell a segment from its mirror image. Three thigh markers on the real walking2 trial whose
     distances were off by 7 mm RMS for 4 frames fitted their distances better with two of them exchanged; the exchange

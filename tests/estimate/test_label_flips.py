@@ -1,8 +1,8 @@
 """Label swaps the distances cannot see: two markers placed alike relative to the rest of their segment (an
 isosceles triangle's base, a pair mirror-symmetric about the other markers' plane) exchanged over a span. The
 segment's pose turns by a half turn at both ends of the span; :func:`flips` finds the pair and the span from that,
-and finds nothing in smooth motion. Exchanging such a pair of three markers where it is labelled right makes that half turn,
-and is no swap (:func:`exchange_flips`); exchanging back a pair that was swapped does not."""
+and finds nothing in smooth motion. Exchanging such a pair of three markers where it is labelled right makes that half
+turn, and is no swap (:func:`exchange_flips`); exchanging back a pair that was swapped does not."""
 import tomllib
 
 import numpy as np
