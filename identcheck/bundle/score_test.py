@@ -57,6 +57,29 @@ class RefitProjection:
         return float(np.sum(self.w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ self.S_plus @ rb)
 
 
+_LAST: list = [None]
+"""The last projection built (:func:`projection`), with what it was built from."""
+
+
+def projection(fit: Fit, weights: np.ndarray) -> RefitProjection:
+    """The :class:`RefitProjection` at `fit` with sample weights `weights`, built once for a run of calls at the same
+    fit: the last one built is kept with the objects it was built from (the fit, its state, the state's term
+    parameters, the terms, the weights) and two sums (the fit's cost, the weights' total), and given again while
+    they are the same objects and the sums have not changed.
+
+    Why: the detectors of one round of ``diagnose`` all project at the round's fit (a delay's, a distortion's, a
+    moving centre's and each hinge's second rotation), and each had built its own: four whole normal-equation
+    builds and Schur complements a round on a lower limb, 0.06 s each at 1500 frames, where one gives the same."""
+    key = (fit, fit.state, fit.state.term_params, fit.terms, weights)
+    sizes = (fit.rss, float(np.sum(weights)))
+    last = _LAST[0]                            # read once: another thread may replace it meanwhile
+    if last is not None and all(a is b for a, b in zip(last[0], key)) and last[1] == sizes:
+        return last[2]
+    proj = RefitProjection(fit, weights)
+    _LAST[0] = (key, sizes, proj)
+    return proj
+
+
 def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
     so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
@@ -69,7 +92,7 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
     a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
-    proj = RefitProjection(fit, weights)
+    proj = projection(fit, weights)
     out = []
     for v in fields:
         p = proj.pieces(v)
@@ -81,7 +104,7 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
     """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
-    proj = RefitProjection(fit, weights)
+    proj = projection(fit, weights)
     return _gram([proj.pieces(v) for v in fields], proj.inner)
 
 
@@ -115,7 +138,7 @@ def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_set
     detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    proj = RefitProjection(fit, weights)
+    proj = projection(fit, weights)
     out = []
     for fields in field_sets:
         n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
@@ -130,7 +153,7 @@ def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, 
     distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    proj = RefitProjection(fit, weights)
+    proj = projection(fit, weights)
     n, Z, reduced = [], [], []
     for v in fields:
         v0, z, red = proj.pieces(v)
@@ -164,7 +187,7 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
     their moments are sums over the frames of each carrier's per-frame pieces weighted by the functions:
     ``G[ek, e'l] = Σ_f b_k b_l (⟨u_e, u_e'⟩_f − z_e·z_e'|_f) − ρ_ekᵀ S⁺ ρ_e'l`` with ``ρ_ek = Σ_f b_k(f) ρ_e(f)``, the
     constants' per-frame parts."""
-    proj = RefitProjection(fit, weights)
+    proj = projection(fit, weights)
     w = proj.w[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     parts = [proj.pieces(u, per_frame=True) for u in carriers]
