@@ -11,6 +11,8 @@ from these moments.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from identcheck.bundle.jacobian import jacobian_blocks
@@ -29,7 +31,7 @@ class RefitProjection:
 
     def __init__(self, fit: Fit, weights: np.ndarray):
         s = fit.state
-        self.w = w = np.asarray(weights, dtype=float)
+        self.w = w = np.array(weights, dtype=float)           # a copy: the caller's array may change later
         R, _t, centre, pred = forward(fit.chain, fit.terms, s)
         self.lay, self.blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
         A, self.B, C, g, h = normal_equations(self.lay, self.blocks, np.zeros_like(pred), w)   # for every field
@@ -61,22 +63,36 @@ _LAST: list = [None]
 """The last projection built (:func:`projection`), with what it was built from."""
 
 
+def _drop(entry_id: int) -> None:
+    """Forget the last projection if it is the entry of id `entry_id` (its fit is gone: nothing can ask for it
+    again). The finaliser holds the id, not the entry, so an entry replaced meanwhile is not kept alive by it; an id
+    used again by a later entry costs at worst one build."""
+    last = _LAST[0]
+    if last is not None and id(last) == entry_id:
+        _LAST[0] = None
+
+
 def projection(fit: Fit, weights: np.ndarray) -> RefitProjection:
     """The :class:`RefitProjection` at `fit` with sample weights `weights`, built once for a run of calls at the same
-    fit: the last one built is kept with the objects it was built from (the fit, its state, the state's term
-    parameters, the terms, the weights) and two sums (the fit's cost, the weights' total), and given again while
-    they are the same objects and the sums have not changed.
+    fit: the last one built is given again while the fit is the same object with the same state, state's term
+    parameters and terms (objects) and cost, and the weights are equal to a copy kept of them. A fit is not changed in
+    place once fitted (:func:`identcheck.bundle.chain.fit_chain` returns new states); the entry is dropped when its
+    fit is.
 
     Why: the detectors of one round of ``diagnose`` all project at the round's fit (a delay's, a distortion's, a
     moving centre's and each hinge's second rotation), and each had built its own: four whole normal-equation
     builds and Schur complements a round on a lower limb, 0.06 s each at 1500 frames, where one gives the same."""
-    key = (fit, fit.state, fit.state.term_params, fit.terms, weights)
-    sizes = (fit.rss, float(np.sum(weights)))
+    objects = (fit.state, fit.state.term_params, fit.terms)
     last = _LAST[0]                            # read once: another thread may replace it meanwhile
-    if last is not None and all(a is b for a, b in zip(last[0], key)) and last[1] == sizes:
-        return last[2]
+    if last is not None:
+        ref, kept, rss, w, proj = last
+        if (ref() is fit and all(a is b for a, b in zip(kept, objects)) and rss == fit.rss
+                and w.shape == np.shape(weights) and np.array_equal(w, weights)):
+            return proj
     proj = RefitProjection(fit, weights)
-    _LAST[0] = (key, sizes, proj)
+    entry = (weakref.ref(fit), objects, fit.rss, proj.w, proj)
+    weakref.finalize(fit, _drop, id(entry))
+    _LAST[0] = entry
     return proj
 
 

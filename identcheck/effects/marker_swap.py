@@ -8,10 +8,11 @@ mirror-symmetric pair) exchange without changing any distance: the segment then 
 ends of the span, which its pose shows (:func:`identcheck.estimate.labels.flips`). Two markers alone on a segment
 have one distance and no pose of their own, and a swap that begins or ends in a gap shows its distances on one side
 only: their positions continuing from each other's at the span's ends show it
-(:func:`identcheck.estimate.labels.exchanges`). An exchange that turns a segment into its mirror image (a half turn
-across the span's ends that the labels as given do not make) is not proposed
-(:func:`identcheck.estimate.labels.exchange_flips`). Augmentation: the two
-columns are exchanged back over the span (the pair and the two ends count as three parameters).
+(:func:`identcheck.estimate.labels.exchanges`). An exchange that turns its segment over across the span's ends
+(by more than a quarter turn, and more than the labels as given do) is not proposed: it poses the segment as its own
+mirror image, which its distances cannot tell (:func:`identcheck.estimate.labels.exchange_turns_over`).
+Augmentation: the two columns are exchanged back over the span (the pair and the two ends count as three
+parameters).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, draw_frame
-from identcheck.estimate.labels import detect, exchange_flips, exchanges, fits_exchanged, flips
+from identcheck.estimate.labels import detect, exchange_turns_over, exchanges, fits_exchanged, flips
 
 
 def _unexplained(ctx, hyp, span) -> float:
@@ -69,8 +70,8 @@ class MarkerSwap(Effect):
             if (d["cols"], d["span"]) not in seen:
                 seen.add((d["cols"], d["span"]))
                 found.append({**d, "gain": _unexplained(ctx, hyp, d["span"]), "shown": True})
-        # an exchange that makes a segment the mirror image of itself is no swap (distances cannot see it)
-        found = [d for d in found if not exchange_flips(hyp.data, ch, d["cols"], d["span"], hyp.fit.state.local)]
+        # an exchange that turns its segment over is no swap (its distances cannot tell it from the mirror image)
+        found = [d for d in found if not exchange_turns_over(hyp.data, ch, d["cols"], d["span"], hyp.fit.state.local)]
         out = [Proposal(self.name, {"markers": [ch.labels[d["cols"][0]], ch.labels[d["cols"][1]]],
                                     "frames": list(d["span"])},
                         d["gain"], {"cols": d["cols"], "span": d["span"], "keep": d["keep"], "swap": d["swap"],

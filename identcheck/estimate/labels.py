@@ -327,49 +327,62 @@ def exchanges(data: np.ndarray, chain) -> list:
     return out
 
 
-def _end_turns(x: np.ndarray, local: np.ndarray, a: int, b: int) -> list:
-    """The segment's turn across each end of the span a..b (deg), its points `x` (F, m, 3) posed with the body-fixed
-    `local` (m, 3): between the posed frame nearest the end inside the span and the one nearest it outside, each
-    within :data:`LOOKBACK` frames (an end with no such pair, or the trial's own end, gives nothing)."""
-    F, out = len(x), []
-    for inside, outside in ((range(a, min(b, a + LOOKBACK) + 1), range(a - 1, max(a - 1 - LOOKBACK, -1), -1)),
-                            (range(b, max(a, b - LOOKBACK) - 1, -1), range(b + 1, min(b + 1 + LOOKBACK, F)))):
+END_GAP = 2
+"""At most this many frames apart are the two posed frames a turn across a span's end is read between
+(:func:`exchange_turns_over`): a segment turning 6 deg a frame (a shank in swing at 100 Hz) turns 90 deg over 15
+frames, and a turn read across a gap that long is motion, not a flip."""
+
+
+def _end_turns(labelled: np.ndarray, exchanged: np.ndarray, local: np.ndarray, a: int, b: int) -> list:
+    """For each end of the span a..b both labellings can be read across: (the segment's turn as labelled, its turn
+    exchanged), deg, its points (F, m, 3) posed with the body-fixed `local` (m, 3) and both turns read between the
+    same two frames: the one nearest the end inside the span and the one nearest it outside that both labellings
+    pose, at most :data:`END_GAP` frames apart. An end at the trial's edge, or without such frames, gives nothing."""
+    F, out = len(labelled), []
+    for inside, outside in ((range(a, min(b, a + END_GAP - 1) + 1), range(a - 1, max(a - 1 - END_GAP, -1), -1)),
+                            (range(b, max(a, b - END_GAP + 1) - 1, -1), range(b + 1, min(b + 1 + END_GAP, F)))):
         rows = list(inside) + list(outside)
         if not len(outside):
             continue
-        poses = segment_poses(x[rows], local)
-        p = next((k for k in range(len(inside)) if poses.valid[k]), None)
-        q = next((k for k in range(len(inside), len(rows)) if poses.valid[k]), None)
-        if p is not None and q is not None:
-            out.append(float(_angle_deg(poses.R[p], poses.R[q])))
+        poses = [segment_poses(x[rows], local) for x in (labelled, exchanged)]
+        both = poses[0].valid & poses[1].valid
+        p = next((k for k in range(len(inside)) if both[k]), None)
+        q = next((k for k in range(len(inside), len(rows)) if both[k]), None)
+        if p is not None and q is not None and abs(rows[q] - rows[p]) <= END_GAP:
+            out.append(tuple(float(_angle_deg(ps.R[p], ps.R[q])) for ps in poses))
     return out
 
 
-def exchange_flips(data: np.ndarray, chain, cols: tuple, span: tuple, local: np.ndarray | None = None) -> bool:
-    """Whether exchanging the labels of markers `cols` over rows `span` turns a segment they sit on by more than
-    :data:`FLIP_DEG` across an end of the span, and more than as labelled: the exchanged markers are then posed only by
-    turning the segment over (their shape is its mirror image, or nearly), and the exchange is no swap. `local`
-    (M, 3): the markers' body-fixed positions (each segment's :func:`~identcheck.geometry.poses.reference_shape` by
-    default). Segments with fewer than three markers, or without a pose near an end, say nothing.
+def exchange_turns_over(data: np.ndarray, chain, cols: tuple, span: tuple, local: np.ndarray | None = None) -> bool:
+    """Whether exchanging the labels of markers `cols` over rows `span` turns a segment they sit on over: at every end
+    of the span that can be read (:func:`_end_turns`, at least one), by more than :data:`FLIP_DEG` and by more than as
+    labelled. The exchanged markers are then posed only by turning the segment over (their shape is its mirror image,
+    or nearly), and the exchange is no swap. `local` (M, 3): the markers' body-fixed positions (each segment's
+    :func:`~identcheck.geometry.poses.reference_shape` by default). Segments with fewer than three markers, or that
+    cannot be posed near an end, say nothing.
 
-    Why: distances cannot tell a segment from its mirror image. Three thigh markers on the real walking2 trial whose
-    distances were off by 7 mm RMS for 4 frames fitted their distances better with two of them exchanged; the exchange
-    turned the thigh by 179 deg at both ends, and each such candidate, refitted in every round of ``diagnose``, scored
-    −7 million. A true exchange undoes the turn its swap made (measured on held-out swaps: at most 40 deg after,
-    from up to 180 as labelled)."""
+    Why: the distances within a segment cannot tell it from its mirror image. Three thigh markers on the real walking2
+    trial whose distances were off by 7 mm RMS for 4 frames fitted their distances better with two of them
+    exchanged; the exchange turned the thigh by 179 deg at both ends, and each such candidate, refitted in every round
+    of ``diagnose``, scored −7 million. A true exchange undoes the turns its swap made (on the held-out swaps of
+    draws 67-69: at most 40 deg after, from up to 180 as labelled), and a true swap proposed with its span a frame
+    off turns its segment over at one end only."""
     (i, j), (a, b) = cols, span
-    x = data.copy()
-    x[a:b + 1, [i, j]] = x[a:b + 1, [j, i]]
     for seg in {chain.marker_seg[i], chain.marker_seg[j]}:
         idx = list(chain.seg_markers[seg])
         if len(idx) < 3:
             continue
+        labelled = data[:, idx]
+        exchanged = data[:, idx].copy()
+        for src, dst in ((i, j), (j, i)):               # each exchanged marker of the segment takes the other's samples
+            if src in idx:
+                exchanged[a:b + 1, idx.index(src)] = data[a:b + 1, dst]
         try:
-            shape = reference_shape(data[:, idx]) if local is None else local[idx]
-        except ValueError:
+            shape = reference_shape(labelled) if local is None else local[idx]
+            ends = _end_turns(labelled, exchanged, shape, a, b)
+        except ValueError:                              # no frame shows them all, or a shape no pose can be fitted to
             continue
-        labelled, exchanged = _end_turns(data[:, idx], shape, a, b), _end_turns(x[:, idx], shape, a, b)
-        if exchanged and max(exchanged) > FLIP_DEG and max(exchanged) > max(labelled, default=0.0):
+        if ends and all(x > FLIP_DEG and x > lab for lab, x in ends):
             return True
     return False
 

@@ -40,6 +40,10 @@ def test_reused_at_the_same_fit_and_built_again_for_another(seed, hidden):
     again = projection(fit, w)
     fit.state.term_params = list(fit.state.term_params)                # the state's terms replaced in place
     assert projection(fit, w) is not again
+    again = projection(fit, w)
+    w[[0, 1]] = w[[1, 0]]                                             # the weights changed in place, sum kept
+    if not np.array_equal(w[0], w[1]):
+        assert projection(fit, w) is not again
 
 
 @settings(max_examples=3, deadline=None)
@@ -48,9 +52,24 @@ def test_a_reused_projection_gives_the_moments_of_a_fresh_one(seed, hidden):
     data, w, fit = _fit(seed, hidden)
     fields = [np.random.default_rng(seed + k).normal(size=data.shape) for k in range(3)]
     residual = fit.pred - data
-    projection(fit, w)                                                 # built, then reused below
+    first = projection(fit, w)                                         # built, then reused below
     (n, G), = score_moments(fit, w, residual, [fields])
+    assert projection(fit, w) is first
     fresh = RefitProjection(fit, w)
     parts = [fresh.pieces(v) for v in fields]
     G2 = np.array([[fresh.inner(parts[min(i, j)], parts[max(i, j)]) for j in range(3)] for i in range(3)])
     np.testing.assert_allclose(G, G2, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(G2))))
+
+
+def test_the_projection_is_let_go_with_its_fit():
+    """Nothing keeps a finished fit's projection: the entry goes when the fit does."""
+    import gc
+
+    from identcheck.bundle import score_test
+
+    data, w, fit = _fit(7, 0.1)
+    projection(fit, w)
+    assert score_test._LAST[0] is not None
+    del fit
+    gc.collect()
+    assert score_test._LAST[0] is None

@@ -2,14 +2,14 @@
 isosceles triangle's base, a pair mirror-symmetric about the other markers' plane) exchanged over a span. The
 segment's pose turns by a half turn at both ends of the span; :func:`flips` finds the pair and the span from that,
 and finds nothing in smooth motion. Exchanging such a pair of three markers where it is labelled right makes that half
-turn, and is no swap (:func:`exchange_flips`); exchanging back a pair that was swapped does not."""
+turn, and is no swap (:func:`exchange_turns_over`); exchanging back a pair that was swapped does not."""
 import tomllib
 
 import numpy as np
 from hypothesis import given, settings, strategies as st
 from scipy.spatial.transform import Rotation
 
-from identcheck.estimate.labels import detect, exchange_flips, flips, screen
+from identcheck.estimate.labels import detect, exchange_turns_over, flips, screen
 from identcheck.io.model import Model
 from identcheck.skeleton import Skeleton
 from identcheck.trial import Trial
@@ -96,8 +96,8 @@ def _span(rng, n):
 
 
 @settings(max_examples=20, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.floats(0.0, 1.0))
-def test_exchanging_a_mirror_pair_labelled_right_turns_the_segment_over(seed, noise):
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 1.0), st.booleans())
+def test_exchanging_a_mirror_pair_labelled_right_turns_the_segment_over(seed, noise, fitted_shape):
     """Three markers, two of them the base of an isosceles triangle: exchanged, they are the triangle turned by a
     half turn about its axis of symmetry. (With a fourth marker off that axis no rotation reaches the exchange, and
     the best pose need not turn far.)"""
@@ -106,23 +106,24 @@ def test_exchanging_a_mirror_pair_labelled_right_turns_the_segment_over(seed, no
     model, chain = _chain(False)
     data = _trial(rng, n, noise, False).select(chain.labels).as_array()
     cols = tuple(chain.labels.index(m) for m in ("Q1", "Q2"))
-    assert exchange_flips(data, chain, cols, _span(rng, n))
+    assert exchange_turns_over(data, chain, cols, _span(rng, n), data[0] if fitted_shape else None)
 
 
-@settings(max_examples=20, deadline=None)
-@given(st.integers(0, 2**32 - 1), st.booleans(), st.floats(0.0, 1.0), st.sampled_from(["Q1", "S"]))
-def test_exchanging_back_a_swapped_pair_does_not(seed, four, noise, other):
-    """Any pair of the segment swapped over a span (the mirror pair, or P with another marker): exchanging it back
-    restores the segment's own shape, and its pose turns across the span's ends only as the motion does."""
-    if other == "S" and not four:
-        other = "Q1"
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.booleans(), st.floats(0.0, 1.0), st.sampled_from(["mirror", "other", "across"]),
+       st.booleans(), st.booleans())
+def test_exchanging_back_a_swapped_pair_does_not(seed, four, noise, pair, fitted_shape, frame_off):
+    """Any pair swapped over a span (the mirror pair, P with another marker of its segment, P with a marker of the
+    other segment), exchanged back over that span or over one a frame longer (its segment then turns over at one end
+    only), with the segments' shapes given or read from the data: exchanging it back restores the segment's own
+    shape, and its pose turns across the span's ends only as the motion does, or at one end."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(200, 500))
     model, chain = _chain(four)
-    pair = ("Q1", "Q2") if other == "Q1" else ("P", "S")
-    span = _span(rng, n)
+    names = {"mirror": ("Q1", "Q2"), "other": ("P", "S" if four else "Q1"), "across": ("P", "O1")}[pair]
+    a, b = _span(rng, n)
     data = _trial(rng, n, noise, four).select(chain.labels).as_array()
-    cols = tuple(chain.labels.index(m) for m in pair)
-    a, b = span
+    cols = tuple(chain.labels.index(m) for m in names)
+    local = data[0] if fitted_shape else None                   # row 0 is before the span: labelled right
     data[a:b + 1, list(cols)] = data[a:b + 1, list(cols[::-1])]
-    assert not exchange_flips(data, chain, cols, span)
+    assert not exchange_turns_over(data, chain, cols, (a, b + int(frame_off)), local)
