@@ -63,21 +63,21 @@ _LAST: list = [None]
 """The last projection built (:func:`projection`), with what it was built from."""
 
 
-def _drop(entry_id: int) -> None:
-    """Forget the last projection if it is the entry of id `entry_id` (its fit is gone: nothing can ask for it
-    again). The finaliser holds the id, not the entry, so an entry replaced meanwhile is not kept alive by it; an id
-    used again by a later entry costs at worst one build."""
+def _drop() -> None:
+    """Forget the last projection if its fit is gone (its weak reference is cleared before finalisers run): nothing
+    can ask for it again. The finaliser holds nothing of the entry, so an entry replaced meanwhile is not kept alive
+    by it, and a fit collected later than another's entry was built does not drop that entry."""
     last = _LAST[0]
-    if last is not None and id(last) == entry_id:
+    if last is not None and last[0]() is None:
         _LAST[0] = None
 
 
 def projection(fit: Fit, weights: np.ndarray) -> RefitProjection:
     """The :class:`RefitProjection` at `fit` with sample weights `weights`, built once for a run of calls at the same
     fit: the last one built is given again while the fit is the same object with the same state, state's term
-    parameters and terms (objects) and cost, and the weights are equal to a copy kept of them. A fit is not changed in
-    place once fitted (:func:`identcheck.bundle.chain.fit_chain` returns new states); the entry is dropped when its
-    fit is.
+    parameters and terms (objects) and cost, and the weights are equal to a copy kept of them. A fit's arrays are not
+    changed in place once fitted (:func:`identcheck.bundle.chain.fit_chain` returns new states; a state's term
+    parameters replaced by another list is seen); the entry is dropped when its fit is.
 
     Why: the detectors of one round of ``diagnose`` all project at the round's fit (a delay's, a distortion's, a
     moving centre's and each hinge's second rotation), and each had built its own: four whole normal-equation
@@ -91,7 +91,7 @@ def projection(fit: Fit, weights: np.ndarray) -> RefitProjection:
             return proj
     proj = RefitProjection(fit, weights)
     entry = (weakref.ref(fit), objects, fit.rss, proj.w, proj)
-    weakref.finalize(fit, _drop, id(entry))
+    weakref.finalize(fit, _drop)
     _LAST[0] = entry
     return proj
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from identcheck.errors import InputError
 from identcheck.estimate.noise import noise_floor
-from identcheck.geometry.poses import reference_shape, segment_poses
+from identcheck.geometry.poses import poses_segment, reference_shape, segment_poses
 from identcheck.skeleton import Skeleton
 
 MIN_RUN = 3          # frames
@@ -358,7 +358,8 @@ def exchange_turns_over(data: np.ndarray, chain, cols: tuple, span: tuple, local
     of the span that can be read (:func:`_end_turns`, at least one), by more than :data:`FLIP_DEG` and by more than as
     labelled. The exchanged markers are then posed only by turning the segment over (their shape is its mirror image,
     or nearly), and the exchange is no swap. `local` (M, 3): the markers' body-fixed positions (each segment's
-    :func:`~identcheck.geometry.poses.reference_shape` by default). Segments with fewer than three markers, or that
+    :func:`~identcheck.geometry.poses.reference_shape` by default). Segments whose markers do not pose them (fewer than
+    three, or all near one line: their roll is noise, :func:`~identcheck.geometry.poses.poses_segment`), or that
     cannot be posed near an end, say nothing.
 
     Why: the distances within a segment cannot tell it from its mirror image. Three thigh markers on the real walking2
@@ -370,9 +371,9 @@ def exchange_turns_over(data: np.ndarray, chain, cols: tuple, span: tuple, local
     (i, j), (a, b) = cols, span
     for seg in {chain.marker_seg[i], chain.marker_seg[j]}:
         idx = list(chain.seg_markers[seg])
-        if len(idx) < 3:
-            continue
         labelled = data[:, idx]
+        if not poses_segment(labelled):                 # fewer than three markers, or a roll that is noise
+            continue
         exchanged = data[:, idx].copy()
         for src, dst in ((i, j), (j, i)):               # each exchanged marker of the segment takes the other's samples
             if src in idx:
