@@ -8,6 +8,7 @@ an effect sets aside counts as three parameters spent, not as a sample removed.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -17,6 +18,7 @@ from identcheck.bundle.anatomical_angles import anatomical_angles
 from identcheck.bundle.chain import fit_chain
 from identcheck.bundle.converge import converged_fit
 from identcheck.bundle.model import Fit, State, Terms, forward
+from identcheck.bundle.score_test import RefitProjection
 from identcheck.bundle.start import PICK_ITER, better_start, start_state
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.noise import NoiseFloor
@@ -119,6 +121,15 @@ class Hypothesis:
     def residuals(self) -> np.ndarray:
         """Measured minus predicted, (F, M, 3), NaN where occluded (uses the corrected data)."""
         return self.data - self.fit.pred
+
+    @cached_property
+    def projection(self) -> RefitProjection:
+        """What a refit of this hypothesis absorbs of a field of marker displacements (the score tests' projection,
+        :mod:`identcheck.bundle.score_test`), built when first asked for: the detectors of a round of ``diagnose`` all
+        ask at the round's hypothesis (a delay's, a distortion's, a moving centre's and each hinge's second rotation),
+        and each had built its own, 0.06 s at 1500 frames, where one gives the same. A hypothesis's fit and weights are
+        not replaced once made (:meth:`refit` and :func:`dataclasses.replace` make new ones)."""
+        return RefitProjection(self.fit, self.weights)
 
     def refit(self, terms: Terms | None = None, data=None, weights=None, chain: Skeleton | None = None,
               state: State | None = None, extra_params: int = 0, effect=None,

@@ -7,11 +7,10 @@ score statistic ``nᵀ G⁺ n``: ``n_i = v_iᵀ W r`` and G the Gram matrix of t
 (the per-frame unknowns eliminated frame by frame, the constants through the Schur complement, as in the fit:
 :mod:`identcheck.bundle.chain`). Regressing the residual on the fields themselves understates it whenever the
 model's own unknowns take up part of each field. The detectors of :mod:`identcheck.effects` read their strengths
-from these moments.
+from these moments. Each function takes the projection as `proj` when the caller has it already (a hypothesis keeps
+its own: :attr:`identcheck.bundle.hypothesis.Hypothesis.projection`), else builds it.
 """
 from __future__ import annotations
-
-import weakref
 
 import numpy as np
 
@@ -59,44 +58,7 @@ class RefitProjection:
         return float(np.sum(self.w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ self.S_plus @ rb)
 
 
-_LAST: list = [None]
-"""The last projection built (:func:`projection`), with what it was built from."""
-
-
-def _drop() -> None:
-    """Forget the last projection if its fit is gone (its weak reference is cleared before finalisers run): nothing
-    can ask for it again. The finaliser holds nothing of the entry, so an entry replaced meanwhile is not kept alive
-    by it, and a fit collected later than another's entry was built does not drop that entry."""
-    last = _LAST[0]
-    if last is not None and last[0]() is None:
-        _LAST[0] = None
-
-
-def projection(fit: Fit, weights: np.ndarray) -> RefitProjection:
-    """The :class:`RefitProjection` at `fit` with sample weights `weights`, built once for a run of calls at the same
-    fit: the last one built is given again while the fit is the same object with the same state, state's term
-    parameters and terms (objects) and cost, and the weights are equal to a copy kept of them. A fit's arrays are not
-    changed in place once fitted (:func:`identcheck.bundle.chain.fit_chain` returns new states; a state's term
-    parameters replaced by another list is seen); the entry is dropped when its fit is.
-
-    Why: the detectors of one round of ``diagnose`` all project at the round's fit (a delay's, a distortion's, a
-    moving centre's and each hinge's second rotation), and each had built its own: four whole normal-equation
-    builds and Schur complements a round on a lower limb, 0.06 s each at 1500 frames, where one gives the same."""
-    objects = (fit.state, fit.state.term_params, fit.terms)
-    last = _LAST[0]                            # read once: another thread may replace it meanwhile
-    if last is not None:
-        ref, kept, rss, w, proj = last
-        if (ref() is fit and all(a is b for a, b in zip(kept, objects)) and rss == fit.rss
-                and w.shape == np.shape(weights) and np.array_equal(w, weights)):
-            return proj
-    proj = RefitProjection(fit, weights)
-    entry = (weakref.ref(fit), objects, fit.rss, proj.w, proj)
-    weakref.finalize(fit, _drop)
-    _LAST[0] = entry
-    return proj
-
-
-def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
+def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | None = None) -> list:
     """For each field of marker displacements v (F, M, 3; NaN, and samples of weight 0, count as 0; any iterable,
     so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
     refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
@@ -108,7 +70,7 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     needs no projection. A lag is the case: the joint angles take up most of a lagging limb segment's displacement,
     a segment's pose and a marker's own position most of a single marker's (its mean speed times the lag is a
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
-    proj = projection(fit, weights)
+    proj = proj if proj is not None else RefitProjection(fit, weights)
     out = []
     for v in fields:
         p = proj.pieces(v)
@@ -116,11 +78,12 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields) -> list:
     return out
 
 
-def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list) -> np.ndarray:
+def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, proj: RefitProjection | None = None
+                    ) -> np.ndarray:
     """The Gram matrix (k, k) of the parts of k fields a refit of the model at `fit` does not absorb (what
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
-    proj = projection(fit, weights)
+    proj = proj if proj is not None else RefitProjection(fit, weights)
     return _gram([proj.pieces(v) for v in fields], proj.inner)
 
 
@@ -145,7 +108,8 @@ def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields:
     return quadratic_form(*score_moments(fit, weights, residual, [fields])[0])
 
 
-def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets) -> list:
+def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_sets,
+                  proj: RefitProjection | None = None) -> list:
     """For each set of fields in `field_sets` (any iterable of lists of fields, read once: a generator keeps one set
     in memory at a time; the refit's projection is built once for them all, at the cost of a whole normal-equation
     build and the Schur complement, and each field costs a gradient pass), the score test's moments ``(n, G)``:
@@ -154,7 +118,7 @@ def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_set
     detector that chooses among its fields (:mod:`identcheck.bundle.score_selection`) needs."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    proj = projection(fit, weights)
+    proj = proj if proj is not None else RefitProjection(fit, weights)
     out = []
     for fields in field_sets:
         n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
@@ -162,14 +126,15 @@ def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_set
     return out
 
 
-def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields, plain_gram: np.ndarray):
+def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields, plain_gram: np.ndarray,
+                           proj: RefitProjection | None = None):
     """:func:`score_moments` of one set of fields read one at a time (any iterable of (F, M, 3) arrays), their plain
     Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of frames): only what a refit
     absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
     distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    proj = projection(fit, weights)
+    proj = proj if proj is not None else RefitProjection(fit, weights)
     n, Z, reduced = [], [], []
     for v in fields:
         v0, z, red = proj.pieces(v)
@@ -194,7 +159,7 @@ def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:
 
 
 def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, carriers: list,
-                            bases: list) -> list:
+                            bases: list, proj: RefitProjection | None = None) -> list:
     """For each basis of `bases` (each (F, K), functions of the frame), :func:`score_moments` of the fields
     ``basis[:, k] · carriers[e]`` for every function k and every carrier e (each (F, M, 3)), ordered carrier by carrier
     (field ``e·K + k``), from one gradient pass per carrier for them all: the K·E fields are never formed. A term
@@ -203,7 +168,7 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
     their moments are sums over the frames of each carrier's per-frame pieces weighted by the functions:
     ``G[ek, e'l] = Σ_f b_k b_l (⟨u_e, u_e'⟩_f − z_e·z_e'|_f) − ρ_ekᵀ S⁺ ρ_e'l`` with ``ρ_ek = Σ_f b_k(f) ρ_e(f)``, the
     constants' per-frame parts."""
-    proj = projection(fit, weights)
+    proj = proj if proj is not None else RefitProjection(fit, weights)
     w = proj.w[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     parts = [proj.pieces(u, per_frame=True) for u in carriers]

@@ -229,7 +229,8 @@ def second_rotation_proposals(ctx, hyp, joint: str, name: str, taken: list = ())
     bases = [(spacing, b) for spacing, b in bases if b.shape[1] and seen > b.shape[1] + 10]
     if not bases:
         return []
-    moments = modulated_score_moments(hyp.fit, hyp.weights, hyp.residuals(), carriers, [b for _, b in bases])
+    moments = modulated_score_moments(hyp.fit, hyp.weights, hyp.residuals(), carriers, [b for _, b in bases],
+                                      hyp.projection)
     shifts = [0.0] if taken else PIVOT_SHIFTS_MM
     # a joint that already turns about one axis can take only the axis across it
     betas = np.array([taken[0] + np.pi / 2]) if taken else np.deg2rad(np.arange(0.0, 180.0, BETA_STEP_DEG))

@@ -176,7 +176,8 @@ class JointTranslation(Effect):
             places.append((j, basis, lin))
         # one joint's fields at a time (each (F, M, 3); a full body's joints' together ran to hundreds of MB)
         moments = score_moments(hyp.fit, hyp.weights, hyp.residuals(),
-                                (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places))
+                                (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places),
+                                hyp.projection)
         out = []
         for (j, basis, lin), (n, G) in zip(places, moments):
             k = basis.shape[1]

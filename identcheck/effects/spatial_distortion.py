@@ -159,7 +159,8 @@ class SpatialDistortion(Effect):
         at = where_fields_act(hyp)          # NaN where weighted out: every field is 0 there
         box = volume(at)
         n, G = score_moments_streamed(hyp.fit, hyp.weights, hyp.residuals(),
-                                      (field(at, k, box) for k in range(FIELDS[3])), plain_gram(at, hyp.weights, box))
+                                      (field(at, k, box) for k in range(FIELDS[3])), plain_gram(at, hyp.weights, box),
+                                      hyp.projection)
         chosen = forward_selection(n, G, UNITS,
                                    lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m),
                                    per_param=np.log(ctx.n_obs))

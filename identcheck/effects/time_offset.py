@@ -340,7 +340,7 @@ class TimeOffset(Effect):
         # a lag's displacement −τ·v is taken up in part by the poses (a lagging limb segment's almost whole by the
         # joint angles, a single marker's by its segment's pose): the residual is regressed on the rest of it. The
         # fields are made one at a time (one per segment and per marker: 85 MB at once on a 42-marker body)
-        left = unabsorbed(hyp.fit, hyp.weights, (_only(vel, idx) for _seg, idx in groups))
+        left = unabsorbed(hyp.fit, hyp.weights, (_only(vel, idx) for _seg, idx in groups), hyp.projection)
         for (seg, idx), vv in zip(groups, left):
             v, r = vel[:, idx], res[:, idx]
             ok = np.isfinite(v) & np.isfinite(r)
