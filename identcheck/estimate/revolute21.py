@@ -16,7 +16,6 @@ same cost, and all of them are returned.
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from identcheck.solve import revolute21
 from identcheck.solve.revolute21 import mirror
@@ -26,6 +25,7 @@ NEWTON = 6
 BRANCHES = 4      # local minima of the grid distance refined per sample
 MAX_NFEV = 400    # the valley of a hinge near the A1A2 line is long and flat: stop on tolerance, not budget
 TOL = 1e-12
+BETA_FLOOR = 1e-6         # the least damping scale of a sample's β, as a share of the largest (:func:`_refine`)
 SCATTERED = 100           # random joints scored on a few spread samples (:func:`scattered_seed`)
 SCATTERED_SAMPLES = 40
 SCATTERED_REFINED = 16    # of which this many are refined there
@@ -85,23 +85,18 @@ def thetas(params, local) -> np.ndarray:
     return np.arctan2(local[:, 1], local[:, 0]) - np.arctan2(y, x)
 
 
-def _odr(x, R, z):
-    """Orthogonal-distance residuals: constants x[:5] and one β per sample x[5:]."""
-    xx, yy, zz = _meridian(x[:5], x[5:])
-    return np.concatenate([np.hypot(xx, yy) - R, zz - z])
-
-
-def _odr_jacobian(x, R, z):
-    """Analytic Jacobian of :func:`_odr` (2N × (5 + N), sparse): the meridian's derivatives with respect to
-    (d, r, α, l, ρ) fill the first five columns, each sample's β its own column."""
-    from scipy.sparse import csr_matrix
-
+def _odr_parts(x, R, z) -> tuple:
+    """The orthogonal-distance residuals r (2N) of the constants x[:5] and one β per sample x[5:] (each sample's
+    meridian point's R less the sample's, then its z less the sample's), with their Jacobian in pieces: the
+    constants' columns ``Jp`` (2N × 5) and, for each sample i, the derivatives ``jb1[i]``, ``jb2[i]`` of its two rows
+    (i and N + i) in its own β (the one other nonzero of those rows)."""
     d, r, a, l, rho = x[:5]
     beta = x[5:]
     N = len(beta)
     ca, sa = np.cos(a), np.sin(a)
     cb, sb = np.cos(beta), np.sin(beta)
     xx, yy = rho * cb + r, ca * rho * sb - sa * l
+    zz = sa * rho * sb + ca * l + d
     Rm = np.maximum(np.hypot(xx, yy), 1e-300)
     one, zero = np.ones(N), np.zeros(N)
     # columns d, r, α, l, ρ, β of the meridian point (x, y, z)
@@ -109,18 +104,84 @@ def _odr_jacobian(x, R, z):
     dy = [zero, zero, -sa * rho * sb - ca * l, -sa * one, ca * sb, ca * rho * cb]
     dz = [one, zero, ca * rho * sb - sa * l, ca * one, sa * sb, sa * rho * cb]
     dR = [(xx * gx + yy * gy) / Rm for gx, gy in zip(dx, dy)]
-    rows = np.r_[np.repeat(np.arange(N), 6), np.repeat(N + np.arange(N), 6)]
-    cols = np.tile(np.r_[np.arange(5), -1], 2 * N)
-    cols[cols < 0] = np.tile(5 + np.arange(N), 2)
-    vals = np.r_[np.stack(dR, axis=1).ravel(), np.stack(dz, axis=1).ravel()]
-    return csr_matrix((vals, (rows, cols)), shape=(2 * N, 5 + N))
+    Jp = np.concatenate([np.stack(dR[:5], axis=1), np.stack(dz[:5], axis=1)])
+    return np.concatenate([np.hypot(xx, yy) - R, zz - z]), Jp, dR[5], dz[5]
 
 
-def _odr_bounds(N: int, scale: float) -> tuple:
-    """Bounds of the ODR problem (5 constants, then one β per sample): r, ρ > 0 and α in (0, π)."""
-    lo = np.r_[[-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale], np.full(N, -np.inf)]
-    hi = np.r_[[np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf], np.full(N, np.inf)]
-    return lo, hi
+def _normal_pieces(Jp, jb1, jb2, r) -> tuple:
+    """The normal equations of :func:`_odr_parts` in the arrow form its Jacobian gives them: the constants' block
+    ``A = JpᵀJp`` (5 × 5), each sample's coupling ``B[i]`` (5) to its β and its β's own ``D[i]``, and the gradient's
+    parts ``gp`` (5) and ``gb`` (N)."""
+    N = len(jb1)
+    B = Jp[:N] * jb1[:, None] + Jp[N:] * jb2[:, None]
+    return Jp.T @ Jp, B, jb1**2 + jb2**2, Jp.T @ r, jb1 * r[:N] + jb2 * r[N:]
+
+
+def _reduced(A, B, D) -> np.ndarray:
+    """The constants' block of the normal equations with every β eliminated (its Schur complement, O(N)):
+    ``A − Σ B[i] B[i]ᵀ / D[i]`` over the samples whose β moves their point (D > 0)."""
+    keep = D > 0
+    return A - (B[keep] / D[keep, None]).T @ B[keep]
+
+
+def _damped_step(pieces, damp_p, damp_b) -> tuple:
+    """The step (δp, δβ) solving ``(JᵀJ + diag(damp_p, damp_b)) δ = −Jᵀr`` from the normal equations' arrow-form
+    `pieces` (:func:`_normal_pieces`): the constants' 5 × 5 system with every β eliminated, then each β's own
+    division. `damp_b` must be positive where a sample's ``D`` is 0."""
+    A, B, D, gp, gb = pieces
+    Dl = D + damp_b
+    S = _reduced(A + np.diag(damp_p), B, Dl)
+    rhs = -gp + (B / Dl[:, None]).T @ gb
+    try:
+        dp = np.linalg.solve(S, rhs)
+    except np.linalg.LinAlgError:
+        dp = np.linalg.lstsq(S, rhs, rcond=None)[0]
+    return dp, (-gb - B @ dp) / Dl
+
+
+def _refine(x0, R, z, max_nfev: int, tol: float = TOL) -> tuple:
+    """Levenberg–Marquardt on :func:`_odr_parts` (the constants and one β per sample together), each step solved
+    through the arrow form of its normal equations (:func:`_damped_step`): a 5 × 5 system and N divisions, where a
+    general sparse solver iterates (scipy's bounded trust region with LSMR, which this replaced, took 0.15 s for
+    100 evaluations on 400 samples; this takes about 0.02 s). Marquardt's scaling (the damping proportional to the
+    diagonal) makes the steps independent of the constants' units; a β whose point hardly moves with it (near ρ, r
+    or α at 0) is damped as if it moved :data:`BETA_FLOOR` of the most, or its step would be unbounded. The damping
+    follows Nielsen's rule. Stops after `max_nfev` evaluations of the residuals, or when a step changes the cost by
+    less than `tol` of itself, moves no variable by more than `tol` of its scale, or the scaled gradient is below
+    `tol` (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in [0, π] for the same meridian, which
+    :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the end point."""
+    x = np.array(x0, dtype=float)
+    r, Jp, jb1, jb2 = _odr_parts(x, R, z)
+    cost, nfev = float(r @ r) / 2, 1
+    lam, nu = 1e-3, 2.0
+    while nfev < max_nfev:
+        A, B, D, gp, gb = _normal_pieces(Jp, jb1, jb2, r)
+        dA = np.maximum(np.diag(A), 1e-300)
+        dD = np.maximum(D, BETA_FLOOR * D.max() if D.max() > 0 else 1.0)
+        if max(np.max(np.abs(gp) / np.sqrt(dA)), np.max(np.abs(gb) / np.sqrt(dD))) <= tol * np.sqrt(2 * cost):
+            break
+        dp, db = _damped_step((A, B, D, gp, gb), lam * dA, lam * dD)
+        step = np.r_[dp, db]
+        predicted = 0.5 * (lam * (dA @ dp**2 + dD @ db**2) - gp @ dp - gb @ db)
+        trial = x + step
+        r_new, Jp_new, jb1_new, jb2_new = _odr_parts(trial, R, z)
+        nfev += 1
+        cost_new = float(r_new @ r_new) / 2
+        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        if np.isfinite(cost_new) and gain > 0:
+            small_step = np.all(np.abs(step) * np.sqrt(np.r_[dA, dD]) <= tol * (tol + np.sqrt(2 * cost)))
+            small_change = cost - cost_new <= tol * cost
+            x, r, Jp, jb1, jb2, cost = trial, r_new, Jp_new, jb1_new, jb2_new, cost_new
+            lam *= max(1 / 3, 1 - (2 * gain - 1) ** 3)
+            nu = 2.0
+            if small_step or small_change:
+                break
+        else:
+            lam *= nu
+            nu *= 2
+            if lam > 1e16:
+                break
+    return x, r, Jp, jb1, jb2
 
 
 def fit(local, max_nfev: int = MAX_NFEV) -> list:
@@ -128,7 +189,8 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
 
     ``local``: (N, 3) samples in the frame of the two parent markers (A1 origin, A2 on +z).
     Orthogonal distance regression: the constants and one β per sample are fitted together
-    (a smooth problem with a sparse Jacobian), from each seed of the closed form, each run stopped after
+    (a smooth problem whose normal equations have an arrow form: :func:`_refine`), from each seed of the closed
+    form (off the boundaries r, ρ, α = 0 and α = π, where a derivative vanishes), each run stopped after
     ``max_nfev`` evaluations (a start for a later fit needs fewer than an answer). The closed form's slots come
     in mirror pairs (:func:`identcheck.solve.revolute21.mirror`: the same meridian, ERRATA E2): one of each pair
     is refined and the result mirrored, which halves the work and returns the two as exact mirror images (refined
@@ -136,21 +198,18 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
     """
     local = np.asarray(local, dtype=float)
     R, z = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
-    N = len(local)
     scale = float(np.sqrt(np.mean(local**2)))
     seeds = [s for s in revolute21.solve_batch(local).params if np.all(np.isfinite(s))]
-    lo, hi = _odr_bounds(N, scale)
     found = []
-
+    floor = np.array([-np.inf, 1e-6 * scale, 1e-6, -np.inf, 1e-6 * scale])     # the starts' r, α, ρ off 0 and π
+    ceiling = np.array([np.inf, np.inf, np.pi - 1e-6, np.inf, np.inf])
     units = np.array([scale, scale, 1.0, scale, scale])
 
     def refine(s, into):
-        s = np.clip(np.array(s, dtype=float), lo[:5] + 1e-9 * scale, hi[:5] - 1e-9)
-        x0 = np.r_[s, _nearest_beta(s, R, z)]
-        sol = least_squares(_odr, x0, jac=_odr_jacobian, args=(R, z), bounds=(lo, hi), x_scale="jac",
-                            tr_solver="lsmr", max_nfev=max_nfev, ftol=TOL, xtol=TOL, gtol=TOL)
-        p = sol.x[:5]
-        rms, unc = float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(sol, N)
+        s = np.clip(canonical(s), floor, ceiling)
+        x, r, Jp, jb1, jb2 = _refine(np.r_[s, _nearest_beta(s, R, z)], R, z, max_nfev)
+        p = canonical(x[:5])
+        rms, unc = float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(Jp, jb1, jb2, r)
         into.extend([(p, rms, unc), (mirror(p), rms, unc)])     # the same meridian: the same fit (ERRATA E2)
 
     def met(s, among) -> bool:
@@ -209,8 +268,8 @@ def scattered_seed(R, z, scale: float, seed: int = 0) -> np.ndarray | None:
     noise they all refined to an RMS distance of 2.0 mm, while a joint 0.66 mm from the samples existed. The
     random joints cover the constants' plausible range (the hinge within one sample scale of the samples, α in
     (0, π/2], the other half being the mirror images); the generator is seeded, so the answer depends on the
-    data alone. The short refinements are unbounded Levenberg-Marquardt (several times cheaper than the bounded
-    solver on these small problems), brought back to r, ρ ≥ 0 and α in [0, π] by :func:`canonical`."""
+    data alone. The short refinements are :func:`_refine`'s (unbounded), brought back to r, ρ ≥ 0 and α in [0, π]
+    by :func:`canonical`."""
     n = len(R)
     if n < SCATTERED_SAMPLES:
         return None
@@ -224,16 +283,11 @@ def scattered_seed(R, z, scale: float, seed: int = 0) -> np.ndarray | None:
     cost = np.array([np.mean(residuals(j, Rs, zs) ** 2) for j in joints])
     best, best_cost = None, np.inf
     for j in joints[np.argsort(cost)[:SCATTERED_REFINED]]:
-        sol = least_squares(_odr, np.r_[j, _nearest_beta(j, Rs, zs)], jac=_odr_dense_jacobian, args=(Rs, zs),
-                            method="lm", x_scale="jac", max_nfev=SCATTERED_NFEV)
-        if np.all(np.isfinite(sol.x[:5])) and sol.cost < best_cost:
-            best, best_cost = sol.x[:5], sol.cost
+        x, r, _, _, _ = _refine(np.r_[j, _nearest_beta(j, Rs, zs)], Rs, zs, SCATTERED_NFEV)
+        cost = float(r @ r) / 2
+        if np.all(np.isfinite(x[:5])) and cost < best_cost:
+            best, best_cost = x[:5], cost
     return None if best is None else canonical(best)
-
-
-def _odr_dense_jacobian(x, R, z):
-    """:func:`_odr_jacobian` as a dense array, for the Levenberg-Marquardt of :func:`scattered_seed`."""
-    return _odr_jacobian(x, R, z).toarray()
 
 
 def canonical(params) -> np.ndarray:
@@ -255,22 +309,18 @@ def twin_seeds(params, R, z) -> list:
     return [np.array(s, dtype=float) for s in revolute21.solve_batch(np.c_[x, y, zz]).params if np.all(np.isfinite(s))]
 
 
-def _uncertainty(sol, N: int) -> float:
-    """1-σ of the worst-determined length constant (d, r, l, ρ), mm, from the linearised covariance.
+def _uncertainty(Jp, jb1, jb2, r) -> float:
+    """1-σ of the worst-determined length constant (d, r, l, ρ), mm, from the linearised covariance at the
+    point whose residuals `r` and Jacobian pieces (:func:`_odr_parts`) are given.
 
-    The per-sample β are eliminated by the Schur complement of their diagonal block of JᵀJ, so
+    The per-sample β are eliminated by the Schur complement of their diagonal block of JᵀJ (:func:`_reduced`), so
     the 5 × 5 covariance of the constants costs O(N).
     """
-    J = sol.jac.tocsc()
-    Jp = J[:, :5].toarray()
-    jb1 = np.asarray(J[np.arange(N), 5 + np.arange(N)]).ravel()
-    jb2 = np.asarray(J[N + np.arange(N), 5 + np.arange(N)]).ravel()
-    D = jb1**2 + jb2**2
-    B = Jp[:N] * jb1[:, None] + Jp[N:] * jb2[:, None]
-    keep = D > 0
-    S = Jp.T @ Jp - (B[keep] / D[keep, None]).T @ B[keep]
+    N = len(jb1)
+    A, B, D, _, _ = _normal_pieces(Jp, jb1, jb2, r)
+    S = _reduced(A, B, D)
     dof = max(2 * N - N - 5, 1)
-    sigma2 = float(np.sum(sol.fun**2)) / dof
+    sigma2 = float(np.sum(r**2)) / dof
     try:
         cov = sigma2 * np.linalg.inv(S)
     except np.linalg.LinAlgError:

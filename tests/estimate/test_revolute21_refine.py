@@ -1,0 +1,85 @@
+"""The revolute (2,1) least squares solved through the arrow form of its normal equations
+(:func:`identcheck.estimate.revolute21._refine`): the eliminated samples' angles give exactly the dense solution,
+and the refinement reaches the least squares' minimum."""
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.estimate import revolute21 as r21
+from strategies import revolute21_problem, revolute21_samples
+
+
+def _dense_jacobian(x, R, z):
+    """The residuals' whole Jacobian (2N × (5 + N)), written out: the reference the arrow form is checked against."""
+    _, Jp, jb1, jb2 = r21._odr_parts(x, R, z)
+    N = len(R)
+    J = np.zeros((2 * N, 5 + N))
+    J[:, :5] = Jp
+    J[np.arange(N), 5 + np.arange(N)] = jb1
+    J[N + np.arange(N), 5 + np.arange(N)] = jb2
+    return J
+
+
+def _problem(truth, seed, n=40, noise=0.3):
+    rng = np.random.default_rng(seed)
+    theta, beta = rng.uniform(-np.pi, np.pi, n), rng.uniform(-np.pi, np.pi, n)
+    local = revolute21_samples(truth, theta, beta) + rng.normal(scale=noise, size=(n, 3))
+    return np.hypot(local[:, 0], local[:, 1]), local[:, 2]
+
+
+@settings(max_examples=30, deadline=None)
+@given(revolute21_problem(), st.integers(0, 2**16), st.floats(1e-4, 1e2))
+def test_the_arrow_form_gives_the_dense_damped_step(problem, seed, lam):
+    """The constants' step from the Schur complement, and each β's from it, solve the whole damped system
+    (JᵀJ + λ diag) δ = −Jᵀr written out densely."""
+    truth, _ = problem
+    R, z = _problem(truth, seed)
+    start = truth + np.random.default_rng(seed + 1).normal(scale=[3, 3, 0.05, 3, 3])
+    x = np.r_[start, r21._nearest_beta(start, R, z)]
+    r, Jp, jb1, jb2 = r21._odr_parts(x, R, z)
+    A, B, D, gp, gb = r21._normal_pieces(Jp, jb1, jb2, r)
+    J = _dense_jacobian(x, R, z)
+    np.testing.assert_allclose(J.T @ J, np.block([[A, B.T], [B, np.diag(D)]]),       # B[i]: sample i's coupling
+                               rtol=1e-9, atol=1e-9 * np.abs(J.T @ J).max())
+    np.testing.assert_allclose(J.T @ r, np.r_[gp, gb], rtol=1e-9, atol=1e-9 * np.abs(J.T @ r).max())
+    scale = np.r_[np.diag(A), D] + 1e-3
+    dp, db = r21._damped_step((A, B, D, gp, gb), lam * scale[:5], lam * scale[5:])
+    dense = np.linalg.solve(J.T @ J + lam * np.diag(scale), -J.T @ r)
+    np.testing.assert_allclose(np.r_[dp, db], dense, rtol=1e-6, atol=1e-8 * np.abs(dense).max())
+
+
+@settings(max_examples=30, deadline=None)
+@given(revolute21_problem(), st.integers(0, 2**16))
+def test_the_uncertainty_is_the_dense_covariance_of_the_lengths(problem, seed):
+    """The 1-σ from the eliminated angles equals the one read off the dense inverse of JᵀJ (its constants' block)."""
+    truth, _ = problem
+    R, z = _problem(truth, seed)
+    x = np.r_[truth, r21._nearest_beta(truth, R, z)]
+    r, Jp, jb1, jb2 = r21._odr_parts(x, R, z)
+    J = _dense_jacobian(x, R, z)
+    info = J.T @ J
+    if np.linalg.cond(info) > 1e12:
+        return
+    N = len(R)
+    cov = np.sum(r**2) / max(N - 5, 1) * np.linalg.inv(info)[:5, :5]
+    lengths = cov[np.ix_([0, 1, 3, 4], [0, 1, 3, 4])]
+    expected = np.sqrt(max(np.linalg.eigvalsh(lengths)[-1], 0.0))
+    assert np.isclose(r21._uncertainty(Jp, jb1, jb2, r), expected, rtol=1e-6)
+
+
+@settings(max_examples=25, deadline=None)
+@given(revolute21_problem(), st.integers(0, 2**16))
+def test_a_refinement_from_near_the_truth_reaches_a_minimum_at_least_as_good(problem, seed):
+    """Noisy samples, a start a few mm and degrees off the truth: the refinement ends where the gradient of the
+    least squares vanishes (to 1e-6 of its size at the start) with a cost no higher than the truth's own best."""
+    truth, _ = problem
+    R, z = _problem(truth, seed, n=120, noise=0.2)
+    start = truth + np.random.default_rng(seed + 1).normal(scale=[2, 2, 0.02, 2, 2])
+    x0 = np.r_[start, r21._nearest_beta(start, R, z)]
+    x, r, Jp, jb1, jb2 = r21._refine(x0, R, z, max_nfev=400)
+    _, _, _, gp, gb = r21._normal_pieces(Jp, jb1, jb2, r)
+    r0, Jp0, jb10, jb20 = r21._odr_parts(x0, R, z)
+    _, _, _, gp0, gb0 = r21._normal_pieces(Jp0, jb10, jb20, r0)
+    assert np.linalg.norm(np.r_[gp, gb]) <= 1e-6 * np.linalg.norm(np.r_[gp0, gb0]) + 1e-9
+    at_truth = np.sum(r21.residuals(truth, R, z) ** 2)
+    assert np.sum(r**2) <= at_truth * (1 + 1e-9)
+    assert np.sum(r21.residuals(r21.canonical(x[:5]), R, z) ** 2) <= np.sum(r**2) * (1 + 1e-9)
