@@ -25,6 +25,7 @@ NEWTON = 6
 BRANCHES = 4      # local minima of the grid distance refined per sample
 MAX_NFEV = 400    # the valley of a hinge near the A1A2 line is long and flat: stop on tolerance, not budget
 TOL = 1e-12
+UNDETERMINED_RCOND = 1e-12  # constants undetermined below this singular-value ratio (:func:`_uncertainty`)
 BETA_FLOOR = 1e-6         # the least damping scale of a sample's β, as a share of the largest (:func:`_refine`)
 SCATTERED = 100           # random joints scored on a few spread samples (:func:`scattered_seed`)
 SCATTERED_SAMPLES = 40
@@ -143,21 +144,24 @@ def _refine(x0, R, z, max_nfev: int, tol: float = TOL) -> tuple:
     """Levenberg–Marquardt on :func:`_odr_parts` (the constants and one β per sample together), each step solved
     through the arrow form of its normal equations (:func:`_damped_step`): a 5 × 5 system and N divisions, where a
     general sparse solver iterates (scipy's bounded trust region with LSMR, which this replaced, took 0.15 s for
-    100 evaluations on 400 samples; this takes about 0.02 s). Marquardt's scaling (the damping proportional to the
-    diagonal) makes the steps independent of the constants' units; a β whose point hardly moves with it (near ρ, r
-    or α at 0) is damped as if it moved :data:`BETA_FLOOR` of the most, or its step would be unbounded. The damping
-    follows Nielsen's rule. Stops after `max_nfev` evaluations of the residuals, or when a step changes the cost by
-    less than `tol` of itself, moves no variable by more than `tol` of its scale, or the scaled gradient is below
-    `tol` (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in [0, π] for the same meridian, which
-    :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the end point."""
+    100 evaluations on 400 samples). The damping is scaled by each variable's diagonal term, its largest so far
+    (MINPACK's rule: a scale that falls with the diagonal left the damping too weak where the valley is flat, and
+    the run crawled), which makes the steps independent of the constants' units; a β whose point does not move with
+    it (where ρ = 0, or r = 0 with α at 0 or π) is scaled as if it moved :data:`BETA_FLOOR` of the most, or its step
+    would be unbounded. The damping follows Nielsen's rule. Stops after `max_nfev` evaluations of the residuals,
+    when the scaled gradient is below `tol` of the residual's norm, when no variable's step times its column's norm
+    exceeds `tol` of it, or when a step the linear model predicted well (gain above 1/4) lowered the cost by less
+    than `tol` of itself (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in [0, π] for the same
+    meridian, which :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the end point."""
     x = np.array(x0, dtype=float)
     r, Jp, jb1, jb2 = _odr_parts(x, R, z)
     cost, nfev = float(r @ r) / 2, 1
     lam, nu = 1e-3, 2.0
+    dA, dD = np.zeros(5), np.zeros(len(jb1))
     while nfev < max_nfev:
         A, B, D, gp, gb = _normal_pieces(Jp, jb1, jb2, r)
-        dA = np.maximum(np.diag(A), 1e-300)
-        dD = np.maximum(D, BETA_FLOOR * D.max() if D.max() > 0 else 1.0)
+        dA = np.maximum(dA, np.maximum(np.diag(A), 1e-300))                      # MINPACK's running maximum
+        dD = np.maximum(dD, np.maximum(D, BETA_FLOOR * D.max() if D.max() > 0 else 1.0))
         if max(np.max(np.abs(gp) / np.sqrt(dA)), np.max(np.abs(gb) / np.sqrt(dD))) <= tol * np.sqrt(2 * cost):
             break
         dp, db = _damped_step((A, B, D, gp, gb), lam * dA, lam * dD)
@@ -170,7 +174,7 @@ def _refine(x0, R, z, max_nfev: int, tol: float = TOL) -> tuple:
         gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if np.isfinite(cost_new) and gain > 0:
             small_step = np.all(np.abs(step) * np.sqrt(np.r_[dA, dD]) <= tol * (tol + np.sqrt(2 * cost)))
-            small_change = cost - cost_new <= tol * cost
+            small_change = cost - cost_new <= tol * cost and gain > 0.25     # (a poor model's small change: go on)
             x, r, Jp, jb1, jb2, cost = trial, r_new, Jp_new, jb1_new, jb2_new, cost_new
             lam *= max(1 / 3, 1 - (2 * gain - 1) ** 3)
             nu = 2.0
@@ -311,19 +315,31 @@ def twin_seeds(params, R, z) -> list:
 
 def _uncertainty(Jp, jb1, jb2, r) -> float:
     """1-σ of the worst-determined length constant (d, r, l, ρ), mm, from the linearised covariance at the
-    point whose residuals `r` and Jacobian pieces (:func:`_odr_parts`) are given.
+    point whose residuals `r` and Jacobian pieces (:func:`_odr_parts`) are given; infinite where the constants are
+    not determined to :data:`UNDETERMINED_RCOND`.
 
-    The per-sample β are eliminated by the Schur complement of their diagonal block of JᵀJ (:func:`_reduced`), so
-    the 5 × 5 covariance of the constants costs O(N).
+    The per-sample β are eliminated by projecting each sample's two rows of the constants' columns off its β's
+    column: the projected 2N × 5 matrix's Gram matrix is the Schur complement :func:`_reduced` gives, but its SVD
+    (columns scaled to unit norm) is only as ill-conditioned as the Jacobian itself, where forming and inverting
+    the Schur complement squares the condition. In a flat valley (condition 10¹⁵ and more) the inverse had given
+    0.7 mm where the Jacobian's SVD gives 10⁶ mm, and moving the point by 10⁻¹⁰ changed it a millionfold.
     """
     N = len(jb1)
-    A, B, D, _, _ = _normal_pieces(Jp, jb1, jb2, r)
-    S = _reduced(A, B, D)
-    dof = max(2 * N - N - 5, 1)
-    sigma2 = float(np.sum(r**2)) / dof
-    try:
-        cov = sigma2 * np.linalg.inv(S)
-    except np.linalg.LinAlgError:
+    norm = np.hypot(jb1, jb2)
+    moves = norm > 0
+    u1 = np.where(moves, jb1 / np.where(moves, norm, 1.0), 0.0)
+    u2 = np.where(moves, jb2 / np.where(moves, norm, 1.0), 0.0)
+    along = Jp[:N] * u1[:, None] + Jp[N:] * u2[:, None]           # each sample's rows along its β's column
+    projected = np.concatenate([Jp[:N] - u1[:, None] * along, Jp[N:] - u2[:, None] * along])
+    scale = np.linalg.norm(projected, axis=0)
+    if not np.all(np.isfinite(projected)) or np.any(scale == 0):
         return float("inf")
+    _, sv, Vt = np.linalg.svd(projected / scale, full_matrices=False)
+    if sv[-1] <= UNDETERMINED_RCOND * sv[0]:
+        return float("inf")
+    sigma2 = float(np.sum(r**2)) / max(N - 5, 1)     # 2N residuals less N angles and 5 constants
+    if not np.isfinite(sigma2):
+        return float("inf")
+    cov = sigma2 * ((Vt.T / sv**2) @ Vt) / np.outer(scale, scale)
     lengths = cov[np.ix_([0, 1, 3, 4], [0, 1, 3, 4])]
     return float(np.sqrt(max(np.linalg.eigvalsh(lengths)[-1], 0.0)))
