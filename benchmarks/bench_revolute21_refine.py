@@ -47,11 +47,12 @@ def baseline_module(rev: str):
     """The baseline commit's ``identcheck/estimate/revolute21.py``, imported under another name."""
     source = subprocess.run(["git", "show", f"{rev}:identcheck/estimate/revolute21.py"], cwd=ROOT, check=True,
                             capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp()) / "baseline_revolute21.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location("baseline_revolute21", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "baseline_revolute21.py"
+        path.write_text(source)
+        spec = importlib.util.spec_from_file_location("baseline_revolute21", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
     return module
 
 
@@ -100,6 +101,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="12 problems; writes nothing")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results.json")
     ap.add_argument("--key", default="revolute21_refine")
+    ap.add_argument("--note", default=None, help="a sentence on what was compared, kept with the numbers")
     a = ap.parse_args(argv)
     n = 12 if a.quick else a.problems
     probs = problems(n, a.samples, a.seed)
@@ -114,7 +116,9 @@ def main(argv=None) -> int:
     worse = [k for k in range(n) if rows_cur[k][1] > rows_base[k][1] * (1 + BETTER)]
     better = [k for k in range(n) if rows_cur[k][1] < rows_base[k][1] * (1 - BETTER)]
     ratio = [rows_cur[k][1] / rows_base[k][1] for k in worse]
-    out = {"baseline": a.baseline, "problems": n, "samples": a.samples, "max_nfev": a.max_nfev, "seed": a.seed,
+    current_code = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                                  text=True).stdout.strip() or None
+    out = {"baseline": a.baseline, "current": current_code, "note": a.note, "problems": n, "samples": a.samples, "max_nfev": a.max_nfev, "seed": a.seed,
            "noise_mm": list(NOISE_MM), "machine": machine_info(),
            "baseline_code": summary(rows_base), "current_code": summary(rows_cur),
            "current_worse": len(worse), "current_better": len(better),

@@ -149,8 +149,8 @@ def _refine(x0, R, z, max_nfev: int, tol: float = TOL) -> tuple:
     the run crawled), which makes the steps independent of the constants' units; a β whose point does not move with
     it (where ρ = 0, or r = 0 with α at 0 or π) is scaled as if it moved :data:`BETA_FLOOR` of the most, or its step
     would be unbounded. The damping follows Nielsen's rule. Stops after `max_nfev` evaluations of the residuals,
-    when the scaled gradient is below `tol` of the residual's norm, when no variable's step times its column's norm
-    exceeds `tol` of it, or when a step the linear model predicted well (gain above 1/4) lowered the cost by less
+    when the scaled gradient is below `tol` of the residual's norm, when no variable's step times the square root of
+    its damping scale exceeds `tol` of that norm, or when a step the linear model predicted well (gain above 1/4) lowered the cost by less
     than `tol` of itself (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in [0, π] for the same
     meridian, which :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the end point."""
     x = np.array(x0, dtype=float)
@@ -213,7 +213,7 @@ def fit(local, max_nfev: int = MAX_NFEV) -> list:
         s = np.clip(canonical(s), floor, ceiling)
         x, r, Jp, jb1, jb2 = _refine(np.r_[s, _nearest_beta(s, R, z)], R, z, max_nfev)
         p = canonical(x[:5])
-        rms, unc = float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(Jp, jb1, jb2, r)
+        rms, unc = float(np.sqrt(np.mean(residuals(p, R, z) ** 2))), _uncertainty(Jp, jb1, jb2, r, scale)
         into.extend([(p, rms, unc), (mirror(p), rms, unc)])     # the same meridian: the same fit (ERRATA E2)
 
     def met(s, among) -> bool:
@@ -313,10 +313,13 @@ def twin_seeds(params, R, z) -> list:
     return [np.array(s, dtype=float) for s in revolute21.solve_batch(np.c_[x, y, zz]).params if np.all(np.isfinite(s))]
 
 
-def _uncertainty(Jp, jb1, jb2, r) -> float:
+def _uncertainty(Jp, jb1, jb2, r, scale: float) -> float:
     """1-σ of the worst-determined length constant (d, r, l, ρ), mm, from the linearised covariance at the
     point whose residuals `r` and Jacobian pieces (:func:`_odr_parts`) are given; infinite where the constants are
-    not determined to :data:`UNDETERMINED_RCOND`.
+    not determined to :data:`UNDETERMINED_RCOND`, and with no more samples than the five constants (no residual
+    left to estimate the noise from). `scale`: the samples' length scale (mm), which puts α's column (mm per
+    radian) on the lengths' footing for the test of a column the samples do not move: at α = π/2 with l = 0 the α
+    and l columns vanish but for roundoff, which scaling each column to unit norm would have made look whole.
 
     The per-sample β are eliminated by projecting each sample's two rows of the constants' columns off its β's
     column: the projected 2N × 5 matrix's Gram matrix is the Schur complement :func:`_reduced` gives, but its SVD
@@ -325,21 +328,26 @@ def _uncertainty(Jp, jb1, jb2, r) -> float:
     0.7 mm where the Jacobian's SVD gives 10⁶ mm, and moving the point by 10⁻¹⁰ changed it a millionfold.
     """
     N = len(jb1)
+    if N <= 5:
+        return float("inf")
     norm = np.hypot(jb1, jb2)
     moves = norm > 0
     u1 = np.where(moves, jb1 / np.where(moves, norm, 1.0), 0.0)
     u2 = np.where(moves, jb2 / np.where(moves, norm, 1.0), 0.0)
     along = Jp[:N] * u1[:, None] + Jp[N:] * u2[:, None]           # each sample's rows along its β's column
     projected = np.concatenate([Jp[:N] - u1[:, None] * along, Jp[N:] - u2[:, None] * along])
-    scale = np.linalg.norm(projected, axis=0)
-    if not np.all(np.isfinite(projected)) or np.any(scale == 0):
+    if not np.all(np.isfinite(projected)):
         return float("inf")
-    _, sv, Vt = np.linalg.svd(projected / scale, full_matrices=False)
+    column = np.linalg.norm(projected, axis=0)
+    unitless = column / np.array([1.0, 1.0, scale, 1.0, 1.0])
+    if np.min(unitless) <= UNDETERMINED_RCOND * np.max(unitless):
+        return float("inf")
+    _, sv, Vt = np.linalg.svd(projected / column, full_matrices=False)
     if sv[-1] <= UNDETERMINED_RCOND * sv[0]:
         return float("inf")
     sigma2 = float(np.sum(r**2)) / max(N - 5, 1)     # 2N residuals less N angles and 5 constants
     if not np.isfinite(sigma2):
         return float("inf")
-    cov = sigma2 * ((Vt.T / sv**2) @ Vt) / np.outer(scale, scale)
+    cov = sigma2 * ((Vt.T / sv**2) @ Vt) / np.outer(column, column)
     lengths = cov[np.ix_([0, 1, 3, 4], [0, 1, 3, 4])]
     return float(np.sqrt(max(np.linalg.eigvalsh(lengths)[-1], 0.0)))

@@ -63,7 +63,7 @@ def test_the_uncertainty_is_the_dense_covariance_of_the_lengths(problem, seed):
     cov = np.sum(r**2) / max(N - 5, 1) * np.linalg.inv(info)[:5, :5]
     lengths = cov[np.ix_([0, 1, 3, 4], [0, 1, 3, 4])]
     expected = np.sqrt(max(np.linalg.eigvalsh(lengths)[-1], 0.0))
-    assert np.isclose(r21._uncertainty(Jp, jb1, jb2, r), expected, rtol=1e-6)
+    assert np.isclose(r21._uncertainty(Jp, jb1, jb2, r, np.sqrt(np.mean(R**2 + z**2))), expected, rtol=1e-6)
 
 
 @settings(max_examples=25, deadline=None)
@@ -140,7 +140,7 @@ def test_the_uncertainty_in_a_flat_valley_is_the_jacobians_own_and_stable():
     for k in range(4):
         moved = x * (1 + 1e-10 * np.random.default_rng(k).normal(size=len(x))) if k else x
         r, Jp, jb1, jb2 = r21._odr_parts(moved, R, z)
-        values.append(r21._uncertainty(Jp, jb1, jb2, r))
+        values.append(r21._uncertainty(Jp, jb1, jb2, r, local_scale))
     J = _dense_jacobian(x, R, z)
     r = r21._odr_parts(x, R, z)[0]
     _, sv, Vt = np.linalg.svd(J / np.linalg.norm(J, axis=0), full_matrices=False)
@@ -150,3 +150,37 @@ def test_the_uncertainty_in_a_flat_valley_is_the_jacobians_own_and_stable():
     assert expected > 1e3 * local_scale                        # the valley: the lengths are not determined at all
     assert np.isclose(values[0], expected, rtol=1e-2)
     assert np.ptp(values) <= 1e-2 * values[0]
+
+
+@settings(max_examples=20, deadline=None)
+@given(revolute21_problem(), st.integers(0, 2**16), st.sampled_from([1e-3, 1.0, 1e3]))
+def test_the_uncertainty_scales_with_the_units(problem, seed, unit):
+    """The same joint and samples in metres, millimetres or micrometres: the 1-σ (a length) scales with them."""
+    truth, _ = problem
+    R, z = _problem(truth, seed)
+    x = np.r_[truth, r21._nearest_beta(truth, R, z)]
+    sizes = np.r_[1.0, 1.0, 0.0, 1.0, 1.0]
+    scaled = np.r_[truth * np.where(sizes > 0, unit, 1.0), x[5:]]
+    base = r21._uncertainty(*_pieces(x, R, z), np.sqrt(np.mean(R**2 + z**2)))
+    other = r21._uncertainty(*_pieces(scaled, R * unit, z * unit), unit * np.sqrt(np.mean(R**2 + z**2)))
+    assert np.isclose(other, unit * base, rtol=1e-6) or (np.isinf(base) and np.isinf(other))
+
+
+def _pieces(x, R, z):
+    r, Jp, jb1, jb2 = r21._odr_parts(x, R, z)
+    return Jp, jb1, jb2, r
+
+
+@given(revolute21_problem(), st.integers(0, 2**16))
+@settings(max_examples=10, deadline=None)
+def test_no_uncertainty_is_claimed_without_residual_degrees_of_freedom_or_where_a_constant_cannot_move(problem, seed):
+    """Five samples for five constants leave nothing to estimate the noise from; a hinge at α = π/2 with l = 0 (its
+    meridian does not depend on α or l to first order) leaves those constants undetermined: both are infinite."""
+    truth, _ = problem
+    R, z = _problem(truth, seed, n=5)
+    x = np.r_[truth, r21._nearest_beta(truth, R, z)]
+    assert np.isinf(r21._uncertainty(*_pieces(x, R, z), np.sqrt(np.mean(R**2 + z**2))))
+    flat = np.r_[truth[0], truth[1], np.pi / 2, 0.0, truth[4]]
+    R, z = _problem(flat, seed, n=60, noise=0.0)
+    x = np.r_[flat, r21._nearest_beta(flat, R, z)]
+    assert np.isinf(r21._uncertainty(*_pieces(x, R, z), np.sqrt(np.mean(R**2 + z**2))))
