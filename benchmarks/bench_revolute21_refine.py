@@ -118,7 +118,8 @@ def main(argv=None) -> int:
     ratio = [rows_cur[k][1] / rows_base[k][1] for k in worse]
     current_code = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                                   text=True).stdout.strip() or None
-    out = {"baseline": a.baseline, "current": current_code, "note": a.note, "problems": n, "samples": a.samples, "max_nfev": a.max_nfev, "seed": a.seed,
+    out = {"baseline": a.baseline, "current": current_code, "note": a.note, "problems": n, "samples": a.samples,
+           "max_nfev": a.max_nfev, "seed": a.seed,
            "noise_mm": list(NOISE_MM), "machine": machine_info(),
            "baseline_code": summary(rows_base), "current_code": summary(rows_cur),
            "current_worse": len(worse), "current_better": len(better),

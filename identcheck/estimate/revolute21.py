@@ -150,9 +150,10 @@ def _refine(x0, R, z, max_nfev: int, tol: float = TOL) -> tuple:
     it (where ρ = 0, or r = 0 with α at 0 or π) is scaled as if it moved :data:`BETA_FLOOR` of the most, or its step
     would be unbounded. The damping follows Nielsen's rule. Stops after `max_nfev` evaluations of the residuals,
     when the scaled gradient is below `tol` of the residual's norm, when no variable's step times the square root of
-    its damping scale exceeds `tol` of that norm, or when a step the linear model predicted well (gain above 1/4) lowered the cost by less
-    than `tol` of itself (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in [0, π] for the same
-    meridian, which :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the end point."""
+    its damping scale exceeds `tol` of that norm, or when a step the linear model predicted well (gain above 1/4)
+    lowered the cost by less than `tol` of itself (as MINPACK's tests). Unbounded: a run may leave r, ρ ≥ 0 and α in
+    [0, π] for the same meridian, which :func:`canonical` brings back. Returns (x, residuals, Jp, jb1, jb2) at the
+    end point."""
     x = np.array(x0, dtype=float)
     r, Jp, jb1, jb2 = _odr_parts(x, R, z)
     cost, nfev = float(r @ r) / 2, 1

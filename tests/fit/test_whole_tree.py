@@ -109,14 +109,15 @@ def test_a_joint_the_data_leave_free_claims_no_standard_error(examples):
     """3 pelvis, 1 thigh, 1 shank marker, 600 frames: the knee's thigh marker, axis and shank marker trade off along
     a direction the information does not determine beyond the gauge (at seed 3 with the former start, moving
     3.6 mm along it cost Δχ² 0.002). A standard error computed without that direction would be a number about
-    nothing (6 mm for walking2's sparse left knee): ``uncertainty_mm`` and the weakest direction's error are null exactly for the joints whose distances move
-    along a free direction, and those joints' intervals are unbounded. (A trial whose knee the data leave plainly
-    free, seed 5; at seed 3 the better minimum the arrow-form (2,1) start reaches leaves the knee's weakest
-    direction at 2.2e-9 of the largest, just above the rank cutoff, with a standard error of 1.7 m.)"""
+    nothing (6 mm for walking2's sparse left knee): ``uncertainty_mm`` and the weakest direction's error are null
+    exactly for the joints whose distances move along a free direction, and those joints' intervals are unbounded.
+    (A trial whose knee the data leave plainly free, seed 5; at seed 3 the better minimum the arrow-form (2,1) start
+    reaches leaves the knee's weakest direction at 2.2e-9 of the largest, just above the rank cutoff, with a
+    standard error of 1.7 m.)"""
     from identcheck.bundle.uncertainty import distance_gradients
 
     model = Model.from_toml(examples / "sparse_leg.toml")
-    tree, ans = _answers(model, simulate(model, n_frames=600, noise_mm=0.7, seed=5).trial)   # (seed: see below)
+    tree, ans = _answers(model, simulate(model, n_frames=600, noise_mm=0.7, seed=5).trial)   # (seed: see above)
     best = tree.best
     free = {j: any(best.cov.free(g) for _, g in per.values())
             for j, per in distance_gradients(best.fit.chain, best.fit.state, len(best.cov.information)).items()}
