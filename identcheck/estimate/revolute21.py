@@ -346,7 +346,7 @@ def _uncertainty(Jp, jb1, jb2, r, scale: float) -> float:
     _, sv, Vt = np.linalg.svd(projected / column, full_matrices=False)
     if sv[-1] <= UNDETERMINED_RCOND * sv[0]:
         return float("inf")
-    sigma2 = float(np.sum(r**2)) / max(N - 5, 1)     # 2N residuals less N angles and 5 constants
+    sigma2 = float(np.sum(r**2)) / (N - 5)     # 2N residuals less N angles and 5 constants (N > 5 above)
     if not np.isfinite(sigma2):
         return float("inf")
     cov = sigma2 * ((Vt.T / sv**2) @ Vt) / np.outer(column, column)
