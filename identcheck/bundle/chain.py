@@ -117,7 +117,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     pen = (lambda st: float(np.sum(penalty(st)[0] ** 2))) if penalty else (lambda st: 0.0)
     R, t, centre, pred = forward(chain, terms, s)
     cost = _cost(pred, y, w) + pen(s)
-    lam, it, converged, last_drop = 1e-3, 0, False, None
+    lam, it, converged, last_drop = LAM_START, 0, False, None
     frame_has = w.sum(axis=1) > 0
     for it in range(1, max_iter + 1):
         # the last iteration's blocks are let go before the next are built (B alone: 93 MB for 42 markers)
@@ -128,8 +128,9 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             C, h = C + D.T @ D, h + D.T @ r_p
         k = A.shape[1]
         scaleA = np.trace(A, axis1=1, axis2=2)[:, None] / k + 1e-12
-        improved, promise = False, 0.0
-        for attempt in range(12):
+        improved, promise, attempt = False, 0.0, 0
+        stop_tol = tol if fast_tol is None else max(tol, fast_tol)
+        while attempt < MIN_ATTEMPTS or (lam <= STALL_DAMPING and not stalled_at_minimum(promise, cost, stop_tol)):
             damp_q = lam * np.diagonal(A, axis1=1, axis2=2) + 1e-9 * scaleA                  # (F, k)
             damp_c = lam * np.diag(C) + CONSTANT_RIDGE * (np.trace(C) / max(len(C), 1))      # (P,)
             Ad = A + damp_q[..., None] * np.eye(k)
@@ -145,11 +146,13 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
             if new <= cost:
                 improved = True
                 drop = cost - new
-                lam = max(lam * damping_factor(drop, promised_drop(g, h, dq, dc, damp_q, damp_c)), LAM_MIN)
+                promised = promised_drop(g, h, dq, dc, damp_q, damp_c)
+                lam = max(lam * damping_factor(drop, promised), LAM_MIN)
                 rate = drop / last_drop if last_drop else 1.0
                 fast = rate <= FAST_RATE and attempt == 0     # a drop made small by raised damping says nothing
-                done = drop <= tol * max(cost, 1e-300) or (
-                    fast and drop * rate / (1 - rate) <= (tol if fast_tol is None else fast_tol) * max(new, 1e-300))
+                # a small drop ends the fit only where the step's model held (see :data:`POOR_STEP`)
+                done = model_held(drop, promised) and (drop <= tol * max(cost, 1e-300) or (
+                    fast and drop * rate / (1 - rate) <= (tol if fast_tol is None else fast_tol) * max(new, 1e-300)))
                 if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
                                                          (trial, R2, t2, c2, p2, new))
@@ -157,12 +160,13 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 s, R, t, centre, pred, cost = trial, R2, t2, c2, p2, new
                 break
             lam *= 4
+            attempt += 1
         if on_iteration:
             on_iteration(it, cost)
         if not improved:
             # no damping found a lower cost: a minimum when the least damped step promised no more than the
             # tolerance, else a stall (a valley Gauss-Newton's model does not hold in), which is not convergence
-            converged = stalled_at_minimum(promise, cost, tol if fast_tol is None else max(tol, fast_tol))
+            converged = stalled_at_minimum(promise, cost, stop_tol)
             break
         if done:
             converged = True
@@ -175,7 +179,15 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
 
 
-LAM_MIN = 1e-12
+LAM_START, LAM_MIN = 1e-3, 1e-12     # the damping a fit starts with, and the least it is ever lowered to
+MIN_ATTEMPTS = 12
+STALL_DAMPING = 1e3
+"""An iteration raises its damping fourfold per rejected step, at least :data:`MIN_ATTEMPTS` times and on until it
+exceeds :data:`STALL_DAMPING` (steps a thousandth of Gauss-Newton's along each scaled coordinate); a fit no damping
+up to there lowers is stalled. Why not only twelve attempts: after a run of good steps the damping can sit near
+:data:`LAM_MIN`, twelve quadruplings then end near 2e-5, and the fit stopped there as stalled. A real walking trial's
+sparse leg (151 frames) stopped so at 3733 mm², 12 iterations in, where the same fit with its damping reset went on to
+2230 mm² in 24 more: ``diagnose`` had judged its gap, and named an effect, from the stalled fit."""
 GOOD_STEP, POOR_STEP = 0.75, 0.25
 
 
@@ -184,6 +196,15 @@ def promised_drop(g, h, dq, dc, damp_q, damp_c) -> float:
     gradients (g per frame, h of the constants) as the normal equations give them (half the cost's gradient) and D the
     damping added to the diagonal (``(N + D)δ = −[g; h]`` makes ``−2gᵀδ − δᵀNδ`` equal to it)."""
     return float(-(np.sum(g * dq) + h @ dc) + np.sum(damp_q * dq * dq) + damp_c @ (dc * dc))
+
+
+def model_held(drop: float, promised: float) -> bool:
+    """Whether an accepted step lowered the cost by more than :data:`POOR_STEP` of what its Gauss-Newton model
+    promised (:func:`promised_drop`). Only then does a small drop say the minimum is near: a step that delivers a
+    sliver of its promise has met the valley's curvature, not its floor. A real walking trial's sparse leg, 4
+    iterations in, lowered the cost by 0.49 mm² of a promised 123 after a drop of 203; read as fast convergence, the
+    fit stopped at 4489 mm² and was called converged, where going on reached 2526 mm²."""
+    return drop > POOR_STEP * promised
 
 
 def stalled_at_minimum(promise: float, cost: float, tol: float) -> bool:
