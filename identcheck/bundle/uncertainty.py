@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from identcheck.bundle.chain import _prepare, information_at
-from identcheck.bundle.gauge import gauge_basis
+from identcheck.bundle.gauge import gauge_basis, turning_blocks
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import apply_step, forward, joint_offsets, n_const, null_count, tangents
 from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
@@ -133,21 +133,22 @@ def moves_along_free(grad: np.ndarray, null: np.ndarray, undetermined: int, tol:
     return bool(n > 0 and np.max(np.abs(grad @ null)) > tol * n)
 
 
-def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
-                       basis: np.ndarray | None = None) -> tuple[np.ndarray, int, np.ndarray]:
-    """Pseudo-inverse of the information, Jacobi-scaled first so that millimetres and radians compare;
-    the number of directions left out beyond ``gauge`` (the data leave those undetermined); and those
-    directions, (P, k) unit columns. Directions the data barely determine stay in, with the large
-    variances they deserve.
+def gauge_free_inverse(S: np.ndarray, gauge: int | None = None, basis: np.ndarray | None = None,
+                       blocks: list | None = None) -> tuple[np.ndarray, int, np.ndarray]:
+    """Pseudo-inverse of the information, scaled first so that millimetres and radians compare (by
+    :func:`block_scaled` over ``blocks``, column by column without them); the number of directions left out
+    beyond ``gauge`` (the data leave those undetermined); and those directions, (P, k) unit columns. Directions the
+    data barely determine stay in, with the large variances they deserve.
 
     With ``basis`` (P, g), the gauge written out (:func:`identcheck.bundle.gauge.gauge_basis`), those directions
     are left out exactly and the eigenvalue cutoff judges only the rest (see that module for why); a basis the
     information does not annihilate (to :data:`GAUGE_TOL` of its scaled diagonal) is not a gauge, and the cutoff
-    alone decides as without one."""
-    scaled, d = jacobi_scaled(S)
+    alone decides as without one. With ``blocks``, the groups of columns a change of body frames turns together
+    (:func:`identcheck.bundle.gauge.turning_blocks`), the cutoff reads the same in every choice of frames."""
+    scaled, down, up = block_scaled(S, blocks if blocks is not None else [np.array([k]) for k in range(len(S))])
     N = np.zeros((len(S), 0))
     if basis is not None and basis.shape[1]:
-        written = np.linalg.qr(basis * d[:, None])[0]
+        written = np.linalg.qr(up @ basis)[0]
         N = written if np.max(np.abs(scaled @ written)) <= GAUGE_TOL else N
     if N.shape[1]:
         rest = np.linalg.svd(N, full_matrices=True)[0][:, N.shape[1]:]      # orthonormal complement of the gauge
@@ -156,19 +157,44 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None,
     else:
         w, U = np.linalg.eigh(scaled)
     keep = determined_directions(w)
-    inv = (U[:, keep] / w[keep]) @ U[:, keep].T
+    inv = down @ ((U[:, keep] / w[keep]) @ U[:, keep].T) @ down
     dropped = int((~keep).sum())
-    null = np.column_stack([N, U[:, ~keep]]) / d[:, None]
+    null = down @ np.column_stack([N, U[:, ~keep]])
     null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
     if N.shape[1] or gauge is None:
-        return inv / np.outer(d, d), dropped, null
-    return inv / np.outer(d, d), max(dropped - gauge, 0), null
+        return inv, dropped, null
+    return inv, max(dropped - gauge, 0), null
 
 
 def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, int, np.ndarray]:
     """:func:`gauge_free_inverse` of a chain's information ``S`` at ``state``, its gauge written out
-    (:func:`identcheck.bundle.gauge.gauge_basis`; ``terms``: the fit's effect terms)."""
-    return gauge_free_inverse(S, null_count(chain, terms), gauge_basis(chain, state, len(S), terms))
+    (:func:`identcheck.bundle.gauge.gauge_basis`; ``terms``: the fit's effect terms) and scaled by the blocks its
+    frames turn (:func:`identcheck.bundle.gauge.turning_blocks`)."""
+    return gauge_free_inverse(S, null_count(chain, terms), gauge_basis(chain, state, len(S), terms),
+                              turning_blocks(chain, terms))
+
+
+BLOCK_FLOOR = 1e-6
+"""In :func:`block_scaled`, a direction inside a block that holds less than this share of the block's largest
+information is scaled as if it held this share: a direction the data do not see at all (roundoff, 1e-16 of the
+block) then stays near 1e-10 after scaling, below :data:`RANK_TOL`, where scaling it to unit size would make it
+look determined."""
+
+
+def block_scaled(S: np.ndarray, blocks: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The symmetric matrix S (P, P) scaled block by block to unit diagonal blocks: ``(D S D, D, D⁻¹)`` with D
+    block-diagonal, each block the inverse square root of S's diagonal block over those columns (its eigenvalues
+    floored at :data:`BLOCK_FLOOR` of their largest; a block without information left at 1). With one column a
+    block this is Jacobi scaling. Turning a block's coordinates (a segment's frame, :func:`turning_blocks`) turns
+    D S D by the same rotation, so its eigenvalues do not change; Jacobi scaling's do."""
+    down, up = np.zeros_like(S), np.zeros_like(S)
+    for cols in blocks:
+        w, V = np.linalg.eigh(S[np.ix_(cols, cols)])
+        top = w.max() if len(w) else 0.0
+        w = np.maximum(w, BLOCK_FLOOR * top) if top > 0 else np.ones_like(w)
+        down[np.ix_(cols, cols)] = (V / np.sqrt(w)) @ V.T
+        up[np.ix_(cols, cols)] = (V * np.sqrt(w)) @ V.T
+    return down @ S @ down, down, up
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

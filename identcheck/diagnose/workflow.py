@@ -21,6 +21,7 @@ from identcheck.io.jsonable import plain
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
+from identcheck.bundle.gauge import turning_blocks
 from identcheck.bundle.model import null_count
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.start import better_start, start_state
@@ -244,14 +245,14 @@ class Diagnosis:
 def undetermined(h: Hypothesis) -> int:
     """Directions of the constants the data leave undetermined beyond the gauge (0: identifiable).
 
-    Floating point on the fitted information matrix, Jacobi-scaled; a practical check that an adopted
-    effect does not trade off against the joint parameters, not a structural certificate.
+    Floating point on the fitted information matrix, scaled by the blocks a change of frames turns; a practical
+    check that an adopted effect does not trade off against the joint parameters, not a structural certificate.
     """
     S = information(h.fit, h.data, h.weights)
     if not np.isfinite(S).all():
         return len(S)
     try:
-        return gauge_free_inverse(S, null_count(h.chain, h.terms))[1]
+        return gauge_free_inverse(S, null_count(h.chain, h.terms), blocks=turning_blocks(h.chain, h.terms))[1]
     except np.linalg.LinAlgError:
         return len(S)
 
@@ -596,7 +597,8 @@ def marker_distances(ctx: Context, h: Hypothesis, S: np.ndarray | None = None) -
     {joint: {marker: (distance, sd)}}."""
     ch, s = h.chain, h.fit.state
     S = information(h.fit, h.data, h.weights) if S is None else S
-    cov = ctx.noise.sigma_mm ** 2 * gauge_free_inverse(S, null_count(ch, h.terms))[0]
+    inverse = gauge_free_inverse(S, null_count(ch, h.terms), blocks=turning_blocks(ch, h.terms))[0]
+    cov = ctx.noise.sigma_mm ** 2 * inverse
     return {j: {m: (d, float(np.sqrt(max(g @ cov @ g, 0.0)))) for m, (d, g) in per.items()}
             for j, per in distance_gradients(ch, s, len(S)).items()}
 
