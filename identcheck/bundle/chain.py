@@ -150,8 +150,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 lam = max(lam * damping_factor(drop, promised), LAM_MIN)
                 rate = drop / last_drop if last_drop else 1.0
                 fast = rate <= FAST_RATE and attempt == 0     # a drop made small by raised damping says nothing
-                # a small drop ends the fit only where the step's model held (see :data:`POOR_STEP`)
-                done = model_held(drop, promised) and (drop <= tol * max(cost, 1e-300) or (
+                # a small drop ends the fit only where the step's model held or promised no more than the tolerance
+                done = small_drop_ends(drop, promised, cost, stop_tol) and (drop <= tol * max(cost, 1e-300) or (
                     fast and drop * rate / (1 - rate) <= (tol if fast_tol is None else fast_tol) * max(new, 1e-300)))
                 if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
@@ -198,13 +198,15 @@ def promised_drop(g, h, dq, dc, damp_q, damp_c) -> float:
     return float(-(np.sum(g * dq) + h @ dc) + np.sum(damp_q * dq * dq) + damp_c @ (dc * dc))
 
 
-def model_held(drop: float, promised: float) -> bool:
-    """Whether an accepted step lowered the cost by more than :data:`POOR_STEP` of what its Gauss-Newton model
-    promised (:func:`promised_drop`). Only then does a small drop say the minimum is near: a step that delivers a
-    sliver of its promise has met the valley's curvature, not its floor. A real walking trial's sparse leg, 4
-    iterations in, lowered the cost by 0.49 mm² of a promised 123 after a drop of 203; read as fast convergence, the
-    fit stopped at 4489 mm² and was called converged, where going on reached 2526 mm²."""
-    return drop > POOR_STEP * promised
+def small_drop_ends(drop: float, promised: float, cost: float, tol: float) -> bool:
+    """Whether a small drop of the cost may end the fit: where the accepted step lowered the cost by more than
+    :data:`POOR_STEP` of what its Gauss-Newton model promised (:func:`promised_drop`), or where the model itself
+    promised at most `tol` times the cost (what is left is then below what the fit was asked to resolve, as in
+    :func:`stalled_at_minimum`). A step that delivers a sliver of a larger promise has met the valley's curvature,
+    not its floor: a real walking trial's sparse leg, 4 iterations in, lowered the cost by 0.49 mm² of a promised
+    123 after a drop of 203; read as fast convergence, the fit stopped at 4489 mm² and was called converged, where
+    going on reached 2526 mm²."""
+    return drop > POOR_STEP * promised or promised <= tol * max(cost, 1e-300)
 
 
 def stalled_at_minimum(promise: float, cost: float, tol: float) -> bool:

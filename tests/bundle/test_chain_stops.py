@@ -63,12 +63,15 @@ def test_a_fit_whose_damping_starts_at_its_floor_reaches_the_usual_minimum(seed)
     assert abs(low.rss - usual.rss) <= 1e-6 * usual.rss
 
 
-@settings(max_examples=30, deadline=None)
-@given(promised=st.floats(1e-9, 1e9), share=st.floats(0.0, 2.0))
-def test_a_small_drop_counts_only_where_the_model_held(promised, share):
-    """A step that kept more than :data:`POOR_STEP` of its promise says its model held; one that kept less does not,
-    however small its drop."""
-    assert chain_mod.model_held(share * promised, promised) == (share * promised > chain_mod.POOR_STEP * promised)
+@settings(max_examples=50, deadline=None)
+@given(promised=st.floats(1e-9, 1e9), share=st.floats(0.0, 2.0), cost=st.floats(1e-3, 1e9),
+       tol=st.floats(1e-12, 1e-3))
+def test_a_small_drop_ends_a_fit_only_where_the_model_held_or_promised_nothing(promised, share, cost, tol):
+    """A step that kept more than :data:`POOR_STEP` of its promise may end the fit on a small drop, and so may one
+    whose model promised at most the tolerance; one that kept less of a larger promise may not, however small its
+    drop."""
+    held = share * promised > chain_mod.POOR_STEP * promised
+    assert chain_mod.small_drop_ends(share * promised, promised, cost, tol) == (held or promised <= tol * cost)
 
 
 def _walk1_sparse():
