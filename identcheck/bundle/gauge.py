@@ -83,10 +83,12 @@ def turning_blocks(chain, terms: Terms | None = None) -> list:
     marker's or a centre's effect offsets; every other column (an extra rotation's profile, a world field's scale)
     alone. Moving a frame's origin changes none of the constants' information (the per-frame poses take it up).
 
-    What for: a cutoff on the eigenvalues of the information scaled block by block
+    What for: a cutoff on the eigenvalues of the information scaled with one scale a block
     (:func:`identcheck.bundle.uncertainty.block_scaled`) reads the same in every choice of frames, where scaling
     column by column does not (a one-marker knee's weakest direction read 9e-9 of the largest in the fit's own
-    frames and 8e-12 to 4e-11 in turned ones, against a cutoff of 1e-9)."""
+    frames and 8e-12 to 4e-11 in turned ones, against a cutoff of 1e-9). Not with a hinge's second rotation
+    (``terms.rotations``): its angle is measured from a fixed tangent of the axis, so a turn of the parent's frame
+    mixes the axis' steps into it (:func:`gauge_basis` writes no gauge then either)."""
     terms = terms or Terms()
     offsets = joint_offsets(chain)
     blocks = [np.arange(3 * m, 3 * m + 3) for m in range(chain.n_markers)]

@@ -145,10 +145,10 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None, basis: np.ndarra
     information does not annihilate (to :data:`GAUGE_TOL` of its scaled diagonal) is not a gauge, and the cutoff
     alone decides as without one. With ``blocks``, the groups of columns a change of body frames turns together
     (:func:`identcheck.bundle.gauge.turning_blocks`), the cutoff reads the same in every choice of frames."""
-    scaled, down, up = block_scaled(S, blocks if blocks is not None else [np.array([k]) for k in range(len(S))])
+    scaled, d = block_scaled(S, blocks) if blocks is not None else jacobi_scaled(S)
     N = np.zeros((len(S), 0))
     if basis is not None and basis.shape[1]:
-        written = np.linalg.qr(up @ basis)[0]
+        written = np.linalg.qr(basis * d[:, None])[0]
         N = written if np.max(np.abs(scaled @ written)) <= GAUGE_TOL else N
     if N.shape[1]:
         rest = np.linalg.svd(N, full_matrices=True)[0][:, N.shape[1]:]      # orthonormal complement of the gauge
@@ -157,13 +157,13 @@ def gauge_free_inverse(S: np.ndarray, gauge: int | None = None, basis: np.ndarra
     else:
         w, U = np.linalg.eigh(scaled)
     keep = determined_directions(w)
-    inv = down @ ((U[:, keep] / w[keep]) @ U[:, keep].T) @ down
+    inv = (U[:, keep] / w[keep]) @ U[:, keep].T
     dropped = int((~keep).sum())
-    null = down @ np.column_stack([N, U[:, ~keep]])
+    null = np.column_stack([N, U[:, ~keep]]) / d[:, None]
     null = null / np.maximum(np.linalg.norm(null, axis=0), 1e-300)
     if N.shape[1] or gauge is None:
-        return inv, dropped, null
-    return inv, max(dropped - gauge, 0), null
+        return inv / np.outer(d, d), dropped, null
+    return inv / np.outer(d, d), max(dropped - gauge, 0), null
 
 
 def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, int, np.ndarray]:
@@ -174,27 +174,28 @@ def chain_inverse(chain, state, S: np.ndarray, terms=None) -> tuple[np.ndarray, 
                               turning_blocks(chain, terms))
 
 
-BLOCK_FLOOR = 1e-6
-"""In :func:`block_scaled`, a direction inside a block that holds less than this share of the block's largest
-information is scaled as if it held this share: a direction the data do not see at all (roundoff, 1e-16 of the
-block) then stays near 1e-10 after scaling, below :data:`RANK_TOL`, where scaling it to unit size would make it
-look determined."""
+def block_scaled(S: np.ndarray, blocks: list) -> tuple[np.ndarray, np.ndarray]:
+    """The symmetric matrix S (P, P) scaled as :func:`jacobi_scaled` scales it, but with one scale per block of
+    columns (`blocks`, index arrays covering every column once): the square root of the mean of the block's diagonal.
+    With one column a block this is Jacobi scaling. Turning a block's coordinates (a segment's frame,
+    :func:`identcheck.bundle.gauge.turning_blocks`) turns the scaled matrix by the same rotation, so its eigenvalues
+    do not change; Jacobi scaling's do.
 
-
-def block_scaled(S: np.ndarray, blocks: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The symmetric matrix S (P, P) scaled block by block to unit diagonal blocks: ``(D S D, D, D⁻¹)`` with D
-    block-diagonal, each block the inverse square root of S's diagonal block over those columns (its eigenvalues
-    floored at :data:`BLOCK_FLOOR` of their largest; a block without information left at 1). With one column a
-    block this is Jacobi scaling. Turning a block's coordinates (a segment's frame, :func:`turning_blocks`) turns
-    D S D by the same rotation, so its eigenvalues do not change; Jacobi scaling's do."""
-    down, up = np.zeros_like(S), np.zeros_like(S)
+    Why one scale a block, not the inverse square root of the whole 3 × 3 block (also the same in every frame): a
+    block can hold a direction with no information of its own (a one-marker shank's spin about its knee-marker
+    line; a hinge's rest offset about its axis), whose only information is the per-frame ridge's (1e-12). Whitening
+    the block lifts it (to 1e-5 of the largest eigenvalue with a floor at 1e-6 of the block), and the written-out
+    gauge then failed its check (:data:`GAUGE_TOL`) in some frames, the knee of the one-marker leg reading free in
+    one and determined in another; one scale leaves it where the information puts it."""
+    d = np.empty(len(S))
+    covered = 0
+    diag = np.maximum(np.einsum("ii->i", S), 0.0)
     for cols in blocks:
-        w, V = np.linalg.eigh(S[np.ix_(cols, cols)])
-        top = w.max() if len(w) else 0.0
-        w = np.maximum(w, BLOCK_FLOOR * top) if top > 0 else np.ones_like(w)
-        down[np.ix_(cols, cols)] = (V / np.sqrt(w)) @ V.T
-        up[np.ix_(cols, cols)] = (V * np.sqrt(w)) @ V.T
-    return down @ S @ down, down, up
+        d[cols] = np.sqrt(max(float(diag[cols].mean()), 1e-300))
+        covered += len(cols)
+    if covered != len(S):
+        raise ValueError(f"the blocks cover {covered} columns of a {len(S)}-column information")
+    return S / (d[:, None] * d[None, :]), d
 
 
 def jacobi_scaled(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
