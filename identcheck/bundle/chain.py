@@ -132,7 +132,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         k = A.shape[1]
         scaleA = np.trace(A, axis1=1, axis2=2)[:, None] / k + 1e-12
         improved, promise, attempt = False, np.inf, 0
-        stop_tol = tol if fast_tol is None else max(tol, fast_tol)
+        rate_tol = tol if fast_tol is None else fast_tol
+        stop_tol = max(tol, rate_tol)
         while attempt < MIN_ATTEMPTS or (lam <= STALL_DAMPING and not stalled_at_minimum(promise, cost, stop_tol)):
             damp_q = lam * np.diagonal(A, axis1=1, axis2=2) + 1e-9 * scaleA                  # (F, k)
             damp_c = lam * np.diag(C) + CONSTANT_RIDGE * (np.trace(C) / max(len(C), 1))      # (P,)
@@ -156,7 +157,7 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
                 # a small drop ends the fit only where the least damped step's model held or promised no more
                 done = small_drop_ends(drop, promised, promise, cost, stop_tol, attempt == 0) and (
                     drop <= tol * max(cost, 1e-300)
-                    or (fast and drop * rate / (1 - rate) <= (tol if fast_tol is None else fast_tol) * max(new, 1e-300)))
+                    or (fast and drop * rate / (1 - rate) <= rate_tol * max(new, 1e-300)))
                 if not done and not fast:
                     trial, R2, t2, c2, p2, new = _extend(chain, terms, s, R, dq, dc, y, w, pen,
                                                          (trial, R2, t2, c2, p2, new))
