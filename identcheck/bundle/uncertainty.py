@@ -188,13 +188,14 @@ def block_scaled(S: np.ndarray, blocks: list) -> tuple[np.ndarray, np.ndarray]:
     gauge then failed its check (:data:`GAUGE_TOL`) in some frames, the knee of the one-marker leg reading free in
     one and determined in another; one scale leaves it where the information puts it."""
     d = np.empty(len(S))
-    covered = 0
+    times = np.zeros(len(S), dtype=int)
     diag = np.maximum(np.einsum("ii->i", S), 0.0)
     for cols in blocks:
         d[cols] = np.sqrt(max(float(diag[cols].mean()), 1e-300))
-        covered += len(cols)
-    if covered != len(S):
-        raise ValueError(f"the blocks cover {covered} columns of a {len(S)}-column information")
+        times[cols] += 1
+    if not np.all(times == 1):
+        raise ValueError(f"the blocks cover {int(np.sum(times == 1))} of the information's {len(S)} columns once "
+                         f"(columns {np.flatnonzero(times != 1)[:5].tolist()} are not)")
     return S / (d[:, None] * d[None, :]), d
 
 

@@ -227,3 +227,12 @@ def test_whether_a_direction_is_free_does_not_depend_on_the_gauge(fitted, seed, 
     assert np.array_equal(strong, v1 > 1e-8)
     assert np.allclose(v1[strong], v0[strong], rtol=1e-3)
     assert free0 == free1
+
+
+def test_scaling_blocks_must_cover_every_column_once():
+    """Blocks that leave a column out or take one twice are refused (a column left out would keep an unset scale)."""
+    S = np.eye(4)
+    assert np.allclose(block_scaled(S, [np.array([0, 1]), np.array([2, 3])])[0], S)
+    for bad in ([np.array([0, 1]), np.array([1, 2])], [np.array([0, 1, 2])], [np.array([0, 1, 2, 3]), np.array([3])]):
+        with pytest.raises(ValueError, match="cover"):
+            block_scaled(S, bad)
