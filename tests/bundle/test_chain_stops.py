@@ -44,23 +44,24 @@ def _far_start(chain, data, seed):
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 10_000))
 @example(seed=24)        # twelve quadruplings from the floor stalled this one at 1747 mm² (its minimum: 497)
-def test_a_fit_whose_damping_starts_at_its_floor_reaches_the_usual_minimum(seed):
+def test_a_fit_whose_damping_starts_at_its_floor_ends_at_a_minimum(seed):
     """From a far start, a fit whose damping starts at :data:`LAM_MIN` (where a run of good steps leaves it) ends
-    converged at the minimum the usual starting damping reaches: a rejected step is not a stall until the damping has
-    passed :data:`STALL_DAMPING`."""
+    converged at a minimum: going on from it with the usual starting damping lowers the cost by at most 1e-6 of it. A
+    rejected step is not a stall until the damping has passed :data:`STALL_DAMPING`. (From so far away the two
+    dampings may reach different minima; each must be one.)"""
     sim = simulate(MODEL, n_frames=120, noise_mm=0.5, seed=seed)
     chain = Skeleton.from_model(MODEL)
     data = sim.trial.select(chain.labels).as_array()
     state = _far_start(chain, data, seed)
-    usual = fit_chain(chain, data, state, max_iter=500)
     floor = chain_mod.LAM_START
     try:
         chain_mod.LAM_START = chain_mod.LAM_MIN
         low = fit_chain(chain, data, state, max_iter=500)
     finally:
         chain_mod.LAM_START = floor
-    assert usual.converged and low.converged
-    assert abs(low.rss - usual.rss) <= 1e-6 * usual.rss
+    assert low.converged
+    on = fit_chain(chain, data, low.state, max_iter=500)
+    assert on.rss >= low.rss * (1 - 1e-6)
 
 
 @settings(max_examples=50, deadline=None)
@@ -91,7 +92,7 @@ def test_no_start_of_a_real_sparse_leg_is_called_converged_above_where_it_goes_o
     """Every closed-form start of a real walking trial's sparse leg, fitted as ``fit`` fits it: a fit called converged
     lies within 0.05 χ² (σ̂² units) of where going on leaves it (up to 400 more iterations, stopping only when a drop
     falls below 1e-12 of the cost, no fast-rate exit). One start had been called converged at 4489 mm² four
-    iterations in, by a drop of 0.49 of a promised 123; going on reached 2526 (over 2000 χ²). The geometric-rate exit
+    iterations in, by a drop of 0.49 of a promised 123; going on reached 2526 (1963 mm² lower). The geometric-rate exit
     stops some starts 0.01-0.03 χ² short, the same as before the rules changed."""
     model, chain, data, combos = _walk1_sparse()
     assert len(combos) >= 5
