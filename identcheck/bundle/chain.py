@@ -217,7 +217,7 @@ def small_drop_ends(drop: float, promised: float, least_damped: float, cost: flo
     accepted only after the damping was raised says nothing either, whatever share of its own (damped, so small)
     promise it kept: on the same leg one such step, 2.3e-7 mm² of a damped promise of 2.4e-3 where the least damped
     step had promised 6.9e-3, had ended another start 0.008 χ² above its minimum."""
-    return (first and drop > POOR_STEP * promised) or least_damped <= tol * max(cost, 1e-300)
+    return (first and drop > POOR_STEP * promised) or stalled_at_minimum(least_damped, cost, tol)
 
 
 def stalled_at_minimum(promise: float, cost: float, tol: float) -> bool:

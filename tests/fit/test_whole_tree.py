@@ -111,9 +111,9 @@ def test_a_joint_the_data_leave_free_claims_no_standard_error(examples):
     3.6 mm along it cost Δχ² 0.002). A standard error computed without that direction would be a number about
     nothing (6 mm for walking2's sparse left knee): ``uncertainty_mm`` and the weakest direction's error are null
     exactly for the joints whose distances move along a free direction, and those joints' intervals are unbounded.
-    (A trial whose knee the data leave plainly free, seed 5; at seed 3 the better minimum the arrow-form (2,1) start
-    reaches leaves the knee's weakest direction at 2.2e-9 of the largest, just above the rank cutoff, with a
-    standard error of 1.7 m.)"""
+    (A trial whose knee the data leave plainly free, seed 5. At seed 3 the knee's weakest direction lies near the
+    rank cutoff: with the information scaled column by column it had read above it in the fit's own frames and below
+    it in turned ones; scaled by blocks it reads below it in every frame, tests/bundle/test_weakest_gauge.py.)"""
     from identcheck.bundle.uncertainty import distance_gradients
 
     model = Model.from_toml(examples / "sparse_leg.toml")
