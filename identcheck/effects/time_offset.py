@@ -185,6 +185,44 @@ def usable(hyp, idx: list) -> np.ndarray:
     return np.where((hyp.weights[:, idx] > 0)[..., None], hyp.data[:, idx], np.nan)
 
 
+SHARE_PROBES = 4
+"""Random fields :func:`residual_share` averages."""
+
+
+def residual_share(hyp, idx: list, seed: int = PLACEBO_SEED) -> float:
+    """The share of the noise on the markers `idx` that `hyp`'s residual keeps: Σ(1 − hᵢᵢ) over their seen samples'
+    coordinates, hᵢᵢ the leverage of a refit (:class:`~identcheck.bundle.score_test.RefitProjection`), over their
+    number. Estimated from :data:`SHARE_PROBES` random ±1 fields on those samples (a fixed seed), each the squared norm
+    a refit leaves of it over its own: their expectation is that share (Hutchinson's trace estimate).
+
+    Why: what removing noise from those samples (interpolating between frames, setting samples aside) takes off the
+    residual's sum of squares is that much of what it takes off the samples; the rest of their noise the poses absorb
+    whether or not it is there. A root pelvis of three markers keeps about a third (each frame's pose takes six of
+    their nine coordinates): charged the whole, a pelvis 1.42 frames late in gait (21.6 mm) paid 2 433 criterion units
+    for interpolating and lost to a moving hip centre of ten parameters (held-out draw 74, trial 48)."""
+    seen = np.zeros(hyp.weights.shape, dtype=bool)
+    seen[:, idx] = hyp.weights[:, idx] > 0
+    n = 3 * float(np.sum(np.where(seen, hyp.weights, 0.0)))
+    if n <= 0:
+        return 1.0
+    rng = np.random.default_rng([seed, *idx])
+    fields = (np.where(seen[..., None], rng.choice([-1.0, 1.0], size=seen.shape + (3,)), 0.0)
+              for _ in range(SHARE_PROBES))
+    kept = unabsorbed(hyp.fit, hyp.weights, fields, hyp.projection)
+    return float(np.clip(np.mean(kept) / n, 0.0, 1.0))
+
+
+def noise_charge(ctx, hyp, idx: list, tau: float, lost: np.ndarray, share: float) -> float:
+    """What shifting the markers `idx` by `tau` (s) takes off `hyp`'s residual from noise alone, in parameters (units
+    of ln 3N): interpolating between frames averages away :func:`interpolation_loss` of each moved sample's noise, and
+    a sample moved out of view (`lost`, (F, M)) takes all of its own, of which the residual keeps the `share`
+    (:func:`residual_share`). Charged, so that a delay gains nothing on average from noise it smooths or drops."""
+    seen = hyp.weights > 0
+    moved = int(np.sum(seen[:, idx] & ~lost[:, idx]))
+    noise = moved * interpolation_loss(tau * ctx.rate_hz) + int(np.sum(lost & seen))
+    return 3 * share * noise / np.log(ctx.n_obs)
+
+
 def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
     """The standard deviation, in units of σ², of what shifting the markers `idx` by `frames` (whole frames; under half
     a frame, one frame its way) gains by re-aligning the noise alone. Measured on a placebo: the model's own
@@ -437,13 +475,14 @@ class TimeOffset(Effect):
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = nearest_whole(tau * ctx.rate_hz)
-        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True)
+        share = residual_share(hyp, idx)
+        current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True, share=share)
         fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 
         def scored(frames: float) -> float:
             t = frames / ctx.rate_hz
             if t not in fitted:
-                fit = self._shifted_fit(ctx, hyp, current, idx, t)
+                fit = self._shifted_fit(ctx, hyp, current, idx, t, share=share)
                 fitted[t] = fit, score(ctx, fit, hyp)
             return fitted[t][1]
 
@@ -484,18 +523,20 @@ class TimeOffset(Effect):
         return 1.0
 
     @staticmethod
-    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False):
+    def _shifted_fit(ctx, hyp, current, idx, tau: float, fresh: bool = False, share: float | None = None):
         """`hyp` refitted (from `current`) with the markers `idx` shifted back by `tau`; its parameter count
         charged for the delay, the samples the shift moves out of view and what interpolation removes from noise.
 
         A sample the shift would take from beyond the end of its marker's visible span has nothing to be compared
-        with and is set aside; it is charged what noise alone would leave in it (3 in units of σ², so that setting
+        with and is set aside; it is charged what noise alone would leave in it (in units of σ², so that setting
         it aside gains nothing on average), not three parameters as a sample set aside for being wrong is (31 units):
         a pelvis 3 frames late lost 12 samples and 375 units, more than the whole of what the rigid model could not
         absorb of it (366; held-out draw 46, trial 109). Kept at their measured values instead, they were named
         outliers after the delay (a thigh 46 ms late at speed). A pose left without markers by it is not a saving:
-        the delay leaves the model's parameters as they were. `fresh`: refitted from `current` and from a fresh
-        start, the better kept (:meth:`Hypothesis.refit_corrected`)."""
+        the delay leaves the model's parameters as they were. Both charges count only the `share` of those markers'
+        noise the residual keeps (:func:`residual_share`, computed when not given); the rest the poses absorb with or
+        without it. `fresh`: refitted from `current` and from a fresh start, the better kept
+        (:meth:`Hypothesis.refit_corrected`)."""
         base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
@@ -505,13 +546,8 @@ class TimeOffset(Effect):
             new = current.refit_corrected(ctx, data, weights, max_iter=SHIFTED_ITER)
         else:
             new = current.refit(data=data, weights=weights, max_iter=SHIFTED_ITER)
-        # interpolating between frames averages the noise away in part, which would pass for explained residual:
-        # what it removes from noise alone is charged as parameters
-        moved = int(np.sum((hyp.weights[:, idx] > 0) & ~lost[:, idx]))
-        per_param = np.log(ctx.n_obs)
-        smoothed = 3 * moved * interpolation_loss(tau * ctx.rate_hz) / per_param
-        out_of_view = 3 * int(np.sum(lost & (hyp.weights > 0))) / per_param
-        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + out_of_view + smoothed
+        share = residual_share(hyp, idx) if share is None else share
+        new.extra_params = hyp.n_params() - new.fit.n_params + 1 + noise_charge(ctx, hyp, idx, tau, lost, share)
         return new
 
     def evidence(self, ctx, before, after, proposal) -> dict:
