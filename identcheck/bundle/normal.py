@@ -48,6 +48,9 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
         base = None if b.base is None or not grp.base_runs else b.base.reshape(F, n, -1)
         if unit:
             Jf, Gf, rf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb), r[:, idx].reshape(F, n)
+        elif gradients_only:        # JᵀWr: the weights on the residuals alone (the Jacobians are not copied)
+            Jf, Gf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb)
+            rf = r[:, idx].reshape(F, n) * np.repeat(w[:, idx], 3, axis=1)
         else:
             sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]

@@ -84,6 +84,11 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
         h_want += Gf.T @ rf
     np.testing.assert_allclose(C, C_want, atol=1e-9 * (1 + np.abs(C_want).max()))
     np.testing.assert_allclose(h, h_want, atol=1e-9 * (1 + np.abs(h_want).max()))
+    # the gradients alone (weights on the residuals, not on the Jacobians) are the same sums
+    for per_frame, want in ((False, h_want), (True, h_frames)):
+        g_only, h_only = normal_equations(lay, blocks, r, w, per_frame=per_frame, gradients_only=True)
+        np.testing.assert_allclose(g_only, g, atol=1e-9 * (1 + np.abs(g).max()))
+        np.testing.assert_allclose(h_only, want, atol=1e-9 * (1 + np.abs(want).max()))
     # the coupling kept by structure (term columns a base times a basis) eliminates the frames as B written out does
     from identcheck.bundle import coupling as kept
     from identcheck.bundle.normal import eliminate_frames, ridged
