@@ -26,18 +26,15 @@ def _add(target: np.ndarray, rows: tuple, cols: tuple | None, x: np.ndarray) -> 
             target[..., r0:r1, c0:c1] += x[..., a:a + r1 - r0, b:b + c1 - c0]
 
 
-def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False,
-                     gradients_only: bool = False):
+def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
     """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module), B as a
-    :class:`~identcheck.bundle.coupling.Coupling` (its term columns a base times a basis, never written out); with
-    `gradients_only`, (g, h) alone (the products A, B and C do not depend on `r`: a caller projecting several
-    fields builds them once)."""
+    :class:`~identcheck.bundle.coupling.Coupling` (its term columns a base times a basis, never written out). The
+    gradients of many fields at once, without the products: :func:`field_gradients`."""
     F, k, P = r.shape[0], lay.k, lay.P
     plain_cols = lay.plain
     D = sum(t.d for t in lay.kron)
-    if not gradients_only:
-        A, C = np.zeros((F, k, k)), np.zeros((P, P))
-        Bp, Bb = np.zeros((F, k, len(plain_cols))), np.zeros((F, k, D))
+    A, C = np.zeros((F, k, k)), np.zeros((P, P))
+    Bp, Bb = np.zeros((F, k, len(plain_cols))), np.zeros((F, k, D))
     g, h = np.zeros((F, k)), np.zeros((F, P) if per_frame else P)
     unit = bool(np.all(w == 1.0))        # every sample seen at unit weight (most trials): no weighted copies
     for b in blocks:
@@ -48,9 +45,6 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
         base = None if b.base is None or not grp.base_runs else b.base.reshape(F, n, -1)
         if unit:
             Jf, Gf, rf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb), r[:, idx].reshape(F, n)
-        elif gradients_only:        # JᵀWr: the weights on the residuals alone (the Jacobians are not copied)
-            Jf, Gf = b.J.reshape(F, n, kb), b.G.reshape(F, n, pb)
-            rf = r[:, idx].reshape(F, n) * np.repeat(w[:, idx], 3, axis=1)
         else:
             sw = np.repeat(np.sqrt(w[:, idx]), 3, axis=1)                      # (F, n)
             Jf, Gf = b.J.reshape(F, n, kb) * sw[..., None], b.G.reshape(F, n, pb) * sw[..., None]
@@ -58,19 +52,54 @@ def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, pe
             base = None if base is None else base * sw[..., None]
         Jt, Gt = Jf.transpose(0, 2, 1), Gf.transpose(0, 2, 1)
         G2 = Gf.reshape(F * n, pb)
-        if not gradients_only:
-            Jt = np.ascontiguousarray(Jt)            # a contiguous Jᵀ: JᵀJ at BLAS speed
-            _add(A, fr, fr, Jt @ Jf)
-            plain = Gf if len(grp.plain_at) == pb else Gf[..., grp.plain_at]
-            _add(Bp, fr, grp.plain_runs, Jt @ plain)
-            if base is not None:
-                _add(Bb, fr, grp.base_runs, Jt @ base)
-            _add(C, cr, cr, G2.T @ G2)
+        Jt = np.ascontiguousarray(Jt)            # a contiguous Jᵀ: JᵀJ at BLAS speed
+        _add(A, fr, fr, Jt @ Jf)
+        plain = Gf if len(grp.plain_at) == pb else Gf[..., grp.plain_at]
+        _add(Bp, fr, grp.plain_runs, Jt @ plain)
+        if base is not None:
+            _add(Bb, fr, grp.base_runs, Jt @ base)
+        _add(C, cr, cr, G2.T @ G2)
         _add(g, fr, None, (Jt @ rf[..., None])[..., 0])
         _add(h, cr, None, (Gt @ rf[..., None])[..., 0] if per_frame else G2.T @ rf.reshape(-1))
-    if gradients_only:
-        return g, h
     return A, Coupling(Bp, plain_cols, Bb, lay.kron, P), C, g, h
+
+
+def field_gradients(lay: Layout, blocks: list, V: np.ndarray, w: np.ndarray, per_frame: bool = False):
+    """The gradients of Q fields at once, V (F, M, 3, Q) (the fields along the last axis) with weights `w` (F, M):
+    ``g = JᵀWv`` per frame (F, k, Q) and ``h = Σ_f GᵀWv`` (P, Q) (per frame (F, P, Q)); what
+    :func:`normal_equations` gives as g and h for each field as its residual, without the products A, B and C,
+    which do not depend on it (a caller projecting many fields builds them once).
+
+    Why together: one field at a time, each block's Jacobian is multiplied by a vector per frame (memory-bound); Q
+    fields make it a product of matrices, and the weights go on the fields, so the Jacobians are not copied."""
+    F, M, _, Q = V.shape
+    flat = V.reshape(F, 3 * M, Q)
+    g, h = np.zeros((F, lay.k, Q)), np.zeros((F, lay.P, Q) if per_frame else (lay.P, Q))
+    unit = bool(np.all(w == 1.0))
+    for b in blocks:
+        grp = b.group
+        idx, kb, pb = grp.cols, b.J.shape[-1], b.G.shape[-1]
+        n = 3 * len(idx)
+        Vf = flat[:, (3 * np.asarray(idx)[:, None] + np.arange(3)).ravel()]          # (F, n, Q), a copy
+        if not unit:
+            Vf *= np.repeat(w[:, idx], 3, axis=1)[..., None]
+        Jt = b.J.reshape(F, n, kb).transpose(0, 2, 1)
+        _add_rows(g, grp.frame_runs, Jt @ Vf, axis=1)
+        Gf = b.G.reshape(F, n, pb)
+        if per_frame:
+            _add_rows(h, grp.const_runs, Gf.transpose(0, 2, 1) @ Vf, axis=1)
+        else:
+            _add_rows(h, grp.const_runs, Gf.reshape(F * n, pb).T @ Vf.reshape(F * n, Q), axis=0)
+    return g, h
+
+
+def _add_rows(target: np.ndarray, rows: tuple, x: np.ndarray, axis: int) -> None:
+    """``target[rows] += x`` along `axis` (0 or 1), the rows given as :func:`~identcheck.bundle.jacobian.runs`."""
+    for r0, r1, a in rows:
+        if axis == 0:
+            target[r0:r1] += x[a:a + r1 - r0]
+        else:
+            target[:, r0:r1] += x[:, a:a + r1 - r0]
 
 
 def ridged(A: np.ndarray) -> np.ndarray:

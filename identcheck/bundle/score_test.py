@@ -16,17 +16,17 @@ import numpy as np
 
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, forward
-from identcheck.bundle.normal import eliminate_frames, lower_inverse, normal_equations, ridged
+from identcheck.bundle.normal import eliminate_frames, field_gradients, lower_inverse, normal_equations, ridged
 
 
 class RefitProjection:
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
     per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement). :meth:`pieces`
-    takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and unweighted samples set to 0;
-    :meth:`inner` takes two fields' pieces to the inner product of their unabsorbed parts,
-    ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur complement,
-    ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur complement); each
-    field then costs a gradient pass over the blocks it moves."""
+    takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and unweighted samples set to 0
+    (:meth:`pieces_many`, many fields at once); :meth:`gram` takes many fields' pieces to the inner products of their
+    unabsorbed parts, ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur
+    complement, ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur
+    complement); the fields then cost a gradient pass over the blocks they move."""
 
     def __init__(self, fit: Fit, weights: np.ndarray):
         s = fit.state
@@ -42,20 +42,31 @@ class RefitProjection:
     def pieces(self, v: np.ndarray, per_frame: bool = False) -> tuple:
         """``(v0, z, reduced)`` of field `v` (see the class); with `per_frame`, ``reduced`` frame by frame (F, P), its
         sum over the frames the plain one (a field scaled frame by frame, :func:`modulated_score_moments`, weights
-        it)."""
-        w = self.w
-        v0 = np.where((w[..., None] > 0) & np.isfinite(v), v, 0.0)
-        moved = np.any(v0 != 0, axis=(0, 2))            # a block whose markers the field leaves still adds zeros
-        g, h = normal_equations(self.lay, [b for b in self.blocks if moved[b.group.cols].any()], v0, w,
-                                per_frame=per_frame, gradients_only=True)
-        z = np.einsum("fij,fj->fi", self.Linv, g)
-        back = np.einsum("fji,fj->fi", self.Linv, z)                                # L_f⁻ᵀ z_f
-        return v0, z, h - self.B.transposed_times(back, per_frame=per_frame)        # h − Σ_f (L_f⁻¹B_f)ᵀ z_f
+        it). One field's :meth:`pieces_many`."""
+        v0, z, reduced = self.pieces_many(np.asarray(v, dtype=float)[..., None], per_frame)
+        return v0[..., 0], z[..., 0], reduced[..., 0]
 
-    def inner(self, a: tuple, b: tuple) -> float:
-        """The inner product of the unabsorbed parts of two fields, given their :meth:`pieces`."""
-        (va, za, ra), (vb, zb, rb) = a, b
-        return float(np.sum(self.w[..., None] * va * vb)) - float(np.sum(za * zb)) - float(ra @ self.S_plus @ rb)
+    def pieces_many(self, V: np.ndarray, per_frame: bool = False) -> tuple:
+        """:meth:`pieces` of Q fields at once, V (F, M, 3, Q) (the fields along the last axis, :func:`stacked`):
+        ``(V0, Z, reduced)``, V0 (F, M, 3, Q), Z (F, k, Q) and reduced (P, Q), or (F, P, Q) with `per_frame`. Their
+        gradients are taken together (:func:`~identcheck.bundle.normal.field_gradients`), and so are the per-frame
+        solves."""
+        w = self.w
+        V0 = np.where((w[..., None, None] > 0) & np.isfinite(V), V, 0.0)
+        moved = np.any(V0 != 0, axis=(0, 2, 3))          # a block whose markers no field moves would add zeros
+        g, h = field_gradients(self.lay, [b for b in self.blocks if moved[b.group.cols].any()], V0, w, per_frame)
+        z = self.Linv @ g                                                           # L_f⁻¹ g_f (F, k, Q)
+        back = self.Linv.transpose(0, 2, 1) @ z                                     # L_f⁻ᵀ z_f
+        return V0, z, h - self.B.transposed_times(back, per_frame=per_frame)        # h − Σ_f (L_f⁻¹B_f)ᵀ z_f
+
+    def gram(self, V0: np.ndarray, Z: np.ndarray, reduced: np.ndarray) -> np.ndarray:
+        """The Gram matrix (Q, Q) of the unabsorbed parts of Q fields, given their :meth:`pieces_many` (not per
+        frame): ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` between every two (see the class)."""
+        Q = V0.shape[-1]
+        X = V0.reshape(-1, Q)
+        Zf = Z.reshape(-1, Q)
+        G = (X * np.repeat(self.w.reshape(-1), 3)[:, None]).T @ X - Zf.T @ Zf - reduced.T @ self.S_plus @ reduced
+        return (G + G.T) / 2
 
 
 def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | None = None) -> list:
@@ -72,10 +83,39 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | No
     constant offset), and regressing on the whole field read a 40 ms lag of one pelvis marker as 0.5 ms."""
     proj = proj if proj is not None else RefitProjection(fit, weights)
     out = []
+    for V in stacked(fields):
+        V0, Z, reduced = proj.pieces_many(V)
+        Q = V0.shape[-1]
+        wv = np.sum(proj.w[..., None, None] * V0 * V0, axis=(0, 1, 2))
+        out.extend(wv - np.sum(Z.reshape(-1, Q) ** 2, axis=0) - np.einsum("pq,pr,rq->q", reduced, proj.S_plus, reduced))
+    return [float(x) for x in out]
+
+
+FIELD_CHUNK_ENTRIES = 1 << 22
+"""Entries (float64, 32 MiB) of the fields :func:`stacked` puts together at most, beyond a single field: the score
+tests' fields are projected that many at a time (:meth:`RefitProjection.pieces_many`)."""
+
+
+def stacked(fields):
+    """The fields (any iterable of (F, M, 3) arrays, read once) stacked along a last axis, (F, M, 3, Q), at most
+    :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger)."""
+    chunk = []
     for v in fields:
-        p = proj.pieces(v)
-        out.append(proj.inner(p, p))
-    return out
+        v = np.asarray(v, dtype=float)
+        if chunk and (len(chunk) + 1) * v.size > FIELD_CHUNK_ENTRIES:
+            yield np.stack(chunk, axis=-1)
+            chunk = []
+        chunk.append(v)
+    if chunk:
+        yield np.stack(chunk, axis=-1)
+
+
+def _all_pieces(proj: "RefitProjection", fields) -> tuple:
+    """:meth:`RefitProjection.pieces_many` of every field of `fields`, stack by stack, put together."""
+    parts = [proj.pieces_many(V) for V in stacked(fields)]
+    if not parts:
+        return None
+    return tuple(np.concatenate(p, axis=-1) for p in zip(*parts))
 
 
 def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, proj: RefitProjection | None = None
@@ -84,16 +124,8 @@ def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, proj: RefitProj
     :func:`unabsorbed` gives on its diagonal): the normal matrix of a score test that the residual is not
     explained by any combination of the fields, ``explained = nᵀ G⁺ n`` with ``n_i = v_iᵀ W r`` at the fit."""
     proj = proj if proj is not None else RefitProjection(fit, weights)
-    return _gram([proj.pieces(v) for v in fields], proj.inner)
-
-
-def _gram(parts: list, inner) -> np.ndarray:
-    """The symmetric matrix of `inner` between every two of `parts`."""
-    G = np.empty((len(parts), len(parts)))
-    for i in range(len(parts)):
-        for j in range(i, len(parts)):
-            G[i, j] = G[j, i] = inner(parts[i], parts[j])
-    return G
+    parts = _all_pieces(proj, fields)
+    return np.zeros((0, 0)) if parts is None else proj.gram(*parts)
 
 
 def score_statistic(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields: list) -> float:
@@ -119,33 +151,38 @@ def score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray, field_set
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     proj = proj if proj is not None else RefitProjection(fit, weights)
+    wr = (w * r).reshape(-1)
     out = []
     for fields in field_sets:
-        n = np.array([float(np.sum(w * np.nan_to_num(f) * r)) for f in fields])
-        out.append((n, _gram([proj.pieces(v) for v in fields], proj.inner)))
+        parts = _all_pieces(proj, fields)
+        if parts is None:
+            out.append((np.zeros(0), np.zeros((0, 0))))
+            continue
+        out.append((parts[0].reshape(-1, parts[0].shape[-1]).T @ wr, proj.gram(*parts)))
     return out
 
 
 def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, fields, plain_gram: np.ndarray,
                            proj: RefitProjection | None = None):
-    """:func:`score_moments` of one set of fields read one at a time (any iterable of (F, M, 3) arrays), their plain
-    Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of frames): only what a refit
-    absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
+    """:func:`score_moments` of one set of fields read a stack at a time (any iterable of (F, M, 3) arrays,
+    :func:`stacked`), their plain Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of
+    frames): only what a refit absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
     distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     proj = proj if proj is not None else RefitProjection(fit, weights)
+    wr = (w * r).reshape(-1)
     n, Z, reduced = [], [], []
-    for v in fields:
-        v0, z, red = proj.pieces(v)
-        n.append(float(np.sum(w * v0 * r)))
-        Z.append(z.reshape(-1))
-        reduced.append(red)
+    for V in stacked(fields):
+        V0, z, red = proj.pieces_many(V)
+        n.append(V0.reshape(-1, V0.shape[-1]).T @ wr)
+        Z.append(z.reshape(-1, z.shape[-1]).T)
+        reduced.append(red.T)
     if not n:
         return np.zeros(0), np.zeros((0, 0))
-    Z, reduced = np.stack(Z), np.stack(reduced)
+    n, Z, reduced = np.concatenate(n), np.concatenate(Z), np.concatenate(reduced)
     G = np.asarray(plain_gram, dtype=float) - Z @ Z.T - reduced @ proj.S_plus @ reduced.T
-    return np.array(n), (G + G.T) / 2
+    return n, (G + G.T) / 2
 
 
 def quadratic_form(n: np.ndarray, G: np.ndarray) -> float:
@@ -171,7 +208,7 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
     proj = proj if proj is not None else RefitProjection(fit, weights)
     w = proj.w[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    parts = [proj.pieces(u, per_frame=True) for u in carriers]
+    parts = list(zip(*_all_per_frame(proj, carriers)))
     E = len(parts)
     per_frame = np.empty((len(r), E, E))           # ⟨u_e, u_e'⟩ less the per-frame unknowns' part, frame by frame
     for a, (va, za, _) in enumerate(parts):
@@ -186,3 +223,12 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
         G = G - rho @ proj.S_plus @ rho.T
         out.append((np.concatenate([basis.T @ x for x in along]), (G + G.T) / 2))
     return out
+
+
+def _all_per_frame(proj: RefitProjection, fields) -> tuple:
+    """:meth:`RefitProjection.pieces_many` of every field of `fields` with their constants' parts frame by frame,
+    stack by stack, put together, the fields along the first axis."""
+    parts = [proj.pieces_many(V, per_frame=True) for V in stacked(fields)]
+    if not parts:
+        return [], [], []
+    return tuple(np.moveaxis(np.concatenate(p, axis=-1), -1, 0) for p in zip(*parts))

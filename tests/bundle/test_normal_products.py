@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from identcheck.bundle.hypothesis import angle_basis, time_basis
 from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
 from identcheck.bundle.model import State, Terms, forward
-from identcheck.bundle.normal import normal_equations
+from identcheck.bundle.normal import field_gradients, normal_equations
 from identcheck.io.model import Model
 from identcheck.skeleton import Skeleton
 
@@ -84,11 +84,21 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
         h_want += Gf.T @ rf
     np.testing.assert_allclose(C, C_want, atol=1e-9 * (1 + np.abs(C_want).max()))
     np.testing.assert_allclose(h, h_want, atol=1e-9 * (1 + np.abs(h_want).max()))
-    # the gradients alone (weights on the residuals, not on the Jacobians) are the same sums
-    for per_frame, want in ((False, h_want), (True, h_frames)):
-        g_only, h_only = normal_equations(lay, blocks, r, w, per_frame=per_frame, gradients_only=True)
-        np.testing.assert_allclose(g_only, g, atol=1e-9 * (1 + np.abs(g).max()))
-        np.testing.assert_allclose(h_only, want, atol=1e-9 * (1 + np.abs(want).max()))
+    # Bᵀu of several vectors a frame at once: each vector's own
+    u = rng.normal(size=(F, lay.k, 3))
+    for per_frame in (False, True):
+        many = coupling.transposed_times(u, per_frame=per_frame)
+        for q in range(3):
+            one = coupling.transposed_times(u[..., q], per_frame=per_frame)
+            np.testing.assert_allclose(many[..., q], one, atol=1e-9 * (1 + np.abs(one).max()))
+    # the gradients of several fields at once (weights on the fields, not on the Jacobians): each field's own sums
+    V = np.stack([r, rng.normal(size=r.shape), np.zeros_like(r)], axis=-1)
+    for per_frame in (False, True):
+        g_all, h_all = field_gradients(lay, blocks, V, w, per_frame=per_frame)
+        for q in range(V.shape[-1]):
+            _, _, _, g_q, h_q = normal_equations(lay, blocks, V[..., q], w, per_frame=per_frame)
+            np.testing.assert_allclose(g_all[..., q], g_q, atol=1e-9 * (1 + np.abs(g_q).max()))
+            np.testing.assert_allclose(h_all[..., q], h_q, atol=1e-9 * (1 + np.abs(h_q).max()))
     # the coupling kept by structure (term columns a base times a basis) eliminates the frames as B written out does
     from identcheck.bundle import coupling as kept
     from identcheck.bundle.normal import eliminate_frames, ridged
