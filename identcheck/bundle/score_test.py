@@ -39,20 +39,20 @@ class RefitProjection:
         self.S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                # the gauge stays free
         self.Linv = lower_inverse(np.linalg.cholesky(A))                            # A⁻¹ = L⁻ᵀL⁻¹
 
-    def pieces(self, v: np.ndarray, per_frame: bool = False) -> tuple:
-        """``(v0, z, reduced)`` of field `v` (see the class); with `per_frame`, ``reduced`` frame by frame (F, P), its
-        sum over the frames the plain one (a field scaled frame by frame, :func:`modulated_score_moments`, weights
-        it). One field's :meth:`pieces_many`."""
-        v0, z, reduced = self.pieces_many(np.asarray(v, dtype=float)[..., None], per_frame)
-        return v0[..., 0], z[..., 0], reduced[..., 0]
-
-    def pieces_many(self, V: np.ndarray, per_frame: bool = False) -> tuple:
-        """:meth:`pieces` of Q fields at once, V (F, M, 3, Q) (the fields along the last axis, :func:`stacked`):
-        ``(V0, Z, reduced)``, V0 (F, M, 3, Q), Z (F, k, Q) and reduced (P, Q), or (F, P, Q) with `per_frame`. Their
-        gradients are taken together (:func:`~identcheck.bundle.normal.field_gradients`), and so are the per-frame
-        solves."""
+    def pieces_many(self, V: np.ndarray, per_frame: bool = False, owned: bool = False) -> tuple:
+        """Q fields V (F, M, 3, Q) (the fields along the last axis, :func:`stacked`) to ``(V0, Z, reduced)`` (see the
+        class): V0 (F, M, 3, Q), Z (F, k, Q) and reduced (P, Q), or with `per_frame` (F, P, Q), frame by frame, its
+        sum over the frames the plain one (fields scaled frame by frame, :func:`modulated_score_moments`, weight
+        it). Their gradients are taken together (:func:`~identcheck.bundle.normal.field_gradients`), and so are the
+        per-frame solves. `owned`: V is the caller's to overwrite (a stack of :func:`stacked`), and becomes V0."""
         w = self.w
-        V0 = np.where((w[..., None, None] > 0) & np.isfinite(V), V, 0.0)
+        keep = (w[..., None, None] > 0) & np.isfinite(V)
+        if owned:
+            V0 = V
+            V0[~keep] = 0.0
+        else:
+            V0 = np.where(keep, V, 0.0)
+        del keep
         moved = np.any(V0 != 0, axis=(0, 2, 3))          # a block whose markers no field moves would add zeros
         g, h = field_gradients(self.lay, [b for b in self.blocks if moved[b.group.cols].any()], V0, w, per_frame)
         z = self.Linv @ g                                                           # L_f⁻¹ g_f (F, k, Q)
@@ -65,8 +65,14 @@ class RefitProjection:
         Q = V0.shape[-1]
         X = V0.reshape(-1, Q)
         Zf = Z.reshape(-1, Q)
-        G = (X * np.repeat(self.w.reshape(-1), 3)[:, None]).T @ X - Zf.T @ Zf - reduced.T @ self.S_plus @ reduced
+        plain = X.T @ X if self.unit else (X * np.repeat(self.w.reshape(-1), 3)[:, None]).T @ X
+        G = plain - Zf.T @ Zf - reduced.T @ self.S_plus @ reduced
         return (G + G.T) / 2
+
+    @property
+    def unit(self) -> bool:
+        """Every sample at unit weight (most trials): the plain inner products need no weighted copy."""
+        return bool(np.all(self.w == 1.0))
 
 
 def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | None = None) -> list:
@@ -74,7 +80,7 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | No
     so that a caller with many fields can make each as it is used), its weighted squared norm less the part a
     refit of the model absorbs (every unknown, per frame and constant, linearised at `fit`): ``vᵀWv − bᵀN⁺b``
     with N the Gauss-Newton normal matrix and ``b = JᵀWv``, the per-frame unknowns eliminated as in the fit
-    (Schur complement).
+    (Schur complement): the diagonal of :meth:`RefitProjection.gram`, stack by stack.
 
     What a displacement of that shape still leaves in the model's residual: the denominator of a detector that
     regresses the residual on it. At the fit the residual is orthogonal to what a refit absorbs, so the numerator
@@ -84,38 +90,49 @@ def unabsorbed(fit: Fit, weights: np.ndarray, fields, proj: RefitProjection | No
     proj = proj if proj is not None else RefitProjection(fit, weights)
     out = []
     for V in stacked(fields):
-        V0, Z, reduced = proj.pieces_many(V)
-        Q = V0.shape[-1]
-        wv = np.sum(proj.w[..., None, None] * V0 * V0, axis=(0, 1, 2))
-        out.extend(wv - np.sum(Z.reshape(-1, Q) ** 2, axis=0) - np.einsum("pq,pr,rq->q", reduced, proj.S_plus, reduced))
+        out.extend(np.diag(proj.gram(*proj.pieces_many(V, owned=True))))
     return [float(x) for x in out]
 
 
-FIELD_CHUNK_ENTRIES = 1 << 22
-"""Entries (float64, 32 MiB) of the fields :func:`stacked` puts together at most, beyond a single field: the score
-tests' fields are projected that many at a time (:meth:`RefitProjection.pieces_many`)."""
+FIELD_CHUNK_ENTRIES = 1 << 21
+"""Entries (float64, 16 MiB) of the fields :func:`stacked` puts together at most, beyond a single field: the score
+tests' fields are projected that many at a time (:meth:`RefitProjection.pieces_many`). A stack in work costs about
+twice that (the stack, masked in place, and its blocks' weighted copies; with `per_frame`, (F, P, Q) arrays more); a
+caller that keeps every stack's pieces (:func:`score_moments`) keeps the fields themselves, as it always had to for
+their plain Gram matrix."""
 
 
 def stacked(fields):
     """The fields (any iterable of (F, M, 3) arrays, read once) stacked along a last axis, (F, M, 3, Q), at most
-    :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger)."""
-    chunk = []
+    :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger); each stack a new array,
+    filled as the fields come (the fields already stacked are not held twice)."""
+    buf, q = None, 0
     for v in fields:
         v = np.asarray(v, dtype=float)
-        if chunk and (len(chunk) + 1) * v.size > FIELD_CHUNK_ENTRIES:
-            yield np.stack(chunk, axis=-1)
-            chunk = []
-        chunk.append(v)
-    if chunk:
-        yield np.stack(chunk, axis=-1)
+        if buf is None:
+            buf, q = np.empty(v.shape + (max(1, FIELD_CHUNK_ENTRIES // max(v.size, 1)),)), 0
+        buf[..., q] = v
+        q += 1
+        if q == buf.shape[-1]:
+            yield buf
+            buf = None
+    if buf is not None and q:
+        yield buf[..., :q]
 
 
-def _all_pieces(proj: "RefitProjection", fields) -> tuple:
-    """:meth:`RefitProjection.pieces_many` of every field of `fields`, stack by stack, put together."""
-    parts = [proj.pieces_many(V) for V in stacked(fields)]
+def _all_pieces(proj: "RefitProjection", fields, per_frame: bool = False) -> tuple | None:
+    """:meth:`RefitProjection.pieces_many` of every field of `fields`, stack by stack, put together along the last
+    axis (None for no field)."""
+    parts = [proj.pieces_many(V, per_frame, owned=True) for V in stacked(fields)]
     if not parts:
         return None
-    return tuple(np.concatenate(p, axis=-1) for p in zip(*parts))
+    if len(parts) == 1:
+        return parts[0]
+    out = []
+    while parts[0]:                                     # one piece at a time, each stack's copy let go as it is joined
+        out.append(np.concatenate([p[0] for p in parts], axis=-1))
+        parts = [p[1:] for p in parts]
+    return tuple(out)
 
 
 def unabsorbed_gram(fit: Fit, weights: np.ndarray, fields: list, proj: RefitProjection | None = None
@@ -208,7 +225,8 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
     proj = proj if proj is not None else RefitProjection(fit, weights)
     w = proj.w[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
-    parts = list(zip(*_all_per_frame(proj, carriers)))
+    stack = _all_pieces(proj, carriers, per_frame=True)
+    parts = [] if stack is None else [tuple(x[..., e] for x in stack) for e in range(stack[0].shape[-1])]
     E = len(parts)
     per_frame = np.empty((len(r), E, E))           # ⟨u_e, u_e'⟩ less the per-frame unknowns' part, frame by frame
     for a, (va, za, _) in enumerate(parts):
@@ -223,12 +241,3 @@ def modulated_score_moments(fit: Fit, weights: np.ndarray, residual: np.ndarray,
         G = G - rho @ proj.S_plus @ rho.T
         out.append((np.concatenate([basis.T @ x for x in along]), (G + G.T) / 2))
     return out
-
-
-def _all_per_frame(proj: RefitProjection, fields) -> tuple:
-    """:meth:`RefitProjection.pieces_many` of every field of `fields` with their constants' parts frame by frame,
-    stack by stack, put together, the fields along the first axis."""
-    parts = [proj.pieces_many(V, per_frame=True) for V in stacked(fields)]
-    if not parts:
-        return [], [], []
-    return tuple(np.moveaxis(np.concatenate(p, axis=-1), -1, 0) for p in zip(*parts))

@@ -195,11 +195,13 @@ def residual_share(hyp, idx: list, seed: int = PLACEBO_SEED) -> float:
     number. Estimated from :data:`SHARE_PROBES` random ±1 fields on those samples (a fixed seed), each the squared norm
     a refit leaves of it over its own: their expectation is that share (Hutchinson's trace estimate).
 
-    Why: what removing noise from those samples (interpolating between frames, setting samples aside) takes off the
-    residual's sum of squares is that much of what it takes off the samples; the rest of their noise the poses absorb
-    whether or not it is there. A root pelvis of three markers keeps about a third (each frame's pose takes six of
-    their nine coordinates): charged the whole, a pelvis 1.42 frames late in gait (21.6 mm) paid 2 433 criterion units
-    for interpolating and lost to a moving hip centre of ten parameters (held-out draw 74, trial 48)."""
+    Why: what smoothing the noise of those samples (interpolating between frames) takes off the residual's sum of
+    squares is that much of what it takes off the samples; the rest of their noise the poses absorb whether or not it
+    is there. A root pelvis of three markers keeps about half (each frame's pose takes six of their nine coordinates,
+    and the hip ties it to the thigh): charged the whole, a pelvis 1.42 frames late in gait (21.6 mm) paid 2 433
+    criterion units for interpolating and lost to a moving hip centre of ten parameters (held-out draw 74, trial 48).
+    (A sample set aside is another matter: deleting it takes its whole σ² a coordinate off the residual, whatever its
+    leverage, since the poses no longer absorb any of it: :func:`noise_charge`.)"""
     seen = np.zeros(hyp.weights.shape, dtype=bool)
     seen[:, idx] = hyp.weights[:, idx] > 0
     n = 3 * float(np.sum(np.where(seen, hyp.weights, 0.0)))
@@ -214,13 +216,16 @@ def residual_share(hyp, idx: list, seed: int = PLACEBO_SEED) -> float:
 
 def noise_charge(ctx, hyp, idx: list, tau: float, lost: np.ndarray, share: float) -> float:
     """What shifting the markers `idx` by `tau` (s) takes off `hyp`'s residual from noise alone, in parameters (units
-    of ln 3N): interpolating between frames averages away :func:`interpolation_loss` of each moved sample's noise, and
-    a sample moved out of view (`lost`, (F, M)) takes all of its own, of which the residual keeps the `share`
-    (:func:`residual_share`). Charged, so that a delay gains nothing on average from noise it smooths or drops."""
+    of ln 3N): interpolating between frames averages away :func:`interpolation_loss` of each moved sample's noise, of
+    which the residual keeps the `share` (:func:`residual_share`), and a sample moved out of view (`lost`, (F, M)) is
+    set aside, which takes σ² a coordinate off the residual whatever its leverage (deleting an observation lowers
+    the least-squares sum of squares by rᵢ²/(1 − hᵢᵢ), of expectation σ²; less only where it leaves a pose
+    undetermined, which is not counted). Charged, so that a delay gains nothing on average from noise it smooths or
+    drops."""
     seen = hyp.weights > 0
     moved = int(np.sum(seen[:, idx] & ~lost[:, idx]))
-    noise = moved * interpolation_loss(tau * ctx.rate_hz) + int(np.sum(lost & seen))
-    return 3 * share * noise / np.log(ctx.n_obs)
+    smoothed = share * moved * interpolation_loss(tau * ctx.rate_hz)
+    return 3 * (smoothed + int(np.sum(lost & seen))) / np.log(ctx.n_obs)
 
 
 def realignment_sd(ctx, hyp, idx: list, frames: float) -> float:
@@ -528,15 +533,14 @@ class TimeOffset(Effect):
         charged for the delay, the samples the shift moves out of view and what interpolation removes from noise.
 
         A sample the shift would take from beyond the end of its marker's visible span has nothing to be compared
-        with and is set aside; it is charged what noise alone would leave in it (in units of σ², so that setting
-        it aside gains nothing on average), not three parameters as a sample set aside for being wrong is (31 units):
+        with and is set aside; it is charged what setting it aside takes off noise alone (3 in units of σ², so
+        that it gains nothing on average), not three parameters as a sample set aside for being wrong is (31 units):
         a pelvis 3 frames late lost 12 samples and 375 units, more than the whole of what the rigid model could not
         absorb of it (366; held-out draw 46, trial 109). Kept at their measured values instead, they were named
         outliers after the delay (a thigh 46 ms late at speed). A pose left without markers by it is not a saving:
-        the delay leaves the model's parameters as they were. Both charges count only the `share` of those markers'
-        noise the residual keeps (:func:`residual_share`, computed when not given); the rest the poses absorb with or
-        without it. `fresh`: refitted from `current` and from a fresh start, the better kept
-        (:meth:`Hypothesis.refit_corrected`)."""
+        the delay leaves the model's parameters as they were. What interpolating smooths is charged at the `share` of
+        those markers' noise the residual keeps (:func:`residual_share`, computed when not given; :func:`noise_charge`).
+        `fresh`: refitted from `current` and from a fresh start, the better kept (:meth:`Hypothesis.refit_corrected`)."""
         base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
