@@ -183,8 +183,9 @@ def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, 
                            proj: RefitProjection | None = None):
     """:func:`score_moments` of one set of fields read a stack at a time (any iterable of (F, M, 3) arrays,
     :func:`stacked`), their plain Gram matrix ``vᵀWu`` given (`plain_gram`, accumulated by the caller over chunks of
-    frames): only what a refit absorbs of each field is kept, never the fields themselves. For families of dense fields over every marker (a
-    distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed where unweighted)."""
+    frames): only what a refit absorbs of each field is kept, never the fields themselves. For families of dense
+    fields over every marker (a distortion's 53 on a 42-marker body at 1500 frames: 80 MB, and as much again zeroed
+    where unweighted)."""
     w = np.asarray(weights, dtype=float)[..., None]
     r = np.where((w > 0) & np.isfinite(residual), residual, 0.0)
     proj = proj if proj is not None else RefitProjection(fit, weights)

@@ -540,7 +540,8 @@ class TimeOffset(Effect):
         outliers after the delay (a thigh 46 ms late at speed). A pose left without markers by it is not a saving:
         the delay leaves the model's parameters as they were. What interpolating smooths is charged at the `share` of
         those markers' noise the residual keeps (:func:`residual_share`, computed when not given; :func:`noise_charge`).
-        `fresh`: refitted from `current` and from a fresh start, the better kept (:meth:`Hypothesis.refit_corrected`)."""
+        `fresh`: refitted from `current` and from a fresh start, the better kept
+        (:meth:`Hypothesis.refit_corrected`)."""
         base = hyp.data
         data = base.copy()
         data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
