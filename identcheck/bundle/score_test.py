@@ -21,12 +21,12 @@ from identcheck.bundle.normal import eliminate_frames, field_gradients, lower_in
 
 class RefitProjection:
     """What a refit of the model at `fit` absorbs of a field of marker displacements, linearised (every unknown,
-    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement). :meth:`pieces`
-    takes a field v (F, M, 3) to ``(v0, z, reduced)``, v0 the field with NaN and unweighted samples set to 0
-    (:meth:`pieces_many`, many fields at once); :meth:`gram` takes many fields' pieces to the inner products of their
-    unabsorbed parts, ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur
-    complement, ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur
-    complement); the fields then cost a gradient pass over the blocks they move."""
+    per frame and constant; the per-frame unknowns eliminated as in the fit, Schur complement).
+    :meth:`pieces_many` takes fields (F, M, 3, Q) to their pieces ``(v0, z, reduced)``, v0 the fields with NaN and
+    unweighted samples set to 0; :meth:`gram` takes them to the inner products of the fields' unabsorbed parts,
+    ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur complement,
+    ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur complement); the
+    fields then cost a gradient pass over the blocks they move."""
 
     def __init__(self, fit: Fit, weights: np.ndarray):
         s = fit.state
@@ -192,7 +192,7 @@ def score_moments_streamed(fit: Fit, weights: np.ndarray, residual: np.ndarray, 
     wr = (w * r).reshape(-1)
     n, Z, reduced = [], [], []
     for V in stacked(fields):
-        V0, z, red = proj.pieces_many(V)
+        V0, z, red = proj.pieces_many(V, owned=True)
         n.append(V0.reshape(-1, V0.shape[-1]).T @ wr)
         Z.append(z.reshape(-1, z.shape[-1]).T)
         reduced.append(red.T)
