@@ -103,21 +103,29 @@ their plain Gram matrix."""
 
 
 def stacked(fields):
-    """The fields (any iterable of (F, M, 3) arrays, read once) stacked along a last axis, (F, M, 3, Q), at most
-    :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger); each stack a new array,
-    filled as the fields come (the fields already stacked are not held twice)."""
-    buf, q = None, 0
+    """The fields (any iterable of (F, M, 3) arrays of one shape, read once) stacked along a last axis, (F, M, 3, Q),
+    at most :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger); each stack a
+    new array, filled as the fields come and grown by doubling (the fields already stacked are not held twice, and a
+    few small fields do not take a whole stack's memory)."""
+    buf, q, cap = None, 0, 1
     for v in fields:
         v = np.asarray(v, dtype=float)
         if buf is None:
-            buf, q = np.empty(v.shape + (max(1, FIELD_CHUNK_ENTRIES // max(v.size, 1)),)), 0
+            cap = max(1, FIELD_CHUNK_ENTRIES // max(v.size, 1))
+            buf, q = np.empty(v.shape + (min(cap, 4),)), 0
+        elif v.shape != buf.shape[:-1]:
+            raise ValueError(f"a field of shape {v.shape} among fields of shape {buf.shape[:-1]}")
+        if q == buf.shape[-1]:
+            grown = np.empty(buf.shape[:-1] + (min(cap, 2 * q),))
+            grown[..., :q] = buf
+            buf = grown
         buf[..., q] = v
         q += 1
-        if q == buf.shape[-1]:
+        if q == cap:
             yield buf
             buf = None
     if buf is not None and q:
-        yield buf[..., :q]
+        yield buf[..., :q] if q == buf.shape[-1] else buf[..., :q].copy()
 
 
 def _all_pieces(proj: "RefitProjection", fields, per_frame: bool = False) -> tuple | None:
