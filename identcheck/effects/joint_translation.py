@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.model import Terms
-from identcheck.bundle.score_test import score_moments
+from identcheck.bundle.score_test import modulated_score_moments
 from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
@@ -114,20 +114,42 @@ def in_world(hyp, joint: str, fields: list) -> list:
     return [np.einsum("fij,fj->fi", R, np.nan_to_num(g)) for g in fields]
 
 
-def displacement_fields(hyp, joint: str, basis: np.ndarray, linear: list) -> list:
-    """The marker displacements (each (F, M, 3)) of a unit of each of the translation's parameters: the centre
-    moved in the parent by each basis function along each parent axis, and by each linear field; every marker
-    below the joint moves with it, the others stay."""
+def carriers(hyp, joint: str) -> list:
+    """The three marker displacements (each (F, M, 3)) of the joint's centre moved by a unit along each of its parent's
+    axes, frame by frame: every marker below the joint moves with it, the others stay. Each of the translation's fields
+    is one of them times a function of the frame (a basis function along that axis), or a sum of the three times the
+    components of a field given in the parent's frame (:func:`linear_fields`)."""
     ch = hyp.chain
     idx, R = ch.downstream[joint], hyp.fit.seg_R[ch.parent[joint]]
-    shape = hyp.data.shape
     out = []
-    moves = [np.nan_to_num(basis[:, k, None]) * R[:, :, i] for k in range(basis.shape[1]) for i in range(3)]
-    for g in moves + in_world(hyp, joint, linear):
-        v = np.zeros(shape)
-        v[:, idx] = g[:, None, :]
+    for i in range(3):
+        v = np.zeros(hyp.data.shape)
+        v[:, idx] = R[:, None, :, i]
         out.append(v)
     return out
+
+
+def translation_moments(hyp, joint: str, basis: np.ndarray, linear: list, residual: np.ndarray, proj
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The score test's moments ``(n, G)`` (:func:`~identcheck.bundle.score_test.score_moments`) of the translation's
+    fields against `residual` (the fit's): each basis function (F, K) along each of the parent's axes (field
+    ``3k + i``: function k, axis i), then each linear field (each (F, 3) in the parent frame, field ``3K + l``), NaN
+    read as 0. From the three :func:`carriers` modulated by the functions
+    (:func:`~identcheck.bundle.score_test.modulated_score_moments`), each linear field a sum of the carriers times its
+    components: the 3K + L fields over every marker below the joint are never formed (a full body's ball joint: 33 of
+    them, 50 MB; its detector's peak had been 220 MB above the round's)."""
+    K, L = basis.shape[1], len(linear)
+    functions = np.column_stack([np.nan_to_num(basis)] + [np.nan_to_num(g) for g in linear]) if K + L else basis
+    width = functions.shape[1]                # the modulated fields: carrier i times function c at i·width + c
+    T = np.zeros((3 * K + L, 3 * width))
+    for k in range(K):
+        for i in range(3):
+            T[3 * k + i, i * width + k] = 1.0
+    for m in range(L):
+        for i in range(3):
+            T[3 * K + m, i * width + K + 3 * m + i] = 1.0
+    ((n, G),) = modulated_score_moments(hyp.fit, hyp.weights, residual, carriers(hyp, joint), [functions], proj)
+    return T @ n, T @ G @ T.T
 
 
 class JointTranslation(Effect):
@@ -159,27 +181,21 @@ class JointTranslation(Effect):
 
     def propose(self, ctx, hyp) -> list:
         """Each joint's translation, its strength what the refit with it would gain to first order (a score test
-        over the translation's own displacement fields, :func:`~identcheck.bundle.score_test.score_moments`, net of
-        its parameters). The markers' mean residual below the joint, regressed on the same functions, read a knee
-        rolling back 10.7 mm in gait as 25 where the refit gained 247: a rigid refit takes up most of a smooth
-        translation in the joint's angle and the other segments' poses, and what is left shows on every marker.
+        over the translation's own displacement fields, :func:`translation_moments`, net of its parameters). The
+        markers' mean residual below the joint, regressed on the same functions, read a knee rolling back 10.7 mm in
+        gait as 25 where the refit gained 247: a rigid refit takes up most of a smooth translation in the joint's
+        angle and the other segments' poses, and what is left shows on every marker.
 
         Only the functions the criterion asks for are proposed (:func:`~identcheck.bundle.score_selection.
         forward_selection` over the functions, each in three directions, and the linear fields, each its own), and
         ``where["functions"]`` names them (:func:`function_names`, :func:`linear_names`): a hip pistoning with its
         flexion needs one function, not the 31 parameters of all of them (see the selection module)."""
         ch, angles = hyp.chain, driving_angles(hyp, ctx.rate_hz)
-        places = []
+        out, residual = [], hyp.residuals()
         for j in ch.joints:
             basis = angle_basis(angles[j], linear=False, cubic=True)
             lin = linear_fields(hyp, j, angles[j])
-            places.append((j, basis, lin))
-        # one joint's fields at a time (each (F, M, 3); a full body's joints' together ran to hundreds of MB)
-        moments = score_moments(hyp.fit, hyp.weights, hyp.residuals(),
-                                (displacement_fields(hyp, j, basis, lin) for j, basis, lin in places),
-                                hyp.projection)
-        out = []
-        for (j, basis, lin), (n, G) in zip(places, moments):
+            n, G = translation_moments(hyp, j, basis, lin, residual, hyp.projection)
             k = basis.shape[1]
             units = [[3 * f, 3 * f + 1, 3 * f + 2] for f in range(k)] + [[3 * k + i] for i in range(len(lin))]
             chosen = forward_selection(n, G, units, lambda stat, m: ctx.bic_gain(ctx.smooth_share * stat, m),

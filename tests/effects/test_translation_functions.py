@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from identcheck.bundle.score_test import score_statistic
+from identcheck.bundle.score_test import score_moments, score_statistic
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, rescale
 from identcheck.diagnose.workflow import place, score, start
 from identcheck.effects.injection import normalised_angle, rotate, rotations, subtree_columns
-from identcheck.effects.joint_translation import displacement_fields, function_names, linear_fields, linear_names
+from identcheck.effects.joint_translation import (function_names, in_world, linear_fields, linear_names,
+                                                  translation_moments)
 from identcheck.effects.base import Proposal
 from identcheck.effects.registry import EFFECTS
 from identcheck.io.model import Model
@@ -42,6 +43,47 @@ def _hip_moving_with_flexion(seed: int, size_mm: float) -> Trial:
     clean = sim.clean.as_array()
     clean[:, subtree_columns(sim, "thigh")] += rotate(rotations(sim, "pelvis"), delta)[:, None]
     return Trial(clean + rng.normal(scale=0.8, size=clean.shape), sim.clean.labels, sim.clean.rate_hz)
+
+
+def displacement_fields(hyp, joint: str, basis: np.ndarray, linear: list) -> list:
+    """The translation's fields written out, each (F, M, 3): every marker below `joint` moved by a unit of each basis
+    function along each parent axis (``3k + i``), then by each linear field (given in the parent frame), NaN read as
+    0; the other markers stay. What the detector's moments are of, formed here to check them."""
+    ch = hyp.chain
+    idx, R = ch.downstream[joint], hyp.fit.seg_R[ch.parent[joint]]
+    moves = [np.nan_to_num(basis[:, k, None]) * R[:, :, i] for k in range(basis.shape[1]) for i in range(3)]
+    out = []
+    for g in moves + in_world(hyp, joint, linear):
+        v = np.zeros(hyp.data.shape)
+        v[:, idx] = g[:, None, :]
+        out.append(v)
+    return out
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000), size=st.floats(0.0, 10.0), joint=st.sampled_from(["hip", "knee"]),
+       gaps=st.booleans())
+def test_the_moments_from_carriers_are_those_of_the_fields_written_out(seed, size, joint, gaps):
+    """:func:`translation_moments` (three carriers modulated by the functions) gives the moments :func:`score_moments`
+    gives of the 3K + L fields written out, with or without a translation in the data, with samples unseen."""
+    trial = _hip_moving_with_flexion(seed, size)
+    if gaps:
+        data = trial.as_array()
+        rng = np.random.default_rng(seed)
+        for m in rng.choice(data.shape[1], size=3, replace=False):
+            first = int(rng.integers(0, len(data) - 60))
+            data[first:first + int(rng.integers(5, 60)), m] = np.nan
+        trial = Trial(data, trial.labels, trial.rate_hz)
+    ctx, h = start(_model(), trial.recentred()[0])
+    angles = driving_angles(h, ctx.rate_hz)[joint]
+    basis = angle_basis(angles, linear=False, cubic=True)
+    lin = linear_fields(h, joint, angles)
+    n, G = translation_moments(h, joint, basis, lin, h.residuals(), h.projection)
+    ((n0, G0),) = score_moments(h.fit, h.weights, h.residuals(), [displacement_fields(h, joint, basis, lin)])
+    assert n.shape == n0.shape == (3 * basis.shape[1] + len(lin),)
+    scale = np.sqrt(np.outer(np.diag(G0), np.diag(G0))).max()
+    np.testing.assert_allclose(G, G0, atol=1e-8 * scale)
+    np.testing.assert_allclose(n, n0, atol=1e-8 * np.abs(n0).max() + 1e-12)
 
 
 @settings(max_examples=3, deadline=None)
