@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, State, Terms, apply_step, forward, n_const, null_count, tangents
-from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
+from identcheck.bundle.normal import eliminate_frames, frames_eliminated, normal_equations
 from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.obrien import joint_location
 from identcheck.geometry.poses import Poses, refine_local
@@ -275,8 +275,7 @@ def information_at(chain, terms, state, w: np.ndarray) -> np.ndarray:
     the residual."""
     R, _t, centre, pred = forward(chain, terms, state)
     lay, blocks = jacobian_blocks(chain, terms, state, R, centre, pred)
-    A, B, C, g, h = normal_equations(lay, blocks, np.zeros_like(pred), w)
-    return eliminate_frames(ridged(A), B, C, g, h)[0]
+    return frames_eliminated(lay, blocks, w)[0]
 
 
 

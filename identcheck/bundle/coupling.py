@@ -88,10 +88,8 @@ class Coupling:
         return out
 
     def transposed_times(self, u: np.ndarray, per_frame: bool = False) -> np.ndarray:
-        """``Σ_f B_fᵀ u_f`` (P,) for u (F, k); with `per_frame`, each frame's ``B_fᵀ u_f`` (F, P). For Q vectors a
-        frame, u (F, k, Q): (P, Q), or (F, P, Q) with `per_frame` (:meth:`_transposed_times_many`)."""
-        if u.ndim == 3:
-            return self._transposed_times_many(u, per_frame)
+        """``Σ_f B_fᵀ u_f`` (P,) for u (F, k); with `per_frame`, each frame's ``B_fᵀ u_f`` (F, P). (Of many vectors a
+        frame, from the blocks without B: :func:`identcheck.bundle.normal.coupling_transposed_times`.)"""
         F = u.shape[0]
         out = np.zeros((F, self.P) if per_frame else self.P)
         out[..., self.plain_cols] = np.einsum("fkp,fk->fp" if per_frame else "fkp,fk->p", self.plain, u)
@@ -103,27 +101,6 @@ class Coupling:
                     out[:, t.first:t.first + t.size] = (t.basis[:, :, None] * yt[:, None, :]).reshape(F, t.size)
                 else:
                     out[t.first:t.first + t.size] = (t.basis.T @ yt).ravel()
-        return out
-
-    def _transposed_times_many(self, u: np.ndarray, per_frame: bool) -> np.ndarray:
-        """:meth:`transposed_times` of Q vectors a frame, u (F, k, Q), as products of matrices (the fields of a score
-        test, :meth:`identcheck.bundle.score_test.RefitProjection.pieces_many`). The fit's one vector keeps its own
-        sums: the same quantity, added in another order."""
-        F, k, Q = u.shape
-        out = np.zeros((F, self.P, Q) if per_frame else (self.P, Q))
-        if per_frame:
-            out[:, self.plain_cols] = self.plain.transpose(0, 2, 1) @ u                     # (F, P0, Q)
-        else:
-            out[self.plain_cols] = self.plain.reshape(F * k, -1).T @ u.reshape(F * k, Q)
-        if self.terms:
-            y = self.bases.transpose(0, 2, 1) @ u                                           # (F, D, Q)
-            for t in self.terms:
-                yt = y[:, t.offset:t.offset + t.d]                                         # (F, d, Q)
-                cols = slice(t.first, t.first + t.size)                                     # kk·d + a
-                if per_frame:
-                    out[:, cols] = (t.basis[:, :, None, None] * yt[:, None]).reshape(F, t.size, Q)
-                else:
-                    out[cols] = (t.basis.T @ yt.reshape(F, t.d * Q)).reshape(t.size, Q)
         return out
 
     def schur(self, Linv: np.ndarray) -> np.ndarray:

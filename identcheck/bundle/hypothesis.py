@@ -131,6 +131,11 @@ class Hypothesis:
         not replaced once made (:meth:`refit` and :func:`dataclasses.replace` make new ones)."""
         return RefitProjection(self.fit, self.weights)
 
+    def forget_projection(self) -> None:
+        """Let go of :attr:`projection` (built again if asked for): it holds the fit's derivatives (a 42-marker body
+        at 1500 frames: 78 MB), which the candidates' refits and the hypotheses kept for later rounds do not need."""
+        self.__dict__.pop("projection", None)
+
     def refit(self, terms: Terms | None = None, data=None, weights=None, chain: Skeleton | None = None,
               state: State | None = None, extra_params: int = 0, effect=None,
               max_iter: int = SCREEN_ITER) -> "Hypothesis":

@@ -9,6 +9,8 @@ rows for markers that touch 9 to 20 of them.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from identcheck.bundle.coupling import Coupling
@@ -93,6 +95,31 @@ def field_gradients(lay: Layout, blocks: list, V: np.ndarray, w: np.ndarray, per
     return g, h
 
 
+def coupling_transposed_times(lay: Layout, blocks: list, X: np.ndarray, w: np.ndarray, per_frame: bool = False):
+    """``Bᵀx`` for Q per-frame vectors at once, X (F, k, Q), from the blocks, B = JᵀWG (:func:`normal_equations`)
+    never formed: ``Σ_f G_fᵀ W (J_f x_f)`` (P, Q), or per frame (F, P, Q). Each block's markers move by ``J x`` and
+    their constants' gradient is taken of that move, so the cost is that of the columns each marker touches; B
+    written out holds every per-frame column against every constant (a 42-marker body at 1500 frames: 88 MB, kept by
+    the score tests' projection, :class:`~identcheck.bundle.score_test.RefitProjection`, through a whole round of
+    detectors)."""
+    F, _, Q = X.shape
+    out = np.zeros((F, lay.P, Q) if per_frame else (lay.P, Q))
+    unit = bool(np.all(w == 1.0))
+    for b in blocks:
+        grp = b.group
+        idx, kb, pb = grp.cols, b.J.shape[-1], b.G.shape[-1]
+        n = 3 * len(idx)
+        moved = b.J.reshape(F, n, kb) @ X[:, grp.frame_cols]                        # (F, n, Q)
+        if not unit:
+            moved *= np.repeat(w[:, idx], 3, axis=1)[..., None]
+        Gf = b.G.reshape(F, n, pb)
+        if per_frame:
+            _add_rows(out, grp.const_runs, Gf.transpose(0, 2, 1) @ moved, axis=1)
+        else:
+            _add_rows(out, grp.const_runs, Gf.reshape(F * n, pb).T @ moved.reshape(F * n, Q), axis=0)
+    return out
+
+
 def _add_rows(target: np.ndarray, rows: tuple, x: np.ndarray, axis: int) -> None:
     """``target[rows] += x`` along `axis` (0 or 1), the rows given as :func:`~identcheck.bundle.jacobian.runs`."""
     for r0, r1, a in rows:
@@ -102,12 +129,59 @@ def _add_rows(target: np.ndarray, rows: tuple, x: np.ndarray, axis: int) -> None
             target[:, r0:r1] += x[:, a:a + r1 - r0]
 
 
-def ridged(A: np.ndarray) -> np.ndarray:
-    """The per-frame blocks A (F, k, k) with a ridge of 1e-12 of their (at least the median) scale: a frame
-    whose markers leave its pose free, or that has no marker at all, stays solvable and contributes nothing."""
+def ridged(A: np.ndarray, floor: float | None = None) -> np.ndarray:
+    """The per-frame blocks A (F, k, k) with a ridge of 1e-12 of their (at least the median, or `floor`) scale
+    (trace / k): a frame whose markers leave its pose free, or that has no marker at all, stays solvable and
+    contributes nothing. `floor`: the median of the whole trial's when A holds a chunk of its frames."""
     k = A.shape[1]
     scale = np.trace(A, axis1=1, axis2=2)[:, None, None] / k
-    return A + 1e-12 * np.maximum(scale, np.median(scale) + 1e-300) * np.eye(k)
+    floor = np.median(scale) if floor is None else floor
+    return A + 1e-12 * np.maximum(scale, floor + 1e-300) * np.eye(k)
+
+
+ELIMINATION_CHUNK_ENTRIES = 1 << 21
+"""Entries (float64, 16 MiB) of the coupling B a chunk of frames holds in :func:`frames_eliminated` (one chunk for
+a lower limb's 1500 frames; a 42-marker body's, 271 frames a chunk)."""
+
+
+def frames_eliminated(lay: Layout, blocks: list, w: np.ndarray, r: np.ndarray | None = None,
+                      per_frame: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S, reduced, A): what :func:`eliminate_frames` gives as S and the reduced gradient for the normal equations of
+    the blocks with residuals `r` (zero when None; (F, M, 3)) and weights `w` (F, M), the blocks ridged
+    (:func:`ridged`), and the per-frame blocks A (F, k, k) as built (unridged). The Schur complement and the reduced
+    gradient are sums over the frames, so they are built a chunk of frames at a time (:data:`ELIMINATION_CHUNK_ENTRIES`
+    of B): B is never held whole. For what needs no step back to the frames (the information, the per-frame scores,
+    the score tests' projection); the fit's iterations keep B for theirs. A 42-marker body at 1500 frames: B is 88 MB,
+    held with the derivatives (53 MB) it was built from, and the joints' covariance had been the peak of
+    ``diagnose``."""
+    F, k, P = len(w), lay.k, lay.P
+    ridge_floor = float(np.median(_frame_traces(blocks, w))) / k       # ridged's median over every frame
+    step = max(1, ELIMINATION_CHUNK_ENTRIES // max(k * P, 1))
+    S, A_all = np.zeros((P, P)), np.empty((F, k, k))
+    reduced = np.zeros((F, P) if per_frame else P)
+    for f0 in range(0, F, step):
+        c = slice(f0, min(f0 + step, F))
+        part = replace(lay, kron=tuple(replace(t, basis=t.basis[c]) for t in lay.kron))
+        chunk = [replace(b, J=b.J[c], G=b.G[c], base=None if b.base is None else b.base[c]) for b in blocks]
+        rc = np.zeros((c.stop - f0,) + w.shape[1:] + (3,)) if r is None else r[c]
+        A, B, C, g, h = normal_equations(part, chunk, rc, w[c], per_frame=per_frame)
+        A_all[c] = A
+        S_c, red_c, _ = eliminate_frames(ridged(A, ridge_floor), B, C, g, h)
+        S += S_c
+        if per_frame:
+            reduced[c] = red_c
+        else:
+            reduced += red_c
+    return S, reduced, A_all
+
+
+def _frame_traces(blocks: list, w: np.ndarray) -> np.ndarray:
+    """Each frame's trace of A = JᵀWJ (F,), from the blocks: the weighted sum of squares of each frame's derivatives
+    (the diagonal of A sums them block by block)."""
+    out = np.zeros(len(w))
+    for b in blocks:
+        out += np.einsum("fmcj,fmcj,fm->f", b.J, b.J, w[:, b.group.cols])
+    return out
 
 
 def lower_inverse(L: np.ndarray) -> np.ndarray:

@@ -16,7 +16,8 @@ import numpy as np
 
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import Fit, forward
-from identcheck.bundle.normal import eliminate_frames, field_gradients, lower_inverse, normal_equations, ridged
+from identcheck.bundle.normal import (coupling_transposed_times, field_gradients, frames_eliminated, lower_inverse,
+                                     ridged)
 
 
 class RefitProjection:
@@ -33,9 +34,8 @@ class RefitProjection:
         self.w = w = np.array(weights, dtype=float)           # a copy: the caller's array may change later
         R, _t, centre, pred = forward(fit.chain, fit.terms, s)
         self.lay, self.blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
-        A, self.B, C, g, h = normal_equations(self.lay, self.blocks, np.zeros_like(pred), w)   # for every field
+        S, _, A = frames_eliminated(self.lay, self.blocks, w)      # B's products come from the blocks: not kept
         A = ridged(A)
-        S = eliminate_frames(A, self.B, C, g, h)[0]
         self.S_plus = np.linalg.pinv(S, rcond=1e-12, hermitian=True)                # the gauge stays free
         self.Linv = lower_inverse(np.linalg.cholesky(A))                            # A⁻¹ = L⁻ᵀL⁻¹
 
@@ -57,7 +57,7 @@ class RefitProjection:
         g, h = field_gradients(self.lay, [b for b in self.blocks if moved[b.group.cols].any()], V0, w, per_frame)
         z = self.Linv @ g                                                           # L_f⁻¹ g_f (F, k, Q)
         back = self.Linv.transpose(0, 2, 1) @ z                                     # L_f⁻ᵀ z_f
-        return V0, z, h - self.B.transposed_times(back, per_frame=per_frame)        # h − Σ_f (L_f⁻¹B_f)ᵀ z_f
+        return V0, z, h - coupling_transposed_times(self.lay, self.blocks, back, w, per_frame)   # h − Σ_f B_fᵀ A_f⁻¹g_f
 
     def gram(self, V0: np.ndarray, Z: np.ndarray, reduced: np.ndarray) -> np.ndarray:
         """The Gram matrix (Q, Q) of the unabsorbed parts of Q fields, given their :meth:`pieces_many` (not per

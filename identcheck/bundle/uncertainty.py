@@ -46,7 +46,7 @@ from identcheck.bundle.chain import _prepare, information_at
 from identcheck.bundle.gauge import gauge_basis, turning_blocks
 from identcheck.bundle.jacobian import jacobian_blocks
 from identcheck.bundle.model import apply_step, forward, joint_offsets, n_const, null_count, tangents
-from identcheck.bundle.normal import eliminate_frames, normal_equations, ridged
+from identcheck.bundle.normal import frames_eliminated
 
 RANK_TOL = 1e-9        # relative eigenvalue of the scaled information below which a direction is undetermined
 SIMEX_LEFT = 0.01       # least share of a direction's information taken as real (module docstring)
@@ -221,11 +221,8 @@ def frame_scores(fit, data, weights=None) -> tuple[np.ndarray, np.ndarray, np.nd
     R, t, centre, pred = forward(fit.chain, fit.terms, s)
     lay, blocks = jacobian_blocks(fit.chain, fit.terms, s, R, centre, pred)
     r = np.where(w[..., None] > 0, pred - y, 0.0)
-    A, B, C, Jr, Gr = normal_equations(lay, blocks, r, w, per_frame=True)
-    del blocks                              # the derivatives are not held while the frames are eliminated
-    determined = frame_rank(A)
-    S, g, _ = eliminate_frames(ridged(A), B, C, Jr, Gr)
-    return g, S, r, determined, A, w
+    S, g, A = frames_eliminated(lay, blocks, w, r, per_frame=True)
+    return g, S, r, frame_rank(A), A, w
 
 
 def simex_information(fit, A: np.ndarray, w: np.ndarray, sigma: float, draws: int = SIMEX_DRAWS,

@@ -385,6 +385,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             bar = DECISIVE_GAIN if consistency(ctx, h)["consistent"] else 0.0
             proposals = sorted(((p, eff) for eff in EFFECTS.values()
                                 for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
+            h.forget_projection()            # the detectors are done with it (an effect's apply builds it if it needs)
             tried, best, leader, drift, placed = [], 0.0, None, None, set()
             # an adopted effect's place, and the places of the effects no data could tell from it (its ``alike``:
             # both adopted would model one motion twice)
@@ -415,6 +416,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 tried.append((sc, eff, prop, cand))
                 if not eff.implausible(prop) and sc > best:
                     best, leader = sc, eff
+            h.forget_projection()
             # errors the data show without the joint model come first among those that earn their parameters
             tried.sort(key=lambda x: (not (x[0] > bar_for(x[1], bar) and x[1].read_without_joints(x[2])), -x[0]))
             # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from identcheck.bundle.hypothesis import angle_basis, time_basis
 from identcheck.bundle.jacobian import dense_jacobians, jacobian_blocks
 from identcheck.bundle.model import State, Terms, forward
-from identcheck.bundle.normal import field_gradients, normal_equations
+from identcheck.bundle.normal import coupling_transposed_times, field_gradients, normal_equations
 from identcheck.io.model import Model
 from identcheck.skeleton import Skeleton
 
@@ -84,10 +84,10 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
         h_want += Gf.T @ rf
     np.testing.assert_allclose(C, C_want, atol=1e-9 * (1 + np.abs(C_want).max()))
     np.testing.assert_allclose(h, h_want, atol=1e-9 * (1 + np.abs(h_want).max()))
-    # Bᵀu of several vectors a frame at once: each vector's own
+    # Bᵀu of several vectors a frame at once from the blocks, B never formed: each vector's through B
     u = rng.normal(size=(F, lay.k, 3))
     for per_frame in (False, True):
-        many = coupling.transposed_times(u, per_frame=per_frame)
+        many = coupling_transposed_times(lay, blocks, u, w, per_frame=per_frame)
         for q in range(3):
             one = coupling.transposed_times(u[..., q], per_frame=per_frame)
             np.testing.assert_allclose(many[..., q], one, atol=1e-9 * (1 + np.abs(one).max()))
@@ -111,6 +111,39 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
         np.testing.assert_allclose(red1, red2, atol=1e-9 * (1 + np.abs(red2).max()))
         dc = rng.normal(size=lay.P)
         np.testing.assert_allclose(back1(dc), back2(dc), atol=1e-9 * (1 + np.abs(back2(dc)).max()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(sorted(MODELS)),
+       weights=st.sampled_from(["ones", "gaps", "fractional"]), terms=st.sampled_from(["none", "all"]),
+       F=st.integers(1, 9), chunk_frames=st.integers(1, 10), per_frame=st.booleans())
+def test_frames_eliminated_a_chunk_at_a_time_as_all_at_once(seed, model, weights, terms, F, chunk_frames, per_frame):
+    """:func:`frames_eliminated` (B formed a chunk of frames at a time, the ridge's floor the whole trial's) gives the
+    Schur complement and the reduced gradient that eliminating every frame at once gives, and A as built."""
+    from identcheck.bundle import normal
+    rng = np.random.default_rng(seed)
+    chain = Skeleton.from_model(MODELS[model])
+    s = _random_state(chain, F, rng)
+    tm = _terms(chain, F, rng, terms)
+    s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
+    R, _, centre, pred = forward(chain, tm, s)
+    lay, blocks = jacobian_blocks(chain, tm, s, R, centre, pred)
+    M = chain.n_markers
+    r = rng.normal(size=(F, M, 3))
+    w = {"ones": np.ones((F, M)), "gaps": (rng.random((F, M)) < 0.7).astype(float),
+         "fractional": rng.random((F, M))}[weights]
+    if weights == "gaps":
+        w[0] = 0.0                                                # a frame with no marker: held by the ridge alone
+    A, B, C, g, h = normal_equations(lay, blocks, r, w, per_frame=per_frame)
+    S_want, red_want, _ = normal.eliminate_frames(normal.ridged(A), B, C, g, h)
+    with mock.patch.object(normal, "ELIMINATION_CHUNK_ENTRIES", chunk_frames * lay.k * lay.P):
+        S, red, A_got = normal.frames_eliminated(lay, blocks, w, r, per_frame=per_frame)
+        S0, red0, _ = normal.frames_eliminated(lay, blocks, w)
+    np.testing.assert_allclose(A_got, A, atol=1e-12 * (1 + np.abs(A).max()))
+    np.testing.assert_allclose(S, S_want, atol=1e-8 * (1 + np.abs(S_want).max()))
+    np.testing.assert_allclose(red, red_want, atol=1e-8 * (1 + np.abs(red_want).max()))
+    np.testing.assert_allclose(S0, S, atol=1e-8 * (1 + np.abs(S).max()))      # the residual does not enter S
+    assert not np.any(red0)                                                     # nor, without one, the gradient
 
 
 @settings(max_examples=40, deadline=None)

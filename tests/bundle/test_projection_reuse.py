@@ -1,6 +1,6 @@
 """A hypothesis keeps the refit's projection its score tests use (:attr:`Hypothesis.projection`): built once, given to
 every score test at that hypothesis, and the moments it gives are those of a projection built afresh; a refitted
-hypothesis has its own."""
+hypothesis has its own, and one let go of is built again when asked for."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -38,3 +38,7 @@ def test_the_kept_projection_gives_the_moments_of_a_fresh_one(seed, hidden):
     (n2, G2), = score_moments(h.fit, h.weights, h.residuals(), [fields], RefitProjection(h.fit, h.weights))
     np.testing.assert_allclose(n, n2, rtol=1e-12)
     np.testing.assert_allclose(G, G2, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(G2))))
+    kept = h.projection
+    h.forget_projection()                                                 # let go of: built again when asked for
+    assert "projection" not in vars(h)
+    assert h.projection is not kept and h.projection is h.projection
