@@ -50,11 +50,8 @@ def _terms(chain: Skeleton, F: int, rng, kind: str) -> Terms:
                         (np.sort(cols), rng.normal(size=(F, len(cols), 3)))])
 
 
-@settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(sorted(MODELS)),
-       weights=st.sampled_from(["ones", "gaps", "fractional"]), terms=st.sampled_from(["none", "all"]),
-       F=st.integers(1, 7))
-def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weights, terms, F):
+def _blocks_and_weights(seed: int, model: str, weights: str, terms: str, F: int):
+    """A random chain's state and terms with their blocks, residuals and weights: (chain, lay, blocks, r, w)."""
     rng = np.random.default_rng(seed)
     chain = Skeleton.from_model(MODELS[model])
     s = _random_state(chain, F, rng)
@@ -62,11 +59,22 @@ def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weight
     s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
     R, _, centre, pred = forward(chain, tm, s)
     lay, blocks = jacobian_blocks(chain, tm, s, R, centre, pred)
-    J, G = dense_jacobians(lay, blocks, chain.n_markers)
     M = chain.n_markers
     r = rng.normal(size=(F, M, 3))
     w = {"ones": np.ones((F, M)), "gaps": (rng.random((F, M)) < 0.7).astype(float),
          "fractional": rng.random((F, M))}[weights]
+    return chain, lay, blocks, r, w
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(sorted(MODELS)),
+       weights=st.sampled_from(["ones", "gaps", "fractional"]), terms=st.sampled_from(["none", "all"]),
+       F=st.integers(1, 7))
+def test_block_products_are_the_weighted_sums_they_stand_for(seed, model, weights, terms, F):
+    chain, lay, blocks, r, w = _blocks_and_weights(seed, model, weights, terms, F)
+    rng = np.random.default_rng(seed + 1)
+    J, G = dense_jacobians(lay, blocks, chain.n_markers)
+    M = chain.n_markers
     A, coupling, C, g, h = normal_equations(lay, blocks, r, w)
     B = coupling.dense()
     h_frames = normal_equations(lay, blocks, r, w, per_frame=True)[4]
@@ -121,17 +129,7 @@ def test_frames_eliminated_a_chunk_at_a_time_as_all_at_once(seed, model, weights
     """:func:`frames_eliminated` (B formed a chunk of frames at a time, the ridge's floor the whole trial's) gives the
     Schur complement and the reduced gradient that eliminating every frame at once gives, and A as built."""
     from identcheck.bundle import normal
-    rng = np.random.default_rng(seed)
-    chain = Skeleton.from_model(MODELS[model])
-    s = _random_state(chain, F, rng)
-    tm = _terms(chain, F, rng, terms)
-    s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
-    R, _, centre, pred = forward(chain, tm, s)
-    lay, blocks = jacobian_blocks(chain, tm, s, R, centre, pred)
-    M = chain.n_markers
-    r = rng.normal(size=(F, M, 3))
-    w = {"ones": np.ones((F, M)), "gaps": (rng.random((F, M)) < 0.7).astype(float),
-         "fractional": rng.random((F, M))}[weights]
+    _, lay, blocks, r, w = _blocks_and_weights(seed, model, weights, terms, F)
     if weights == "gaps":
         w[0] = 0.0                                                # a frame with no marker: held by the ridge alone
     A, B, C, g, h = normal_equations(lay, blocks, r, w, per_frame=per_frame)
