@@ -140,20 +140,22 @@ def ridged(A: np.ndarray, floor: float | None = None) -> np.ndarray:
 
 
 ELIMINATION_CHUNK_ENTRIES = 1 << 21
-"""Entries (float64, 16 MiB) of the coupling B a chunk of frames holds in :func:`frames_eliminated` (one chunk for
-a lower limb's 1500 frames; a 42-marker body's, 271 frames a chunk)."""
+"""Entries (float64, 16 MiB) of the coupling B, counted as k × P a frame (its term columns are kept as bases, fewer),
+that a chunk of frames may hold in :func:`frames_eliminated`: a lower limb's rigid model (k 12, P 44) takes its 1500
+frames in one chunk; both legs of walking2 with skin terms (k 14, P 450-775) 190-330 frames a chunk; a 42-marker
+body 271."""
 
 
 def frames_eliminated(lay: Layout, blocks: list, w: np.ndarray, r: np.ndarray | None = None,
                       per_frame: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(S, reduced, A): what :func:`eliminate_frames` gives as S and the reduced gradient for the normal equations of
-    the blocks with residuals `r` (zero when None; (F, M, 3)) and weights `w` (F, M), the blocks ridged
-    (:func:`ridged`), and the per-frame blocks A (F, k, k) as built (unridged). The Schur complement and the reduced
-    gradient are sums over the frames, so they are built a chunk of frames at a time (:data:`ELIMINATION_CHUNK_ENTRIES`
-    of B): B is never held whole. For what needs no step back to the frames (the information, the per-frame scores,
-    the score tests' projection); the fit's iterations keep B for theirs. A 42-marker body at 1500 frames: B is 88 MB,
-    held with the derivatives (53 MB) it was built from, and the joints' covariance had been the peak of
-    ``diagnose``."""
+    """(S, reduced, A): what :func:`eliminate_frames` gives as S and the reduced gradient (with `per_frame`, each
+    frame's) for the normal equations of the blocks with residuals `r` (zero when None; (F, M, 3)) and weights `w`
+    (F, M), the blocks ridged (:func:`ridged`, the floor the whole trial's), and the per-frame blocks A (F, k, k) as
+    built (unridged). The Schur complement and the reduced gradient are sums over the frames, so they are built a
+    chunk of frames at a time (:data:`ELIMINATION_CHUNK_ENTRIES` of B): B is never held whole. For what needs no
+    step back to the frames (the information, the per-frame scores, the score tests' projection); the fit's
+    iterations keep B for theirs. A 42-marker body at 1500 frames: B is 88 MB, held with the derivatives (53 MB) it
+    was built from, and the joints' covariance had been the peak of ``diagnose``."""
     F, k, P = len(w), lay.k, lay.P
     ridge_floor = float(np.median(_frame_traces(blocks, w))) / k       # ridged's median over every frame
     step = max(1, ELIMINATION_CHUNK_ENTRIES // max(k * P, 1))

@@ -27,7 +27,8 @@ class RefitProjection:
     unweighted samples set to 0; :meth:`gram` takes them to the inner products of the fields' unabsorbed parts,
     ``v0ᵀWu0 − z_v·z_u − reduced_vᵀ S⁺ reduced_u`` (S⁺ the pseudo-inverse of the constants' Schur complement,
     ``S_plus``, the gauge left free). Built once (a whole normal-equation build and the Schur complement); the
-    fields then cost a gradient pass over the blocks they move."""
+    fields then cost a gradient pass over the blocks they move, and one over every block for their coupling to the
+    constants (:func:`~identcheck.bundle.normal.coupling_transposed_times`: B itself is not kept)."""
 
     def __init__(self, fit: Fit, weights: np.ndarray):
         s = fit.state

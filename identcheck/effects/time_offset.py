@@ -415,7 +415,10 @@ class TimeOffset(Effect):
         # residual), and from the residual's reading as well only when the two are more than a frame apart
         single = [p for p in single if p.where["markers"][0] not in read
                   or abs(p.payload["tau"] - read[p.where["markers"][0]]) * ctx.rate_hz > 1.0]
-        return whole + rigid + single
+        out = whole + rigid + single
+        for p in out:       # read while the round's projection is at hand (diagnose lets it go before the refits)
+            p.payload["share"] = residual_share(hyp, p.payload["columns"])
+        return out
 
     def rigidity_proposals(self, ctx, hyp) -> list:
         """Single markers whose distances to their segment-mates change with their velocity as a lag makes them
@@ -480,7 +483,8 @@ class TimeOffset(Effect):
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = nearest_whole(tau * ctx.rate_hz)
-        share = residual_share(hyp, idx)
+        share = proposal.payload.get("share")
+        share = residual_share(hyp, idx) if share is None else share
         current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True, share=share)
         fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 

@@ -109,3 +109,33 @@ def test_the_shifted_fit_is_charged_the_delay_and_the_noise_charge(seed, idx, fr
     lost = np.isfinite(h.data).all(axis=2) & (new.weights == 0)
     want = noise_charge(ctx, h, idx, frames / RATE, lost, residual_share(h, idx))
     assert new.extra_params - (h.n_params() - new.fit.n_params) == pytest.approx(1 + want, rel=1e-12)
+
+
+def test_each_hypothesis_builds_its_projection_once_in_a_diagnosis_with_a_delay():
+    """A delay's share of the noise is read in its proposal, while the round's projection is at hand: ``diagnose``
+    lets the projection go before the candidates are refitted, and a delay's refit had built it again (a full body:
+    66 MB and seconds, in every round with a delay to try). The thigh 3 frames late: the delay is named, and no
+    hypothesis's projection is built twice."""
+    from unittest import mock
+
+    from identcheck.diagnose.workflow import diagnose
+    from identcheck.bundle import score_test
+    from identcheck.trial import Trial
+
+    sim = simulate(MODEL, n_frames=300, noise_mm=0.0, seed=3)
+    clean = sim.trial.select(MODEL.markers)
+    data = clean.as_array()
+    thigh = [MODEL.markers.index(m) for m in MODEL.segments["thigh"].markers]
+    data[:, thigh] = shifted(data[:, thigh], RATE, -0.03, extrapolate=True)
+    data += np.random.default_rng(3).normal(scale=0.5, size=data.shape)
+    built = []
+    original = score_test.RefitProjection.__init__
+
+    def counted(self, fit, weights):
+        built.append(id(fit))
+        original(self, fit, weights)
+
+    with mock.patch.object(score_test.RefitProjection, "__init__", counted):
+        diag = diagnose(MODEL, Trial(data, clean.labels, clean.rate_hz))
+    assert diag.steps and diag.steps[0].name == "time_offset" and diag.steps[0].where["segment"] == "thigh"
+    assert len(built) == len(set(built)) >= 2
