@@ -417,7 +417,7 @@ class TimeOffset(Effect):
                   or abs(p.payload["tau"] - read[p.where["markers"][0]]) * ctx.rate_hz > 1.0]
         out = whole + rigid + single
         for p in out:       # read while the round's projection is at hand (diagnose lets it go before the refits)
-            p.payload["share"] = residual_share(hyp, p.payload["columns"])
+            p.payload["share"] = (hyp.fit, residual_share(hyp, p.payload["columns"]))
         return out
 
     def rigidity_proposals(self, ctx, hyp) -> list:
@@ -483,8 +483,8 @@ class TimeOffset(Effect):
         # a fresh start when that fits them better: the rigid fit's angles are bent to the lag (that thigh's 8-iteration
         # refits from it scored 3 frames 76 013 and 4 frames 56 033; from a fresh start 173 942 and 200 872)
         first = nearest_whole(tau * ctx.rate_hz)
-        share = proposal.payload.get("share")
-        share = residual_share(hyp, idx) if share is None else share
+        read = proposal.payload.get("share")            # (the fit it was read at, the share): at this one only
+        share = read[1] if read is not None and read[0] is hyp.fit else residual_share(hyp, idx)
         current = self._shifted_fit(ctx, hyp, current, idx, first / ctx.rate_hz, fresh=True, share=share)
         fitted = {first / ctx.rate_hz: (current, score(ctx, current, hyp))}
 

@@ -120,22 +120,55 @@ def test_each_hypothesis_builds_its_projection_once_in_a_diagnosis_with_a_delay(
 
     from identcheck.diagnose.workflow import diagnose
     from identcheck.bundle import score_test
+
+    built = []                                  # the fits themselves: held here, no id is reused
+    original = score_test.RefitProjection.__init__
+
+    def counted(self, fit, weights):
+        built.append(fit)
+        original(self, fit, weights)
+
+    with mock.patch.object(score_test.RefitProjection, "__init__", counted):
+        diag = diagnose(MODEL, _thigh_late())
+    assert diag.steps and diag.steps[0].name == "time_offset" and diag.steps[0].where["segment"] == "thigh"
+    assert len(built) == len({id(f) for f in built}) >= 2
+
+
+def _thigh_late(seed: int = 3):
+    """The leg, 300 frames, its thigh's markers 3 frames late, white noise of 0.5 mm."""
     from identcheck.trial import Trial
 
-    sim = simulate(MODEL, n_frames=300, noise_mm=0.0, seed=3)
+    sim = simulate(MODEL, n_frames=300, noise_mm=0.0, seed=seed)
     clean = sim.trial.select(MODEL.markers)
     data = clean.as_array()
     thigh = [MODEL.markers.index(m) for m in MODEL.segments["thigh"].markers]
     data[:, thigh] = shifted(data[:, thigh], RATE, -0.03, extrapolate=True)
-    data += np.random.default_rng(3).normal(scale=0.5, size=data.shape)
-    built = []
-    original = score_test.RefitProjection.__init__
+    data += np.random.default_rng(seed).normal(scale=0.5, size=data.shape)
+    return Trial(data, clean.labels, clean.rate_hz)
 
-    def counted(self, fit, weights):
-        built.append(id(fit))
-        original(self, fit, weights)
 
-    with mock.patch.object(score_test.RefitProjection, "__init__", counted):
-        diag = diagnose(MODEL, Trial(data, clean.labels, clean.rate_hz))
-    assert diag.steps and diag.steps[0].name == "time_offset" and diag.steps[0].where["segment"] == "thigh"
-    assert len(built) == len(set(built)) >= 2
+def test_a_delay_applied_at_another_hypothesis_reads_its_share_there():
+    """The share read in a proposal is used only at the hypothesis it was read at: the backward check applies an
+    adopted delay again, from a copy of its proposal, to a hypothesis without another effect, whose refit keeps
+    another share of the noise (its charge, and so its score, had been the forward round's)."""
+    from unittest import mock
+
+    from identcheck.diagnose.workflow import start
+    from identcheck.effects import time_offset
+    from identcheck.effects.base import Proposal
+
+    ctx, h = start(MODEL, _thigh_late().recentred()[0])
+    (p,) = [q for q in TimeOffset().propose(ctx, h) if q.where["segment"] == "thigh" and "markers" not in q.where]
+    assert p.payload["share"][0] is h.fit
+    other = h.refit(max_iter=3)
+    real, calls = time_offset.residual_share, []
+
+    def recorded(hyp, cols, *args, **kwargs):
+        calls.append(hyp)
+        return real(hyp, cols, *args, **kwargs)
+
+    with mock.patch.object(time_offset, "residual_share", recorded):
+        for hyp in (h, other):
+            copy = Proposal(p.effect, dict(p.where), p.strength, dict(p.payload))
+            TimeOffset().apply(ctx, hyp, copy)
+    assert calls and all(c is other for c in calls)
