@@ -107,21 +107,28 @@ def stacked(fields):
     """The fields (any iterable of (F, M, 3) arrays of one shape, read once) stacked along a last axis, (F, M, 3, Q),
     at most :data:`FIELD_CHUNK_ENTRIES` entries a stack (one field a stack where one field is larger); each stack a
     new array, filled as the fields come and grown by doubling (the fields already stacked are not held twice, and a
-    few small fields do not take a whole stack's memory)."""
+    few small fields do not take a whole stack's memory). An item may also be a unit of fields, (F, M, 3, q), whose q
+    fields stay in one stack, in their order (a slip's three steps, whose 3 × 3 Gram block is read per marker:
+    :func:`identcheck.effects.marker_slip.refit_gain`)."""
     buf, q, cap = None, 0, 1
-    for v in fields:
-        v = np.asarray(v, dtype=float)
+    for item in fields:
+        v = np.asarray(item, dtype=float)
+        v = v[..., None] if v.ndim == 3 else v
+        k = v.shape[-1]
+        if buf is not None and v.shape[:-1] != buf.shape[:-1]:
+            raise ValueError(f"a field of shape {np.shape(item)} among fields of shape {buf.shape[:-1]}")
+        if buf is not None and q + k > cap:                  # the unit does not fit: the stack goes as it is
+            yield buf[..., :q] if q == buf.shape[-1] else buf[..., :q].copy()
+            buf = None
         if buf is None:
-            cap = max(1, FIELD_CHUNK_ENTRIES // max(v.size, 1))
-            buf, q = np.empty(v.shape + (min(cap, 4),)), 0
-        elif v.shape != buf.shape[:-1]:
-            raise ValueError(f"a field of shape {v.shape} among fields of shape {buf.shape[:-1]}")
-        if q == buf.shape[-1]:
-            grown = np.empty(buf.shape[:-1] + (min(cap, 2 * q),))
-            grown[..., :q] = buf
+            cap = max(k, FIELD_CHUNK_ENTRIES // max(v[..., 0].size, 1))
+            buf, q = np.empty(v.shape[:-1] + (min(cap, max(4, k)),)), 0
+        if q + k > buf.shape[-1]:
+            grown = np.empty(buf.shape[:-1] + (min(cap, max(2 * buf.shape[-1], q + k)),))
+            grown[..., :q] = buf[..., :q]
             buf = grown
-        buf[..., q] = v
-        q += 1
+        buf[..., q:q + k] = v
+        q += k
         if q == cap:
             yield buf
             buf = None

@@ -16,7 +16,7 @@ import numpy as np
 
 from identcheck.bundle.model import Terms
 from identcheck.bundle.hypothesis import segment_residuals
-from identcheck.bundle.score_test import FIELD_CHUNK_ENTRIES, quadratic_form
+from identcheck.bundle.score_test import quadratic_form, stacked
 from identcheck.effects.base import Effect, Proposal
 from identcheck.effects.injection import Change, cannot, marker_column, draw_frame, pick, rotations, unit_vectors
 
@@ -134,12 +134,11 @@ class MarkerSlip(Effect):
                 "mark": [proposal.where["frame"]], "kind": "series3"}
 
 
-def step_fields(hyp, col: int, basis: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+def step_fields(hyp, col: int, basis: np.ndarray) -> np.ndarray:
     """The displacements (F, M, 3, 3) of marker `col` moved by `basis` (F, 1) times a unit step along each axis of its
-    segment's frame (the last axis), as the fit poses the segment: a slip's three fields (written into `out` when
-    given, which must be zero elsewhere)."""
+    segment's frame (the last axis), as the fit poses the segment: a slip's three fields."""
     R = hyp.fit.seg_R[hyp.chain.marker_seg[col]]                                   # (F, 3, 3), segment to world
-    out = np.zeros(hyp.data.shape + (3,)) if out is None else out
+    out = np.zeros(hyp.data.shape + (3,))
     out[:, col] = basis[:, :, None] * R
     return out
 
@@ -150,8 +149,8 @@ def refit_gain(ctx, hyp, found: list) -> list:
     net of its parameters (4, a ramp 5). The scale is :meth:`~identcheck.bundle.hypothesis.Context.kept_share` of the
     fitted step less its mean over the marker's seen frames, which the marker's own place on its segment takes up
     (the whole step's share read as little as 0.35 of the refit's gain at φ 0.95 over 300 frames). The markers'
-    fields are projected together, as many markers a stack as :data:`~identcheck.bundle.score_test.
-    FIELD_CHUNK_ENTRIES` allows, and only each marker's own 3 × 3 block of their Gram matrix is formed.
+    fields are projected together in stacks (:func:`~identcheck.bundle.score_test.stacked`, each marker's three in
+    one), and only each marker's own 3 × 3 block of their Gram matrix is formed.
 
     Why not the marker's own residual: the rigid fit poses the segment through the slipped marker too, so part of
     its step is taken up and the rest shows on its mates. A pelvis of three markers whose LASI slipped 4.5 mm
@@ -160,15 +159,13 @@ def refit_gain(ctx, hyp, found: list) -> list:
     proj = hyp.projection
     w = hyp.weights
     wr = (np.where((w > 0)[..., None], np.nan_to_num(hyp.residuals()), 0.0) * w[..., None]).reshape(-1)
-    per_stack = max(1, FIELD_CHUNK_ENTRIES // (3 * hyp.data.size))
     out = []
-    for first in range(0, len(found), per_stack):
-        group = found[first:first + per_stack]
-        V = np.zeros(hyp.data.shape + (3 * len(group),))
-        for j, (col, _, _, basis) in enumerate(group):
-            step_fields(hyp, col, basis, V[..., 3 * j:3 * j + 3])
+    markers = iter(found)
+    for V in stacked(step_fields(hyp, col, basis) for col, _, _, basis in found):     # each marker's three together
+        count = V.shape[-1] // 3
         V0, Z, reduced = proj.pieces_many(V, owned=True)
-        for j, (col, _, length, basis) in enumerate(group):
+        for j in range(count):
+            col, _, length, basis = next(markers)
             mine = slice(3 * j, 3 * j + 3)
             n = V0[..., mine].reshape(-1, 3).T @ wr
             G = proj.gram(V0[..., mine], Z[..., mine], reduced[:, mine])

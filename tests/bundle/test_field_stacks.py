@@ -43,3 +43,23 @@ def test_several_stacks_give_what_one_gives(seed, per_stack):
 def test_a_field_of_another_shape_is_refused():
     with pytest.raises(ValueError, match="shape"):
         list(stacked([np.ones((4, 2, 3)), np.arange(3.0)]))
+
+
+@settings(max_examples=30, deadline=None)
+@given(sizes=st.lists(st.integers(1, 4), min_size=1, max_size=9), per_stack=st.integers(1, 8))
+def test_a_unit_of_fields_stays_in_one_stack(sizes, per_stack):
+    """Items of one field (F, M, 3) and units of several (F, M, 3, q) come out in their order, each unit whole in one
+    stack, no stack beyond the entries allowed unless one unit alone is larger."""
+    rng = np.random.default_rng(len(sizes) * 10 + per_stack)
+    items = [rng.normal(size=(5, 2, 3)) if q == 1 and rng.random() < 0.5 else rng.normal(size=(5, 2, 3, q))
+             for q in sizes]
+    with mock.patch.object(score_test, "FIELD_CHUNK_ENTRIES", per_stack * 30):
+        stacks = list(stacked(iter(items)))
+    columns = [x[..., None] if x.ndim == 3 else x for x in items]
+    np.testing.assert_array_equal(np.concatenate(stacks, axis=-1), np.concatenate(columns, axis=-1))
+    ends = np.cumsum([s.shape[-1] for s in stacks])
+    starts = np.cumsum([0] + [c.shape[-1] for c in columns])
+    for a, b in zip(starts[:-1], starts[1:]):
+        assert not any(a < e < b for e in ends)                  # no stack ends inside a unit
+    for s in stacks:
+        assert s.shape[-1] <= max(per_stack, max(sizes))
