@@ -95,12 +95,8 @@ class Coupling:
         out[..., self.plain_cols] = np.einsum("fkp,fk->fp" if per_frame else "fkp,fk->p", self.plain, u)
         if self.terms:
             y = np.einsum("fkd,fk->fd", self.bases, u)                          # (F, D)
-            for t in self.terms:
-                yt = y[:, t.offset:t.offset + t.d]
-                if per_frame:
-                    out[:, t.first:t.first + t.size] = (t.basis[:, :, None] * yt[:, None, :]).reshape(F, t.size)
-                else:
-                    out[t.first:t.first + t.size] = (t.basis.T @ yt).ravel()
+            cols = np.concatenate([t.cols for t in self.terms])
+            out[..., cols] = term_sums(y, [(t.offset, t.d, t.basis) for t in self.terms], per_frame)
         return out
 
     def schur(self, Linv: np.ndarray) -> np.ndarray:
@@ -108,13 +104,11 @@ class Coupling:
         Schur complement the frames take away, summed over chunks of frames (:data:`CHUNK_ENTRIES`)."""
         F, k, P0 = self.plain.shape
         D = self.bases.shape[2]
-        spans = np.cumsum([0] + [t.size for t in self.terms])
-        T = int(spans[-1])
+        T = sum(t.size for t in self.terms)
         S_pp, S_pt, S_tt = np.zeros((P0, P0)), np.zeros((P0, T)), np.zeros((T, T))
         step = max(1, CHUNK_ENTRIES // max(k * (P0 + D), P0 * max(D, 1), D * D, 1))
         for f0 in range(0, F, step):
             L = Linv[f0:f0 + step]
-            c = len(L)
             Vp = L @ self.plain[f0:f0 + step]                                    # (c, k, P0)
             Vp2 = Vp.reshape(-1, P0)
             S_pp += Vp2.T @ Vp2
@@ -123,26 +117,71 @@ class Coupling:
             Vb = L @ self.bases[f0:f0 + step]                                    # (c, k, D)
             M = Vp.transpose(0, 2, 1) @ Vb                                       # (c, P0, D)
             N = Vb.transpose(0, 2, 1) @ Vb                                       # (c, D, D)
-            for i, t in enumerate(self.terms):
-                bt = t.basis[f0:f0 + step]                                       # (c, K)
-                Kt = bt.shape[1]
-                part = M[:, :, t.offset:t.offset + t.d].reshape(c, P0 * t.d).T @ bt       # (P0·d, K)
-                S_pt[:, spans[i]:spans[i + 1]] += part.reshape(P0, t.d, Kt).transpose(0, 2, 1).reshape(P0, -1)
-                for j in range(i, len(self.terms)):
-                    u = self.terms[j]
-                    nn = N[:, t.offset:t.offset + t.d, u.offset:u.offset + u.d]              # (c, d_t, d_u)
-                    left = (bt[:, :, None, None] * nn[:, None]).reshape(c, -1)            # (c, Kt·d_t·d_u)
-                    block = (left.T @ u.basis[f0:f0 + step]).reshape(Kt, t.d, u.d, -1)   # (Kt, d_t, d_u, Ku)
-                    S_tt[spans[i]:spans[i + 1], spans[j]:spans[j + 1]] += block.transpose(0, 1, 3, 2).reshape(
-                        t.size, u.size)
+            pt, tt = term_products(M, N, [(t.offset, t.d, t.basis[f0:f0 + step]) for t in self.terms])
+            S_pt += pt
+            S_tt += tt
         P = self.P
         if not T and P0 == P:
             return S_pp
         out = np.zeros((P, P))
         term_cols = np.concatenate([t.cols for t in self.terms]) if T else np.zeros(0, dtype=int)
-        upper = np.triu(S_tt)                   # the term blocks were summed on and above the block diagonal
         out[np.ix_(self.plain_cols, self.plain_cols)] = S_pp
         out[np.ix_(self.plain_cols, term_cols)] = S_pt
         out[np.ix_(term_cols, self.plain_cols)] = S_pt.T
-        out[np.ix_(term_cols, term_cols)] = upper + np.triu(upper, 1).T
+        out[np.ix_(term_cols, term_cols)] = symmetric_from_upper(S_tt)
         return out
+
+
+def term_products(M: np.ndarray, N: np.ndarray, parts: list) -> tuple[np.ndarray, np.ndarray]:
+    """The sums over frames of products that involve term columns (a basis times base directions), from the
+    products of the base directions alone: with M (c, p, D) each frame's products of p plain columns with D base
+    directions and N (c, D, D) those of the base directions with each other, and `parts` each term's
+    ``(offset, d, basis)`` (its base directions ``offset .. offset + d`` of D, its basis (c, K) over the same
+    frames), returns ``pt`` (p, T), the plain columns against every term column, and ``tt`` (T, T), the term
+    columns against each other on and above the block diagonal (below it zero: :func:`symmetric_from_upper`), T the
+    terms' columns in order, each basis function first, direction second.
+
+    Column (kk, a) of a term is ``base_a · basis_kk`` in every frame, so its product with a plain column p is
+    ``Σ_f M_f[p, a] basis_f,kk`` and with column (ll, b) of a term u ``Σ_f N_f[a, b] basis_f,kk basis_u,f,ll``:
+    c·p·d·K and c·d_t·d_u·K_t·K_u multiplications in place of the rows' (3 per marker) times as many with the
+    columns written out. Used for the Schur complement (:meth:`Coupling.schur`) and the constants' normal matrix
+    (:func:`identcheck.bundle.normal.normal_equations`)."""
+    c, p, _ = M.shape
+    spans = np.cumsum([0] + [d * basis.shape[1] for _, d, basis in parts])
+    pt, tt = np.zeros((p, spans[-1])), np.zeros((spans[-1], spans[-1]))
+    for i, (off, d, bt) in enumerate(parts):
+        K = bt.shape[1]
+        part = M[:, :, off:off + d].reshape(c, p * d).T @ bt                          # (p·d, K)
+        pt[:, spans[i]:spans[i + 1]] = part.reshape(p, d, K).transpose(0, 2, 1).reshape(p, K * d)
+        for j in range(i, len(parts)):
+            off_u, d_u, bu = parts[j]
+            nn = N[:, off:off + d, off_u:off_u + d_u]                                 # (c, d, d_u)
+            left = (bt[:, :, None, None] * nn[:, None]).reshape(c, -1)                # (c, K·d·d_u)
+            block = (left.T @ bu).reshape(K, d, d_u, -1)                              # (K, d, d_u, K_u)
+            tt[spans[i]:spans[i + 1], spans[j]:spans[j + 1]] = block.transpose(0, 1, 3, 2).reshape(K * d, -1)
+    return pt, tt
+
+
+def term_sums(y: np.ndarray, parts: list, per_frame: bool = False) -> np.ndarray:
+    """``Σ_f`` of term columns times vectors, from the base directions' (y (F, D) or (F, D, Q), each frame's products
+    of its D base directions with the vectors): column (kk, a) of a term ``(offset, d, basis)`` is ``Σ_f basis_f,kk
+    y_f,offset+a`` ((T,) or (T, Q)), or each frame's term ((F, T) or (F, T, Q)) with `per_frame`; the columns as
+    :func:`term_products` orders them."""
+    out = []
+    for off, d, basis in parts:
+        yt = y[:, off:off + d]                                                      # (F, d[, Q])
+        if per_frame:
+            spread = basis.reshape(basis.shape + (1,) * (yt.ndim - 1)) * yt[:, None]   # (F, K, d[, Q])
+            out.append(spread.reshape((len(y), basis.shape[1] * d) + yt.shape[2:]))
+        else:
+            out.append(np.tensordot(basis, yt, axes=(0, 0)).reshape((-1,) + yt.shape[2:]))
+    if not out:
+        return np.zeros((len(y), 0) + y.shape[2:] if per_frame else (0,) + y.shape[2:])
+    return np.concatenate(out, axis=1 if per_frame else 0)
+
+
+def symmetric_from_upper(upper_blocks: np.ndarray) -> np.ndarray:
+    """The symmetric matrix whose part on and above the diagonal is that of `upper_blocks` (a sum built block by block
+    on and above the block diagonal; the diagonal blocks are whole and symmetric)."""
+    upper = np.triu(upper_blocks)
+    return upper + np.triu(upper, 1).T

@@ -30,12 +30,13 @@ class Group:
 
     ``cols``: the markers (trial columns, (m,)); ``joints``: the joints from the root down to the segment;
     ``terms``: indices (``Terms.ordered()`` order) of the effect terms that touch them; ``frame_cols`` (kb,):
-    their per-frame unknowns (the root's pose, then each joint's angles); ``const_cols`` (pb,): their
-    constants (the markers' own positions, 3 each, then each joint's, root first, then each term's); and
-    both as :func:`runs`. For the coupling kept by structure (:mod:`identcheck.bundle.coupling`): ``plain_at``,
-    the positions in ``const_cols`` of the plain constants (those not a basis times a base direction), and
-    ``plain_runs`` their places among :attr:`Layout.plain`; ``base_runs``, the places of the group's terms' base
-    directions among the coupling's bases."""
+    their per-frame unknowns (the root's pose, then each joint's angles), and as :func:`runs`; ``const_cols``
+    (pb,): their constants (the markers' own positions, 3 each, then each joint's, root first, then each term's).
+    ``plain_at``: the positions in ``const_cols`` of the plain constants (those not a basis times a base direction:
+    the columns of the block's G), ``plain_const_runs`` their columns in the whole system and ``plain_runs`` their
+    places among :attr:`Layout.plain`, both as runs; ``kron_at``, the group's terms that are a basis times base
+    directions, as indices of :attr:`Layout.kron`, in the order of their base directions in the block, and
+    ``base_runs``, the places of those directions among the coupling's bases (:mod:`identcheck.bundle.coupling`)."""
 
     segment: str
     cols: np.ndarray
@@ -44,9 +45,10 @@ class Group:
     frame_cols: np.ndarray
     const_cols: np.ndarray
     frame_runs: tuple
-    const_runs: tuple
     plain_at: np.ndarray
+    plain_const_runs: tuple
     plain_runs: tuple
+    kron_at: tuple
     base_runs: tuple
 
 
@@ -145,30 +147,24 @@ def layout(chain: Skeleton, terms: Terms) -> Layout:
             plain_at = np.flatnonzero(~in_kron[ccol])
             bases = np.concatenate([np.arange(kron[kron_of[i]].offset, kron[kron_of[i]].offset + kron[kron_of[i]].d)
                                     for i in key if i in kron_of] or [np.zeros(0)]).astype(int)
-            groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), runs(ccol), plain_at,
-                                runs(plain_index[ccol[plain_at]]), runs(bases)))
+            groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), plain_at, runs(ccol[plain_at]),
+                                runs(plain_index[ccol[plain_at]]), tuple(kron_of[i] for i in key if i in kron_of),
+                                runs(bases)))
     return Layout(col, n_const(chain, terms), tuple(groups), plain, tuple(kron))
 
 
 @dataclass(frozen=True)
 class Block:
-    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, ``G`` (F, m, 3, pb) constants, in its columns;
-    ``base`` (F, m, 3, db), the base directions of the group's terms that are a basis times them (G's columns of
-    such a term are its base times each basis function: :mod:`identcheck.bundle.coupling`)."""
+    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, in its columns; ``G`` (F, m, 3, pp), its plain
+    constants' (``Group.plain_at`` of its columns); ``base`` (F, m, 3, db), the base directions of the group's terms
+    that are a basis times them (``Group.kron_at``): such a term's columns are its base times each basis function
+    (:mod:`identcheck.bundle.coupling`) and are never written out (a hinge's second rotation with 82 basis functions
+    had made a shank block's G 112 columns wide, 82 of them such; :func:`dense_jacobians` writes them for checks)."""
 
     group: Group
     J: np.ndarray
     G: np.ndarray
     base: np.ndarray | None = None
-
-
-def _base_times_basis(G: np.ndarray, cc: int, base: np.ndarray, basis: np.ndarray) -> int:
-    """Write a term's columns into G (F, m, 3, pb) from column `cc` on: its base directions `base` (F, m or 1, 3, d)
-    times each basis function (F, K), column ``cc + d·kk + a``; returns the column after them."""
-    F, K, d = basis.shape[0], basis.shape[1], base.shape[-1]
-    G[..., cc:cc + d * K] = (base[..., None, :] * basis[:, None, None, :, None]).reshape(
-        (F, base.shape[1], 3, d * K))
-    return cc + d * K
 
 
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
@@ -213,7 +209,7 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
     for grp in lay.groups:
         idx, m = grp.cols, len(grp.cols)
         J = np.zeros((F, m, 3, len(grp.frame_cols)))
-        G = np.zeros((F, m, 3, len(grp.const_cols)))
+        G = np.zeros((F, m, 3, len(grp.plain_at)))          # the plain constants' columns only
         J[..., 0:3] = -skew(lever[:, idx] - s.root_t[:, None])    # column a: e_a × lever (a turn about the root)
         J[..., 3:6] = np.eye(3)
         for i in range(m):                                   # each marker's own position: the segment's rotation
@@ -241,19 +237,15 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         for ti in grp.terms:
             term = ordered[ti]
             if ti < len(terms.markers):                      # the markers' position on their segment
-                basis = term[1]
                 base.append(np.broadcast_to(R[grp.segment][:, None], (F, m, 3, 3)))
-                cc = _base_times_basis(G, cc, R[grp.segment][:, None], basis)
             elif ti < n_mc:                                  # the joint centre in the parent
-                j, basis = term
+                j = term[0]
                 base.append(np.broadcast_to(R[chain.parent[j]][:, None], (F, m, 3, 3)))
-                cc = _base_times_basis(G, cc, R[chain.parent[j]][:, None], basis)
-            elif ti < n0:                                    # a hinge's second rotation
-                j, basis, _ = term
+            elif ti < n0:                                    # a hinge's second rotation (its β column is plain)
+                j = term[0]
                 w_psi, w_beta = second[ti]
                 turn = cross3(w_psi[:, None], dx[j])
                 base.append(turn[..., None])
-                cc = _base_times_basis(G, cc, turn[..., None], basis)
                 G[..., cc] = cross3(w_beta[:, None], dx[j])
                 cc += 1
             elif ti in runs_at:                              # fields in the world, a run of them at once
@@ -266,7 +258,8 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
 
 
 def dense_jacobians(lay: Layout, blocks: list, n_markers: int):
-    """The blocks written out in full: per-frame J (F, M, 3, k) and constants' G (F, M, 3, P) (for checks)."""
+    """The blocks written out in full: per-frame J (F, M, 3, k) and constants' G (F, M, 3, P), the term columns each
+    base direction times each basis function (for checks)."""
     F = blocks[0].J.shape[0] if blocks else 0
     J = np.zeros((F, n_markers, 3, lay.k))
     G = np.zeros((F, n_markers, 3, lay.P))
@@ -274,6 +267,10 @@ def dense_jacobians(lay: Layout, blocks: list, n_markers: int):
         g = b.group
         for i, col in enumerate(g.cols):
             J[:, col][..., g.frame_cols] = b.J[:, i]
-            G[:, col][..., g.const_cols] = b.G[:, i]
+            G[:, col][..., g.const_cols[g.plain_at]] = b.G[:, i]
+            off = 0
+            for t in (lay.kron[at] for at in g.kron_at):
+                base = b.base[:, i, :, off:off + t.d]                                   # (F, 3, d)
+                G[:, col][..., t.cols] = (base[:, :, None, :] * t.basis[:, None, :, None]).reshape(F, 3, t.size)
+                off += t.d
     return J, G
-
