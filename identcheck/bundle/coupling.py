@@ -74,9 +74,7 @@ class Coupling:
         out = np.zeros((F, k, self.P))
         out[..., self.plain_cols] = self.plain
         for t in self.terms:
-            base = self.bases[..., t.offset:t.offset + t.d]                  # (F, k, d)
-            out[..., t.first:t.first + t.size] = (base[:, :, None, :] * t.basis[:, None, :, None]).reshape(
-                F, k, t.size)
+            out[..., t.first:t.first + t.size] = term_columns(self.bases[..., t.offset:t.offset + t.d], t.basis)
         return out
 
     def times(self, dc: np.ndarray) -> np.ndarray:
@@ -130,6 +128,14 @@ class Coupling:
         out[np.ix_(term_cols, self.plain_cols)] = S_pt.T
         out[np.ix_(term_cols, term_cols)] = symmetric_from_upper(S_tt)
         return out
+
+
+def term_columns(base: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """A term's columns written out (F, r, K·d) from its base directions (F, r, d) and its basis (F, K), column
+    ``d·kk + a`` the direction a times basis function kk: for checks and the rare dense solve; the products take them
+    from the directions (:func:`term_products`, :func:`term_sums`)."""
+    F, r, d = base.shape
+    return (base[:, :, None, :] * basis[:, None, :, None]).reshape(F, r, basis.shape[1] * d)
 
 
 def term_products(M: np.ndarray, N: np.ndarray, parts: list) -> tuple[np.ndarray, np.ndarray]:

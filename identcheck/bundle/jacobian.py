@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identcheck.bundle.coupling import KronTerm
+from identcheck.bundle.coupling import KronTerm, term_columns
 from identcheck.bundle.model import (State, Terms, cross3, hinge_turns, n_const, second_axis, second_rotations,
                                      tangents, tilt_axis, turn_beta, turn_rate, world_motion)
 from identcheck.geometry.rotations import hinge_matrix, left_jacobian_times, skew
@@ -155,11 +155,12 @@ def layout(chain: Skeleton, terms: Terms) -> Layout:
 
 @dataclass(frozen=True)
 class Block:
-    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, in its columns; ``G`` (F, m, 3, pp), its plain
-    constants' (``Group.plain_at`` of its columns); ``base`` (F, m, 3, db), the base directions of the group's terms
-    that are a basis times them (``Group.kron_at``): such a term's columns are its base times each basis function
-    (:mod:`identcheck.bundle.coupling`) and are never written out (a hinge's second rotation with 82 basis functions
-    had made a shank block's G 112 columns wide, 82 of them such; :func:`dense_jacobians` writes them for checks)."""
+    """One group's derivatives: ``J`` (F, m, 3, kb) per frame, in its columns; ``G`` (F, m, 3, len(plain_at)), its
+    plain constants' (``Group.plain_at`` of its columns); ``base`` (F, m, 3, db), the base directions of the group's
+    terms that are a basis times them (``Group.kron_at``): such a term's columns are its base times each basis
+    function (:mod:`identcheck.bundle.coupling`) and are never written out (a hinge's second rotation with 82 basis
+    functions had made a shank block's G 112 columns wide, 82 of them such; :func:`dense_jacobians` writes them for
+    checks)."""
 
     group: Group
     J: np.ndarray
@@ -270,7 +271,6 @@ def dense_jacobians(lay: Layout, blocks: list, n_markers: int):
             G[:, col][..., g.const_cols[g.plain_at]] = b.G[:, i]
             off = 0
             for t in (lay.kron[at] for at in g.kron_at):
-                base = b.base[:, i, :, off:off + t.d]                                   # (F, 3, d)
-                G[:, col][..., t.cols] = (base[:, :, None, :] * t.basis[:, None, :, None]).reshape(F, 3, t.size)
+                G[:, col][..., t.cols] = term_columns(b.base[:, i, :, off:off + t.d], t.basis)
                 off += t.d
     return J, G

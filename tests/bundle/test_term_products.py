@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from identcheck.bundle.coupling import symmetric_from_upper, term_products, term_sums
+from identcheck.bundle.coupling import symmetric_from_upper, term_columns, term_products, term_sums
 
 
 def _written_out(base: np.ndarray, parts: list) -> np.ndarray:
@@ -61,3 +61,12 @@ def test_term_sums_are_the_written_out_columns_times_the_vectors(problem, Q, per
     want = np.einsum("fnt,fn...->ft...", T, v) if per_frame else np.einsum("fnt,fn...->t...", T, v)
     assert got.shape == want.shape
     np.testing.assert_allclose(got, want, atol=1e-10 * (1 + np.abs(want).max(initial=0)))
+
+
+@settings(max_examples=40, deadline=None)
+@given(_problem())
+def test_term_columns_are_each_direction_times_each_basis_function(problem):
+    _, _, base, parts = problem
+    for off, d, basis in parts:
+        want = _written_out(base, [(off, d, basis)])
+        np.testing.assert_array_equal(term_columns(base[:, :, off:off + d], basis), want)
