@@ -2,6 +2,7 @@
 written out frame by frame from the full Jacobians: random chains' states, effect terms, weights and residuals."""
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from unittest import mock
 
@@ -201,3 +202,34 @@ def test_lower_inverse_inverts_every_frame(seed, F, k, spread):
     for f in range(F):
         bound = 10 * k ** 2 * eps * np.abs(X[f]).max() * np.abs(L[f]).max()
         assert np.abs(X[f] @ L[f] - np.eye(k)).max() <= bound
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(sorted(MODELS)), terms=st.sampled_from(["none", "all"]),
+       F=st.integers(1, 5))
+def test_blocks_formed_one_at_a_time_are_the_blocks(seed, model, terms, F):
+    """``jacobian_blocks(..., lazy=True)`` forms each block only when it is reached (the fit's normal equations let
+    each go once summed), and they are the blocks of the list, giving the same normal equations."""
+    rng = np.random.default_rng(seed)
+    chain = Skeleton.from_model(MODELS[model])
+    s = _random_state(chain, F, rng)
+    tm = _terms(chain, F, rng, terms)
+    s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
+    R, _, centre, pred = forward(chain, tm, s)
+    lay, listed = jacobian_blocks(chain, tm, s, R, centre, pred)
+    lay2, lazy = jacobian_blocks(chain, tm, s, R, centre, pred, lazy=True)
+    assert isinstance(lazy, Iterator) and not isinstance(lazy, (list, tuple))     # formed as they are reached
+    got = list(lazy)
+    assert [b.group.cols.tolist() for b in got] == [b.group.cols.tolist() for b in listed] == [
+        g.cols.tolist() for g in lay2.groups]
+    for a, b in zip(got, listed):
+        np.testing.assert_array_equal(a.J, b.J)
+        np.testing.assert_array_equal(a.G, b.G)
+        assert (a.base is None) == (b.base is None) and (a.base is None or np.array_equal(a.base, b.base))
+    r, w = rng.normal(size=pred.shape), np.ones(pred.shape[:2])
+    want = normal_equations(lay, listed, r, w)
+    have = normal_equations(*jacobian_blocks(chain, tm, s, R, centre, pred, lazy=True), r, w)
+    for x, y in zip(want, have):
+        if hasattr(x, "dense"):
+            x, y = x.dense(), y.dense()
+        np.testing.assert_array_equal(x, y)
