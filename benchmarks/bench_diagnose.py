@@ -218,6 +218,7 @@ STAGES = {  # stage -> (file suffix, function names); cumulative times, summed
     "fit_chain (all calls)": ("bundle/chain.py", ("fit_chain",)),
     "  _normal (normal equations)": ("bundle/chain.py", ("_normal",)),
     "  _jacobians": ("bundle/jacobian.py", ("jacobian_blocks",)),
+    "  Jacobian blocks formed (the fit's within _normal)": ("bundle/jacobian.py", ("block",)),
 }
 
 

@@ -259,7 +259,7 @@ def _solve_constants(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 def _normal(chain, terms, s, R, centre, pred, y, w):
     """Gauss-Newton normal-equation blocks: per-frame A (F,k,k), coupling B (F,k,P), constants C (P,P),
     gradients g (F,k) and h (P,)."""
-    lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred, lazy=True)     # each block let go once summed
+    lay, blocks = jacobian_blocks(chain, terms, s, R, centre, pred, lazy=True)     # formed one at a time, once
     return normal_equations(lay, blocks, np.where(w[..., None] > 0, pred - y, 0.0), w)
 
 

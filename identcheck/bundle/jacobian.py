@@ -13,6 +13,7 @@ the root origin, or about the joint's centre for every marker downstream of the 
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,12 +170,13 @@ class Block:
 
 
 def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: dict,
-                    pred: np.ndarray, lazy: bool = False) -> tuple[Layout, list]:
+                    pred: np.ndarray, lazy: bool = False) -> tuple[Layout, list | Iterator]:
     """The derivatives of the predictions `pred` (F, M, 3) of state `s` (with the segments' rotations `R` and
     the joints' world centres `centre` of :func:`identcheck.bundle.model.forward`), one :class:`Block` per group:
-    a list, or with `lazy` an iterator that forms each block when it is reached (for a caller that passes over
-    them once, as the fit's normal equations do: the blocks are never all held, 53 MB on a 42-marker body at 1500
-    frames, beside the coupling B they are summed into)."""
+    a list, or with `lazy` an iterator that forms each block when it is reached. `lazy` is for a caller that passes
+    over the blocks once, as the fit's normal equations do (a second pass would find none: not
+    :func:`~identcheck.bundle.normal.frames_eliminated`): there no more than two blocks are held at once, not all of
+    them (53 MB on a 42-marker body at 1500 frames) beside the coupling B they are summed into."""
     lay = layout(chain, terms)
     F = pred.shape[0]
     n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)

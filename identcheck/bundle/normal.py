@@ -9,6 +9,7 @@ rows for markers that touch 9 to 20 of them.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import replace
 
 import numpy as np
@@ -39,10 +40,11 @@ def term_parts(lay: Layout, grp) -> tuple[list, tuple]:
     return parts, cols
 
 
-def normal_equations(lay: Layout, blocks: list, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
+def normal_equations(lay: Layout, blocks: Iterable, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
     """(A, B, C, g, h) of the blocks with residuals `r` (F, M, 3) and weights `w` (F, M) (see the module), B as a
     :class:`~identcheck.bundle.coupling.Coupling` (its term columns a base times a basis, never written out). The
-    gradients of many fields at once, without the products: :func:`field_gradients`.
+    gradients of many fields at once, without the products: :func:`field_gradients`. The blocks are passed over
+    once (a list, or the fit's blocks formed as they are reached).
 
     C and h are built from the blocks' plain columns and their terms' base directions alone
     (:func:`~identcheck.bundle.coupling.term_products`), the term columns never written out: a hinge's second rotation

@@ -51,14 +51,20 @@ def _terms(chain: Skeleton, F: int, rng, kind: str) -> Terms:
                         (np.sort(cols), rng.normal(size=(F, len(cols), 3)))])
 
 
-def _blocks_and_weights(seed: int, model: str, weights: str, terms: str, F: int):
-    """A random chain's state and terms with their blocks, residuals and weights: (chain, lay, blocks, r, w)."""
+def _state_and_terms(seed: int, model: str, terms: str, F: int):
+    """A random chain's state and terms, predicted: (rng, chain, terms, state, R, centre, pred)."""
     rng = np.random.default_rng(seed)
     chain = Skeleton.from_model(MODELS[model])
     s = _random_state(chain, F, rng)
     tm = _terms(chain, F, rng, terms)
     s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
     R, _, centre, pred = forward(chain, tm, s)
+    return rng, chain, tm, s, R, centre, pred
+
+
+def _blocks_and_weights(seed: int, model: str, weights: str, terms: str, F: int):
+    """A random chain's state and terms with their blocks, residuals and weights: (chain, lay, blocks, r, w)."""
+    rng, chain, tm, s, R, centre, pred = _state_and_terms(seed, model, terms, F)
     lay, blocks = jacobian_blocks(chain, tm, s, R, centre, pred)
     M = chain.n_markers
     r = rng.normal(size=(F, M, 3))
@@ -210,12 +216,7 @@ def test_lower_inverse_inverts_every_frame(seed, F, k, spread):
 def test_blocks_formed_one_at_a_time_are_the_blocks(seed, model, terms, F):
     """``jacobian_blocks(..., lazy=True)`` forms each block only when it is reached (the fit's normal equations let
     each go once summed), and they are the blocks of the list, giving the same normal equations."""
-    rng = np.random.default_rng(seed)
-    chain = Skeleton.from_model(MODELS[model])
-    s = _random_state(chain, F, rng)
-    tm = _terms(chain, F, rng, terms)
-    s.term_params = [0.1 * rng.normal(size=sh) for sh in tm.shapes()]
-    R, _, centre, pred = forward(chain, tm, s)
+    rng, chain, tm, s, R, centre, pred = _state_and_terms(seed, model, terms, F)
     lay, listed = jacobian_blocks(chain, tm, s, R, centre, pred)
     lay2, lazy = jacobian_blocks(chain, tm, s, R, centre, pred, lazy=True)
     assert isinstance(lazy, Iterator) and not isinstance(lazy, (list, tuple))     # formed as they are reached
