@@ -36,8 +36,9 @@ class Group:
     ``plain_at``: the positions in ``const_cols`` of the plain constants (those not a basis times a base direction:
     the columns of the block's G), ``plain_const_runs`` their columns in the whole system and ``plain_runs`` their
     places among :attr:`Layout.plain`, both as runs; ``kron_at``, the group's terms that are a basis times base
-    directions, as indices of :attr:`Layout.kron`, in the order of their base directions in the block, and
-    ``base_runs``, the places of those directions among the coupling's bases (:mod:`identcheck.bundle.coupling`)."""
+    directions, as indices of :attr:`Layout.kron`, in the order of their base directions in the block (their
+    columns and their places among the coupling's bases follow from those:
+    :func:`identcheck.bundle.normal.term_parts`)."""
 
     segment: str
     cols: np.ndarray
@@ -50,7 +51,6 @@ class Group:
     plain_const_runs: tuple
     plain_runs: tuple
     kron_at: tuple
-    base_runs: tuple
 
 
 def runs(cols: np.ndarray) -> tuple:
@@ -146,11 +146,8 @@ def layout(chain: Skeleton, terms: Terms) -> Layout:
             ccol = np.concatenate([(3 * cols[:, None] + np.arange(3)).ravel()] + ccols
                                   + [term_cols[i] for i in key]).astype(int)
             plain_at = np.flatnonzero(~in_kron[ccol])
-            bases = np.concatenate([np.arange(kron[kron_of[i]].offset, kron[kron_of[i]].offset + kron[kron_of[i]].d)
-                                    for i in key if i in kron_of] or [np.zeros(0)]).astype(int)
             groups.append(Group(seg, cols, joints, key, fcols, ccol, runs(fcols), plain_at, runs(ccol[plain_at]),
-                                runs(plain_index[ccol[plain_at]]), tuple(kron_of[i] for i in key if i in kron_of),
-                                runs(bases)))
+                                runs(plain_index[ccol[plain_at]]), tuple(kron_of[i] for i in key if i in kron_of)))
     return Layout(col, n_const(chain, terms), tuple(groups), plain, tuple(kron))
 
 

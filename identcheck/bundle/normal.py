@@ -29,15 +29,18 @@ def _add(target: np.ndarray, rows: tuple, cols: tuple | None, x: np.ndarray) -> 
             target[..., r0:r1, c0:c1] += x[..., a:a + r1 - r0, b:b + c1 - c0]
 
 
-def term_parts(lay: Layout, grp) -> tuple[list, tuple]:
+def term_parts(lay: Layout, grp) -> tuple[list, tuple, tuple]:
     """A group's terms that are a basis times base directions (``Group.kron_at``): each one's ``(offset, d, basis)``
-    (its directions among its block's ``base``, as :func:`~identcheck.bundle.coupling.term_products` takes them),
-    and their columns in the whole system as :func:`~identcheck.bundle.jacobian.runs` (position in the terms'
-    columns taken in that order)."""
+    (its directions among its block's ``base``, as :func:`~identcheck.bundle.coupling.term_products` takes them);
+    their columns in the whole system, and their directions among the coupling's bases, both as
+    :func:`~identcheck.bundle.jacobian.runs` (positions among the terms' columns, and the block's directions)."""
     terms = [lay.kron[i] for i in grp.kron_at]
-    parts = [(int(off), t.d, t.basis) for t, off in zip(terms, np.cumsum([0] + [t.d for t in terms]))]
-    cols = tuple((t.first, t.first + t.size, int(at)) for t, at in zip(terms, np.cumsum([0] + [t.size for t in terms])))
-    return parts, cols
+    at_d = np.cumsum([0] + [t.d for t in terms])
+    at_size = np.cumsum([0] + [t.size for t in terms])
+    parts = [(int(off), t.d, t.basis) for t, off in zip(terms, at_d)]
+    cols = tuple((t.first, t.first + t.size, int(at)) for t, at in zip(terms, at_size))
+    bases = tuple((t.offset, t.offset + t.d, int(off)) for t, off in zip(terms, at_d))
+    return parts, cols, bases
 
 
 def normal_equations(lay: Layout, blocks: Iterable, r: np.ndarray, w: np.ndarray, per_frame: bool = False):
@@ -79,9 +82,9 @@ def normal_equations(lay: Layout, blocks: Iterable, r: np.ndarray, w: np.ndarray
         _add(h, pr, None, (Gf.transpose(0, 2, 1) @ rf[..., None])[..., 0] if per_frame else G2.T @ rf.reshape(-1))
         if base is None:
             continue
-        _add(Bb, fr, grp.base_runs, Jt @ base)
+        parts, tr, bases = term_parts(lay, grp)
+        _add(Bb, fr, bases, Jt @ base)
         base_t = base.transpose(0, 2, 1)
-        parts, tr = term_parts(lay, grp)
         pt, tt = term_products(Gf.transpose(0, 2, 1) @ base, base_t @ base, parts)
         _add(C, pr, tr, pt)
         _add(C, tr, pr, pt.T)
@@ -147,7 +150,7 @@ def _add_constant_gradients(out: np.ndarray, lay: Layout, b, V: np.ndarray, per_
     plain = Gf.transpose(0, 2, 1) @ V if per_frame else Gf.reshape(F * n, -1).T @ V.reshape(F * n, Q)
     _add_rows(out, grp.plain_const_runs, plain, axis)
     if grp.kron_at:
-        parts, cols = term_parts(lay, grp)
+        parts, cols, _ = term_parts(lay, grp)
         y = b.base.reshape(F, n, -1).transpose(0, 2, 1) @ V                          # (F, d, Q)
         _add_rows(out, cols, term_sums(y, parts, per_frame), axis)
 
