@@ -136,11 +136,15 @@ class ModelledMotion:
         RMS (3-D) over the frames of the fitted motion about its mean, mm.
     joint : str or None
         The one joint it moves (a centre moving in its parent), or None: every joint beside `segments` (skin).
+    reading : str
+        Empty for the motion an adopted effect fits; else the effect the data cannot tell from the adopted one
+        whose reading of the same motion this is (:meth:`identcheck.effects.base.Effect.reading`), for the report.
     """
 
     segments: tuple
     rms_mm: float
     joint: str | None = None
+    reading: str = ""
 
     def beside(self, chain, joint: str) -> bool:
         """Whether this motion moves `joint`'s markers relative to it."""

@@ -115,6 +115,16 @@ class Effect:
         none by default."""
         return []
 
+    def reading(self, chain, where: dict, rms_mm: float) -> list:
+        """The motions with the joint angles this effect at `where` would fit, as
+        :class:`~identcheck.bundle.misfit.ModelledMotion`, were it given the motion (RMS `rms_mm`) that an adopted
+        effect fits and the data cannot tell from this one (the adopted step's ``indistinguishable_from``). The same
+        marker motion read as another effect moves the joints otherwise: a pelvis cluster moving as one with the hip's
+        angles is, to first order, the hip centre displaced by the motion over the angles' excursion, where the same
+        motion read as the centre moving only moves the centre about its mean place. None by default (an effect that
+        fits no motion with the angles)."""
+        return []
+
     def scale_sd(self, proposal: Proposal, hyp) -> float:
         """The relative standard deviation this effect, as hypothesis `hyp` fits it, leaves on every length the trial
         measures, which no fit can remove (a distortion of the capture volume says its calibration is off, and the

@@ -243,6 +243,11 @@ class JointTranslation(Effect):
         offsets = (found[0][1] if found else 0.0) + sum((c * linear[k] for k, c in coefficients), 0.0)
         return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)]
 
+    def reading(self, chain, where: dict, rms_mm: float) -> list:
+        """The centre of the joint at `where` moving in its parent by `rms_mm`."""
+        j = where.get("joint")
+        return [ModelledMotion((chain.parent[j], chain.child[j]), rms_mm, joint=j)] if j in chain.parent else []
+
     def evidence(self, ctx, before, after, proposal) -> dict:
         j = proposal.payload["joint"]
         ch = before.chain

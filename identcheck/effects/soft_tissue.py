@@ -255,6 +255,11 @@ class SoftTissue(Effect):
                 out.append(ModelledMotion((proposal.where["segment"],), motion_rms_mm(offsets[seen])))
         return out
 
+    def reading(self, chain, where: dict, rms_mm: float) -> list:
+        """The markers at `where` moving on their segment(s) by `rms_mm`."""
+        segments = tuple(where.get("segments") or [where["segment"]]) if "segment" in where else ()
+        return [ModelledMotion(segments, rms_mm)] if set(segments) <= set(chain.seg_markers) and segments else []
+
     def evidence(self, ctx, before, after, proposal) -> dict:
         col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]
         x, x_label = main_angle(before, j)

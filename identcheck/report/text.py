@@ -182,11 +182,14 @@ def diagnose_text(diag) -> str:
     if scale > 0:
         lines.append(f"   the uncertainties include a standard deviation of {100 * scale:.2g} % of every length: "
                      "the volume is distorted, and the uniform scale of its calibration is invisible to rigid bodies")
-    from identcheck.bundle.honest import MOVING_CENTRE_CAVEAT      # here: the terminal's start stays light
-
     for name, j in rep["joints"].items():
-        if MOVING_CENTRE_CAVEAT in j.get("practical", {}).get("reason", ""):
-            lines.append(f"   {name}: {MOVING_CENTRE_CAVEAT.lstrip('; ')}")
+        if "moving_centre" in j:
+            f = j["moving_centre"]
+            lines.append(f"   {name}: its centre moves with its angles ({f['motion_rms_mm']:.3g} mm RMS): where it is "
+                         "at any one pose is not identifiable (the part of the motion linear in the angles is a "
+                         "shifted centre to the data); the distances are to its place over the trial, each within "
+                         + ("no bound" if f["uncertainty_mm"] is None else f"±{1.96 * f['uncertainty_mm']:.2g} mm")
+                         + " there (95 %)")
     return "\n".join(lines)
 
 

@@ -186,7 +186,7 @@ def test_the_joints_may_not_lose_more_than_the_rigid_fit_allows_over_several_ste
     with pytest.MonkeyPatch.context() as monkeypatch:
         diag = _patched(monkeypatch, model, tr, [first, second], max_steps=3,
                         worst_joint=lambda ctx, h: ("knee", sd.get(getattr(h, "name", None), rigid)))
-        monkeypatch.setattr(workflow, "joint_report", lambda ctx, h, progress=None: {})
+        monkeypatch.setattr(workflow, "joint_report", lambda ctx, h, progress=None, steps=(): {})
         doc, text = diag.to_dict(), diagnose_text(diag)
     assert [s.name for s in diag.steps] == ["first"]
     (refused,) = diag.not_adopted
