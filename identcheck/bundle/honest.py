@@ -69,10 +69,10 @@ class Minimum:
 
 
 MOVING_CENTRE_REASON = (
-    "its centre moves with its angles (`diagnose` models a translation, or an effect the data cannot tell from one): the part of "
-    "that motion linear in the angles is, to any data, a shifted centre (a shifted axis, for a hinge), so where the "
-    "centre is in either segment at any one pose is not identifiable and no interval is claimed for the distances to "
-    "it; `moving_centre` gives their intervals to the place the fit gives the centre over the trial, a "
+    "its centre moves with its angles (`diagnose` models a translation, or an effect the data cannot tell from one): "
+    "the part of that motion linear in the angles is, to any data, a shifted centre (a shifted axis, for a hinge), so "
+    "where the centre is in either segment at any one pose is not identifiable and no interval is claimed for the "
+    "distances to it; `moving_centre` gives their intervals to the place the fit gives the centre over the trial, a "
     "convention")
 """Why a joint whose own centre an adopted effect moves (:func:`with_moving_centre`) is ``undetermined``. Only a
 caveat until held-out draw 80: knees whose centres shifted posteriorly with flexion were called determined 6.4 and

@@ -168,7 +168,9 @@ def joints_table(joints: dict) -> str:
         verdict = (j.get("practical") or {}).get("verdict", "undetermined")
         colour = VERDICT_COLOURS.get(verdict, "#555")
         ci = j.get("marker_distances_ci95") or {}
-        dist = "<br>".join(f"{_e(m)}: {_num(d, 4)} ({_interval(ci.get(m))})"
+        place = (j.get("moving_centre") or {}).get("marker_distances_ci95")   # a centre moving with the angles
+        dist = "<br>".join(f"{_e(m)}: {_num(d, 4)} ({_interval(ci.get(m))}"
+                           + (f"; to its place over the trial {_interval(place.get(m))}" if place else "") + ")"
                            for m, d in (j.get("marker_distances") or {}).items())
         why = ""
         if verdict != "determined":

@@ -139,3 +139,5 @@ def test_a_moving_centre_the_effects_fit_leaves_its_own_joint_unclaimed(tmp_path
     assert "model_error_sd_mm" not in hip["practical"] and "moving_centre" not in hip
     assert MOVING_CENTRE_REASON not in hip["practical"]["reason"]
     assert "knee: its centre moves with its angles" in diagnose_text(diag)
+    from identcheck.report.html import joints_table                  # and the page, beside the unbounded intervals
+    assert joints_table(joints).count("to its place over the trial") == len(knee["marker_distances"])
