@@ -664,7 +664,7 @@ def said(name: str, where: dict) -> str:
     ``joint_translation at hip``."""
     out = name + (f" at {where['joint']}" if "joint" in where and "segment" not in where else "")
     out += f" on {where['segment']}" if "segment" in where else ""
-    markers = list(where.get("markers") or ())
+    markers = [str(m) for m in where.get("markers") or ()]
     return out + (f" ({', '.join(markers)}{' together' if where.get('together') else ''})" if markers else "")
 
 

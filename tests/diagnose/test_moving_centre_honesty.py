@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from identcheck.diagnose.workflow import diagnose, modelled_motion
+from identcheck.diagnose.workflow import diagnose, equivalent_readings, modelled_motion
 from identcheck.effects.injection import normalised_angle, rotate, rotations, unit_vectors
 from identcheck.effects.joint_translation import JointTranslation
 from identcheck.effects.soft_tissue import SoftTissue
@@ -61,6 +61,11 @@ def test_a_pelvis_cluster_moving_with_the_hip_leaves_the_hip_unclaimed(tmp_path,
     rep = diag.to_dict()
     assert rep["effects"], "the cluster's motion is far above the noise"
     assert any(m.joint == "hip" for m in modelled_motion(diag.after, diag.steps))
+    readings = equivalent_readings(diag.after, diag.steps)     # each alike reading of a motion the model fits is there
+    for st in diag.steps:
+        if st.name in ("joint_translation", "soft_tissue") and st.equivalents():
+            assert any(m.reading.endswith(f"{st.name} at hip adopted") or f"{st.name} on " in m.reading
+                       for m in readings), (st.name, [m.reading for m in readings])
     hip = rep["joints"]["hip"]
     assert hip["practical"]["verdict"] != "determined" and not hip["unique"]
     for m, d in truth.items():
