@@ -83,18 +83,21 @@ of the joint measure, so the centre at the truth's reference pose is not identif
 
 
 def with_moving_centre(answer: dict, motion_rms_mm: float) -> dict:
-    """A joint's answer (:func:`joint_answer`) once its own centre is modelled moving with its angles, RMS
-    `motion_rms_mm` about its mean place: ``undetermined`` (:data:`MOVING_CENTRE_REASON`), every interval
-    ``[0, None]`` (method ``moving_centre``), and the intervals, methods and largest standard error of the distances
-    to the centre's fitted place over the trial kept under ``moving_centre`` with the motion's size: what the data
-    do determine, the place a functional method gives the centre, which is a convention of the trial's poses."""
+    """A joint's answer (:func:`joint_answer`) once its own centre moves with its angles in the final model (a
+    translation fitted there, or a motion fitted otherwise that the data cannot tell from one: the largest such, RMS
+    `motion_rms_mm` about its mean over the trial): ``undetermined`` (:data:`MOVING_CENTRE_REASON`, before the reason
+    the answer had, which says what widens its intervals), every interval ``[0, None]`` (method ``moving_centre``),
+    and the intervals, methods and largest standard error of the distances to the centre as the fit places it over
+    the trial kept under ``moving_centre`` with the motion's size: what the data do determine, the place a functional
+    method gives the centre, which is a convention of the trial's poses."""
     functional = {"marker_distances_ci95": answer["marker_distances_ci95"],
                   "interval_method": answer["interval_method"], "uncertainty_mm": answer["uncertainty_mm"],
                   "motion_rms_mm": round(float(motion_rms_mm), 3)}
     out = without_bounds(answer)
     out["interval_method"] = {m: "moving_centre" for m in out["interval_method"]}
     was = answer["practical"]
-    reason = MOVING_CENTRE_REASON if was["verdict"] == "determined" else f"{was['reason']}; {MOVING_CENTRE_REASON}"
+    reason = (f"{MOVING_CENTRE_REASON}; to that place, {was['reason']}" if was["verdict"] == "determined" else
+              f"{was['reason']}; {MOVING_CENTRE_REASON}")
     out["practical"] = dict(out["practical"], verdict="undetermined", reason=reason, motion_advice="")
     out["moving_centre"] = functional
     return out
@@ -413,11 +416,13 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
             f"{', '.join(skipped)} was not computed within the {PROFILE_BUDGET_S:g} s budget: no bound is claimed "
             "for them (fit fewer frames, or one joint at a time, to have them profiled)")
     practical = judge(chain, fit, cov, j, dist, n_alternatives=len(alternatives), unbounded=unbounded)
+    moving = [m.rms_mm for m in best.modelled if m.joint == j]          # its own centre moves (with_moving_centre)
+    explained = practical["verdict"] != "determined" or bool(moving)      # the reason says what widens the intervals
     if not best.fit.converged:           # its intervals are all unbounded (honest_intervals): say why
         practical["reason"] = not_converged_reason()
     if j in best.model_error:
         practical["model_error_sd_mm"] = round(best.model_error[j], 3)
-        if practical["verdict"] != "determined":
+        if explained:
             practical["reason"] += (f"; the intervals include ±{Z95 * best.model_error[j]:.1f} mm of model error, "
                                     "for markers that move with the joint angles " + (
                                         "(the effects fit the motion they show; their segment's markers moving "
@@ -429,7 +434,7 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
                 practical["reason"] += "; it counts the same motion read as " + ", and as ".join(readings)
     if best.scale_sd > 0:
         practical["scale_sd"] = round(best.scale_sd, 6)
-        if practical["verdict"] != "determined":
+        if explained:
             practical["reason"] += ("; the intervals include the capture's uncertain scale "
                                     f"(±{100 * Z95 * best.scale_sd:.2f} % of each distance: the trial shows the "
                                     "volume distorted)")
@@ -452,5 +457,4 @@ def joint_answer(best: Minimum, j: str, alternatives: list = (), rejected: list 
            "alternatives": list(alternatives), "rejected_candidates": list(rejected), "practical": practical}
     if j in best.spread:
         out["sampling_spread"] = dict(best.spread[j])
-    moving = [m.rms_mm for m in best.modelled if m.joint == j]
     return with_moving_centre(out, max(moving)) if moving else out

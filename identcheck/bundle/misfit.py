@@ -125,7 +125,8 @@ def excursion_rad(fit, joint: str) -> float:
 @dataclass(frozen=True)
 class ModelledMotion:
     """Motion with the joint angles that an effect term of ``diagnose`` fits: a marker (or a cluster) moving on its
-    segment, or a joint's centre moving in its parent. The term takes that motion out of the residual, so
+    segment, or a joint's centre moving in its parent; or (``reading`` set) that motion as an effect the data cannot
+    tell from the fitted one would take it. The term takes that motion out of the residual, so
     :func:`angle_dependence` no longer sees it; the segments are what it moves relative to the joints.
 
     Attributes
@@ -167,7 +168,11 @@ def model_error_sd(fit, joint: str, misfit: dict, modelled: tuple = ()) -> float
     :attr:`~MarkerMisfit.moves`. A joint's own moving centre (``joint`` set) counts for that joint only, and as
     ``MODEL_ERROR_PER_MM · e``, not ``e / θ``: the centre's motion is fitted, no cluster motion is implied by it, and
     its distances are those to the centre's mean place, which change over the trial by about e (on simulated knees
-    translating 8-15 mm, e / θ had made every one undetermined at 9-13 mm of model error)."""
+    translating 8-15 mm, e / θ had made every one undetermined at 9-13 mm of model error). Where the same motion is
+    also read as a cluster moving as one (``diagnose``'s readings of the effects it cannot tell apart: a knee's centre
+    moving in the thigh and the last segment's cluster moving on it), that reading is skin and counts as e / θ; such a
+    joint's intervals are then those to its centre's place over the trial, the joint itself claiming none
+    (:func:`identcheck.bundle.honest.with_moving_centre`)."""
     chain = fit.chain
     sides = (chain.parent[joint], chain.child[joint])
     moved = [m.explained_mm for m in misfit.values() if m.moves and m.segment in sides]

@@ -673,7 +673,8 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) 
     rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
     covariance (correlated noise allowed), widened for markers that still move with the angles, profiled where
     wide, unbounded where the data leave the joint free; the largest standard error; the practical verdict;
-    and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion.
+    and, beside fit's keys, the declared type, the residual of the joint's markers and the range of motion. A joint
+    whose own centre the final model moves claims no interval (:func:`identcheck.bundle.honest.with_moving_centre`).
     `progress` hears of the profiles and bootstrap refits, at most once a second. The model error counts the
     motions the effects fit as the adopted `steps` read them and as the effects the data cannot tell from them would
     (:func:`equivalent_readings`)."""

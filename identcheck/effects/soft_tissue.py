@@ -257,8 +257,8 @@ class SoftTissue(Effect):
 
     def reading(self, chain, where: dict, rms_mm: float) -> list:
         """The markers at `where` moving on their segment(s) by `rms_mm`."""
-        segments = tuple(where.get("segments") or [where["segment"]]) if "segment" in where else ()
-        return [ModelledMotion(segments, rms_mm)] if set(segments) <= set(chain.seg_markers) and segments else []
+        segment = where.get("segment")
+        return [ModelledMotion((segment,), rms_mm)] if segment in chain.seg_markers else []
 
     def evidence(self, ctx, before, after, proposal) -> dict:
         col, j = np.atleast_1d(proposal.payload["col"]), proposal.payload["joint"]

@@ -185,11 +185,13 @@ def diagnose_text(diag) -> str:
     for name, j in rep["joints"].items():
         if "moving_centre" in j:
             f = j["moving_centre"]
+            ends = [(lo, hi) for lo, hi in f["marker_distances_ci95"].values()]
+            half = None if any(hi is None for _, hi in ends) else max(((hi - lo) / 2 for lo, hi in ends), default=0.0)
             lines.append(f"   {name}: its centre moves with its angles ({f['motion_rms_mm']:.3g} mm RMS): where it is "
                          "at any one pose is not identifiable (the part of the motion linear in the angles is a "
-                         "shifted centre to the data); the distances are to its place over the trial, each within "
-                         + ("no bound" if f["uncertainty_mm"] is None else f"±{1.96 * f['uncertainty_mm']:.2g} mm")
-                         + " there (95 %)")
+                         "shifted centre to the data); the distances are to its place over the trial, their 95 % "
+                         + ("intervals there not all bounded" if half is None else
+                            f"intervals there at most ±{half:.2g} mm wide"))
     return "\n".join(lines)
 
 

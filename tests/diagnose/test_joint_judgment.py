@@ -106,7 +106,8 @@ def test_a_moving_centre_the_effects_fit_leaves_its_own_joint_unclaimed(tmp_path
     """A knee whose centre moves with its angle (8-15 mm): diagnose fits the translation and finds its terms in the
     final model. Where the centre is at any one pose is not identifiable (the motion's part linear in the angle is a
     shifted axis to the data): the knee is undetermined with no interval claimed, and its intervals to the centre's
-    fitted place over the trial (``moving_centre``) carry 1.5 times the fitted motion as model error; the hip
+    fitted place over the trial (``moving_centre``) carry at least 1.5 times the fitted motion as model error (more
+    where the shank's cluster moving as one, which the data cannot tell from it, reads it as skin); the hip
     keeps its own answer. The terminal says so."""
     from identcheck.io.model import Model
     from identcheck.simulate.rigid import simulate
@@ -127,7 +128,8 @@ def test_a_moving_centre_the_effects_fit_leaves_its_own_joint_unclaimed(tmp_path
     knee, hip = joints["knee"], joints["hip"]
     assert knee["practical"]["model_error_sd_mm"] >= round(1.5 * motions[0].rms_mm, 3) - 1e-3
     assert knee["practical"]["verdict"] == "undetermined" and not knee["unique"]
-    assert knee["practical"]["reason"].endswith(MOVING_CENTRE_REASON) and knee["uncertainty_mm"] is None
+    assert MOVING_CENTRE_REASON in knee["practical"]["reason"] and knee["uncertainty_mm"] is None
+    assert "model error" in knee["practical"]["reason"]            # what widens the intervals to its place is said
     assert all(iv == [0.0, None] for iv in knee["marker_distances_ci95"].values())
     assert set(knee["interval_method"].values()) == {"moving_centre"}
     functional = knee["moving_centre"]
