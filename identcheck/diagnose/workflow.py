@@ -660,8 +660,10 @@ def equivalent_readings(h: Hypothesis, steps: tuple) -> tuple:
 
 
 def said(name: str, where: dict) -> str:
-    """An effect at a place in words: ``soft_tissue on pelvis (RASI, LASI, RPSI, LPSI together)``,
-    ``joint_translation at hip``."""
+    """An effect at a place in words, for a joint's reason: ``soft_tissue on pelvis (RASI, LASI, RPSI, LPSI
+    together)``, ``joint_translation at hip``. Only the keys that make the place (segment, joint, markers), not
+    :func:`identcheck.report.diagnose_figures.where_text`'s every key: a translation's ``where`` also holds a sentence
+    on what is modelled, and the report layer is above this one."""
     out = name + (f" at {where['joint']}" if "joint" in where and "segment" not in where else "")
     out += f" on {where['segment']}" if "segment" in where else ""
     markers = [str(m) for m in where.get("markers") or ()]
