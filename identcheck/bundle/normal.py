@@ -85,7 +85,7 @@ def normal_equations(lay: Layout, blocks: Iterable, r: np.ndarray, w: np.ndarray
         parts, tr, bases = term_parts(lay, grp)
         _add(Bb, fr, bases, Jt @ base)
         base_t = base.transpose(0, 2, 1)
-        pt, tt = term_products(Gf.transpose(0, 2, 1) @ base, base_t @ base, parts)
+        pt, tt = term_products(base_t @ Gf, base_t @ base, parts)
         _add(C, pr, tr, pt)
         _add(C, tr, pr, pt.T)
         _add(C, tr, tr, symmetric_from_upper(tt))

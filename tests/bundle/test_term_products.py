@@ -39,7 +39,7 @@ def _problem(draw):
 def test_term_products_are_the_written_out_columns_products(problem):
     rng, plain, base, parts = problem
     T = _written_out(base, parts)
-    pt, tt = term_products(plain.transpose(0, 2, 1) @ base, base.transpose(0, 2, 1) @ base, parts)
+    pt, tt = term_products(base.transpose(0, 2, 1) @ plain, base.transpose(0, 2, 1) @ base, parts)
     want_pt = np.einsum("fnp,fnt->pt", plain, T)
     want_tt = np.einsum("fns,fnt->st", T, T)
     np.testing.assert_allclose(pt, want_pt, atol=1e-10 * (1 + np.abs(want_pt).max(initial=0)))
