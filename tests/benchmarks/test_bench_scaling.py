@@ -1,0 +1,53 @@
+"""benchmarks/bench_scaling.py: the models it sweeps are valid and as large as it says, the exponent it fits is the
+power of a power law, and one fit worker and one diagnose run on a small simulated trial report what the sweep
+tabulates."""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path.insert(0, str(BENCH))
+bench = pytest.importorskip("bench_scaling")
+
+
+@pytest.mark.parametrize("per_segment,legs_only,segments,joints", [(3, True, 7, 6), (3, False, 14, 13),
+                                                                    (5, False, 14, 13)])
+def test_body_models_have_the_segments_joints_and_markers_said(tmp_path, per_segment, legs_only, segments, joints):
+    from identcheck.io.model import Model
+
+    path = tmp_path / "body.toml"
+    path.write_text(bench.body_model(per_segment, legs_only=legs_only))
+    model = Model.from_toml(path)
+    assert len(model.segments) == segments and len(model.joints) == joints
+    assert len(model.markers) == per_segment * segments == len(set(model.markers))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-2.0, 3.0), st.floats(1e-3, 1e3), st.lists(st.integers(2, 10_000), min_size=2, max_size=6,
+                                                           unique=True))
+def test_slope_is_the_power_of_a_power_law(power, scale, xs):
+    ys = [scale * x ** power for x in xs]
+    assert bench.slope(xs, ys) == pytest.approx(power, abs=1e-6)
+
+
+def test_slope_leaves_out_missing_points_and_needs_two():
+    assert bench.slope([1, 2, 4], [1.0, None, 16.0]) == pytest.approx(2.0)
+    assert bench.slope([1, 2], [1.0, None]) is None
+
+
+def test_one_point_measured_end_to_end(tmp_path):
+    root = bench.ROOT
+    model, trial, n_markers = bench.write_trial(tmp_path, "leg9 120 frames", 120,
+                                                (root / "examples" / "diagnose_leg.toml").read_text())
+    assert n_markers == 9 and model.exists() and trial.exists()
+    fit = bench.run_fit(root, model, trial, 2)
+    assert "error" not in fit, fit
+    assert 1 <= fit["iterations"] <= 2 and fit["s_per_iteration"] > 0 and np.isfinite(fit["rss_mm2"])
+    diag = bench.run_diagnose(root, model, trial, cap_s=300.0)
+    assert diag["exit_code"] in (0, 1) and diag["cpu_s"] > 0 and isinstance(diag["effects"], list)
+    capped = bench.run_diagnose(root, model, trial, cap_s=0.0)
+    assert capped.get("capped") is True and "cpu_s" not in capped
