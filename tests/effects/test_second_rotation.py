@@ -265,3 +265,21 @@ def test_a_second_rotation_wider_than_play_is_not_what_it_claims(ranges):
     why = ExtraDof().implausible(Proposal("extra_dof", where, 1.0, {}))
     assert bool(why) == (max(ranges) > MAX_PLAY_DEG)
     assert not ExtraDof().implausible(Proposal("extra_dof", {"joint": "knee", "needs": "spherical"}, 1.0, {}))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 12), st.floats(-200.0, 200.0), st.integers(0, 2**32 - 1))
+def test_moments_about_a_shifted_pivot_are_the_carriers_combined(K, shift, seed):
+    """The two turns' moments about a pivot `shift` along the hinge are the four carriers' moments combined by
+    ``T = [[1, 0, shift, 0], [0, 1, 0, shift]] ⊗ I_K`` (each turn plus shift times its translation)."""
+    from identcheck.effects.extra_dof import _at_shift
+
+    rng = np.random.default_rng(seed)
+    n = rng.normal(size=4 * K)
+    G = rng.normal(size=(4 * K, 4 * K))
+    G = G + G.T
+    T = np.kron(np.array([[1.0, 0.0, shift, 0.0], [0.0, 1.0, 0.0, shift]]), np.eye(K))
+    n_s, G_s = _at_shift(n, G, K, shift)
+    scale = 1.0 + shift * shift
+    np.testing.assert_allclose(n_s, T @ n, rtol=0, atol=1e-12 * scale * np.abs(n).max())
+    np.testing.assert_allclose(G_s, T @ G @ T.T, rtol=0, atol=1e-12 * scale * np.abs(G).max())
