@@ -8,12 +8,14 @@ expected: the message asks for a report). Progress and warnings go to stderr, re
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import ctypes.util
 import logging
 import math
 import os
 import sys
+import tempfile
 import threading
 import traceback
 import warnings
@@ -622,7 +624,7 @@ def _bad_address(address: str) -> str:
 
 
 def _unwritable_file(path) -> str:
-    """Why a file cannot be written at `path` ('' when it can); nothing is created."""
+    """Why a file cannot be written at `path` ('' when it can); nothing is left behind."""
     if os.path.isdir(path):
         return "is a directory; give a file name"
     parent = os.path.dirname(os.path.abspath(path))
@@ -630,6 +632,23 @@ def _unwritable_file(path) -> str:
         return f"its directory {parent} does not exist"
     if not os.access(parent, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
         return "not writable"
+    if os.path.exists(path) and not os.path.isfile(path):
+        return ""                                    # a device or a FIFO (/dev/null): written into, not beside
+    return _cannot_create_in(parent)
+
+
+def _cannot_create_in(folder) -> str:
+    """Why no file can be created in `folder` ('' when one can), found by creating an empty one there and removing
+    it: the permission bits do not say it for every folder (root may write anywhere by them, yet nothing can be
+    created in /proc; a read-only mount; a full inode table), and the results are written beside their names
+    (:mod:`identcheck.io.atomic`) only after the work."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".tmp-probe-", dir=folder)
+    except OSError as exc:
+        return f"cannot create a file in {folder} ({exc.strerror or exc})"
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
     return ""
 
 
@@ -659,13 +678,15 @@ def _unwritable_dir(path) -> str:
     if os.path.exists(path) and not os.path.isdir(path):
         return "is a file; give a directory"
     if os.path.isdir(path):
-        return "" if os.access(path, os.W_OK) else "not writable"
+        return _cannot_create_in(path) if os.access(path, os.W_OK) else "not writable"
     parent = os.path.dirname(os.path.abspath(path))
     while parent and not os.path.exists(parent):
         parent = os.path.dirname(parent)
     if not os.path.isdir(parent):
         return f"{parent} is a file, not a directory"
-    return "" if os.access(parent, os.W_OK) else f"cannot create it under {parent} (not writable)"
+    if not os.access(parent, os.W_OK):
+        return f"cannot create it under {parent} (not writable)"
+    return _cannot_create_in(parent)
 
 
 def keep_freed_memory() -> None:

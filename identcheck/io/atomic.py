@@ -53,6 +53,12 @@ def replacing(path):
         yield tmp
         _sync(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename in (str(tmp), tmp) or exc.filename2 in (str(tmp), tmp):
+            # said of the file the user named, not of the temporary name it was being written under
+            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

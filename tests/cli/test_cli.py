@@ -3,6 +3,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 
 from identcheck import cli
@@ -181,6 +182,46 @@ def test_bad_outputs_and_arguments_are_refused_before_any_work(tmp_path, capsys,
         err = capsys.readouterr().err
         assert option in err and reason in err, (argv, err)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file.txt"]
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc, where no file can be created")
+def test_outputs_where_no_file_can_be_created_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """A folder whose permission bits allow writing but where no file can be created (/proc; a read-only mount):
+    exit 2 before the work, naming the option and the folder, and none of the command's other outputs written
+    (before, each verb computed, then failed naming its temporary file, and `simulate --out A --truth /proc/t.json`
+    left A behind)."""
+    import identcheck.api as api_mod
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the work started")
+
+    for verb in ("table", "simulate", "plan", "diagnose", "fit", "skeleton"):
+        monkeypatch.setattr(api_mod, verb, no_work)
+    model = str(ROOT / "examples" / "leg.toml")
+    kept = tmp_path / "x.trc"
+    cases = [(["fit", model, "t.trc", "--export-markers", "/proc/x.trc"], "--export-markers"),
+             (["fit", model, "t.trc", "--report", "/proc/x.html"], "--report"),
+             (["table", "--save", "/proc/x.json"], "--save"),
+             (["plan", model, "--figure", "/proc/x.png"], "--figure"),
+             (["skeleton", "t.trc", "--out", "/proc/x.toml"], "--out"),
+             (["simulate", model, "--out", str(kept), "--truth", "/proc/t.json"], "--truth"),
+             (["diagnose", model, "t.trc", "--plots", "/proc/plots"], "--plots")]
+    for argv, option in cases:
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert option in err and "/proc" in err and "cannot create" in err and ".tmp-" not in err, (argv, err)
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_write_that_fails_late_names_the_file_asked_for(tmp_path, monkeypatch):
+    """Should writing fail after the checks (a full disk, a folder removed meanwhile), the error names the file the
+    user asked for, not the temporary name it was being written under."""
+    from identcheck.io import atomic
+
+    target = tmp_path / "gone" / "result.json"
+    with pytest.raises(OSError) as info:
+        atomic.atomic_write(target, "{}")
+    assert info.value.filename == str(target) and ".tmp-" not in str(info.value)
 
 
 def test_fit_exports_the_joints_as_virtual_markers_in_the_files_numbering(tmp_path, capsys):
