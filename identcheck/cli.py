@@ -474,6 +474,12 @@ NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 JSON_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("truth",)}
+DEGENERATE_KEYS = {"fit": {"joints": {}},
+                   "diagnose": {"noise_floor": None, "gap_before": None, "gap_after": None, "effects": [],
+                                "joints": {}}}
+"""The keys the contract requires of a verb's JSON, with what degenerate data give them (nothing measured: null,
+nothing named, no joint judged), beside ``ok`` false and the ``degenerate`` message: a reader of the contract's keys
+finds every one of them."""
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
@@ -731,7 +737,7 @@ def main(argv=None) -> int:
         where = f"{a.trial}: " if getattr(a, "trial", None) and str(a.trial) not in str(exc) else ""
         print(f"identcheck {a.verb}: degenerate data: {where}{exc}", file=sys.stderr)
         if getattr(a, "json", False):   # exit 1 is an answer, and --json promises one document for it
-            _print_json({"ok": False, "degenerate": f"{where}{exc}"})
+            _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {})})
         return 1
     except BrokenPipeError:
         raise

@@ -162,6 +162,9 @@ def test_a_static_trial_is_degenerate_data_for_diagnose_as_for_fit(run, corpus, 
     res = run(["diagnose", DIAGNOSE_LEG, path, "--json"])
     doc = json.loads(res.out)
     assert res.code == 1 and doc["ok"] is False and "does not move" in doc["degenerate"], res.err
+    # the keys the contract requires of diagnose are there, saying nothing was measured, named or judged
+    assert doc["noise_floor"] is None and doc["gap_before"] is None and doc["gap_after"] is None
+    assert doc["effects"] == [] and doc["joints"] == {}
 
 
 def test_a_marker_never_seen_in_the_chosen_frames_names_them(run, corpus, tmp_path):
