@@ -22,6 +22,12 @@ COINCIDENT_MM = 1.0
 """Two markers closer than this in every frame where both are seen are one marker under two labels: the balls
 of real markers are several millimetres wide, so their centres cannot come this close, let alone stay so."""
 
+LONGEST_SEGMENT_MM = 3000.0
+"""The most a rigid segment's markers may span (the median over frames of their largest distance): no limb, trunk or
+head is 3 m long. A model's segment spanning more is a trial whose units field scaled its numbers up (millimetres in
+a file that says cm made a thigh 4.3 m long, and every joint was reported 10 times too far, exit 0), or markers
+mislabelled across bodies."""
+
 SUBJECT_SEPARATOR = ":"
 """What ends a subject prefix in a marker label (Vicon Nexus writes ``Subject:Marker``): :meth:`Trial.unprefixed`."""
 
@@ -300,8 +306,36 @@ class Trial:
             problems.append(f"markers {a!r}{seg(a)} and {b!r}{seg(b)} coincide: closer than {COINCIDENT_MM:g} mm in "
                             "every frame where both are seen, which two real markers cannot be; one marker exported "
                             "under two labels? fix the labelling, or remove one from the model")
+        problems += self._overlong_segments(present, where)
         if problems:
             raise InputError(problems, source=self._source)
+
+    def _overlong_segments(self, labels: Sequence[str], where: dict) -> list[str]:
+        """A problem for each segment (`where`: label -> segment) whose markers among `labels` span more than
+        :data:`LONGEST_SEGMENT_MM` (median over the frames where two of them are seen), naming the two farthest."""
+        by_segment: dict = {}
+        for lab in labels:
+            if lab in where:
+                by_segment.setdefault(where[lab], []).append(lab)
+        out = []
+        for segment, names in by_segment.items():
+            if len(names) < 2:
+                continue
+            xyz = self._xyz[:, [self._index[n] for n in names]]
+            d = np.linalg.norm(xyz[:, :, None] - xyz[:, None], axis=3)            # (F, m, m), NaN where unseen
+            seen = np.isfinite(d).any(axis=(1, 2))
+            if not seen.any():
+                continue
+            d = np.where(np.isfinite(d[seen]), d[seen], -np.inf)
+            span = float(np.median(d.max(axis=(1, 2))))
+            if span <= LONGEST_SEGMENT_MM:
+                continue
+            i, j = np.unravel_index(np.argmax(np.median(d, axis=0)), d.shape[1:])
+            out.append(f"segment {segment!r} spans {span / 1000:.3g} m ({names[i]!r} to {names[j]!r}, median over "
+                       f"frames): no rigid body segment is that long; are the coordinates in a smaller unit than "
+                       f"the file's units field says (millimetres in a file that says cm or m)? fix the units field, "
+                       f"or the markers' labels")
+        return out
 
     def unprefixed(self, labels: Sequence[str]) -> tuple["Trial", str | None]:
         """The trial with a subject prefix taken off its labels, when that alone makes them match `labels`.

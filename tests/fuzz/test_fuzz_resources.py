@@ -141,54 +141,17 @@ def test_a_simulated_rate_whose_times_cannot_print_is_refused(run, tmp_path, rat
     assert res.code == 2 and res.names("--rate", "Hz") and not (tmp_path / "s.trc").exists(), res.err
 
 
-def test_millimetres_labelled_centimetres_are_warned_about(run, corpus, tmp_path):
+def test_millimetres_labelled_centimetres_are_warned_about(corpus, tmp_path):
+    """The reader warns of a frame spanning more than a capture volume in the file's units (the verbs then refuse
+    the segments it makes too long: :func:`test_millimetres_in_a_file_that_says_cm_are_refused_by_the_segments_they_make`)."""
+    from identcheck.trial import Trial
+
     lines = _trc_lines(corpus)
     lines[2] = lines[2].replace("\tmm\t", "\tcm\t")
     path = tmp_path / "cm.trc"
     path.write_text("\n".join(lines))
-    res = run(["fit", LEG, path, "--json"])
-    warned = [w["message"] for w in json.loads(res.out)["warnings"]]
-    assert any("Units says cm" in w and "in mm" in w for w in warned), warned
-
-
-def test_a_static_trial_is_degenerate_data_for_diagnose_as_for_fit(run, corpus, tmp_path):
-    """Data that cannot decide is exit 1 with one JSON document, for diagnose as for fit (it was exit 2)."""
-    from identcheck.trial import Trial
-
-    t = Trial.from_file(corpus / "dleg.trc")
-    still = np.repeat(t.as_array()[:1], 200, axis=0) + np.random.default_rng(0).normal(0, 0.3, (200, t.n_markers, 3))
-    path = tmp_path / "still.trc"
-    Trial(still, t.labels, t.rate_hz).to_file(path)
-    res = run(["diagnose", DIAGNOSE_LEG, path, "--json"])
-    doc = json.loads(res.out)
-    assert res.code == 1 and doc["ok"] is False and "does not move" in doc["degenerate"], res.err
-    # the keys the contract requires of diagnose are there, saying nothing was measured, named or judged
-    assert doc["noise_floor"] is None and doc["gap_before"] is None and doc["gap_after"] is None
-    assert doc["effects"] == [] and doc["joints"] == {}
-
-
-def test_a_marker_never_seen_in_the_chosen_frames_names_them(run, corpus, tmp_path):
-    lines = _trc_lines(corpus)
-    for i in range(6, 106):                     # RTIB (marker 7) unseen in frames 1-100
-        cells = lines[i].split("\t")
-        cells[2 + 3 * 6:5 + 3 * 6] = ["", "", ""]
-        lines[i] = "\t".join(cells)
-    path = tmp_path / "gap.trc"
-    path.write_text("\n".join(lines))
-    res = run(["fit", LEG, path, "--frames", "10:90"])
-    assert res.code == 2 and res.names("never visible in the trial's frames 10 to 90"), res.err
-
-
-@pytest.mark.parametrize("frames", [1, 3, 9])
-def test_a_trial_too_short_to_group_says_so(run, corpus, tmp_path, frames):
-    """A skeleton from a handful of frames: the message says the trial is too short (it had asked for markers)."""
-    lines = _trc_lines(corpus)
-    head = lines[:6]
-    head[2] = head[2].replace("\t200\t", f"\t{frames}\t", 1)
-    path = tmp_path / "short.trc"
-    path.write_text("\n".join(head + lines[6:6 + frames]) + "\n")
-    res = run(["skeleton", path, "--out", tmp_path / "m.toml"])
-    assert res.code == 2 and res.names(path, f"has {frames} frame(s)", "longer span"), res.err
+    with pytest.warns(UserWarning, match="Units says cm.*in mm"):
+        Trial.from_file(path)
 
 
 @pytest.mark.parametrize("verb", ["fit", "diagnose"])
@@ -255,3 +218,21 @@ def test_plan_on_a_recorded_motion_says_the_noise_is_the_trials_own(run, corpus)
     '? mm noise'."""
     res = run(["plan", LEG, "--fast", "--noise-mm", "1", "--motion", corpus / "leg.trc"])
     assert res.code in (0, 1) and "the trial's own noise, measured" in res.out and "? mm" not in res.out, res.out
+
+
+@pytest.mark.parametrize("verb", ["fit", "diagnose"])
+def test_millimetres_in_a_file_that_says_cm_are_refused_by_the_segments_they_make(run, corpus, tmp_path, verb):
+    """A lower limb in mm under a units field that says cm reads 10 times too large: the frame's span alone was only
+    warned about (a capture volume can be large), and every joint was reported 10 times too far with exit 0. A rigid
+    segment 3.7 m long is no body part: exit 2, naming the file, the segment, two of its markers and the units; the
+    same numbers labelled mm pass this check."""
+    lines = _trc_lines(corpus)
+    fields = lines[2].split("\t")
+    assert fields[4] == "mm"
+    fields[4] = "cm"
+    path = tmp_path / "in_mm_said_cm.trc"
+    path.write_text("\n".join(lines[:2] + ["\t".join(fields)] + lines[3:]))
+    res = run([verb, LEG, path, "--json"])
+    assert res.code == 2 and "Traceback" not in res.err, res.err
+    assert str(path) in res.err and "segment 'thigh_r'" in res.err and "units field" in res.err, res.err
+    assert run(["fit", LEG, corpus / "leg.trc", "--json"]).code in (0, 1)
