@@ -42,7 +42,8 @@ def gross_spikes(xyz: np.ndarray) -> np.ndarray:
 
 def without_spikes(trial: Trial) -> tuple[Trial, dict | None]:
     """The trial with its gross spikes (:func:`gross_spikes`) made occluded, and a warning naming them (``kind``
-    ``gross_error``, ``markers``, ``frames`` as 0-based rows and ``file_frames``), or None when there are none.
+    ``gross_error``, ``markers``, ``frames`` as 0-based rows, ``file_frames`` and ``count``, the samples), or None
+    when there are none.
     The input file is not touched."""
     mask = gross_spikes(trial.xyz)
     if not mask.any():
@@ -59,4 +60,5 @@ def without_spikes(trial: Trial) -> tuple[Trial, dict | None]:
     frames = sorted({int(r) for r in rows})
     return (Trial(xyz, trial.labels, trial.rate_hz, trial.source, trial.frame_number(0)),
             {"kind": "gross_error", "message": message, "markers": markers, "frames": frames,
+             "count": int(len(rows)),
              "file_frames": [trial.frame_number(f) for f in frames]})

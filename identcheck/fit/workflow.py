@@ -59,6 +59,26 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     return fitted, points, tree
 
 
+def with_screen_findings(exc: InputError, swaps: list, spikes: dict | None) -> InputError:
+    """`exc` with a last problem saying what the screens before the fit left out, when they left any out (samples
+    read as spikes, spans read as swapped labels): frames missing after them are their doing, not the file's (random
+    numbers under six labels lost 875 samples as spikes, and the fit then said only two frames showed three markers
+    a segment, where every frame of the file showed all six)."""
+    found = []
+    if spikes:
+        found.append(f"{spikes.get('count', 'some')} sample(s) as spikes (jumps out and back)")
+    if swaps:
+        pairs = sorted({" and ".join(s["markers"]) for s in swaps})
+        found.append(f"the samples of {len(swaps)} span(s) as swapped labels ({'; '.join(pairs[:6])}"
+                     f"{'; ...' if len(pairs) > 6 else ''})")
+    if not found:
+        return exc
+    note = (f"before the fit, the screens left out {' and '.join(found)}; see the warnings. Markers that do not stay "
+            "rigid on their segment read so: check that each segment's markers are on one rigid body and labelled "
+            "alike throughout")
+    return InputError(exc.problems + [note], source=exc.source, segment=exc.segment)
+
+
 def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
@@ -92,7 +112,10 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     screened, swaps = screen(model, centred)
     with _w.catch_warnings(record=True) as caught:
         _w.simplefilter("always")
-        fitted, points, tree = fit_closed_then_tree(model, screened, progress)
+        try:
+            fitted, points, tree = fit_closed_then_tree(model, screened, progress)
+        except InputError as exc:
+            raise with_screen_findings(exc, swaps, spikes) from None
     jumps = {}
     if tree.best is not None:
         jumps = angle_jumps(tree.best.fit, screened.select(tree.best.fit.chain.labels).as_array(), screened.rate_hz)

@@ -236,3 +236,21 @@ def test_millimetres_in_a_file_that_says_cm_are_refused_by_the_segments_they_mak
     assert res.code == 2 and "Traceback" not in res.err, res.err
     assert str(path) in res.err and "segment 'thigh_r'" in res.err and "units field" in res.err, res.err
     assert run(["fit", LEG, corpus / "leg.trc", "--json"]).code in (0, 1)
+
+
+def test_frames_the_screens_left_out_are_named_when_too_few_are_left(run, tmp_path):
+    """Random numbers under six labels: every frame of the file shows every marker, but the spike screen leaves most
+    samples out, and the fit's start then finds two frames with three markers a segment. The error says so (it had
+    said only that two frames showed three markers, as if the file lacked them)."""
+    rng = np.random.default_rng(5)
+    labels = [f"W{i}" for i in range(6)]
+    from identcheck.trial import Trial
+
+    trial = tmp_path / "random.trc"
+    Trial(rng.uniform(-1000.0, 1000.0, (200, 6, 3)), labels, 100.0).to_file(trial)
+    model = tmp_path / "two.toml"
+    model.write_text('units = "mm"\n[segments.a]\nmarkers = ["W0", "W1", "W2"]\n[segments.b]\n'
+                     'markers = ["W3", "W4", "W5"]\n[joints.j]\ntype = "spherical"\nparent = "a"\nchild = "b"\n')
+    res = run(["fit", model, trial, "--json"])
+    assert res.code == 2 and str(trial) in res.err, res.err
+    assert "screens left out" in res.err and "spikes" in res.err and "rigid" in res.err, res.err
