@@ -62,6 +62,11 @@ COMPETE_ROUNDS = 6
 """Most rounds of competition between the bodies for the markers (:func:`_compete`)."""
 REASSIGN_MARGIN = 1.5
 """A marker leaves its body only for one in which it deviates this many times less."""
+MAX_GROUPING_MARKERS = 500
+"""The most markers grouped into segments: the grouping compares every pair and merges groups one at a time, a time
+that grows faster than the square of the markers (random trials of 12 frames: 100 markers 4 s, 400 markers 44 s;
+3000 had not ended after 180 s). A full body with hands and a face is well below; more is refused up front, with
+``--segments`` as the way on, so that the command ends in bounded time."""
 MAX_GROUPING_FRAMES = 600
 """The rigid bodies are found on at most this many frames, evenly spread (the spreads use every frame)."""
 STATIC_MM = 15.0
@@ -473,6 +478,11 @@ def group_markers(trial) -> Grouping:
     if len(labels) < 2:
         raise InputError([f"the trial has {len(labels)} marker(s); a skeleton needs at least two segments, each "
                           "with markers"], source=trial.source)
+    if len(labels) > MAX_GROUPING_MARKERS:
+        raise InputError([f"the trial has {len(labels)} markers, more than the {MAX_GROUPING_MARKERS} whose grouping "
+                          "into rigid segments ends in reasonable time (it compares every pair of markers): give "
+                          "the segments with --segments FILE, or a trial of the markers of the bodies to infer"],
+                         source=trial.source)
     _never_visible(trial, labels)
     seen = _seen(trial.xyz)
     unused = {m: f"seen in only {int(seen[i])} frame(s); grouping needs {MIN_SAMPLES_PER_PAIR}"

@@ -143,7 +143,7 @@ def test_a_simulated_rate_whose_times_cannot_print_is_refused(run, tmp_path, rat
 
 def test_millimetres_labelled_centimetres_are_warned_about(corpus, tmp_path):
     """The reader warns of a frame spanning more than a capture volume in the file's units (the verbs then refuse
-    the segments it makes too long: :func:`test_millimetres_in_a_file_that_says_cm_are_refused_by_the_segments_they_make`)."""
+    the segments it makes too long: the test below)."""
     from identcheck.trial import Trial
 
     lines = _trc_lines(corpus)
@@ -254,3 +254,17 @@ def test_frames_the_screens_left_out_are_named_when_too_few_are_left(run, tmp_pa
     res = run(["fit", model, trial, "--json"])
     assert res.code == 2 and str(trial) in res.err, res.err
     assert "screens left out" in res.err and "spikes" in res.err and "rigid" in res.err, res.err
+
+
+def test_skeleton_refuses_more_markers_than_its_grouping_ends_with(run, tmp_path):
+    """Grouping compares every pair of markers and merges one group at a time: 3000 markers had not ended after
+    180 s, with no end in sight. More than the limit is refused at once, naming the count and --segments."""
+    from identcheck.infer.grouping import MAX_GROUPING_MARKERS
+    from identcheck.trial import Trial
+
+    n = MAX_GROUPING_MARKERS + 1
+    path = tmp_path / "many.trc"
+    Trial(np.random.default_rng(2).uniform(-500.0, 500.0, (12, n, 3)), [f"M{i}" for i in range(n)], 100.0).to_file(path)
+    res = run(["skeleton", path, "--out", tmp_path / "s.toml"])
+    assert res.code == 2 and str(path) in res.err and f"{n} markers" in res.err and "--segments" in res.err, res.err
+    assert not (tmp_path / "s.toml").exists()
