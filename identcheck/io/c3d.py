@@ -121,6 +121,16 @@ def _structure_problems(raw: bytes) -> list[str]:
     return _meaning_problems(records) or _header_problems(raw, records, raw[0] + n_blocks, PROCESSORS[proc])
 
 
+def _shown_name(name: str, most: int = 24) -> str:
+    """A record's name as a message quotes it: as it is when it is a short printable name, else its printable start
+    and its length (a corrupt length byte makes the name run on through the following records' bytes, and the
+    message had quoted some 200 characters of them)."""
+    if name.isprintable() and name.isascii() and len(name) <= most:
+        return repr(name)
+    start = "".join(c if c.isascii() and c.isprintable() else "?" for c in name[:most])
+    return f"{start!r}... (a name of {len(name)} bytes, not text: its length byte looks corrupt)"
+
+
 def _walk(raw: bytes, pos: int, end: int, proc: int, records: list) -> str:
     """Read the parameter records from byte `pos` into `records`; the first record that does not lie inside the
     section (`end`), end where the next one starts, or declare a known type and 1 to 7 dimensions ('' if none)."""
@@ -133,7 +143,7 @@ def _walk(raw: bytes, pos: int, end: int, proc: int, records: list) -> str:
             return ""
         link = pos + 2 + abs(n_name)
         name = raw[pos + 2:link].decode("latin-1")
-        what = f"{'parameter' if group > 0 else 'group'} {name!r} at byte {pos}"
+        what = f"{'parameter' if group > 0 else 'group'} {_shown_name(name)} at byte {pos}"
         if group == 0:
             return f"{what}: group id 0 (groups are numbered from 1)"
         if link + 2 > end:

@@ -175,6 +175,20 @@ def test_header_and_parameters_that_disagree_are_named(corpus, tmp_path):
         assert "ezc3d" not in r["err"], (name, r["err"])
 
 
+def test_a_corrupt_name_length_is_quoted_short(corpus, tmp_path):
+    """A parameter's name-length byte corrupted runs its name on through the next records' bytes: the message names
+    the file, quotes the name's printable start and says its length looks corrupt, never some 100 raw bytes."""
+    raw = bytearray((corpus / "leg.c3d").read_bytes())
+    at = raw.index(b"DESCRIPTIONS")
+    assert raw[at - 2] == len(b"DESCRIPTIONS")
+    raw[at - 2] = 100
+    path = _variant(tmp_path, bytes(raw), "name_length.c3d")
+    r = read_in_child([path], tmp_path)[str(path)]
+    assert r["code"] == 2 and str(path) in r["err"] and "length byte looks corrupt" in r["err"], r["err"]
+    quoted = r["err"].split("parameter ", 1)[1].split(" at byte")[0]
+    assert quoted.isprintable() and len(quoted) < 120, quoted
+
+
 @pytest.mark.parametrize("value", [1e30, -1e7, math.inf])
 def test_a_far_sample_is_named_by_frame_and_marker(run, corpus, tmp_path, leg_markers, value):
     """A sample 10 km away, 1e30 (a sentinel for 'missing') or infinite in a C3D: exit 2 naming the marker
