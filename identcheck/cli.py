@@ -14,6 +14,7 @@ import ctypes.util
 import logging
 import math
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -710,12 +711,33 @@ def keep_freed_memory() -> None:
     mallopt(-1, 1 << 30)                 # M_TRIM_THRESHOLD
 
 
+NEGATIVE_VALUE_OPTIONS = ("--frames",)
+"""Options whose value may start with a minus sign (a frame range or index from before the file's first frame)."""
+
+
+def joined_negative_values(argv: list) -> list:
+    """`argv` with ``--frames -5:10`` written as ``--frames=-5:10``: argparse takes a word starting with '-' and a
+    digit for an option when the parser has options that look like numbers, and otherwise answered only "expected
+    one argument"; joined, the value reaches the option's own check, which explains (a range is clamped to the
+    file's frames, with a warning)."""
+    out, i = [], 0
+    while i < len(argv):
+        word = str(argv[i])
+        if word in NEGATIVE_VALUE_OPTIONS and i + 1 < len(argv) and re.match(r"-\d", str(argv[i + 1])):
+            out.append(f"{word}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(argv[i])
+        i += 1
+    return out
+
+
 def main(argv=None) -> int:
     """Run the CLI in-process; returns the exit code (tests call this)."""
     keep_freed_memory()
     parser = build_parser()
     try:
-        a = parser.parse_args(argv)
+        a = parser.parse_args(joined_negative_values(sys.argv[1:] if argv is None else list(argv)))
     except SystemExit as exc:
         return int(exc.code or 0) and 2
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, stream=sys.stderr,

@@ -177,3 +177,13 @@ def test_json_outputs_must_be_json_files_and_never_an_input_or_another_output(ru
     res = run([str(a).format(model=model, tmp=tmp_path) for a in argv])
     assert res.code == 2 and option in res.err and ".json" in res.err, res.err
     assert model.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["model.toml"]
+
+
+def test_a_frame_range_starting_below_zero_reaches_the_option_s_own_check(run, corpus):
+    """``--frames -5:10`` (a space, not '='): argparse had taken -5:10 for an option and said only "expected one
+    argument"; the value now reaches --frames' own check, which clamps the range to the file's frames with a warning,
+    as ``--frames=-5:10`` did."""
+    res = run(["fit", LEG, corpus / "leg.trc", "--frames", "-5:10", "--json"])
+    assert res.code in (0, 1) and "--frames -5:10 reaches beyond the file's frames" in res.err, res.err
+    res = run(["identify", KNEE, corpus / "knee.trc", "--frames", "-1,5"])
+    assert res.code == 2 and "--frames -1,5" in res.err and "expected one argument" not in res.err, res.err
