@@ -8,7 +8,6 @@ expected: the message asks for a report). Progress and warnings go to stderr, re
 from __future__ import annotations
 
 import argparse
-import contextlib
 import ctypes
 import ctypes.util
 import logging
@@ -475,9 +474,9 @@ NEEDS_MATPLOTLIB = {"plan": "figure", "diagnose": "plots"}
 TRIAL_SUFFIXES = (".c3d", ".trc")
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 JSON_OUTPUTS = {"rank": ("save",), "table": ("save",), "simulate": ("truth",)}
-DEGENERATE_KEYS = {"fit": {"joints": {}},
+DEGENERATE_KEYS = {"fit": {"joints": {}, "noise": None, "warnings": []},
                    "diagnose": {"noise_floor": None, "gap_before": None, "gap_after": None, "effects": [],
-                                "joints": {}}}
+                                "joints": {}, "noise": None, "warnings": []}}
 """The keys the contract requires of a verb's JSON, with what degenerate data give them (nothing measured: null,
 nothing named, no joint judged), beside ``ok`` false and the ``degenerate`` message: a reader of the contract's keys
 finds every one of them."""
@@ -631,16 +630,19 @@ def _bad_address(address: str) -> str:
 
 
 def _unwritable_file(path) -> str:
-    """Why a file cannot be written at `path` ('' when it can); nothing is left behind."""
+    """Why a file cannot be written at `path` ('' when it can); nothing is left behind. A symbolic link is judged
+    where it leads (its target is what is written, :func:`identcheck.io.atomic.replacing`)."""
+    path = os.path.realpath(path)
     if os.path.isdir(path):
         return "is a directory; give a file name"
-    parent = os.path.dirname(os.path.abspath(path))
+    if os.path.exists(path) and not os.path.isfile(path):
+        # a device or a FIFO (/dev/null, /dev/stdout): written into, not beside, so its folder does not matter
+        return "" if os.access(path, os.W_OK) else "not writable"
+    parent = os.path.dirname(path)
     if not os.path.isdir(parent):
         return f"its directory {parent} does not exist"
     if not os.access(parent, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
         return "not writable"
-    if os.path.exists(path) and not os.path.isfile(path):
-        return ""                                    # a device or a FIFO (/dev/null): written into, not beside
     return _cannot_create_in(parent)
 
 
@@ -654,8 +656,10 @@ def _cannot_create_in(folder) -> str:
     except OSError as exc:
         return f"cannot create a file in {folder} ({exc.strerror or exc})"
     os.close(fd)
-    with contextlib.suppress(OSError):
+    try:
         os.unlink(probe)
+    except OSError as exc:
+        return f"a file created in {folder} cannot be removed ({exc.strerror or exc}; {probe} is left there)"
     return ""
 
 

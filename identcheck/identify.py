@@ -153,7 +153,7 @@ def identify_joint(model: Model, trial: Trial, joint: str, frames=None, precisio
     label, n_min, solver = _CASES.get(key, _CASES[("spherical", 3, 1)])
     parent = list(parent)[:3] if jt.type == "spherical" else list(parent)
     names = list(parent) + list(child)
-    trial.require_usable(names, {m: model.marker_segment(m) for m in names})
+    model.require_markers_in(trial, names)
     frames = _frames(trial, names, frames, n_min, label)
     sel = trial.select(names).as_array()[frames]
     cands = solver(sel, parent, list(child), precision)

@@ -23,10 +23,14 @@ COINCIDENT_MM = 1.0
 of real markers are several millimetres wide, so their centres cannot come this close, let alone stay so."""
 
 LONGEST_SEGMENT_MM = 3000.0
-"""The most a rigid segment's markers may span (the median over frames of their largest distance): no limb, trunk or
-head is 3 m long. A model's segment spanning more is a trial whose units field scaled its numbers up (millimetres in
-a file that says cm made a thigh 4.3 m long, and every joint was reported 10 times too far, exit 0), or markers
-mislabelled across bodies."""
+"""The farthest two markers of a segment may lie apart (the median over the frames where both are seen) unless the
+model declares the segment longer (``length_mm``): no limb, trunk or head is 3 m long. A segment spanning more is a
+trial whose units field scaled its numbers up (millimetres in a file that says cm made a thigh 3.7 m long, and every
+joint was reported 10 times too far, exit 0), or markers mislabelled across bodies."""
+
+SPAN_FRAMES = 1000
+"""Frames (evenly spread) a segment's span is read over: the median needs no more, and a long trial's every frame
+would cost seconds (30 000 frames of 40 markers)."""
 
 SUBJECT_SEPARATOR = ":"
 """What ends a subject prefix in a marker label (Vicon Nexus writes ``Subject:Marker``): :meth:`Trial.unprefixed`."""
@@ -261,7 +265,7 @@ class Trial:
         """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
         return self._xyz[:, self.index(name)].copy()
 
-    def require_usable(self, labels: Sequence[str], where: dict | None = None) -> None:
+    def require_usable(self, labels: Sequence[str], where: dict | None = None, lengths: dict | None = None) -> None:
         """Raise unless every label is in the trial, visible in at least one frame, and no two of them coincide.
 
         Parameters
@@ -270,13 +274,16 @@ class Trial:
             The model's markers.
         where : dict, optional
             label -> the model's segment holding it (named in the message).
+        lengths : dict, optional
+            segment -> its declared length (mm), which may make a segment longer than :data:`LONGEST_SEGMENT_MM`.
 
         Raises
         ------
         InputError
             Names, at once, every marker missing from the trial, every marker never visible (not silently dropped:
-            its segment and the joints beside it would change case without a word), and every pair of markers
-            that coincide (:meth:`coincident`).
+            its segment and the joints beside it would change case without a word), every pair of markers
+            that coincide (:meth:`coincident`), and every segment whose markers lie farther apart than a body
+            segment can (:data:`LONGEST_SEGMENT_MM`: a units field that scaled the numbers up).
         """
         where = where or {}
         seg = lambda lab: f" (segment {where[lab]!r})" if lab in where else ""  # noqa: E731
@@ -306,35 +313,37 @@ class Trial:
             problems.append(f"markers {a!r}{seg(a)} and {b!r}{seg(b)} coincide: closer than {COINCIDENT_MM:g} mm in "
                             "every frame where both are seen, which two real markers cannot be; one marker exported "
                             "under two labels? fix the labelling, or remove one from the model")
-        problems += self._overlong_segments(present, where)
+        problems += self._overlong_segments(present, where, lengths or {})
         if problems:
             raise InputError(problems, source=self._source)
 
-    def _overlong_segments(self, labels: Sequence[str], where: dict) -> list[str]:
-        """A problem for each segment (`where`: label -> segment) whose markers among `labels` span more than
-        :data:`LONGEST_SEGMENT_MM` (median over the frames where two of them are seen), naming the two farthest."""
+    def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
+        """A problem for each segment (`where`: label -> segment) two of whose markers among `labels` lie more than
+        :data:`LONGEST_SEGMENT_MM` apart, or more than 1.5 times the segment's `declared` length (segment -> mm, the
+        model's ``length_mm``) when that is longer: the median of the two markers' distance over the frames where
+        both are seen (at most :data:`SPAN_FRAMES` of them, evenly spread), naming the farthest pair."""
         by_segment: dict = {}
         for lab in labels:
             if lab in where:
                 by_segment.setdefault(where[lab], []).append(lab)
+        rows = np.unique(np.linspace(0, self.n_frames - 1, min(self.n_frames, SPAN_FRAMES)).astype(int))
         out = []
         for segment, names in by_segment.items():
-            if len(names) < 2:
-                continue
-            xyz = self._xyz[:, [self._index[n] for n in names]]
-            d = np.linalg.norm(xyz[:, :, None] - xyz[:, None], axis=3)            # (F, m, m), NaN where unseen
-            seen = np.isfinite(d).any(axis=(1, 2))
-            if not seen.any():
-                continue
-            d = np.where(np.isfinite(d[seen]), d[seen], -np.inf)
-            span = float(np.median(d.max(axis=(1, 2))))
-            if span <= LONGEST_SEGMENT_MM:
-                continue
-            i, j = np.unravel_index(np.argmax(np.median(d, axis=0)), d.shape[1:])
-            out.append(f"segment {segment!r} spans {span / 1000:.3g} m ({names[i]!r} to {names[j]!r}, median over "
-                       f"frames): no rigid body segment is that long; are the coordinates in a smaller unit than "
-                       f"the file's units field says (millimetres in a file that says cm or m)? fix the units field, "
-                       f"or the markers' labels")
+            limit = max(LONGEST_SEGMENT_MM, 1.5 * float(declared.get(segment) or 0.0))
+            xyz = self._xyz[rows][:, [self._index[n] for n in names]]
+            widest, pair = 0.0, None
+            for i in range(len(names)):
+                for j in range(i + 1, len(names)):
+                    d = np.linalg.norm(xyz[:, i] - xyz[:, j], axis=1)
+                    d = d[np.isfinite(d)]
+                    if len(d) and float(np.median(d)) > widest:
+                        widest, pair = float(np.median(d)), (names[i], names[j])
+            if pair is not None and widest > limit:
+                out.append(f"segment {segment!r} spans {widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over "
+                           f"the frames where both are seen): no body segment is that long; are the coordinates in a "
+                           f"smaller unit than the file's units field says (millimetres in a file that says cm or m)? "
+                           f"fix the units field or the labels; a body truly that long (a boat, an oar) passes with "
+                           f"its length_mm declared in the model")
         return out
 
     def unprefixed(self, labels: Sequence[str]) -> tuple["Trial", str | None]:

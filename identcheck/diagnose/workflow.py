@@ -275,7 +275,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     trial, unprefixed = trial.unprefixed(model.markers)
     if unprefixed:
         warnings.warn(unprefixed, UserWarning, stacklevel=2)
-    trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
+    model.require_markers_in(trial)
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
     files = f"{trial.source} (model {model.source})"

@@ -60,10 +60,10 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
 
 
 def with_screen_findings(exc: InputError, swaps: list, spikes: dict | None) -> InputError:
-    """`exc` with a last problem saying what the screens before the fit left out, when they left any out (samples
-    read as spikes, spans read as swapped labels): frames missing after them are their doing, not the file's (random
-    numbers under six labels lost 875 samples as spikes, and the fit then said only two frames showed three markers
-    a segment, where every frame of the file showed all six)."""
+    """`exc`, when it is about frames, with a last problem saying what the screens before the fit left out, when they
+    left any out (samples read as spikes, spans read as swapped labels): frames missing after them are their doing,
+    not the file's (random numbers under six labels lost 875 samples as spikes, and the fit then said only two frames
+    showed three markers a segment, where every frame of the file showed all six)."""
     found = []
     if spikes:
         found.append(f"{spikes.get('count', 'some')} sample(s) as spikes (jumps out and back)")
@@ -71,7 +71,7 @@ def with_screen_findings(exc: InputError, swaps: list, spikes: dict | None) -> I
         pairs = sorted({" and ".join(s["markers"]) for s in swaps})
         found.append(f"the samples of {len(swaps)} span(s) as swapped labels ({'; '.join(pairs[:6])}"
                      f"{'; ...' if len(pairs) > 6 else ''})")
-    if not found:
+    if not found or not any("frame" in p for p in exc.problems):
         return exc
     note = (f"before the fit, the screens left out {' and '.join(found)}; see the warnings. Markers that do not stay "
             "rigid on their segment read so: check that each segment's markers are on one rigid body and labelled "
@@ -106,7 +106,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
                           "it" for m in clash] + [
             "a file `--export-markers` wrote holds such points: they are a fit's output, not measured markers; fit "
             "the trial it was exported from"], source=trial.source)
-    trial.require_usable(model.markers, {m: model.marker_segment(m) for m in model.markers})
+    model.require_markers_in(trial)
     trial, spikes = without_spikes(trial)
     centred, offset = trial.recentred()
     screened, swaps = screen(model, centred)

@@ -478,11 +478,6 @@ def group_markers(trial) -> Grouping:
     if len(labels) < 2:
         raise InputError([f"the trial has {len(labels)} marker(s); a skeleton needs at least two segments, each "
                           "with markers"], source=trial.source)
-    if len(labels) > MAX_GROUPING_MARKERS:
-        raise InputError([f"the trial has {len(labels)} markers, more than the {MAX_GROUPING_MARKERS} whose grouping "
-                          "into rigid segments ends in reasonable time (it compares every pair of markers): give "
-                          "the segments with --segments FILE, or a trial of the markers of the bodies to infer"],
-                         source=trial.source)
     _never_visible(trial, labels)
     seen = _seen(trial.xyz)
     unused = {m: f"seen in only {int(seen[i])} frame(s); grouping needs {MIN_SAMPLES_PER_PAIR}"
@@ -493,6 +488,11 @@ def group_markers(trial) -> Grouping:
                           f"markers seen in fewer than {MIN_SAMPLES_PER_PAIR}): grouping markers into rigid segments "
                           f"reads how their distances change over a movement, and needs each marker seen in "
                           f"{MIN_SAMPLES_PER_PAIR} frames or more; record (or choose with --frames) a longer span"],
+                         source=trial.source)
+    if len(usable) > MAX_GROUPING_MARKERS:
+        raise InputError([f"the trial has {len(usable)} markers to group, more than the {MAX_GROUPING_MARKERS} whose "
+                          "grouping into rigid segments ends in reasonable time (it compares every pair of markers): "
+                          "give the segments with --segments FILE, or a trial of the markers of the bodies to infer"],
                          source=trial.source)
     stats = pair_statistics(trial.xyz)
     _refuse_static(stats, labels, trial.source, usable)

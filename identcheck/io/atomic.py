@@ -40,6 +40,7 @@ def replacing(path):
     left as it was. A symbolic link is followed (its target is replaced, the link kept); a path that is no
     regular file (a device, a FIFO) gets the content copied into it from a temporary folder, as no file can be
     moved onto it."""
+    asked = str(path)
     path = Path(os.path.realpath(path))        # through a symbolic link to its target, which is what is meant
     if path.exists() and not path.is_file():     # a device or a FIFO (/dev/stdout, /dev/null): copied into
         with tempfile.TemporaryDirectory() as folder:
@@ -57,7 +58,7 @@ def replacing(path):
         tmp.unlink(missing_ok=True)
         if exc.filename in (str(tmp), tmp) or exc.filename2 in (str(tmp), tmp):
             # said of the file the user named, not of the temporary name it was being written under
-            raise OSError(exc.errno, exc.strerror, str(path)) from exc
+            raise OSError(exc.errno, exc.strerror, asked) from exc
         raise
     except BaseException:
         tmp.unlink(missing_ok=True)

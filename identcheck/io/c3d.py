@@ -121,13 +121,14 @@ def _structure_problems(raw: bytes) -> list[str]:
     return _meaning_problems(records) or _header_problems(raw, records, raw[0] + n_blocks, PROCESSORS[proc])
 
 
-def _shown_name(name: str, most: int = 24) -> str:
-    """A record's name as a message quotes it: as it is when it is a short printable name, else its printable start
-    and its length (a corrupt length byte makes the name run on through the following records' bytes, and the
-    message had quoted some 200 characters of them)."""
-    if name.isprintable() and name.isascii() and len(name) <= most:
-        return repr(name)
-    start = "".join(c if c.isascii() and c.isprintable() else "?" for c in name[:most])
+def _shown_name(name: str, most: int = 40) -> str:
+    """A record's name as a message quotes it: as it is when short and printable; a long printable one cut to its
+    start and length; one with bytes that are no text by its printable start and its length, saying its length byte
+    looks corrupt (it then runs on through the following records' bytes, and the message had quoted some 200
+    characters of them)."""
+    if name.isprintable():
+        return repr(name) if len(name) <= most else f"{name[:most]!r}... ({len(name)} characters)"
+    start = "".join(c if c.isprintable() else "?" for c in name[:24])
     return f"{start!r}... (a name of {len(name)} bytes, not text: its length byte looks corrupt)"
 
 

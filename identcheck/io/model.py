@@ -232,6 +232,13 @@ class Model:
         except KeyError:
             raise InputError([_unknown("marker", name, self.markers)], source=self.source) from None
 
+    def require_markers_in(self, trial, names=None) -> None:
+        """:meth:`identcheck.trial.Trial.require_usable` for the model's markers (or `names` of them) in `trial`, each
+        named with its segment, and each segment's declared length (``length_mm``) allowed for its span."""
+        names = self.markers if names is None else names
+        trial.require_usable(names, {m: self.marker_segment(m) for m in names},
+                             {name: seg.length_mm for name, seg in self.segments.items() if seg.length_mm})
+
     def parent_joint(self, segment: str) -> Joint | None:
         """The joint whose child is `segment` (None for the root)."""
         return next((j for j in self.joints.values() if j.child == segment), None)
