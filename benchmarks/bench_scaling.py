@@ -159,6 +159,8 @@ def run_diagnose(code: Path, model: Path, trial: Path, cap_s: float) -> dict:
                "max_rss_mib": usage.ru_maxrss / 1024, "exit_code": os.waitstatus_to_exitcode(status)}
         if capped:
             return {"capped": True, "cap_s": cap_s, "max_rss_mib": row["max_rss_mib"]}
+        if row["exit_code"] not in (0, 1):                  # an error is no diagnosis: its time is not one
+            return {"error": row["exit_code"], "max_rss_mib": row["max_rss_mib"]}
         try:
             doc = json.loads(out.read_text())
             row["effects"] = [e["name"] for e in doc.get("effects", [])]
@@ -176,16 +178,39 @@ def slope(xs: list, ys: list) -> float | None:
     return float(np.polyfit(lx, ly, 1)[0])
 
 
-def exponents(rows: list) -> dict:
-    """Per sweep, measure and version: the slope of log time against log frames (or markers)."""
+def exponents(rows: list, startup_cpu_s: float) -> dict:
+    """Per sweep: the slope of log time against log frames (or markers) of the fit's iterations, both versions over
+    the points both finished, and of ``diagnose`` (this tree) three ways: the whole process, the process less the
+    CPU of starting Python and importing the package for the command (`startup_cpu_s`, which a longer trial does not
+    change), and that over the upper half of the points (where growth shows rather than fixed costs)."""
     out = {}
     for sweep, x in (("frames", "frames"), ("markers", "markers")):
-        for measure, field in (("fit_s_per_iteration", ("fit", "s_per_iteration")),
-                               ("diagnose_cpu_s", ("diagnose", "cpu_s"))):
-            for version in ("baseline", "current"):
-                got = [(r[x], r[version][field[0]].get(field[1])) for r in rows if r["sweep"] == sweep]
-                out[f"{sweep}/{measure}/{version}"] = slope([a for a, _ in got], [b for _, b in got])
+        pts = [r for r in rows if r["sweep"] == sweep]
+        both = [r for r in pts if all(r[v]["fit"].get("s_per_iteration") for v in ("baseline", "current"))]
+        for version in ("baseline", "current"):
+            out[f"{sweep}/fit_s_per_iteration/{version}"] = slope(
+                [r[x] for r in both], [r[version]["fit"]["s_per_iteration"] for r in both])
+        done = [r for r in pts if r["current"]["diagnose"].get("cpu_s")]
+        xs, ys = [r[x] for r in done], [r["current"]["diagnose"]["cpu_s"] for r in done]
+        net = [y - startup_cpu_s for y in ys]
+        upper = len(done) // 2
+        out[f"{sweep}/diagnose_cpu_s/current"] = slope(xs, ys)
+        out[f"{sweep}/diagnose_cpu_s_less_startup/current"] = slope(xs, net)
+        out[f"{sweep}/diagnose_cpu_s_less_startup_upper_half/current"] = slope(xs[upper:], net[upper:])
     return out
+
+
+def startup_cpu(code: Path) -> float:
+    """CPU seconds of a process that starts Python and imports what ``diagnose`` imports, and does nothing else (the
+    median of three)."""
+    env = {**os.environ, **ONE_THREAD, "PYTHONPATH": str(code)}
+    took = []
+    for _ in range(3):
+        proc = subprocess.Popen([sys.executable, "-c", "import identcheck.cli, identcheck.api, "
+                                 "identcheck.diagnose.workflow"], cwd=code, env=env)
+        _, _, usage = os.wait4(proc.pid, 0)
+        took.append(usage.ru_utime + usage.ru_stime)
+    return statistics.median(took)
 
 
 def figure(rows: list, path: Path) -> None:
@@ -286,13 +311,15 @@ def main(argv=None) -> int:
                   f"{row['current']['fit'].get('s_per_iteration')}; diagnose CPU "
                   f"{row['current']['diagnose'].get('cpu_s', 'capped')}", flush=True)
             rows.append(row)
-    exps = exponents(rows)
+    startup = startup_cpu(ROOT)
+    exps = exponents(rows, startup)
     print(table(rows, exps))
+    print(f"(starting Python and importing what diagnose imports: {startup:.2f} CPU s)")
     figure(rows, args.figure)
     results_io.write_json(args.out, args.key, {
         "baseline": args.baseline, "current": worktree.head(), "date": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "machine": results_io.machine_info(), "iterations": args.iterations, "repeats": args.repeats,
-        "cap_s": args.cap, "rows": rows, "exponents": exps, "figure": str(args.figure.relative_to(ROOT))
+        "cap_s": args.cap, "startup_cpu_s": startup, "rows": rows, "exponents": exps, "figure": str(args.figure.relative_to(ROOT))
         if args.figure.is_relative_to(ROOT) else str(args.figure)})
     return 0
 

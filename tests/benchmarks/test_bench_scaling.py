@@ -51,3 +51,22 @@ def test_one_point_measured_end_to_end(tmp_path):
     assert diag["exit_code"] in (0, 1) and diag["cpu_s"] > 0 and isinstance(diag["effects"], list)
     capped = bench.run_diagnose(root, model, trial, cap_s=0.0)
     assert capped.get("capped") is True and "cpu_s" not in capped
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(0.5, 2.5), st.floats(0.5, 2.5), st.floats(0.0, 2.0))
+def test_exponents_are_the_powers_each_version_and_diagnose_grow_with(p_base, p_now, startup):
+    """Rows whose times are power laws of the frames (the fit's per iteration, the diagnose process's as a startup
+    cost plus a power law): the exponents read back are those powers, diagnose's once the startup is taken off."""
+    rows = []
+    for n in (500, 1000, 2000, 4000, 8000):
+        fit = lambda p: {"s_per_iteration": 1e-5 * n ** p}  # noqa: E731
+        rows.append({"sweep": "frames", "frames": n, "markers": 9,
+                     "baseline": {"fit": fit(p_base), "diagnose": {}},
+                     "current": {"fit": fit(p_now), "diagnose": {"cpu_s": startup + 1e-4 * n ** p_now}}})
+    exps = bench.exponents(rows, startup)
+    assert exps["frames/fit_s_per_iteration/baseline"] == pytest.approx(p_base, abs=1e-6)
+    assert exps["frames/fit_s_per_iteration/current"] == pytest.approx(p_now, abs=1e-6)
+    assert exps["frames/diagnose_cpu_s_less_startup/current"] == pytest.approx(p_now, abs=1e-6)
+    assert exps["frames/diagnose_cpu_s_less_startup_upper_half/current"] == pytest.approx(p_now, abs=1e-6)
+    assert exps["markers/fit_s_per_iteration/current"] is None
