@@ -266,7 +266,8 @@ class Trial:
         return self._xyz[:, self.index(name)].copy()
 
     def require_usable(self, labels: Sequence[str], where: dict | None = None, lengths: dict | None = None) -> None:
-        """Raise unless every label is in the trial, visible in at least one frame, and no two of them coincide.
+        """Raise unless every label is in the trial, visible in at least one frame, no two of them coincide and no
+        segment's markers lie farther apart than a body segment can.
 
         Parameters
         ----------

@@ -11,7 +11,6 @@ short and reported written; a model without joints stopped ``diagnose`` and ``fi
 for ``fit``."""
 from __future__ import annotations
 
-import json
 import os
 import threading
 
