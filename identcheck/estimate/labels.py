@@ -42,7 +42,7 @@ class _Distances:
     once per search and shared by every pair it is tested in (the medians are what make the search slow)."""
 
     def __init__(self, data: np.ndarray, chain):
-        self.data, self.chain, self._own = data, chain, {}
+        self.data, self.chain, self._own, self._padded = data, chain, {}, None
 
     def to(self, a: int, ks: np.ndarray) -> np.ndarray:
         return np.linalg.norm(self.data[:, [a]] - self.data[:, ks], axis=2)
@@ -56,6 +56,22 @@ class _Distances:
             self._own[key] = (ks, np.nanmedian(self.to(a, ks), axis=0) if len(ks) else np.zeros(0))
         return self._own[key]
 
+    def padded(self) -> tuple:
+        """Every marker's partners on its segment, their distances' medians and the squared misfits of its distances
+        to them, padded with NaN (columns -1) to the most partners W: (columns (M, W), medians (M, W), misfits
+        (F, M, W), partner counts (M,)), computed once."""
+        if self._padded is None:
+            M, F = self.chain.n_markers, len(self.data)
+            parts = [self.own(a, set()) for a in range(M)]
+            width = max([len(P) for P, _ in parts] + [1])
+            cols, meds = np.full((M, width), -1), np.full((M, width), np.nan)
+            misfit = np.full((F, M, width), np.nan)
+            for a, (P, D) in enumerate(parts):
+                if len(P):
+                    cols[a, :len(P)], meds[a, :len(P)] = P, D
+                    misfit[:, a, :len(P)] = (self.to(a, P) - D) ** 2
+            self._padded = cols, meds, misfit, np.array([len(P) for P, _ in parts])
+        return self._padded
 
 def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None = None):
     """Per-frame misfit of the within-segment distances with labels i, j as given and exchanged (F,), mm².
@@ -86,6 +102,41 @@ def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None
     return keep, swap
 
 
+def swap_costs_across(data: np.ndarray, chain, i: int, js: list, dists: _Distances) -> dict:
+    """:func:`swap_costs` of marker `i` with each marker of `js`, all on segments other than `i`'s, at once: j -> (keep,
+    swap), the same numbers (j without a partner on either side: left out, as :func:`swap_costs` gives None).
+
+    Why: the label screen tests every pair of markers, and one pair at a time cost about a millisecond of NumPy calls
+    on a few distances (a 56-marker body: 1540 pairs, 1.6 s a round of ``diagnose``). Markers on other segments keep
+    their own partners whatever `i` is, so their distances to their partners are read once per marker and `i`'s
+    distances to every marker once per `i`; the distances of each j to `i`'s partners are taken for all j together.
+    Partner lists of unequal lengths are padded with NaN, which the NaN-ignoring sums and means leave out."""
+    if not js:
+        return {}
+    cols_all, meds_all, misfit, count = dists.padded()
+    Pi, Di = cols_all[i, :count[i]], meds_all[i, :count[i]]
+    cols, meds, own_j = cols_all[js], meds_all[js], misfit[:, js]                # (J, W), (J, W), (F, J, W)
+    pad = cols < 0
+    to_i = np.linalg.norm(data[:, [i]] - data, axis=2)                            # (F, M): i to every marker
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)            # means of frames with no partner seen: NaN
+        own_i = misfit[:, i, :count[i]]                                               # (F, n_i)
+        i_as_j = np.where(pad, np.nan, (to_i[:, np.where(pad, 0, cols)] - meds) ** 2)             # (F, J, W)
+        j_as_i = (np.linalg.norm(data[:, js][:, :, None] - data[:, None, Pi], axis=3) - Di) ** 2   # (F, J, n_i)
+        keep = np.nansum(own_i, axis=1)[:, None] + np.nansum(own_j, axis=2)
+        swap = np.nansum(j_as_i, axis=2) + np.nansum(i_as_j, axis=2)
+        n = count[i] + count[js]
+        only_i = n * np.nanmean(own_i, axis=1)[:, None], n * np.nanmean(i_as_j, axis=2)
+        only_j = n * np.nanmean(own_j, axis=2), n * np.nanmean(j_as_i, axis=2)
+    seen_i = np.all(np.isfinite(data[:, i]), axis=1)[:, None]
+    seen_j = np.all(np.isfinite(data[:, js]), axis=2)
+    for alone, (k, s) in ((seen_i & ~seen_j, only_i), (seen_j & ~seen_i, only_j)):
+        keep[alone], swap[alone] = np.broadcast_to(k, alone.shape)[alone], s[alone]
+    neither = ~seen_i & ~seen_j
+    keep[neither], swap[neither] = np.nan, np.nan
+    return {j: (keep[:, k], swap[:, k]) for k, j in enumerate(js) if n[k] > 0}
+
+
 def longest_run(flag: np.ndarray, doubt: np.ndarray) -> tuple[int, int]:
     """First and last frame of the longest run of `flag`, bridging holes of at most MAX_HOLE `doubt`
     frames; (-1, -1) if none."""
@@ -113,9 +164,12 @@ def detect(data: np.ndarray, chain, sigma_mm: float, n_obs: int) -> list:
     sig2, pen = sigma_mm ** 2, np.log(max(n_obs, 2))
     out = []
     dists = _Distances(data, chain)
+    seg = chain.marker_seg
     for i in range(chain.n_markers):
+        across = swap_costs_across(data, chain, i, [j for j in range(i + 1, chain.n_markers) if seg[j] != seg[i]],
+                                   dists)
         for j in range(i + 1, chain.n_markers):
-            keep, swap = swap_costs(data, chain, i, j, dists)
+            keep, swap = across.get(j, (None, None)) if seg[j] != seg[i] else swap_costs(data, chain, i, j, dists)
             if keep is None:
                 continue
             n_terms = len(_partners(chain, i, {i, j})) + len(_partners(chain, j, {i, j}))
