@@ -88,16 +88,26 @@ def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None
         return None, None
     own_i, own_j = (dists.to(i, Pi) - Di) ** 2, (dists.to(j, Pj) - Dj) ** 2
     i_as_j, j_as_i = (dists.to(i, Pj) - Dj) ** 2, (dists.to(j, Pi) - Di) ** 2
+    seen = np.all(np.isfinite(data[:, [i, j]]), axis=2)
+    return _kept_and_swapped(own_i, own_j, i_as_j, j_as_i, n, seen[:, 0], seen[:, 1])
+
+
+def _kept_and_swapped(own_i, own_j, i_as_j, j_as_i, n, seen_i, seen_j) -> tuple[np.ndarray, np.ndarray]:
+    """The per-frame misfits as labelled and exchanged (:func:`swap_costs`) from the squared misfits of i's and j's
+    distances to their own partners (``own_i``, ``own_j``) and to the other's (``i_as_j``, ``j_as_i``), the partner
+    axis last (NaN: unseen, left out), `n` the pair's distances and where each marker is seen; any leading shape
+    that broadcasts (one pair, (F,); i against many j, (F, J))."""
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)            # means of frames with no partner seen: NaN
-        keep = np.nansum(own_i, axis=1) + np.nansum(own_j, axis=1)
-        swap = np.nansum(j_as_i, axis=1) + np.nansum(i_as_j, axis=1)
-        only_i = n * np.nanmean(own_i, axis=1), n * np.nanmean(i_as_j, axis=1)
-        only_j = n * np.nanmean(own_j, axis=1), n * np.nanmean(j_as_i, axis=1)
-    seen = np.all(np.isfinite(data[:, [i, j]]), axis=2)
-    for alone, (k, s) in ((seen[:, 0] & ~seen[:, 1], only_i), (seen[:, 1] & ~seen[:, 0], only_j)):
-        keep[alone], swap[alone] = k[alone], s[alone]
-    neither = ~seen[:, 0] & ~seen[:, 1]
+        keep = np.nansum(own_i, axis=-1) + np.nansum(own_j, axis=-1)
+        swap = np.nansum(j_as_i, axis=-1) + np.nansum(i_as_j, axis=-1)
+        only_i = n * np.nanmean(own_i, axis=-1), n * np.nanmean(i_as_j, axis=-1)
+        only_j = n * np.nanmean(own_j, axis=-1), n * np.nanmean(j_as_i, axis=-1)
+    keep, swap = np.broadcast_arrays(keep, swap)
+    keep, swap = keep.copy(), swap.copy()
+    for alone, (k, s) in ((seen_i & ~seen_j, only_i), (seen_j & ~seen_i, only_j)):
+        keep[alone], swap[alone] = np.broadcast_to(k, alone.shape)[alone], np.broadcast_to(s, alone.shape)[alone]
+    neither = ~seen_i & ~seen_j
     keep[neither], swap[neither] = np.nan, np.nan
     return keep, swap
 
@@ -118,22 +128,13 @@ def swap_costs_across(data: np.ndarray, chain, i: int, js: list, dists: _Distanc
     cols, meds, own_j = cols_all[js], meds_all[js], misfit[:, js]                # (J, W), (J, W), (F, J, W)
     pad = cols < 0
     to_i = np.linalg.norm(data[:, [i]] - data, axis=2)                            # (F, M): i to every marker
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)            # means of frames with no partner seen: NaN
-        own_i = misfit[:, i, :count[i]]                                               # (F, n_i)
+    with np.errstate(invalid="ignore"):
         i_as_j = np.where(pad, np.nan, (to_i[:, np.where(pad, 0, cols)] - meds) ** 2)             # (F, J, W)
         j_as_i = (np.linalg.norm(data[:, js][:, :, None] - data[:, None, Pi], axis=3) - Di) ** 2   # (F, J, n_i)
-        keep = np.nansum(own_i, axis=1)[:, None] + np.nansum(own_j, axis=2)
-        swap = np.nansum(j_as_i, axis=2) + np.nansum(i_as_j, axis=2)
-        n = count[i] + count[js]
-        only_i = n * np.nanmean(own_i, axis=1)[:, None], n * np.nanmean(i_as_j, axis=2)
-        only_j = n * np.nanmean(own_j, axis=2), n * np.nanmean(j_as_i, axis=2)
+    n = count[i] + count[js]
     seen_i = np.all(np.isfinite(data[:, i]), axis=1)[:, None]
     seen_j = np.all(np.isfinite(data[:, js]), axis=2)
-    for alone, (k, s) in ((seen_i & ~seen_j, only_i), (seen_j & ~seen_i, only_j)):
-        keep[alone], swap[alone] = np.broadcast_to(k, alone.shape)[alone], s[alone]
-    neither = ~seen_i & ~seen_j
-    keep[neither], swap[neither] = np.nan, np.nan
+    keep, swap = _kept_and_swapped(misfit[:, i, None, :count[i]], own_j, i_as_j, j_as_i, n, seen_i, seen_j)
     return {j: (keep[:, k], swap[:, k]) for k, j in enumerate(js) if n[k] > 0}
 
 
