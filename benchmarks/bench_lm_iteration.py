@@ -58,29 +58,20 @@ KEY = "lm_iteration"
 CHAINS = ("leg9", "walking2", "body42")
 
 
+LAB_MARKERS = {"thigh": ("GT", "THI", "KNE"), "shank": ("TIB", "TIB2", "ANK"), "foot": ("HEE", "TOE", "MT5"),
+               "upperarm": ("SHO", "UPA", "ELB"), "forearm": ("FRA", "WRA", "WRB"), "hand": ("FIN", "HND", "HN2")}
+"""The ``body42`` limbs' markers, each prefixed with the side (R or L)."""
+
+
 def body42() -> str:
-    """The ``body42`` model file: 14 segments with 3 markers each, 13 joints."""
-    segs = [("pelvis", ["LASI", "RASI", "SACR"], None), ("trunk", ["C7", "T10", "STRN"], 450)]
-    joints = [("lumbar", "spherical", "pelvis", "trunk")]
-    for s in ("R", "L"):
-        side = s.lower()
-        for seg, marks, length, joint, kind, parent in (
-                ("thigh", ("GT", "THI", "KNE"), 420, "hip", "spherical", "pelvis"),
-                ("shank", ("TIB", "TIB2", "ANK"), 400, "knee", "revolute", "thigh"),
-                ("foot", ("HEE", "TOE", "MT5"), 200, "ankle", "revolute", "shank"),
-                ("upperarm", ("SHO", "UPA", "ELB"), 300, "shoulder", "spherical", "trunk"),
-                ("forearm", ("FRA", "WRA", "WRB"), 260, "elbow", "revolute", "upperarm"),
-                ("hand", ("FIN", "HND", "HN2"), 90, "wrist", "spherical", "forearm")):
-            segs.append((f"{seg}_{side}", [s + m for m in marks], length))
-            joints.append((f"{joint}_{side}", kind, parent if parent in ("pelvis", "trunk") else f"{parent}_{side}",
-                           f"{seg}_{side}"))
-    text = ['units = "mm"']
-    for name, marks, length in segs:
-        text += [f"[segments.{name}]", "markers = [" + ", ".join(f'"{m}"' for m in marks) + "]"]
-        text += [f"length_mm = {length}"] if length else []
-    for name, kind, parent, child in joints:
-        text += [f"[joints.{name}]", f'type = "{kind}"', f'parent = "{parent}"', f'child = "{child}"']
-    return "\n".join(text) + "\n"
+    """The ``body42`` model file: 14 segments with 3 markers each, 13 joints (the body of
+    :func:`bench_scaling.body_model`, with lab-style marker names)."""
+    from bench_scaling import body_model
+
+    names = {"pelvis": ["LASI", "RASI", "SACR"], "trunk": ["C7", "T10", "STRN"]}
+    names.update({f"{seg}_{side.lower()}": [side + m for m in marks] for seg, marks in LAB_MARKERS.items()
+                  for side in ("R", "L")})
+    return body_model(3, names=names)
 
 
 # ---------------------------------------------------------------------- one measurement, in a fresh process

@@ -59,10 +59,10 @@ LIMBS = (("thigh", 420, "hip", "spherical", "pelvis"), ("shank", 400, "knee", "r
          ("forearm", 260, "elbow", "revolute", "upperarm"), ("hand", 90, "wrist", "spherical", "forearm"))
 
 
-def body_model(markers_per_segment: int, legs_only: bool = False) -> str:
+def body_model(markers_per_segment: int, legs_only: bool = False, names: dict | None = None) -> str:
     """A model file: a full body of 14 segments (or, with `legs_only`, the pelvis and both legs: 7 segments), each
-    with `markers_per_segment` markers, ball joints at the lumbar spine, hips, shoulders and wrists and hinges at
-    the knees, ankles and elbows."""
+    with `markers_per_segment` markers (named SEGMENT1, SEGMENT2, ..., or as `names` gives them: segment -> labels),
+    ball joints at the lumbar spine, hips, shoulders and wrists and hinges at the knees, ankles and elbows."""
     segs = [(name, length) for name, length in BODY_SEGMENTS if not (legs_only and name == "trunk")]
     joints = [] if legs_only else [("lumbar", "spherical", "pelvis", "trunk")]
     for side in ("r", "l"):
@@ -72,8 +72,9 @@ def body_model(markers_per_segment: int, legs_only: bool = False) -> str:
                            f"{seg}_{side}"))
     text = ['units = "mm"']
     for name, length in segs:
-        marks = ", ".join(f'"{name.upper()}{i + 1}"' for i in range(markers_per_segment))
-        text += [f"[segments.{name}]", f"markers = [{marks}]"] + ([f"length_mm = {length}"] if length else [])
+        marks = (names or {}).get(name) or [f"{name.upper()}{i + 1}" for i in range(markers_per_segment)]
+        text += [f"[segments.{name}]", "markers = [" + ", ".join(f'"{m}"' for m in marks) + "]"]
+        text += [f"length_mm = {length}"] if length else []
     for name, kind, parent, child in joints:
         text += [f"[joints.{name}]", f'type = "{kind}"', f'parent = "{parent}"', f'child = "{child}"']
     return "\n".join(text) + "\n"

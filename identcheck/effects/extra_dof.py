@@ -136,8 +136,7 @@ def _at_shift(n, G, K: int, shift: float):
     ``T = [[1, 0, shift, 0], [0, 1, 0, shift]] ⊗ I_K``, taken block by block. (Formed as a (2K, 4K) matrix, T cost
     K³ a shift: the functions' count grows with the trial's length, and on an 8000-frame trial, 400 functions at the
     finest knots, the 13 shifts had taken 1.7 of its 11.7 s.)"""
-    rows = [slice(0, K), slice(K, 2 * K)]
-    turn, along = rows, [slice(2 * K, 3 * K), slice(3 * K, 4 * K)]
+    turn, along = [slice(0, K), slice(K, 2 * K)], [slice(2 * K, 3 * K), slice(3 * K, 4 * K)]
     n_s = np.concatenate([n[t] + shift * n[a] for t, a in zip(turn, along)])
     G_s = np.block([[G[t, u] + shift * (G[a, u] + G[t, b]) + shift * shift * G[a, b]
                      for u, b in zip(turn, along)] for t, a in zip(turn, along)])

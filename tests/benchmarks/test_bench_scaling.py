@@ -70,3 +70,18 @@ def test_exponents_are_the_powers_each_version_and_diagnose_grow_with(p_base, p_
     assert exps["frames/diagnose_cpu_s_less_startup/current"] == pytest.approx(p_now, abs=1e-6)
     assert exps["frames/diagnose_cpu_s_less_startup_upper_half/current"] == pytest.approx(p_now, abs=1e-6)
     assert exps["markers/fit_s_per_iteration/current"] is None
+
+
+def test_the_lm_benchmarks_body42_is_this_body_with_lab_marker_names(tmp_path):
+    """bench_lm_iteration's ``body42`` is built by :func:`bench_scaling.body_model` (one body for both benchmarks):
+    the same segments, lengths and joints as the three-marker body here, its markers named as in a lab."""
+    import bench_lm_iteration
+    from identcheck.io.model import Model
+
+    (tmp_path / "lab.toml").write_text(bench_lm_iteration.body42())
+    (tmp_path / "here.toml").write_text(bench.body_model(3))
+    lab, here = Model.from_toml(tmp_path / "lab.toml"), Model.from_toml(tmp_path / "here.toml")
+    assert list(lab.segments) == list(here.segments) and list(lab.joints) == list(here.joints)
+    assert all(lab.segments[s].length_mm == here.segments[s].length_mm for s in lab.segments)
+    assert all(lab.joints[j] == here.joints[j] for j in lab.joints)
+    assert {"RGT", "LHN2", "SACR"} <= set(lab.markers) and len(lab.markers) == 42
