@@ -40,7 +40,7 @@ import identcheck as ic  # noqa: E402
 from results_io import add_shard_arguments, machine_info, run_trials, write_json  # noqa: E402
 
 
-def visible_chi2(trial_dir: Path, entry: dict) -> float | None:
+def visible_chi2(trial_dir: Path, entry: dict, only: int | None = None) -> float | None:
     """What of the trial's effects a rigid-joint model cannot absorb, in units of the noise: the noise-free trial
     (the generator's own ``simulate(spec, noise=False)``) fitted by the rigid whole-chain model, its residual
     prewhitened with the trial's true noise correlation, over the true noise variance. An effect whose visible
@@ -48,7 +48,10 @@ def visible_chi2(trial_dir: Path, entry: dict) -> float | None:
     The rigid fit is started both from its own closed-form start and from the rigid fit of the measured trial, and
     the better is kept: on noise-free data the first can creep for a thousand iterations far above the minimum
     (seed 12, trial_0082: 30 194 mm² against 93 mm² from the second start), which made a barely visible
-    distortion read as χ² 54 000."""
+    distortion read as χ² 54 000.
+
+    `only`: the trial's effect of that index alone (the generator's spec with the others taken out, the same motion
+    and noise): what a two-effect trial shows of each of its effects, read apart."""
     import generator as heldout
     from identcheck.bundle.chain import fit_chain, initial_state
     from identcheck.bundle.hypothesis import whitened_rss
@@ -56,6 +59,8 @@ def visible_chi2(trial_dir: Path, entry: dict) -> float | None:
 
     truth = json.loads((trial_dir / f"{entry['stem']}.truth.json").read_text())
     spec = truth["spec"]
+    if only is not None:
+        spec = {**spec, "effects": [spec["effects"][only]]}
     X = heldout.simulate(spec, noise=False)
     X = X[0] if isinstance(X, tuple) else X
     noise = truth["params"]["noise"]
@@ -163,9 +168,12 @@ def evaluate(trial_dir: Path, entry: dict) -> dict:
              for t in entry["effects"]]
     indistinct = [[o["name"] for o in e.get("indistinguishable_from", [])] for e in diag.get("effects", [])]
     visible = visible_chi2(trial_dir, entry) if entry["effects"] else None
+    own = [visible_chi2(trial_dir, entry, only=k) for k in range(len(entry["effects"]))] if len(entry["effects"]) > 1 \
+        else [visible]
     truth = json.loads((trial_dir / f"{stem}.truth.json").read_text())
     return {"stem": stem, "named": named, "joints": joints_against_truth(diag, truth),
             "visible_chi2": None if visible is None else round(visible, 1),
+            "own_visible_chi2": [None if v is None else round(v, 1) for v in own] if entry["effects"] else [],
             "where_right": right, "indistinguishable": indistinct,
             "gap_ratio": round(diag["gap_after"] / diag["noise_floor"], 3) if diag.get("noise_floor") else None,
             "noise": entry["category"]["noise"], "motion": entry["category"]["motion"],
@@ -218,6 +226,7 @@ def summarise(results: list) -> dict:
         "confusion": {k: dict(v) for k, v in sorted(confusion.items())},
         "misses": misses,
         "by_category": by_category(single, clean),
+        "by_visibility": by_visibility(single, pairs),
         "joints": joints_summary(ok),
         "median_seconds": sorted(r["seconds"] for r in results)[len(results) // 2] if results else None,
     }
@@ -269,6 +278,50 @@ def by_category(single: list, clean: list) -> dict:
             out[f"{key}={value}"] = {
                 "single": len(s), "named_first": sum(bool(r["named"]) and r["named"][0] == r["truth"][0] for r in s),
                 "clean": len(c), "nothing_named": sum(not r["named"] for r in c)}
+    return out
+
+
+VISIBILITY_BINS = (0.0, 30.0, 100.0, 300.0, float("inf"))
+"""Edges of the visible χ² bins :func:`by_visibility` counts in: below 30 an effect leaves less than the noise of a
+few dozen samples, what no method could name; 30-100 is about what a criterion charging ln 3N (10-11 here) a
+parameter pays for the few parameters of the simplest story; above, every effect's own model earns its keep."""
+
+
+def told_apart(name: str, row: dict) -> bool:
+    """Whether the truth's effect `name` is named in `row`, or reported as indistinguishable from a named one (a
+    story the data cannot tell from the one named: as honest an answer)."""
+    return name in row["named"] or any(name in alts for alts in (row.get("indistinguishable") or []))
+
+
+def by_visibility(single: list, pairs: list, edges: tuple = VISIBILITY_BINS) -> list:
+    """The named rates by how visible the effects were (:func:`visible_chi2`): single-effect trials by their
+    effect's visible χ², named first (and named first or tied with the first as indistinguishable); two-effect trials
+    by the smaller of their effects' own visible χ² (each effect simulated alone, ``own_visible_chi2``), both named
+    (and both named or reported indistinguishable from a named one, :func:`told_apart`). Trials without the numbers
+    (rows of an older run) are left out. What the held-out rates mean depends on how many trials hide an effect
+    below anything a rigid-model method could see; this says."""
+    def binned(value):
+        return next(i for i in range(len(edges) - 1) if edges[i] <= value < edges[i + 1])
+    out = [{"visible_chi2_from": edges[i], "visible_chi2_below": edges[i + 1], "single": 0, "named_first": 0,
+            "named_first_or_indistinguishable": 0, "pairs": 0, "both_named": 0, "both_told_apart": 0}
+           for i in range(len(edges) - 1)]
+    for r in single:
+        if r.get("visible_chi2") is None:
+            continue
+        b = out[binned(r["visible_chi2"])]
+        first = bool(r["named"]) and r["named"][0] == r["truth"][0]
+        b["single"] += 1
+        b["named_first"] += first
+        b["named_first_or_indistinguishable"] += first or (
+            bool(r["named"]) and r["truth"][0] in (r.get("indistinguishable") or [[]])[0])
+    for r in pairs:
+        own = r.get("own_visible_chi2") or []
+        if len(own) != len(r["truth"]) or any(v is None for v in own):
+            continue
+        b = out[binned(min(own))]
+        b["pairs"] += 1
+        b["both_named"] += all(t in r["named"] for t in r["truth"])
+        b["both_told_apart"] += all(told_apart(t, r) for t in r["truth"])
     return out
 
 
@@ -359,6 +412,11 @@ def main(argv=None) -> int:
     for m in s["misses"]:
         print(f"  miss {m['stem']}: {m['truth']} ({m['shape']}, {m['magnitude_mm']} mm, visible χ² "
               f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
+    print("by visible chi2 (single: its effect's; pairs: the smaller of the two effects' own):")
+    for b in s["by_visibility"]:
+        print(f"  {b['visible_chi2_from']:>5g} - {b['visible_chi2_below']:<5g} single named first "
+              f"{b['named_first']}/{b['single']} (or indistinguishable {b['named_first_or_indistinguishable']}), "
+              f"pairs both named {b['both_named']}/{b['pairs']} (or indistinguishable {b['both_told_apart']})")
     jt = s["joints"]
     print(f"joints: {jt['determined']}/{jt['joints']} called determined, {jt['determined_all_covered']} of them with "
           f"every interval holding the truth, {jt['determined_missed_by_over_5mm']} missing it by over 5 mm "
