@@ -4,7 +4,9 @@ the one that earns its parameters best and keeps the joints identifiable (an err
 model, a label swap whose exchanged distances fit, comes before the rest once it earns its parameters: skin terms can
 absorb part of a swap and be adopted first, after which the swap is never named); when none is left to adopt, drop the
 earlier effects that later ones made unnecessary (:mod:`identcheck.diagnose.backward`) and, if any was dropped, search
-on; report the effects in order with the gap before and after each.
+on; report the effects in order with the gap before and after each. A proposal whose effect has a cheaper first fit
+(:meth:`identcheck.effects.base.Effect.screen`: a delay's first Newton step) that scores far below the round's best is
+left there, and fitted in full only if the round's choice comes near it (:func:`choose`).
 """
 from __future__ import annotations
 
@@ -45,7 +47,9 @@ effect's further places are not fitted this round when their strength is below 1
 fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
 lag is several frames) or it or the proposal is marked ``always_fit`` (a swap's strength is read from distances,
 not from the residual; a hinge's extra rotation's are a bound and a first-order reading; a marker's delay read from
-its distances to its segment-mates)."""
+its distances to its segment-mates). A proposal that is fitted goes no further than its effect's screen
+(:meth:`identcheck.effects.base.Effect.screen`) while that scores below 1/SKIP_RATIO of the best so far
+(:data:`COMPLETE_SHARE` says when it is fitted in full after all)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its
@@ -386,7 +390,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
             proposals = sorted(((p, eff) for eff in EFFECTS.values()
                                 for p in eff.propose(ctx, h)[:eff.max_proposals]), key=lambda pe: -pe[0].strength)
             h.forget_projection()            # the detectors are done with it (an effect's apply builds it if it needs)
-            tried, best, leader, drift, placed = [], 0.0, None, None, set()
+            tried, best, leader, drift, placed, screened = [], 0.0, None, None, set(), []
             # an adopted effect's place, and the places of the effects no data could tell from it (its ``alike``:
             # both adopted would model one motion twice)
             taken = {place(n, w) for st in steps for n, w in [(st.name, st.where), *st.alike]} | dropped
@@ -407,6 +411,14 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if progress:
                     progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
                 try:
+                    first = eff.screen(ctx, h, prop) if best > 0.0 else None
+                    if first is not None:
+                        drift = creep(ctx, h) if drift is None else drift
+                        estimate = score(ctx, first, h) - drift
+                        if estimate * SKIP_RATIO < best:
+                            log.debug("%s %s left at its screen (%.0f)", eff.name, prop.where, estimate)
+                            screened.append((estimate, eff, prop, first))
+                            continue
                     cand = eff.apply(ctx, h, prop)
                 except (np.linalg.LinAlgError, ValueError) as exc:
                     log.debug("%s %s failed: %s", eff.name, prop.where, exc)
@@ -417,39 +429,9 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if not eff.implausible(prop) and sc > best:
                     best, leader = sc, eff
             h.forget_projection()
-            # errors the data show without the joint model come first among those that earn their parameters
-            tried.sort(key=lambda x: (not (x[0] > bar_for(x[1], bar) and x[1].read_without_joints(x[2])), -x[0]))
-            # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike
-            plausible = []
-            for sc, eff, prop, cand in tried:
-                why = eff.implausible(prop)
-                if why and sc > bar_for(eff, bar):
-                    log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
-                elif not why:
-                    plausible.append((sc, eff, prop, cand))
-            tried = simplest_among_equals(plausible, h, bar)
-            adopted, closed = None, False
-            for sc, eff, prop, cand in tried:
-                # the first candidate short of the round's bar closes the round to all but the sparse effects, held
-                # to their own (bar_for): what follows scores less, or is a simpler explanation moved ahead of it
-                closed = closed or sc <= bar
-                if sc <= bar_for(eff, bar) or (closed and not eff.sparse):
-                    continue
-                if progress:
-                    progress(f"step {len(steps) + 1}: fitting {eff.name} {prop.where} further, to check the "
-                             f"joints stay determined")
-                cand = cand.polish()
-                if corrects_data_only(h, cand):
-                    limit, free_floor = bar_on_corrected_data(ctx, base, cand, rigid_limit)
-                    adopted = (sc, eff, prop, cand)
-                    break
-                free = undetermined(cand)
-                joint, sd = worst_joint(ctx, cand) if free <= free_floor else (None, float("inf"))
-                if sd <= limit:
-                    adopted = (sc, eff, prop, cand)
-                    break
-                log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
-                refused[place(eff.name, prop.where)] = Refused(eff.name, prop.where, sc, joint, sd, free)
+            bars = Bars(bar, best, limit, free_floor, rigid_limit)
+            tried, adopted, limit, free_floor = choose(ctx, base, h, tried, screened, bars, refused, drift, progress,
+                                                       len(steps) + 1)
         if adopted is not None:
             h = _adopt(ctx, h, adopted, tried, steps, progress)
             adopted_effects.append(Adopted(adopted[1], adopted[2]))
@@ -480,6 +462,109 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     not_adopted = sorted((r for key, r in refused.items() if key not in kept), key=lambda r: -r.score)
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
                      tuple(dropped_steps), progress, tuple(not_adopted), limit)
+
+
+COMPLETE_SHARE = 0.6
+"""A proposal left at its screen (:meth:`identcheck.effects.base.Effect.screen`, which scored below 1/SKIP_RATIO of the
+round's best fit) is fitted in full before a candidate scoring below this share of the round's best is polished for
+adoption, and before a round ends with nothing adopted: the round's choice then reaches scores that the full fit of
+a screened proposal might have (it can move well above its screen: a delay several frames long, from a fresh start).
+Adopting a candidate near the round's best, the screened ones are not needed: the searched delays of held-out draw 82
+never rose from below a tenth of the round's best to half of it (see ``benchmarks/README.md``)."""
+
+
+@dataclass(frozen=True)
+class Bars:
+    """What a round's candidate must clear to be adopted: ``bar`` on its score (0, or :data:`DECISIVE_GAIN` when the
+    gap is consistent with noise), ``best`` the round's best plausible score, ``limit`` and ``free_floor`` on what it
+    leaves of the joints (worst standard error, free directions), ``rigid_limit`` the rigid fit's limit."""
+
+    bar: float
+    best: float
+    limit: float
+    free_floor: int
+    rigid_limit: float
+
+
+def ranked(tried: list, h: Hypothesis, bar: float) -> list:
+    """The round's fitted candidates `tried` ((score, effect, proposal, hypothesis)) in the order they are considered
+    for adoption, without those that cannot be what they claim: errors the data show without the joint model first
+    among those that earn their parameters, then by score, the simplest of equals first
+    (:func:`simplest_among_equals`)."""
+    tried = sorted(tried, key=lambda x: (not (x[0] > bar_for(x[1], bar) and x[1].read_without_joints(x[2])), -x[0]))
+    # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike
+    plausible = []
+    for sc, eff, prop, cand in tried:
+        why = eff.implausible(prop)
+        if why and sc > bar_for(eff, bar):
+            log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
+        elif not why:
+            plausible.append((sc, eff, prop, cand))
+    return simplest_among_equals(plausible, h, bar)
+
+
+def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened: list, bars: Bars, refused: dict,
+           drift: float | None, progress, step: int) -> tuple:
+    """The round's adoption: (the candidates in the order considered, the adopted (score, effect, proposal,
+    hypothesis) or None, the limit and free directions for the rounds after). Candidates are considered in
+    :func:`ranked` order; each is fitted on (:meth:`Hypothesis.polish`) and adopted when it keeps the joints
+    determined (or only corrects the data), else recorded in `refused`. The proposals left at their screen
+    (`screened`, (estimate, effect, proposal, screen)) are fitted in full, and the round considered again with them,
+    when its choice reaches below :data:`COMPLETE_SHARE` of the round's best or ends with none; each candidate is
+    fitted on once."""
+    polished, before = {}, dict(refused)
+    while True:
+        refused.clear()
+        refused.update(before)                     # (a second pass records its own refusals, as a single one would)
+        order = ranked(tried, h, bars.bar)
+        limit, free_floor = bars.limit, bars.free_floor
+        adopted, closed, reached = None, False, False
+        for sc, eff, prop, cand in order:
+            # the first candidate short of the round's bar closes the round to all but the sparse effects, held
+            # to their own (bar_for): what follows scores less, or is a simpler explanation moved ahead of it
+            closed = closed or sc <= bars.bar
+            if sc <= bar_for(eff, bars.bar) or (closed and not eff.sparse):
+                continue
+            if screened and sc < COMPLETE_SHARE * bars.best:
+                reached = True
+                break
+            if id(prop) not in polished:
+                if progress:
+                    progress(f"step {step}: fitting {eff.name} {prop.where} further, to check the joints stay "
+                             f"determined")
+                polished[id(prop)] = cand.polish()
+            cand = polished[id(prop)]
+            if corrects_data_only(h, cand):
+                limit, free_floor = bar_on_corrected_data(ctx, base, cand, bars.rigid_limit)
+                adopted = (sc, eff, prop, cand)
+                break
+            free = undetermined(cand)
+            joint, sd = worst_joint(ctx, cand) if free <= free_floor else (None, float("inf"))
+            if sd <= limit:
+                adopted = (sc, eff, prop, cand)
+                break
+            log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
+            refused[place(eff.name, prop.where)] = Refused(eff.name, prop.where, sc, joint, sd, free)
+        if not screened or (adopted is not None and not reached):
+            return order, adopted, limit, free_floor
+        tried = tried + complete(ctx, h, screened, drift, progress, step)
+        screened = []
+
+
+def complete(ctx: Context, h: Hypothesis, screened: list, drift: float, progress, step: int) -> list:
+    """The proposals left at their screen, fitted in full (:meth:`identcheck.effects.base.Effect.apply`, going on
+    from the screen), as the round's candidates: (score net of `drift`, effect, proposal, hypothesis)."""
+    out = []
+    for _estimate, eff, prop, _screen in screened:
+        if progress:
+            progress(f"step {step}: trying {eff.name} {prop.where} in full")
+        try:
+            cand = eff.apply(ctx, h, prop)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            log.debug("%s %s failed: %s", eff.name, prop.where, exc)
+            continue
+        out.append((score(ctx, cand, h) - drift, eff, prop, cand))
+    return out
 
 
 def bar_on_corrected_data(ctx: Context, base: Hypothesis, h: Hypothesis, rigid_limit: float) -> tuple[float, int]:

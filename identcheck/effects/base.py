@@ -97,6 +97,14 @@ class Effect:
         """Hypothesis `hyp` with the effect added where `proposal` says, its parameters fitted."""
         raise NotImplementedError
 
+    def screen(self, ctx, hyp, proposal: Proposal):
+        """A first, cheaper fit of the proposal: a hypothesis whose score over `hyp` estimates the candidate's, or None
+        when the effect has none (then :meth:`apply` is its only fit). :meth:`apply` goes on from it rather than
+        repeating it. The search leaves a proposal at its screen when that scores far below the round's best
+        (:func:`identcheck.diagnose.workflow.diagnose`), and fits it in full only if the round's choice comes near
+        it."""
+        return None
+
     def alike(self, chain, where: dict) -> list:
         """Hypotheses of other effects that no data of this marker set could tell from this one at `where` (the
         same family of marker motions), as [(name, where)]; by default none."""

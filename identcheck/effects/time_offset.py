@@ -30,6 +30,8 @@ from identcheck.effects.base import Effect, Proposal, seen_mean
 from identcheck.effects.injection import Change, cannot, marker_column, pick
 
 NEWTON_STEPS = 6
+SCREEN_STEPS = 1
+"""Newton steps of a delay's screen (:meth:`TimeOffset.screen`)."""
 MIN_DELAY_FRAMES = 0.2   # delays below a fifth of a frame are not worth a refit
 TAU_TOL_S = 5e-5
 WHOLE_FRAME_TRY = 0.02   # a delay farther than this (frames) from a whole frame is also tried at the two beside it;
@@ -449,16 +451,35 @@ class TimeOffset(Effect):
                                     always_fit=True))
         return sorted(out, key=lambda p: -p.strength)
 
-    def apply(self, ctx, hyp, proposal):
+    def screen(self, ctx, hyp, proposal):
+        """The model refitted with the detector's delay undone and one Gauss-Newton step on it (:meth:`newton`),
+        charged the delay's parameter (not what interpolating smooths of the noise): an estimate of what the whole
+        search (:meth:`apply`: Newton's further steps, a fresh start, the whole frames beside it, the placebo) scores,
+        at a tenth of its cost. None for a delay read from the distances (fitted from there, with no Newton step)."""
+        if proposal.payload.get("from_rigidity"):
+            return None
+        _tau, current = self.newton(ctx, hyp, proposal, steps=SCREEN_STEPS)
+        return replace(current, extra_params=hyp.n_params() - current.fit.n_params + 1)
+
+    def newton(self, ctx, hyp, proposal, steps: int | None = None) -> tuple:
+        """(τ, the hypothesis refitted with the markers shifted back by τ): τ refined by Gauss-Newton from the
+        proposal's, the velocity of the shifted markers as the derivative, up to `steps` (default
+        :data:`NEWTON_STEPS`) steps of three iterations each in all, fewer once a step moves τ less than
+        :data:`TAU_TOL_S`. Taken up where an earlier call on the same proposal and hypothesis left it (:meth:`screen`,
+        then :meth:`apply`): the steps are the same either way."""
+        steps = NEWTON_STEPS if steps is None else steps
         idx = proposal.payload["columns"]
-        tau = proposal.payload["tau"]
+        kept = proposal.payload.get("newton")
+        if kept is not None and kept[0] is hyp.fit:
+            _, tau, current, done, settled = kept
+        else:
+            tau, current, done, settled = proposal.payload["tau"], hyp, 0, False
         base = hyp.data
-        current = hyp
         # a delay read from the distances alone (:meth:`rigidity_proposals`) is not refined on the joint model's
         # residuals: those are what hid it (Newton from 2.2 frames went back to -0.07, the rigid fit's own lag, and
         # the whole frames near it were refitted from that bent fit: 4 frames scored 13 079 where 3 frames refitted
         # from a start with the lag undone scores 44 101; held-out draw 56, trial 89)
-        for _ in range(0 if proposal.payload.get("from_rigidity") else NEWTON_STEPS):
+        while not settled and done < (0 if proposal.payload.get("from_rigidity") else steps):
             data = base.copy()
             data[:, idx] = shifted(usable(hyp, idx), ctx.rate_hz, tau)
             vel = shifted(usable(hyp, idx), ctx.rate_hz, tau, derivative=1)
@@ -468,8 +489,14 @@ class TimeOffset(Effect):
             tau += dtau
             current = replace(stepped, terms=hyp.terms)
             current.fit.state.term_params = current.fit.state.term_params[:-1]
-            if abs(dtau) < TAU_TOL_S:
-                break
+            done += 1
+            settled = abs(dtau) < TAU_TOL_S
+        proposal.payload["newton"] = (hyp.fit, tau, current, done, settled)
+        return tau, current
+
+    def apply(self, ctx, hyp, proposal):
+        idx = proposal.payload["columns"]
+        tau, current = self.newton(ctx, hyp, proposal)
         # the Gauss-Newton delay minimises a residual that interpolating between frames also lowers (it averages
         # the noise away in part, most at half a frame): it leans off a whole-frame lag, which interpolates
         # nothing (held-out pelvis 4 frames late: 38.2 ms found, 40 ms scoring 661 more once that is charged).
@@ -508,6 +535,7 @@ class TimeOffset(Effect):
         noise_sd = realignment_sd(ctx, hyp, idx, nearest_whole(tau * ctx.rate_hz)) if best > 0.0 else 0.0
         proposal.payload["noise_sd"] = noise_sd
         proposal.payload["score"] = best
+        proposal.payload.pop("newton", None)        # (its hypothesis is not needed again: let it go)
         return new
 
     def stands_out(self, proposal: Proposal, gain: float) -> bool:

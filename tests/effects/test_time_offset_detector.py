@@ -494,3 +494,23 @@ def test_a_delay_is_adopted_and_kept_by_one_rule(score, spread):
     prop = Proposal(eff.name, {"segment": "s", "delay_ms": 10.0}, 1.0,
                     {"noise_sd": spread, "score": score})
     assert (eff.implausible(prop) == "") == eff.stands_out(prop, score) == (score > REALIGN_Z * spread)
+
+
+@settings(max_examples=3, deadline=None)
+@given(st.integers(0, 2**16), st.floats(1.2, 3.8))
+def test_a_delays_screen_then_its_full_fit_are_the_full_fit_alone(seed, frames):
+    """The shank 1.2-3.8 frames late: a delay's screen (its first Newton step, charged one parameter) and then its
+    full fit, which takes Newton up where the screen left it, give what the full fit gives alone, to the last bit."""
+    from identcheck.effects.registry import EFFECTS
+
+    ctx, h, cols, rate = _shank_late(seed, frames, 0.5)
+    eff = EFFECTS["time_offset"]
+    shank = [p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where]
+    alone, screened = shank[0], next(p for p in eff.propose(ctx, h) if p.where == shank[0].where)
+    direct = eff.apply(ctx, h, alone)
+    first = eff.screen(ctx, h, screened)
+    assert first.n_params() == h.n_params() + 1 and first.data is not h.data
+    after = eff.apply(ctx, h, screened)
+    assert alone.where == screened.where
+    assert np.array_equal(direct.fit.pred, after.fit.pred, equal_nan=True) and direct.rss == after.rss
+    assert direct.extra_params == after.extra_params and "newton" not in screened.payload

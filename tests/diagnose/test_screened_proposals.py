@@ -1,0 +1,97 @@
+"""The search's handling of proposals left at their screen (:func:`identcheck.diagnose.workflow.choose`): they are
+fitted in full only when the round's choice comes near them, and the round then chooses as if every proposal had been
+fitted in full from the start."""
+from types import SimpleNamespace
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+import identcheck.diagnose.workflow as W
+
+
+class Candidate:
+    """A fitted candidate as the adoption step sees it: its score, and the standard error it leaves on the joints."""
+
+    def __init__(self, value: float, sd: float):
+        self.value, self.sd = value, sd
+
+    def polish(self):
+        return self
+
+
+class Stub:
+    """An effect whose proposals are fitted to given candidates (`full`: proposal id -> Candidate), counting fits."""
+
+    name, sparse = "stub", False
+
+    def __init__(self, full: dict):
+        self.full, self.fits = full, 0
+
+    def apply(self, ctx, h, prop):
+        self.fits += 1
+        return self.full[id(prop)]
+
+    def implausible(self, prop):
+        return ""
+
+    def read_without_joints(self, prop):
+        return False
+
+    def own_params(self, prop, h, cand):
+        return 1.0
+
+
+@pytest.fixture
+def stubbed(monkeypatch):
+    """The adoption step's judgments read off the stub candidates: score their value, no free directions, the worst
+    standard error theirs (stateless: shared by every example hypothesis draws)."""
+    monkeypatch.setattr(W, "score", lambda ctx, cand, h: cand.value)
+    monkeypatch.setattr(W, "corrects_data_only", lambda h, cand: False)
+    monkeypatch.setattr(W, "undetermined", lambda cand: 0)
+    monkeypatch.setattr(W, "worst_joint", lambda ctx, cand: ("knee", cand.sd))
+
+
+scores = st.floats(-500.0, 5e4, allow_nan=False)
+sds = st.sampled_from([1.0, 1.0, 50.0])          # 50 mm: beyond the limit, refused
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(scores, sds), min_size=1, max_size=6), st.lists(st.tuples(scores, sds), max_size=4),
+       st.sampled_from([0.0, W.DECISIVE_GAIN]))
+def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, fitted, screened, bar):
+    """Random rounds: fitted candidates (score, standard error), and screened ones whose full fit scores below half the
+    round's best (what a screen below a tenth of it is taken to promise). The choice, its order and the refusals are
+    those of the round with every proposal fitted in full; the screened ones are fitted only when the choice fell
+    below COMPLETE_SHARE of the best or nothing was adopted."""
+    def build():
+        props = [SimpleNamespace(where={"n": i}) for i in range(len(fitted) + len(screened))]
+        full = {id(p): Candidate(v, sd) for p, (v, sd) in zip(props, fitted + screened)}
+        return props, full
+
+    best = max([v for v, _ in fitted] + [0.0])
+    screened = [(min(v, 0.49 * best - 1.0), sd) for v, sd in screened]
+    props, full = build()
+    eff = Stub(full)
+    tried = [(full[id(p)].value, eff, p, full[id(p)]) for p in props[:len(fitted)]]
+    left = [(v / W.SKIP_RATIO, eff, p, None) for p, (v, _) in zip(props[len(fitted):], screened)]
+    bars = W.Bars(bar, best, 10.0, 0, 10.0)
+    refused = {}
+    order, adopted, _, _ = W.choose(None, None, None, tried, left, bars, refused, 0.0, None, 1)
+
+    props2, full2 = build()
+    eff2 = Stub(full2)
+    every = [(full2[id(p)].value, eff2, p, full2[id(p)]) for p in props2]
+    refused2 = {}
+    order2, adopted2, _, _ = W.choose(None, None, None, every, [], bars, refused2, 0.0, None, 1)
+
+    assert (adopted is None) == (adopted2 is None)
+    if adopted is not None:
+        assert adopted[2].where == adopted2[2].where and adopted[0] == adopted2[0]
+    assert {k: r.score for k, r in refused.items()} == {k: r.score for k, r in refused2.items()}
+    near = adopted is not None and adopted[0] >= W.COMPLETE_SHARE * best
+    if near and screened:
+        assert eff.fits == 0            # adopted near the best: the screened proposals were never fitted in full
+        assert [x[2].where for x in order] == [x[2].where for x in order2 if x[2].where["n"] < len(fitted)]
+    if screened and not near:
+        assert eff.fits == len(screened)
+        assert [(x[0], x[2].where) for x in order] == [(x[0], x[2].where) for x in order2]
