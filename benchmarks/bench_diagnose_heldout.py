@@ -302,7 +302,8 @@ def by_visibility(single: list, pairs: list, edges: tuple = VISIBILITY_BINS) -> 
     below anything a rigid-model method could see; this says."""
     def binned(value):
         return next(i for i in range(len(edges) - 1) if edges[i] <= value < edges[i + 1])
-    out = [{"visible_chi2_from": edges[i], "visible_chi2_below": edges[i + 1], "single": 0, "named_first": 0,
+    out = [{"visible_chi2_from": edges[i], "visible_chi2_below": edges[i + 1] if np.isfinite(edges[i + 1]) else None,
+            "single": 0, "named_first": 0,
             "named_first_or_indistinguishable": 0, "pairs": 0, "both_named": 0, "both_told_apart": 0}
            for i in range(len(edges) - 1)]
     for r in single:
@@ -414,7 +415,7 @@ def main(argv=None) -> int:
               f"{m.get('visible_chi2')}, {m.get('noise')} noise) -> {m['named'] or 'nothing'}")
     print("by visible chi2 (single: its effect's; pairs: the smaller of the two effects' own):")
     for b in s["by_visibility"]:
-        print(f"  {b['visible_chi2_from']:>5g} - {b['visible_chi2_below']:<5g} single named first "
+        print(f"  {b['visible_chi2_from']:>5g} - {b['visible_chi2_below'] or float('inf'):<5g} single named first "
               f"{b['named_first']}/{b['single']} (or indistinguishable {b['named_first_or_indistinguishable']}), "
               f"pairs both named {b['both_named']}/{b['pairs']} (or indistinguishable {b['both_told_apart']})")
     jt = s["joints"]

@@ -1,5 +1,6 @@
 """benchmarks/bench_diagnose_heldout.py's summary split by trial category: every single-effect and clean row is
 counted once under each key, and a row counts as named first only when its first named effect is the true one."""
+import json
 import sys
 from pathlib import Path
 
@@ -54,12 +55,14 @@ def test_visibility_bins_count_each_measured_row_once(single, pairs):
     complete = [r for r in pairs if len(r["own_visible_chi2"]) == 2 and None not in r["own_visible_chi2"]]
     assert sum(b["single"] for b in out) == len(measured)
     assert sum(b["pairs"] for b in out) == len(complete)
+    json.dumps(out, allow_nan=False)                 # as results.json is written
     for b in out:
-        inside = [r for r in measured if b["visible_chi2_from"] <= r["visible_chi2"] < b["visible_chi2_below"]]
+        below = float("inf") if b["visible_chi2_below"] is None else b["visible_chi2_below"]
+        inside = [r for r in measured if b["visible_chi2_from"] <= r["visible_chi2"] < below]
         assert b["single"] == len(inside)
         assert b["named_first"] == sum(bool(r["named"]) and r["named"][0] == r["truth"][0] for r in inside)
         assert b["named_first"] <= b["named_first_or_indistinguishable"] <= b["single"]
-        both = [r for r in complete if b["visible_chi2_from"] <= min(r["own_visible_chi2"]) < b["visible_chi2_below"]]
+        both = [r for r in complete if b["visible_chi2_from"] <= min(r["own_visible_chi2"]) < below]
         assert b["pairs"] == len(both)
         assert b["both_named"] == sum(all(t in r["named"] for t in r["truth"]) for r in both)
         assert b["both_named"] <= b["both_told_apart"] <= b["pairs"]
