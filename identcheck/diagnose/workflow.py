@@ -5,8 +5,8 @@ model, a label swap whose exchanged distances fit, comes before the rest once it
 absorb part of a swap and be adopted first, after which the swap is never named); when none is left to adopt, drop the
 earlier effects that later ones made unnecessary (:mod:`identcheck.diagnose.backward`) and, if any was dropped, search
 on; report the effects in order with the gap before and after each. A proposal whose effect has a cheaper first fit
-(:meth:`identcheck.effects.base.Effect.screen`: a delay's first Newton step) that scores far below the round's best is
-left there, and fitted in full only if the round's choice comes near it (:func:`choose`).
+(:meth:`identcheck.effects.base.Effect.screen`: Newton on a delay until it settles) that scores far below the round's
+best is left there, and fitted in full only if the round's choice comes near it (:func:`choose`).
 """
 from __future__ import annotations
 
@@ -469,8 +469,11 @@ COMPLETE_SHARE = 0.6
 round's best fit) is fitted in full before a candidate scoring below this share of the round's best is polished for
 adoption, and before a round ends with nothing adopted: the round's choice then reaches scores that the full fit of
 a screened proposal might have (it can move well above its screen: a delay several frames long, from a fresh start).
-Adopting a candidate near the round's best, the screened ones are not needed: the searched delays of held-out draw 82
-never rose from below a tenth of the round's best to half of it (see ``benchmarks/README.md``)."""
+Adopting a candidate near the round's best, the screened ones are not needed: on the 120 trials of held-out draw 82
+(233 rounds), 48 delays were left at their screen, and fitted in full for the measurement none scored above 0.091 of
+its round's best (one had risen from a screen of −1 419 to 24 581, against 604 039); one round would have fitted them
+in full (it adopted nothing). A screen of one Newton step had let through what a settled one does not: a marker of a
+pelvis 4 frames late, its first step at −248, scored 669 in full against the round's 1 151."""
 
 
 @dataclass(frozen=True)

@@ -499,8 +499,9 @@ def test_a_delay_is_adopted_and_kept_by_one_rule(score, spread):
 @settings(max_examples=3, deadline=None)
 @given(st.integers(0, 2**16), st.floats(1.2, 3.8))
 def test_a_delays_screen_then_its_full_fit_are_the_full_fit_alone(seed, frames):
-    """The shank 1.2-3.8 frames late: a delay's screen (its first Newton step, charged one parameter) and then its
-    full fit, which takes Newton up where the screen left it, give what the full fit gives alone, to the last bit."""
+    """The shank 1.2-3.8 frames late: a delay's screen (Newton until a step moves it under a tenth of a frame, charged
+    one parameter) and then its full fit, which takes Newton up where the screen left it, give what the full fit gives
+    alone, to the last bit."""
     from identcheck.effects.registry import EFFECTS
 
     ctx, h, cols, rate = _shank_late(seed, frames, 0.5)
