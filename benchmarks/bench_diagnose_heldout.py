@@ -345,15 +345,23 @@ def detection_limits(single: list, rate: float = 0.9) -> dict:
     return out
 
 
-def limits_figure(limits: dict, path: Path) -> None:
+def pair_points(pairs: list) -> list:
+    """Each two-effect trial with both effects' own visible χ² as (the smaller of the two, both named or reported
+    indistinguishable from a named one): the row :func:`limits_figure` draws for the pairs."""
+    return [(min(r["own_visible_chi2"]), all(told_apart(t, r) for t in r["truth"])) for r in pairs
+            if len(r.get("own_visible_chi2") or []) == len(r["truth"]) and None not in r["own_visible_chi2"]]
+
+
+def limits_figure(limits: dict, path: Path, pairs: list = ()) -> None:
     """Named (filled) and missed (open) single-effect trials against their visible χ², one row per effect, the
-    90 % detection limit marked."""
+    90 % detection limit marked; below them, when given, the two-effect trials at the smaller of their effects' own
+    visible χ² (filled: both named, :func:`pair_points`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     names = list(limits)
-    fig, ax = plt.subplots(figsize=(8, 0.5 * len(names) + 1.5))
+    fig, ax = plt.subplots(figsize=(9, 0.5 * (len(names) + bool(pairs)) + 2.0))
     for i, name in enumerate(names):
         pts = limits[name]["below"]
         hit = [p[0] for p in pts if p[2]]
@@ -364,11 +372,17 @@ def limits_figure(limits: dict, path: Path) -> None:
         lim = limits[name]["limit"]
         if lim:
             ax.plot([lim["visible_chi2"]] * 2, [i - 0.35, i + 0.35], color="k", lw=1.5)
+    if pairs:
+        row = -1
+        ax.scatter([x for x, ok in pairs if ok], [row] * sum(ok for _, ok in pairs), color="tab:green", s=30)
+        ax.scatter([x for x, ok in pairs if not ok], [row] * sum(not ok for _, ok in pairs), facecolors="none",
+                   edgecolors="tab:red", s=30)
+        names = ["pairs: both named (weaker effect)"] + names
     ax.set_xscale("log")
-    ax.set_yticks(range(len(names)), names)
+    ax.set_yticks(range(-1 if pairs else 0, len(names) - (1 if pairs else 0)), names)
     ax.set_xlabel("visible χ² of the effect (what the rigid model cannot absorb, over the noise)")
     ax.set_title("diagnose on independently generated trials: | = 90 % detection limit")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -431,7 +445,8 @@ def main(argv=None) -> int:
                                   f"magnitudes from {lim['magnitude_mm_from']} mm)" if lim else "not reached"))
     a.out.parent.mkdir(parents=True, exist_ok=True)
     try:
-        limits_figure(s["detection_limits"], a.out.parent / "diagnose_detection_limits.png")
+        limits_figure(s["detection_limits"], a.out.parent / "diagnose_detection_limits.png",
+                      pair_points([r for r in results if r.get("kind") == "pair" and "error" not in r]))
     except ImportError:
         print("matplotlib missing: no figure", file=sys.stderr)
     write_json(a.out, a.key, {"summary": s, "trials_dir": str(a.trials), "machine": machine_info()})

@@ -56,6 +56,9 @@ def test_visibility_bins_count_each_measured_row_once(single, pairs):
     assert sum(b["single"] for b in out) == len(measured)
     assert sum(b["pairs"] for b in out) == len(complete)
     json.dumps(out, allow_nan=False)                 # as results.json is written
+    points = bench.pair_points(pairs)                # the figure's row: one point a complete pair, at its weaker
+    assert [x for x, _ in points] == [min(r["own_visible_chi2"]) for r in complete]
+    assert sum(ok for _, ok in points) == sum(b["both_told_apart"] for b in out)
     for b in out:
         below = float("inf") if b["visible_chi2_below"] is None else b["visible_chi2_below"]
         inside = [r for r in measured if b["visible_chi2_from"] <= r["visible_chi2"] < below]
