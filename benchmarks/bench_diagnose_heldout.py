@@ -355,7 +355,7 @@ def pair_points(pairs: list) -> list:
 def limits_figure(limits: dict, path: Path, pairs: list = ()) -> None:
     """Named (filled) and missed (open) single-effect trials against their visible χ², one row per effect, the
     90 % detection limit marked; below them, when given, the two-effect trials at the smaller of their effects' own
-    visible χ² (filled: both named, :func:`pair_points`)."""
+    visible χ² (filled: both named or reported indistinguishable from a named one, :func:`pair_points`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -377,7 +377,7 @@ def limits_figure(limits: dict, path: Path, pairs: list = ()) -> None:
         ax.scatter([x for x, ok in pairs if ok], [row] * sum(ok for _, ok in pairs), color="tab:green", s=30)
         ax.scatter([x for x, ok in pairs if not ok], [row] * sum(not ok for _, ok in pairs), facecolors="none",
                    edgecolors="tab:red", s=30)
-        names = ["pairs: both named (weaker effect)"] + names
+        names = ["pairs: both named or tied (weaker effect)"] + names
     ax.set_xscale("log")
     ax.set_yticks(range(-1 if pairs else 0, len(names) - (1 if pairs else 0)), names)
     ax.set_xlabel("visible χ² of the effect (what the rigid model cannot absorb, over the noise)")

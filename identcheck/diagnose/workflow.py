@@ -5,8 +5,9 @@ model, a label swap whose exchanged distances fit, comes before the rest once it
 absorb part of a swap and be adopted first, after which the swap is never named); when none is left to adopt, drop the
 earlier effects that later ones made unnecessary (:mod:`identcheck.diagnose.backward`) and, if any was dropped, search
 on; report the effects in order with the gap before and after each. A proposal whose effect has a cheaper first fit
-(:meth:`identcheck.effects.base.Effect.screen`: Newton on a delay until it settles) that scores far below the round's
-best is left there, and fitted in full only if the round's choice comes near it (:func:`choose`).
+(:meth:`identcheck.effects.base.Effect.screen`: Newton on a delay until it settles) that scores below a tenth of the
+round's best is left there, and fitted in full only if the round adopts nothing or a candidate well below its best
+(:func:`choose`).
 """
 from __future__ import annotations
 
@@ -411,9 +412,8 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                 if progress:
                     progress(f"step {len(steps) + 1}: trying {eff.name} {prop.where}")
                 try:
-                    first = eff.screen(ctx, h, prop) if best > 0.0 else None
-                    if first is not None:
-                        drift = creep(ctx, h) if drift is None else drift
+                    first = eff.screen(ctx, h, prop) if best >= SCREEN_FROM else None
+                    if first is not None:                 # (a best fitted already: drift is known)
                         estimate = score(ctx, first, h) - drift
                         if estimate * SKIP_RATIO < best:
                             log.debug("%s %s left at its screen (%.0f)", eff.name, prop.where, estimate)
@@ -464,6 +464,13 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                      tuple(dropped_steps), progress, tuple(not_adopted), limit)
 
 
+SCREEN_FROM = 100.0
+"""Proposals are screened (:meth:`identcheck.effects.base.Effect.screen`) only once the round's best fitted score is at
+least this: a screened proposal whose full score came within :data:`EQUIVALENT_GAIN` of the candidate adopted would
+have been named indistinguishable from it, or put ahead of it as the simpler of equals
+(:func:`simplest_among_equals`), and below a tenth of a best of 100 its full score stays clear of that margin around
+any candidate :func:`choose` adopts without fitting it (at least :data:`COMPLETE_SHARE` of the best), as long as it
+stays below about a third of the best. Measured (below), it stayed below a tenth."""
 COMPLETE_SHARE = 0.6
 """A proposal left at its screen (:meth:`identcheck.effects.base.Effect.screen`, which scored below 1/SKIP_RATIO of the
 round's best fit) is fitted in full before a candidate scoring below this share of the round's best is polished for
@@ -514,14 +521,16 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
     determined (or only corrects the data), else recorded in `refused`. The proposals left at their screen
     (`screened`, (estimate, effect, proposal, screen)) are fitted in full, and the round considered again with them,
     when its choice reaches below :data:`COMPLETE_SHARE` of the round's best or ends with none; each candidate is
-    fitted on once."""
+    fitted on once. The choice, the refusals and the candidates equivalent to the one adopted are then those of the
+    round with every proposal fitted in full, provided each screened proposal's full score is below a third of the
+    best (:data:`SCREEN_FROM`)."""
     polished, before = {}, dict(refused)
     while True:
         refused.clear()
         refused.update(before)                     # (a second pass records its own refusals, as a single one would)
         order = ranked(tried, h, bars.bar)
         limit, free_floor = bars.limit, bars.free_floor
-        adopted, closed, reached = None, False, False
+        adopted, closed = None, False
         for sc, eff, prop, cand in order:
             # the first candidate short of the round's bar closes the round to all but the sparse effects, held
             # to their own (bar_for): what follows scores less, or is a simpler explanation moved ahead of it
@@ -529,8 +538,7 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
             if sc <= bar_for(eff, bars.bar) or (closed and not eff.sparse):
                 continue
             if screened and sc < COMPLETE_SHARE * bars.best:
-                reached = True
-                break
+                break                              # (the screened proposals are fitted in full first)
             if id(prop) not in polished:
                 if progress:
                     progress(f"step {step}: fitting {eff.name} {prop.where} further, to check the joints stay "
@@ -548,7 +556,7 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
                 break
             log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
             refused[place(eff.name, prop.where)] = Refused(eff.name, prop.where, sc, joint, sd, free)
-        if not screened or (adopted is not None and not reached):
+        if not screened or adopted is not None:     # (a candidate adopted: never one past the share)
             return order, adopted, limit, free_floor
         tried = tried + complete(ctx, h, screened, drift, progress, step)
         screened = []

@@ -100,9 +100,9 @@ class Effect:
     def screen(self, ctx, hyp, proposal: Proposal):
         """A first, cheaper fit of the proposal: a hypothesis whose score over `hyp` estimates the candidate's, or None
         when the effect has none (then :meth:`apply` is its only fit). :meth:`apply` goes on from it rather than
-        repeating it. The search leaves a proposal at its screen when that scores far below the round's best
-        (:func:`identcheck.diagnose.workflow.diagnose`), and fits it in full only if the round's choice comes near
-        it."""
+        repeating it. The search leaves a proposal at its screen when that scores below a tenth of the round's best
+        (:func:`identcheck.diagnose.workflow.diagnose`), and fits it in full only if the round adopts nothing or a
+        candidate well below its best (:func:`identcheck.diagnose.workflow.choose`)."""
         return None
 
     def alike(self, chain, where: dict) -> list:

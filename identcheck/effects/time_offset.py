@@ -456,9 +456,10 @@ class TimeOffset(Effect):
 
     def screen(self, ctx, hyp, proposal):
         """The model refitted with the delay undone as Gauss-Newton leaves it once a step moves it less than
-        :data:`SCREEN_SETTLED` (:meth:`newton`; one or two steps for most), charged the delay's parameter but not what
-        interpolating smooths of the noise (which the whole search charges: the screen reads high where the delay is a
-        fraction of a frame): an estimate of what the whole search (:meth:`apply`: Newton to its tolerance, a fresh
+        :data:`SCREEN_SETTLED` (:meth:`newton`; one or two steps for most), charged the delay's parameter but neither
+        what interpolating smooths of the noise nor the samples the shift moves out of view (which the whole search
+        charges: the screen reads high where the delay is a fraction of a frame, or moves samples past the trial's
+        ends): an estimate of what the whole search (:meth:`apply`: Newton to its tolerance, a fresh
         start, the whole frames beside it, the placebo) scores, at a fraction of its cost. None for a delay read from
         the distances (fitted from there, with no Newton step)."""
         if proposal.payload.get("from_rigidity"):

@@ -1,6 +1,6 @@
 """The search's handling of proposals left at their screen (:func:`identcheck.diagnose.workflow.choose`): they are
-fitted in full only when the round's choice comes near them, and the round then chooses as if every proposal had been
-fitted in full from the start."""
+fitted in full only when the round adopts nothing or a candidate well below its best, and the round then chooses as if
+every proposal had been fitted in full from the start."""
 from types import SimpleNamespace
 
 import pytest
@@ -10,10 +10,11 @@ import identcheck.diagnose.workflow as W
 
 
 class Candidate:
-    """A fitted candidate as the adoption step sees it: its score, and the standard error it leaves on the joints."""
+    """A fitted candidate as the adoption step sees it: its score, the standard error it leaves on the joints and the
+    parameters its story adds."""
 
-    def __init__(self, value: float, sd: float):
-        self.value, self.sd = value, sd
+    def __init__(self, value: float, sd: float, params: int):
+        self.value, self.sd, self.params = value, sd, params
 
     def polish(self):
         return self
@@ -38,7 +39,7 @@ class Stub:
         return False
 
     def own_params(self, prop, h, cand):
-        return 1.0
+        return cand.params
 
 
 @pytest.fixture
@@ -51,29 +52,37 @@ def stubbed(monkeypatch):
     monkeypatch.setattr(W, "worst_joint", lambda ctx, cand: ("knee", cand.sd))
 
 
+def equivalents(order: list, adopted) -> list:
+    """The candidates the report would name indistinguishable from the adopted one (its round's rivals within the
+    margin of equal explanations, :meth:`identcheck.diagnose.workflow.Step.equivalents`)."""
+    step = W.Step("stub", adopted[2].where, 0.0, 0.0, adopted[0], {}, W.rivals(order, adopted[2]), ())
+    return sorted(w["n"] for _, w in step.equivalents())
+
+
 scores = st.floats(-500.0, 5e4, allow_nan=False)
-sds = st.sampled_from([1.0, 1.0, 50.0])          # 50 mm: beyond the limit, refused
+candidates = st.tuples(scores, st.sampled_from([1.0, 1.0, 50.0]), st.integers(1, 31))   # 50 mm: refused
 
 
-@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(scores, sds), min_size=1, max_size=6), st.lists(st.tuples(scores, sds), max_size=4),
-       st.sampled_from([0.0, W.DECISIVE_GAIN]))
-def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, fitted, screened, bar):
-    """Random rounds: fitted candidates (score, standard error), and screened ones whose full fit scores below half the
-    round's best (what a screen below a tenth of it is taken to promise). The choice, its order and the refusals are
-    those of the round with every proposal fitted in full; the screened ones are fitted only when the choice fell
-    below COMPLETE_SHARE of the best or nothing was adopted."""
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(candidates, min_size=1, max_size=6), st.lists(candidates, max_size=4),
+       st.floats(0.0, 0.33), st.sampled_from([0.0, W.DECISIVE_GAIN]))
+def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, fitted, screened, share, bar):
+    """Random rounds: fitted candidates (score, standard error, parameters), and, where the best is at least
+    SCREEN_FROM, screened ones whose full fit scores at most a third of it (what a screen below a tenth is taken to
+    promise, with room). The choice, the refusals and the candidates equivalent to the choice are those of the round
+    with every proposal fitted in full; the screened ones are fitted only when the choice fell below COMPLETE_SHARE
+    of the best or nothing was adopted."""
+    best = max([v for v, _, _ in fitted] + [0.0])
+    screened = [(share * best * (v / 5e4), sd, n) for v, sd, n in screened] if best >= W.SCREEN_FROM else []
+
     def build():
         props = [SimpleNamespace(where={"n": i}) for i in range(len(fitted) + len(screened))]
-        full = {id(p): Candidate(v, sd) for p, (v, sd) in zip(props, fitted + screened)}
-        return props, full
+        return props, {id(p): Candidate(*c) for p, c in zip(props, fitted + screened)}
 
-    best = max([v for v, _ in fitted] + [0.0])
-    screened = [(min(v, 0.49 * best - 1.0), sd) for v, sd in screened]
     props, full = build()
     eff = Stub(full)
     tried = [(full[id(p)].value, eff, p, full[id(p)]) for p in props[:len(fitted)]]
-    left = [(v / W.SKIP_RATIO, eff, p, None) for p, (v, _) in zip(props[len(fitted):], screened)]
+    left = [(c[0] / W.SKIP_RATIO, eff, p, None) for p, c in zip(props[len(fitted):], screened)]
     bars = W.Bars(bar, best, 10.0, 0, 10.0)
     refused = {}
     order, adopted, _, _ = W.choose(None, None, None, tried, left, bars, refused, 0.0, None, 1)
@@ -87,6 +96,7 @@ def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, fit
     assert (adopted is None) == (adopted2 is None)
     if adopted is not None:
         assert adopted[2].where == adopted2[2].where and adopted[0] == adopted2[0]
+        assert equivalents(order, adopted) == equivalents(order2, adopted2)
     assert {k: r.score for k, r in refused.items()} == {k: r.score for k, r in refused2.items()}
     near = adopted is not None and adopted[0] >= W.COMPLETE_SHARE * best
     if near and screened:

@@ -501,17 +501,31 @@ def test_a_delay_is_adopted_and_kept_by_one_rule(score, spread):
 def test_a_delays_screen_then_its_full_fit_are_the_full_fit_alone(seed, frames):
     """The shank 1.2-3.8 frames late: a delay's screen (Newton until a step moves it under a tenth of a frame, charged
     one parameter) and then its full fit, which takes Newton up where the screen left it, give what the full fit gives
-    alone, to the last bit."""
+    alone, to the last bit, with no more refits in all."""
+    from identcheck.bundle.hypothesis import Hypothesis
     from identcheck.effects.registry import EFFECTS
 
     ctx, h, cols, rate = _shank_late(seed, frames, 0.5)
     eff = EFFECTS["time_offset"]
     shank = [p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where]
     alone, screened = shank[0], next(p for p in eff.propose(ctx, h) if p.where == shank[0].where)
-    direct = eff.apply(ctx, h, alone)
-    first = eff.screen(ctx, h, screened)
-    assert first.n_params() == h.n_params() + 1 and first.data is not h.data
-    after = eff.apply(ctx, h, screened)
+    calls, refit = [], Hypothesis.refit
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return refit(self, *args, **kwargs)
+
+    Hypothesis.refit = counted
+    try:
+        direct = eff.apply(ctx, h, alone)
+        n_alone = len(calls)
+        first = eff.screen(ctx, h, screened)
+        n_screen = len(calls) - n_alone
+        after = eff.apply(ctx, h, screened)
+    finally:
+        Hypothesis.refit = refit
+    assert first.n_params() == h.n_params() + 1 and n_screen >= 1
+    assert len(calls) - n_alone == n_alone         # the screen's Newton steps are not taken again
     assert alone.where == screened.where
     assert np.array_equal(direct.fit.pred, after.fit.pred, equal_nan=True) and direct.rss == after.rss
     assert direct.extra_params == after.extra_params and "newton" not in screened.payload
