@@ -466,21 +466,25 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
 
 SCREEN_FROM = 100.0
 """Proposals are screened (:meth:`identcheck.effects.base.Effect.screen`) only once the round's best fitted score is at
-least this: a screened proposal whose full score came within :data:`EQUIVALENT_GAIN` of the candidate adopted would
-have been named indistinguishable from it, or put ahead of it as the simpler of equals
-(:func:`simplest_among_equals`), and below a tenth of a best of 100 its full score stays clear of that margin around
-any candidate :func:`choose` adopts without fitting it (at least :data:`COMPLETE_SHARE` of the best), as long as it
-stays below about a third of the best. Measured (below), it stayed below a tenth."""
+least this. A screened proposal whose full score came within the margin of equal explanations
+(:data:`EQUIVALENT_GAIN`, :data:`EQUIVALENT_FRACTION`) of the candidate adopted would have been named
+indistinguishable from it, or put ahead of it as the simpler of equals (:func:`simplest_among_equals`). A candidate
+:func:`choose` adopts without fitting the screened ones scores at least :data:`COMPLETE_SHARE` of the best; from a
+best of 100 that margin is at most a tenth of the best, so a screened proposal whose full score stays below half the
+best cannot come within it. Measured (below), the full scores stayed below a quarter of the best."""
 COMPLETE_SHARE = 0.6
 """A proposal left at its screen (:meth:`identcheck.effects.base.Effect.screen`, which scored below 1/SKIP_RATIO of the
 round's best fit) is fitted in full before a candidate scoring below this share of the round's best is polished for
 adoption, and before a round ends with nothing adopted: the round's choice then reaches scores that the full fit of
 a screened proposal might have (it can move well above its screen: a delay several frames long, from a fresh start).
-Adopting a candidate near the round's best, the screened ones are not needed: on the 120 trials of held-out draw 82
-(233 rounds), 48 delays were left at their screen, and fitted in full for the measurement none scored above 0.091 of
-its round's best (one had risen from a screen of −1 419 to 24 581, against 604 039); one round would have fitted them
-in full (it adopted nothing). A screen of one Newton step had let through what a settled one does not: a marker of a
-pelvis 4 frames late, its first step at −248, scored 669 in full against the round's 1 151."""
+Adopting a candidate near the round's best, the screened ones are not needed. Measured with every screened delay
+fitted in full beside (from any best above 0): on the 120 trials of held-out draw 82 (233 rounds), 48 delays were
+left at their screen and none scored above 0.091 of its round's best in full (one had risen from a screen of −1 419
+to 24 581, against 604 039); on the 120 of draw 83, drawn afterwards (249 rounds), 52 and none above 0.257 (a screen
+of 125 828, in full 455 527, against 1 772 243; another at a best of 201: −112, then 40). One round of the 482 would
+have fitted them in full (it adopted nothing). A screen of one Newton step had let through what a settled one does
+not: a marker of a pelvis 4 frames late, its first step at −248, scored 669 in full against the round's 1 151 (draw
+82, trial 59)."""
 
 
 @dataclass(frozen=True)
@@ -522,8 +526,8 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
     (`screened`, (estimate, effect, proposal, screen)) are fitted in full, and the round considered again with them,
     when its choice reaches below :data:`COMPLETE_SHARE` of the round's best or ends with none; each candidate is
     fitted on once. The choice, the refusals and the candidates equivalent to the one adopted are then those of the
-    round with every proposal fitted in full, provided each screened proposal's full score is below a third of the
-    best (:data:`SCREEN_FROM`)."""
+    round with every proposal fitted in full, provided each screened proposal's full score is below half the best
+    (:data:`SCREEN_FROM`)."""
     polished, before = {}, dict(refused)
     while True:
         refused.clear()
