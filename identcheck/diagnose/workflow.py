@@ -48,9 +48,9 @@ effect's further places are not fitted this round when their strength is below 1
 fitted so far, unless the effect leads (a delay's linearised detector cannot tell which segment lags when the
 lag is several frames) or it or the proposal is marked ``always_fit`` (a swap's strength is read from distances,
 not from the residual; a hinge's extra rotation's are a bound and a first-order reading; a marker's delay read from
-its distances to its segment-mates). A proposal that is fitted goes no further than its effect's screen
-(:meth:`identcheck.effects.base.Effect.screen`) while that scores below 1/SKIP_RATIO of the best so far
-(:data:`COMPLETE_SHARE` says when it is fitted in full after all)."""
+its distances to its segment-mates). Once the best so far is at least :data:`SCREEN_FROM`, a proposal that is fitted
+goes no further than its effect's screen (:meth:`identcheck.effects.base.Effect.screen`) while that scores below
+1/SKIP_RATIO of the best (:data:`COMPLETE_SHARE` says when it is fitted in full after all)."""
 BASE_ITER = 40         # the rigid fit of data an effect corrupts creeps on for long; its gap is settled by then
 CREEP_ITER = 12
 """Iterations of the null refit each round: what a candidate's refit gains by iterating on, without its

@@ -14,7 +14,9 @@ limb to the lag and the residual regression reads it wrongly.
 Augmentation: the segment's trajectories are shifted back by τ (cubic spline through its visible samples), τ
 refined by Gauss-Newton with the velocity as the derivative, and the model refitted (one parameter) from the better
 of the current fit and a fresh start (the current fit's angles are bent to the lag); whole-frame delays beside it are
-searched a frame at a time (:func:`best_whole_frame`).
+searched a frame at a time (:func:`best_whole_frame`). The search may stop after Newton's first steps
+(:meth:`TimeOffset.screen`) when that already scores far below the round's best
+(:func:`identcheck.diagnose.workflow.choose`).
 """
 from __future__ import annotations
 
@@ -459,9 +461,9 @@ class TimeOffset(Effect):
         :data:`SCREEN_SETTLED` (:meth:`newton`; one or two steps for most), charged the delay's parameter but neither
         what interpolating smooths of the noise nor the samples the shift moves out of view (which the whole search
         charges: the screen reads high where the delay is a fraction of a frame, or moves samples past the trial's
-        ends): an estimate of what the whole search (:meth:`apply`: Newton to its tolerance, a fresh
-        start, the whole frames beside it, the placebo) scores, at a fraction of its cost. None for a delay read from
-        the distances (fitted from there, with no Newton step)."""
+        ends): an estimate of what the whole search (:meth:`apply`: Newton to its tolerance, a fresh start, the whole
+        frames beside it, the placebo) scores, at a fraction of its cost. None for a delay read from the distances
+        (fitted from there, with no Newton step)."""
         if proposal.payload.get("from_rigidity"):
             return None
         tau, current, steps = None, hyp, 0
