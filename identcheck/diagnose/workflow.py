@@ -33,6 +33,7 @@ from identcheck.effects.registry import EFFECTS
 from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
 from identcheck.diagnose.backward import Adopted, Redundant, redundant
 from identcheck.estimate.noise import noise_floor
+from identcheck.estimate.screen_findings import with_screen_findings
 from identcheck.estimate.spikes import without_spikes
 from identcheck.progress import Progress
 
@@ -375,7 +376,10 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     if spikes:
         warnings.warn(spikes["message"], UserWarning, stacklevel=2)
     trial, offset = trial.recentred()
-    ctx, base = start(model, trial, progress)
+    try:
+        ctx, base = start(model, trial, progress)
+    except InputError as exc:
+        raise with_screen_findings(exc, [], spikes) from None
     test0 = consistency(ctx, base)
     h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
     rigid_limit = max(SD_GROWTH * worst_sd(ctx, base), MAX_SD_MM)

@@ -7,6 +7,7 @@ import math
 
 from identcheck.errors import InputError
 from identcheck.estimate.closed_forms import fit_model
+from identcheck.estimate.screen_findings import with_screen_findings
 from identcheck.io.model import reserved_names
 
 log = logging.getLogger("identcheck")
@@ -57,26 +58,6 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
                     restart=lambda fixed: fit_model(model, trial, fixed=fixed)[0],
                     starts_budget_s=STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s)
     return fitted, points, tree
-
-
-def with_screen_findings(exc: InputError, swaps: list, spikes: dict | None) -> InputError:
-    """`exc`, when it is about frames, with a last problem saying what the screens before the fit left out, when they
-    left any out (samples read as spikes, spans read as swapped labels): frames missing after them are their doing,
-    not the file's (random numbers under six labels lost 875 samples as spikes, and the fit then said only two frames
-    showed three markers a segment, where every frame of the file showed all six)."""
-    found = []
-    if spikes:
-        found.append(f"{spikes.get('count', 'some')} sample(s) as spikes (jumps out and back)")
-    if swaps:
-        pairs = sorted({" and ".join(s["markers"]) for s in swaps})
-        found.append(f"the samples of {len(swaps)} span(s) as swapped labels ({'; '.join(pairs[:6])}"
-                     f"{'; ...' if len(pairs) > 6 else ''})")
-    if not found or not any("frame" in p for p in exc.problems):
-        return exc
-    note = (f"before the fit, the screens left out {' and '.join(found)}; see the warnings. Markers that do not stay "
-            "rigid on their segment read so: check that each segment's markers are on one rigid body and labelled "
-            "alike throughout")
-    return InputError(exc.problems + [note], source=exc.source, segment=exc.segment)
 
 
 def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:

@@ -240,7 +240,7 @@ def test_millimetres_in_a_file_that_says_cm_are_refused_by_the_segments_they_mak
 def test_frames_the_screens_left_out_are_named_when_too_few_are_left(run, tmp_path):
     """Random numbers under six labels: every frame of the file shows every marker, but the spike screen leaves most
     samples out, and the fit's start then finds two frames with three markers a segment. The error says so (it had
-    said only that two frames showed three markers, as if the file lacked them)."""
+    said only that two frames showed three markers, as if the file lacked them), from `fit` and from `diagnose`."""
     rng = np.random.default_rng(5)
     labels = [f"W{i}" for i in range(6)]
     from identcheck.trial import Trial
@@ -250,9 +250,10 @@ def test_frames_the_screens_left_out_are_named_when_too_few_are_left(run, tmp_pa
     model = tmp_path / "two.toml"
     model.write_text('units = "mm"\n[segments.a]\nmarkers = ["W0", "W1", "W2"]\n[segments.b]\n'
                      'markers = ["W3", "W4", "W5"]\n[joints.j]\ntype = "spherical"\nparent = "a"\nchild = "b"\n')
-    res = run(["fit", model, trial, "--json"])
-    assert res.code == 2 and str(trial) in res.err, res.err
-    assert "screens left out" in res.err and "spikes" in res.err and "rigid" in res.err, res.err
+    for verb in ("fit", "diagnose"):     # diagnose had said only that no two markers were seen together in 10 frames
+        res = run([verb, model, trial, "--json"])
+        assert res.code == 2 and str(trial) in res.err, (verb, res.err)
+        assert "screens left out" in res.err and "spikes" in res.err and "rigid" in res.err, (verb, res.err)
 
 
 def test_skeleton_refuses_more_markers_than_its_grouping_ends_with(run, tmp_path):
