@@ -421,7 +421,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
                         estimate = score(ctx, first, h) - drift
                         if estimate * SKIP_RATIO < best:
                             log.debug("%s %s left at its screen (%.0f)", eff.name, prop.where, estimate)
-                            screened.append((estimate, eff, prop, first))
+                            screened.append((estimate, eff, prop))
                             continue
                     cand = eff.apply(ctx, h, prop)
                 except (np.linalg.LinAlgError, ValueError) as exc:
@@ -527,7 +527,7 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
     hypothesis) or None, the limit and free directions for the rounds after). Candidates are considered in
     :func:`ranked` order; each is fitted on (:meth:`Hypothesis.polish`) and adopted when it keeps the joints
     determined (or only corrects the data), else recorded in `refused`. The proposals left at their screen
-    (`screened`, (estimate, effect, proposal, screen)) are fitted in full, and the round considered again with them,
+    (`screened`, (estimate, effect, proposal)) are fitted in full, and the round considered again with them,
     when its choice reaches below :data:`COMPLETE_SHARE` of the round's best or ends with none; each candidate is
     fitted on once. The choice, the refusals and the candidates equivalent to the one adopted are then those of the
     round with every proposal fitted in full, provided each screened proposal's full score is below half the best
@@ -574,7 +574,7 @@ def complete(ctx: Context, h: Hypothesis, screened: list, drift: float, progress
     """The proposals left at their screen, fitted in full (:meth:`identcheck.effects.base.Effect.apply`, going on
     from the screen), as the round's candidates: (score net of `drift`, effect, proposal, hypothesis)."""
     out = []
-    for _estimate, eff, prop, _screen in screened:
+    for _estimate, eff, prop in screened:
         if progress:
             progress(f"step {step}: trying {eff.name} {prop.where} in full")
         try:

@@ -21,6 +21,7 @@ searched a frame at a time (:func:`best_whole_frame`). The search may stop after
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -64,6 +65,18 @@ of it), and the spread alone passed for delays: on a clean functional trial of h
 169. On that trial's smoothed motion with fresh noise (40 draws), shifting RASI by −1 and +1 frame gained −6 ± 75
 and −13 ± 91, the whole pelvis −18 ± 84 and −4 ± 81; :func:`realignment_sd` read 98, 94, 85 and 82. Three standard
 deviations keep a false delay rare over the few dozen shifts a search tries."""
+
+
+class NewtonState(NamedTuple):
+    """Where :meth:`TimeOffset.newton` left a proposal's delay: the fit of the hypothesis it was refined on (the key),
+    the delay τ (s), the hypothesis refitted with it undone, the steps taken and whether the last moved τ less than
+    :data:`TAU_TOL_S`."""
+
+    fit: object
+    tau: float
+    current: object
+    done: int
+    settled: bool
 
 
 def shifted(data: np.ndarray, rate_hz: float, tau_s: float, derivative: int = 0,
@@ -472,7 +485,7 @@ class TimeOffset(Effect):
             before = tau
             tau, current = self.newton(ctx, hyp, proposal, steps=steps)
             moved = abs(tau - (proposal.payload["tau"] if before is None else before)) * ctx.rate_hz
-            if moved < SCREEN_SETTLED or proposal.payload["newton"][4]:
+            if moved < SCREEN_SETTLED or proposal.payload["newton"].settled:
                 break
         return replace(current, extra_params=hyp.n_params() - current.fit.n_params + 1)
 
@@ -485,7 +498,7 @@ class TimeOffset(Effect):
         steps = NEWTON_STEPS if steps is None else steps
         idx = proposal.payload["columns"]
         kept = proposal.payload.get("newton")
-        if kept is not None and kept[0] is hyp.fit:
+        if kept is not None and kept.fit is hyp.fit:
             _, tau, current, done, settled = kept
         else:
             tau, current, done, settled = proposal.payload["tau"], hyp, 0, False
@@ -506,7 +519,7 @@ class TimeOffset(Effect):
             current.fit.state.term_params = current.fit.state.term_params[:-1]
             done += 1
             settled = abs(dtau) < TAU_TOL_S
-        proposal.payload["newton"] = (hyp.fit, tau, current, done, settled)
+        proposal.payload["newton"] = NewtonState(hyp.fit, tau, current, done, settled)
         return tau, current
 
     def apply(self, ctx, hyp, proposal):

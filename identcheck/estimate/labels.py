@@ -73,6 +73,7 @@ class _Distances:
             self._padded = cols, meds, misfit, np.array([len(P) for P, _ in parts])
         return self._padded
 
+
 def swap_costs(data: np.ndarray, chain, i: int, j: int, dists: _Distances | None = None):
     """Per-frame misfit of the within-segment distances with labels i, j as given and exchanged (F,), mm².
 

@@ -82,7 +82,7 @@ def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, fit
     props, full = build()
     eff = Stub(full)
     tried = [(full[id(p)].value, eff, p, full[id(p)]) for p in props[:len(fitted)]]
-    left = [(c[0] / W.SKIP_RATIO, eff, p, None) for p, c in zip(props[len(fitted):], screened)]
+    left = [(c[0] / W.SKIP_RATIO, eff, p) for p, c in zip(props[len(fitted):], screened)]
     bars = W.Bars(bar, best, 10.0, 0, 10.0)
     refused = {}
     order, adopted, _, _ = W.choose(None, None, None, tried, left, bars, refused, 0.0, None, 1)
