@@ -719,15 +719,21 @@ NEGATIVE_VALUE_OPTIONS = ("--frames",)
 """Options whose value may start with a minus sign (a frame range or index from before the file's first frame)."""
 
 
+def takes_negative_value(word: str) -> bool:
+    """Whether `word` names one of :data:`NEGATIVE_VALUE_OPTIONS`, in full or as the abbreviation argparse accepts
+    (``--fra`` for ``--frames``: at least ``--fr``, so that no other option of any verb shares it)."""
+    return any(word == opt or (len(word) >= 4 and opt.startswith(word)) for opt in NEGATIVE_VALUE_OPTIONS)
+
+
 def joined_negative_values(argv: list) -> list:
-    """`argv` with ``--frames -5:10`` written as ``--frames=-5:10``: argparse takes a word starting with '-' and a
-    digit for an option when the parser has options that look like numbers, and otherwise answered only "expected
-    one argument"; joined, the value reaches the option's own check, which explains (a range is clamped to the
-    file's frames, with a warning)."""
+    """`argv` with ``--frames -5:10`` (or an abbreviation, ``--fra -5:10``) written as ``--frames=-5:10``: argparse
+    takes a word starting with '-' and a digit for an option when the parser has options that look like numbers,
+    and otherwise answered only "expected one argument"; joined, the value reaches the option's own check, which
+    explains (a range is clamped to the file's frames, with a warning)."""
     out, i = [], 0
     while i < len(argv):
         word = str(argv[i])
-        if word in NEGATIVE_VALUE_OPTIONS and i + 1 < len(argv) and re.match(r"-\d", str(argv[i + 1])):
+        if takes_negative_value(word) and i + 1 < len(argv) and re.match(r"-\d", str(argv[i + 1])):
             out.append(f"{word}={argv[i + 1]}")
             i += 2
             continue

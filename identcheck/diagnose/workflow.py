@@ -504,17 +504,20 @@ class Bars:
     rigid_limit: float
 
 
-def ranked(tried: list, h: Hypothesis, bar: float) -> list:
+def ranked(tried: list, h: Hypothesis, bar: float, logged: set | None = None) -> list:
     """The round's fitted candidates `tried` ((score, effect, proposal, hypothesis)) in the order they are considered
     for adoption, without those that cannot be what they claim: errors the data show without the joint model first
     among those that earn their parameters, then by score, the simplest of equals first
-    (:func:`simplest_among_equals`)."""
+    (:func:`simplest_among_equals`). `logged`: the proposals (by id) whose refusal was logged already, to which those
+    logged now are added (a round considered again does not repeat its log)."""
+    logged = set() if logged is None else logged
     tried = sorted(tried, key=lambda x: (not (x[0] > bar_for(x[1], bar) and x[1].read_without_joints(x[2])), -x[0]))
     # what cannot be what it claims is never adopted, nor sets the margin of the explanations alike
     plausible = []
     for sc, eff, prop, cand in tried:
         why = eff.implausible(prop)
-        if why and sc > bar_for(eff, bar):
+        if why and sc > bar_for(eff, bar) and id(prop) not in logged:
+            logged.add(id(prop))
             log.info("%s at %s not adopted: %s", eff.name, prop.where, why)
         elif not why:
             plausible.append((sc, eff, prop, cand))
@@ -532,11 +535,11 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
     fitted on once. The choice, the refusals and the candidates equivalent to the one adopted are then those of the
     round with every proposal fitted in full, provided each screened proposal's full score is below half the best
     (:data:`SCREEN_FROM`)."""
-    polished, before = {}, dict(refused)
+    polished, before, logged = {}, dict(refused), set()
     while True:
         refused.clear()
         refused.update(before)                     # (a second pass records its own refusals, as a single one would)
-        order = ranked(tried, h, bars.bar)
+        order = ranked(tried, h, bars.bar, logged)
         limit, free_floor = bars.limit, bars.free_floor
         adopted, closed = None, False
         for sc, eff, prop, cand in order:
@@ -562,7 +565,9 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
             if sd <= limit:
                 adopted = (sc, eff, prop, cand)
                 break
-            log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
+            if id(prop) not in logged:
+                logged.add(id(prop))
+                log.info("%s at %s not adopted: it leaves the joint parameters undetermined", eff.name, prop.where)
             refused[place(eff.name, prop.where)] = Refused(eff.name, prop.where, sc, joint, sd, free)
         if not screened or adopted is not None:     # (a candidate adopted: never one past the share)
             return order, adopted, limit, free_floor

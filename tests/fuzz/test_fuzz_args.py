@@ -180,10 +180,38 @@ def test_json_outputs_must_be_json_files_and_never_an_input_or_another_output(ru
 
 
 def test_a_frame_range_starting_below_zero_reaches_the_option_s_own_check(run, corpus):
-    """``--frames -5:10`` (a space, not '='): argparse had taken -5:10 for an option and said only "expected one
-    argument"; the value now reaches --frames' own check, which clamps the range to the file's frames with a warning,
-    as ``--frames=-5:10`` did."""
+    """``--frames -5:10`` (a space, not '='), or abbreviated as argparse allows (``--fra -5:10``): argparse had taken
+    -5:10 for an option and said only "expected one argument"; the value now reaches --frames' own check, which clamps
+    the range to the file's frames with a warning, as ``--frames=-5:10`` did."""
     res = run(["fit", LEG, corpus / "leg.trc", "--frames", "-5:10", "--json"])
     assert res.code in (0, 1) and "--frames -5:10 reaches beyond the file's frames" in res.err, res.err
     res = run(["identify", KNEE, corpus / "knee.trc", "--frames", "-1,5"])
     assert res.code == 2 and "--frames -1,5" in res.err and "expected one argument" not in res.err, res.err
+    res = run(["fit", LEG, corpus / "leg.trc", "--fra", "-5:10", "--json"])       # argparse's abbreviation
+    assert res.code in (0, 1) and "--frames -5:10 reaches beyond the file's frames" in res.err, res.err
+
+
+def test_only_frames_and_its_abbreviations_are_joined_to_a_negative_value():
+    """What argparse would read as ``--frames`` (the option itself, or a prefix of it no other option shares) is
+    joined to a following negative value; any other option, and a prefix other options share (``--f``), is left for
+    argparse to judge."""
+    from identcheck.cli import build_parser, joined_negative_values
+
+    names = {opt for action in _all_actions(build_parser()) for opt in action.option_strings}
+    for end in range(4, len("--frames") + 1):
+        prefix = "--frames"[:end]
+        assert [n for n in names if n.startswith(prefix)] == ["--frames"]     # (one name, in every verb)
+        assert joined_negative_values([prefix, "-5:10"]) == [f"{prefix}=-5:10"]
+    for word in ("--f", "--figure", "--fast", "--seed", "-5:10"):
+        assert joined_negative_values([word, "-5"]) == [word, "-5"]
+
+
+def _all_actions(parser):
+    """Every action of `parser` and of its sub-commands' parsers."""
+    import argparse
+
+    for action in parser._actions:
+        yield action
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                yield from _all_actions(sub)
