@@ -366,9 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=_seed, default=0, help="seed of the random prime and point")
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
     s.add_argument("--max-seconds", type=float, default=None, metavar="S",
-                   help="time budget of the robustness and motion analyses together (default 30), and separately "
-                        "of the --witness searches (default 120); what they leave unchecked is listed under "
-                        "'unfinished'")
+                   help="time budget of the robustness and motion analyses together (default 30), separately of "
+                        "the search for the fewest markers to add (default 30) and of the --witness searches "
+                        "(default 120); what they leave unchecked is listed under 'unfinished'")
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.add_argument("--witness", action="store_true",

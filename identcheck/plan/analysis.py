@@ -425,6 +425,7 @@ class Fix:
     fewer_bare: int             # plans with fewer added markers skipped: a subtree stays bare (cannot pass)
     complete: bool              # every plan with fewer added markers was ruled out (False: the budget ran out)
     failure_bound: float = 0.0  # probability that any of those rejections is wrong (sum of their plans' bounds)
+    out_of_time: tuple = ()     # the joints whose search the time budget stopped (then nothing was found)
 
     @property
     def markers(self) -> int | None:
@@ -454,7 +455,7 @@ def suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers
 
 
 def fewest_markers(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_markers: int = MAX_SUGGESTED,
-                   budget: int = MAX_RANK_CHECKS, base: Plan | None = None) -> Fix:
+                   budget: int = MAX_RANK_CHECKS, base: Plan | None = None, clock: Budget | None = None) -> Fix:
     """The fewest extra markers after which the plan :attr:`~Plan.passes`, minimal for the whole-tree rank.
 
     The propagation's fix (:func:`unique_suggestions`) passes, so it bounds the count from above. Every
@@ -463,9 +464,15 @@ def fewest_markers(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_mark
     is. So no plan with one marker fewer passes: each was rejected by the whole-tree rank, or skipped
     because it leaves some joint's whole subtree without a marker (nothing then varies that joint's
     centre or axis, so the rank cannot determine them: such a plan provably fails). ``budget`` caps the
-    whole-tree ranks; when it runs out, the propagation's fix is returned with ``complete`` False."""
+    whole-tree ranks; when it runs out, the propagation's fix is returned with ``complete`` False. ``clock``, a
+    time budget (:class:`Budget`): the search over multisets grows exponentially with the segments a joint's
+    markers could go on (a chain of 25 bare links took 92 s, a bare star of 30 did not end in 120), so when it
+    is spent nothing is suggested and the joints still open are named in ``out_of_time``."""
     base = base or analyse(spec, rows, seed=seed)
-    unique = {} if base.all_identifiable else unique_suggestions(spec, rows, seed, max_markers)
+    try:
+        unique = {} if base.all_identifiable else unique_suggestions(spec, rows, seed, max_markers, clock)
+    except OutOfTime as stop:
+        return Fix(None, None, 1, 0, False, base.rank.failure_bound, stop.joints)
     if base.passes:
         return Fix({}, unique, 0, 0, True, 0.0)
     upper = max_markers if unique is None else sum(unique.values()) - 1
@@ -478,6 +485,8 @@ def fewest_markers(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, max_mark
                 level_bare += 1
                 continue
             if checked + level_checked >= budget:
+                return Fix(unique, unique, checked + level_checked, bare + level_bare, False, fail)
+            if clock is not None and clock.spent():      # (the propagation's fix stands; its minimality unchecked)
                 return Fix(unique, unique, checked + level_checked, bare + level_bare, False, fail)
             extra = _count_segments(combo)
             cand = analyse(_with_extra(spec, extra), rows, seed=seed, warm_frames=base.rank.frames - 1,
@@ -504,8 +513,17 @@ def _count_segments(combo) -> dict:
     return extra
 
 
+class OutOfTime(Exception):
+    """The time budget of the fewest-marker search (:func:`fewest_markers`' ``clock``) was spent; ``joints``: the
+    names of the joints it was settling."""
+
+    def __init__(self, joints):
+        super().__init__(f"the search for the fewest markers ran out of time ({', '.join(joints)})")
+        self.joints = tuple(joints)
+
+
 def unique_suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0,
-                       max_markers: int = MAX_SUGGESTED) -> dict | None:
+                       max_markers: int = MAX_SUGGESTED, clock: Budget | None = None) -> dict | None:
     """Fewest extra markers (segment -> count) after which the propagation settles every joint with one
     candidate and the whole-tree rank confirms it (every joint identifiable), or None when no addition of
     up to ``max_markers`` markers suffices.
@@ -516,20 +534,21 @@ def unique_suggestions(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0,
     open joints whose influencing segments overlap form a component, components are independent, and
     their fewest additions add up. Each is found exhaustively over multisets of its influencing
     segments, fewest first, screened by the propagation; the whole-tree rank checks the union (and on
-    the rare failure the search is repeated over all the segments at once)."""
+    the rare failure the search is repeated over all the segments at once). Raises :class:`OutOfTime` when `clock`
+    (a :class:`Budget`) is spent first."""
     base = propagate(spec, rows)
     open_joints = [j for j in spec.joints if not (j[0] in base and base[j[0]].candidates == 1)]
     if not open_joints:
         return {}
     extra: dict = {}
     for comp in _components(spec, open_joints):
-        found = _fewest(spec, rows, comp, max_markers - sum(extra.values()))
+        found = _fewest(spec, rows, comp, max_markers - sum(extra.values()), clock=clock)
         if found is None:
             return None
         extra.update(found)
     if analyse(_with_extra(spec, extra), rows, seed=seed).all_identifiable:
         return extra
-    return _fewest(spec, rows, open_joints, max_markers, seed=seed)
+    return _fewest(spec, rows, open_joints, max_markers, seed=seed, clock=clock)
 
 
 def _influencing(spec, joints: list) -> set:
@@ -549,14 +568,22 @@ def _components(spec, joints: list) -> list:
     return comps
 
 
-def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None) -> dict | None:
+def _fewest(spec, rows, joints: list, max_markers: int, seed: int | None = None, clock: Budget | None = None
+            ) -> dict | None:
     """Fewest extra markers on the influencing segments of ``joints`` after which the propagation settles
-    all of them uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan)."""
-    names = {j[0] for j in joints}
+    all of them uniquely (and, with ``seed``, the whole-tree rank confirms every joint of the plan); raises
+    :class:`OutOfTime` when `clock` is spent first."""
+    names = [j[0] for j in joints]
     near = _influencing(spec, joints)
     segs = [s for s in spec.markers if s in near]
+    tried = 0
     for k in range(1, max_markers + 1):
         for combo in itertools.combinations_with_replacement(segs, k):
+            tried += 1
+            if clock is not None and tried % 32 == 0:
+                clock.tick("fewest markers to add", k, max_markers)
+                if clock.spent():
+                    raise OutOfTime([j[0] for j in spec.joints if j[0] in names])     # (the tree's order)
             extra = _count_segments(combo)
             cand = _with_extra(spec, extra)
             settled = propagate(cand, rows)
@@ -600,9 +627,11 @@ def _suggestion_keys(fix: Fix) -> dict:
     checked, and the fewest for a proof of uniqueness by propagation when those differ."""
     keys = {"suggestions": as_suggestions(fix.extra), "suggestions_check": fix.check()}
     if fix.extra is None:
-        keys["suggestions_note"] = (f"no addition of up to {MAX_SUGGESTED} markers makes every joint locally "
-                                    "identifiable" if fix.complete else
-                                    f"none found: the search stopped after {fix.fewer_checked} whole-tree ranks")
+        keys["suggestions_note"] = (
+            f"none found: the search stopped at its time budget before settling {', '.join(fix.out_of_time)}"
+            if fix.out_of_time else
+            f"no addition of up to {MAX_SUGGESTED} markers makes every joint locally identifiable" if fix.complete
+            else f"none found: the search stopped after {fix.fewer_checked} whole-tree ranks")
     if fix.unique_extra != fix.extra:
         keys["suggestions_unique"] = as_suggestions(fix.unique_extra)
         if fix.unique_extra is None:
@@ -630,9 +659,9 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     progress : callable, optional
         Called with a message per stage (at most one a second in the per-joint and per-marker analyses).
     max_seconds : float, optional
-        Budget of the motion and robustness analyses together (default :data:`ANALYSES_BUDGET_S`), and
-        separately of the witness searches (default :data:`identcheck.plan.witness.BUDGET_S`); what they
-        leave unchecked is listed under ``unfinished``.
+        Budget of the motion and robustness analyses together (default :data:`ANALYSES_BUDGET_S`), separately of
+        the search for the fewest markers to add (the same default), and of the witness searches (default
+        :data:`identcheck.plan.witness.BUDGET_S`); what they leave unchecked is listed under ``unfinished``.
 
     Returns
     -------
@@ -661,7 +690,10 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
             doc["joints"][n]["motion_needed"] = None if "motion_needed" in budget.skipped else needs[n]
     doc["suggestions"] = []
     if suggest and not plan.all_identifiable:
-        doc.update(_suggestion_keys(fewest_markers(spec, rows, seed, base=plan)))
+        fix = fewest_markers(spec, rows, seed, base=plan, clock=Budget(max_seconds, progress))
+        doc.update(_suggestion_keys(fix))
+        if fix.out_of_time:
+            doc.setdefault("unfinished", {})["suggestions"] = list(fix.out_of_time)
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed, budget, windows)
     reasons = []
@@ -671,6 +703,9 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
                        "whole-tree rank per joint and per marker); `plan --max-seconds` raises it, `--fast` skips them")
     if "witness" in doc.get("unfinished", {}):
         reasons.append("the witness searches stopped at their budget; `plan --max-seconds` raises it")
+    if "suggestions" in doc.get("unfinished", {}):
+        reasons.append("the search for the fewest markers to add stopped at its budget of "
+                       f"{Budget(max_seconds).seconds:g} s before settling these joints; `plan --max-seconds` raises it")
     if reasons:
         doc["unfinished"]["reason"] = "; ".join(reasons)
     if fewest:

@@ -36,9 +36,10 @@ class PlanResult:
     suggestions_note, suggestions_check, robustness, fewest_local, shared_motion
         Present (not None) when computed; as in the JSON.
     unfinished : Mapping
-        Present when the motion and robustness analyses ran out of their time budget: the joints
-        (``motion_needed``; their ``motion_needed`` is then null) and markers (``robustness``) not analysed,
-        and the ``reason``.
+        Present when an analysis ran out of its time budget: the joints (``motion_needed``; their
+        ``motion_needed`` is then null) and markers (``robustness``) the motion and robustness analyses left, the
+        joints ``--witness`` did not search (``witness``), the joints the search for the fewest markers to add was
+        settling when it stopped (``suggestions``; nothing is then suggested), and the ``reason``.
     suggestions_unique, suggestions_unique_note
         The fewest markers after which the propagation settles every joint uniquely, when they differ from
         ``suggestions`` (jointly identifiable joints' candidates are not counted).

@@ -269,8 +269,9 @@ def plan_text(result) -> str:
                      + ": " + (", ".join(weak) or "none"))
     if doc.get("unfinished"):
         u = doc["unfinished"]
-        left = [f"{len(u[k])} {what}" for k, what in (("motion_needed", "joints' motion"), ("robustness", "markers"))
-                if u.get(k)]
+        left = [f"{len(u[k])} {what}" for k, what in (("motion_needed", "joints' motion"), ("robustness", "markers"),
+                                                     ("witness", "joints' witness"),
+                                                     ("suggestions", "joints' fewest markers to add")) if u.get(k)]
         lines.append(f"not analysed: {', '.join(left)} ({u['reason']})")
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")

@@ -76,3 +76,34 @@ def test_witness_searches_stop_at_their_budget_and_say_which_joints_they_left():
     assert "witness" in res["unfinished"]["reason"]
     plain = api.plan(knee, motion=False, robust=False).to_dict()
     assert {n: j["identifiable"] for n, j in plain["joints"].items()} == {n: j["identifiable"] for n, j in res["joints"].items()}
+
+
+def bare_star(path, n: int):
+    """A root without markers and n ball joints to children without markers: every joint open, and the multisets of
+    segments the fewest-marker search would try grow as n^6."""
+    lines = ['units = "mm"', "[segments.root]", "markers = []"]
+    for i in range(n):
+        lines += [f"[segments.c{i}]", "markers = []", f"[joints.j{i}]", 'type = "spherical"', 'parent = "root"',
+                  f'child = "c{i}"']
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_the_fewest_marker_search_stops_at_its_budget_and_says_so(tmp_path):
+    """A bare star of 30 balls (a 1 kB model) had run past 120 s in the search for the fewest markers to add,
+    whatever ``--max-seconds`` said: it now stops at its own budget, suggests nothing, and names the joints it was
+    settling, in the tree's order, under ``unfinished`` and in the note."""
+    res = api.plan(bare_star(tmp_path / "star.toml", 30), max_seconds=0.5, motion=False, robust=False).to_dict()
+    assert res["suggestions"] == []
+    assert res["unfinished"]["suggestions"] == [f"j{i}" for i in range(30)]
+    assert "fewest markers" in res["unfinished"]["reason"] and "--max-seconds" in res["unfinished"]["reason"]
+    assert "time budget" in res["suggestions_note"]
+    assert res["all_identifiable"] is False         # the verdicts themselves never depend on the budget
+
+
+def test_a_small_bare_star_gets_its_suggestions_within_the_budget(tmp_path):
+    """Where the search ends within its budget, nothing is left unfinished and a marker is suggested on each bare
+    child (the fewest that pose them)."""
+    res = api.plan(bare_star(tmp_path / "star.toml", 2), max_seconds=600, motion=False, robust=False).to_dict()
+    assert "unfinished" not in res
+    assert res["suggestions"] and {s["segment"] for s in res["suggestions"]} >= {"c0", "c1"}
