@@ -28,6 +28,16 @@ model declares the segment longer (``length_mm``): no limb, trunk or head is 3 m
 trial whose units field scaled its numbers up (millimetres in a file that says cm made a thigh 3.7 m long, and every
 joint was reported 10 times too far, exit 0), or markers mislabelled across bodies."""
 
+SMALLEST_REACH_SHARE = 1 / 4
+"""A segment the model declares L long (``length_mm``) has some marker of the model at least L/4 away from its
+markers (the median over the frames where both are seen): the markers of a body spread over its segments' lengths
+(a thigh cluster lies half a thigh from the pelvis and from the shank's markers; the minimal hip of Pham et al., a
+knee marker 400 mm from three pelvis markers, reaches 1.07 times the thigh's declared 420 mm; the bundled leg's thigh
+markers reach 1.5 times it). A trial whose farthest marker is nearer is in a larger unit than its units field says:
+centimetres in a file that says mm put every hip 10 times too near its markers, called ``unique`` and
+``determined`` with exit 0 (the bundled leg's thigh then reached 0.15 of its length). Without a declared length no
+body size is wrong (a mouse's markers are millimetres apart), and nothing is checked."""
+
 SPAN_FRAMES = 1000
 """Frames (evenly spread) a segment's span is read over: the median needs no more, and a long trial's every frame
 would cost seconds (30 000 frames of 40 markers)."""
@@ -315,8 +325,45 @@ class Trial:
                             "every frame where both are seen, which two real markers cannot be; one marker exported "
                             "under two labels? fix the labelling, or remove one from the model")
         problems += self._overlong_segments(present, where, lengths or {})
+        problems += self._undersized_segments(present, where, lengths or {})
         if problems:
             raise InputError(problems, source=self._source)
+
+    def _median_distances(self, a: Sequence[str], b: Sequence[str]) -> np.ndarray:
+        """The median distance (mm) between each marker of `a` and each of `b` over the frames where both are seen
+        (at most :data:`SPAN_FRAMES` of them, evenly spread), (len(a), len(b)); NaN where two are never seen together
+        or are the same marker."""
+        rows = np.unique(np.linspace(0, self.n_frames - 1, min(self.n_frames, SPAN_FRAMES)).astype(int))
+        xa = self._xyz[rows][:, [self._index[n] for n in a]]
+        xb = self._xyz[rows][:, [self._index[n] for n in b]]
+        d = np.linalg.norm(xa[:, :, None] - xb[:, None], axis=3)                    # (frames, a, b)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)                      # (pairs never seen together)
+            out = np.nanmedian(d, axis=0)
+        out[np.array(a)[:, None] == np.array(b)[None, :]] = np.nan
+        return out
+
+    def _undersized_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
+        """A problem for each segment the model declares long (`declared`: segment -> mm, ``length_mm``) that has no
+        marker of `labels` as far as :data:`SMALLEST_REACH_SHARE` of that length from its own markers (`where`: label
+        -> segment), naming the farthest pair: a units field that scaled the numbers down."""
+        out = []
+        for segment, length in declared.items():
+            own = [lab for lab in labels if where.get(lab) == segment]
+            if not own or not length or len(labels) < 2:
+                continue
+            d = self._median_distances(own, list(labels))
+            if not np.isfinite(d).any():
+                continue
+            i, j = np.unravel_index(np.nanargmax(d), d.shape)
+            reach = float(d[i, j])
+            if reach < SMALLEST_REACH_SHARE * float(length):
+                out.append(f"segment {segment!r} is declared {float(length):g} mm long (length_mm), but no marker of "
+                           f"the model lies farther than {reach:.3g} mm from its markers ({own[i]!r} to "
+                           f"{list(labels)[j]!r}, median over the frames where both are seen): are the coordinates "
+                           f"in a larger unit than the file's units field says (centimetres in a file that says mm)? "
+                           f"fix the units field, or the model's length_mm")
+        return out
 
     def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
         """A problem for each segment (`where`: label -> segment) two of whose markers among `labels` lie more than

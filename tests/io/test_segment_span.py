@@ -1,6 +1,7 @@
 """A model segment whose markers lie farther apart than any body segment (a units field that scaled the numbers up)
 is refused by :meth:`Trial.require_usable`, whatever part of the frames the two markers share; a declared
-``length_mm`` lets a body truly that long through."""
+``length_mm`` lets a body truly that long through. A segment declared far longer than the markers reach (a units
+field that scaled the numbers down: centimetres in a file that says mm) is refused too."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from identcheck.errors import InputError
-from identcheck.trial import LONGEST_SEGMENT_MM, Trial
+from identcheck.trial import LONGEST_SEGMENT_MM, SMALLEST_REACH_SHARE, Trial
 
 
 def _trial(apart_mm: float, together: float, seed: int, n_frames: int = 200) -> Trial:
@@ -52,3 +53,43 @@ def test_markers_never_seen_together_say_nothing_of_the_span():
     xyz[:5, 0] = 0.0
     xyz[5:, 1] = 10_000.0
     Trial(xyz, ["A", "B"], 100.0).require_usable(["A", "B"], {"A": "s", "B": "s"})
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(1000.0, 2500.0), st.floats(0.01, 0.15), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
+def test_markers_that_reach_far_less_than_their_declared_segment_are_refused(length, share, together, seed):
+    """The markers reach at most 0.15 of the declared length plus C's 40 mm (below a quarter of it from 1 m up): read
+    as a larger unit than the file says, named with the segment, its declared length and the farthest pair."""
+    trial = _trial(share * length, together, seed)
+    with pytest.raises(InputError) as info:
+        trial.require_usable(["A", "B", "C"], {m: "thigh" for m in "ABC"}, {"thigh": length})
+    msg = str(info.value)
+    assert "span.trc" in msg and "segment 'thigh'" in msg and f"{length:g} mm long (length_mm)" in msg, msg
+    assert "larger unit" in msg and "length_mm" in msg, msg
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(100.0, 2000.0), st.floats(SMALLEST_REACH_SHARE + 0.05, 1.4), st.floats(0.05, 1.0),
+       st.integers(0, 2**32 - 1))
+def test_markers_that_reach_a_fair_share_of_their_declared_segment_pass(length, share, together, seed):
+    _trial(share * length, together, seed).require_usable(["A", "B", "C"], {m: "thigh" for m in "ABC"},
+                                                          {"thigh": length})
+
+
+def test_a_trial_in_centimetres_labelled_mm_is_refused_on_the_bundled_models(tmp_path):
+    """The bundled minimal hip and leg simulated, then written with every coordinate divided by 10 under the same
+    'mm': refused by identify and fit (exit 2) where they had fitted a hip 10 times too near its markers with exit 0;
+    the trials as simulated pass."""
+    from pathlib import Path
+
+    from identcheck import api, cli
+    from identcheck.io.trc import read_trc, write_trc
+
+    root = Path(__file__).resolve().parents[2] / "examples"
+    for name, verb in (("hip_31", "identify"), ("leg", "fit")):
+        good, small = tmp_path / f"{name}.trc", tmp_path / f"{name}_cm.trc"
+        api.simulate(root / f"{name}.toml", good, seed=3, n_frames=60)
+        trial = read_trc(good)
+        write_trc(small, trial.xyz / 10.0, trial.labels, trial.rate_hz)          # (in mm, as it says)
+        assert cli.main([verb, str(root / f"{name}.toml"), str(small), "--json"]) == 2
+        assert cli.main([verb, str(root / f"{name}.toml"), str(good), "--json"]) in (0, 1)
