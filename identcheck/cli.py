@@ -773,6 +773,9 @@ def main(argv=None) -> int:
         return 1
     except BrokenPipeError:
         raise
+    except KeyboardInterrupt:           # Ctrl-C: the user's stop, not a failure; one line, not a traceback
+        print(f"identcheck {a.verb}: interrupted", file=sys.stderr)
+        return 130
     except OSError as exc:              # the disk is full, a file vanished, a device refused: the machine, not a bug
         where = exc.filename or _outputs(a) or _inputs(a)
         print(f"identcheck {a.verb}: {where}: {exc.strerror or exc}", file=sys.stderr)

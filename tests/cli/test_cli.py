@@ -116,6 +116,21 @@ def test_internal_error_is_exit_3_with_a_request_to_report(monkeypatch, capsys):
     assert "ZeroDivisionError: a bug" in err and "internal error" in err and "report" in err
 
 
+@pytest.mark.parametrize("verb, argv", [("table", ["table"]), ("plan", ["plan", "examples/body16.toml"])])
+def test_ctrl_c_is_one_line_and_exit_130_not_a_traceback(monkeypatch, capsys, verb, argv):
+    """A verb stopped by Ctrl-C had printed Python's whole traceback ending in KeyboardInterrupt: it now says it was
+    interrupted, in one line, and exits 130 (the shell's code for a program stopped by SIGINT)."""
+    from identcheck import api
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(api, verb, stopped)
+    assert cli.main([a if not a.endswith(".toml") else str(ROOT / a) for a in argv]) == 130
+    err = capsys.readouterr().err
+    assert err.strip() == f"identcheck {verb}: interrupted" and "Traceback" not in err
+
+
 def test_version_and_no_blas_variables_set_on_import():
     import os
     import subprocess
