@@ -215,3 +215,11 @@ def _all_actions(parser):
         if isinstance(action, argparse._SubParsersAction):
             for sub in action.choices.values():
                 yield from _all_actions(sub)
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf", "1e300", "1001"])
+def test_a_plan_noise_no_capture_system_has_is_refused(run, value):
+    """`plan --noise-mm` predicts a capture with that noise: zero, negative, not a number, or beyond a metre (at
+    1e300 mm it had printed a 300-digit standard error) is refused, naming the option and the bound."""
+    res = run(["plan", LEG, "--fast", "--noise-mm", value])
+    assert res.code == 2 and f"--noise-mm {float(value)}" in res.err and "at most 1000" in res.err, res.err
