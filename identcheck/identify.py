@@ -175,7 +175,12 @@ def _frames(trial: Trial, names, frames, n_min: int, label: str) -> list:
             raise InputError([f"frames {bad} are outside the trial (0..{trial.n_frames - 1})"], source=trial.source)
         hidden = [f for f in frames if not visible[f]]
         if hidden:
-            raise InputError([f"frames {hidden}: a marker of {names} is occluded there"], source=trial.source)
+            seen = np.all(np.isfinite(xyz), axis=2)                                        # (F, markers)
+            lines = [f"frame {f}: {', '.join(repr(n) for n, ok in zip(names, seen[f]) if not ok)} occluded there"
+                     for f in hidden[:10]]
+            more = f" (and {len(hidden) - 10} more frames)" if len(hidden) > 10 else ""
+            raise InputError(lines[:-1] + [f"{lines[-1]}{more}; the joint needs {', '.join(map(repr, names))} in "
+                                           "every frame used"], source=trial.source)
     if len(frames) < n_min:
         raise InputError([f"only {len(frames)} frames show all of {names}; {label} needs at least {n_min}"],
                          source=trial.source)

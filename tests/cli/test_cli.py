@@ -297,3 +297,21 @@ def test_diagnose_exports_the_joints_where_the_file_has_them(tmp_path, capsys):
     joint = next(j for j in tr.joints if f"{j}.centre" in got.labels)
     err = np.linalg.norm(got.marker(f"{joint}.centre") - (tr.centre_world(joint) + 100_000.0), axis=1)
     assert np.nanmax(err) < 2.5
+
+
+def test_identify_names_the_marker_occluded_in_a_frame_asked_for(tmp_path, capsys):
+    """`identify --frames` with frames where a marker is hidden names that marker in each such frame (it had said only
+    "a marker of [the joint's four] is occluded there")."""
+    from identcheck import api
+    from identcheck.io.trc import read_trc, write_trc
+
+    model = str(ROOT / "examples" / "hip_31.toml")
+    api.simulate(model, tmp_path / "hip.trc", seed=1, n_frames=40)
+    trial = read_trc(tmp_path / "hip.trc")
+    xyz = trial.xyz.copy()
+    xyz[[3, 4], list(trial.labels).index("LPELVIS")] = np.nan
+    write_trc(tmp_path / "hidden.trc", xyz, trial.labels, trial.rate_hz)
+    assert cli.main(["identify", model, str(tmp_path / "hidden.trc"), "--frames", "2,3,4"]) == 2
+    err = capsys.readouterr().err
+    assert "frame 3: 'LPELVIS' occluded there" in err and "frame 4: 'LPELVIS' occluded there" in err, err
+    assert "frame 2:" not in err and "'L5' occluded" not in err, err
