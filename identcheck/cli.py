@@ -353,8 +353,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "fitted centres and axes, the markers), for OpenSim's inverse kinematics; needs "
                         "identcheck[osim]")
     s.add_argument("--frames", metavar="START:END", default=None,
-                   help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
-                        "it), both included; either end may be left out")
+                   help="only these frames, in the file's own numbering (TRC Frame#; C3D from the header's first "
+                        "frame counted from 0, as ezc3d reads it: one less than Nexus, QTM and Mokka show), both "
+                        "included; either end may be left out")
     s.set_defaults(func=_cmd_fit)
 
     s = sub.add_parser("plan", formatter_class=_Help, epilog=_epilog("identcheck plan examples/leg.toml --noise-mm 1 --motion functional", "every joint is uniquely identifiable", "some joint is not (suggestions names the markers to add)"),
@@ -397,8 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write one self-contained HTML page: the skeleton in 3-D, residuals, the effects with "
                         "the gap each closed, and the joints (opens offline in a browser)")
     s.add_argument("--frames", metavar="START:END", default=None,
-                   help="only these frames, in the file's own numbering (TRC Frame#, C3D first frame as QTM shows "
-                        "it), both included; either end may be left out")
+                   help="only these frames, in the file's own numbering (TRC Frame#; C3D from the header's first "
+                        "frame counted from 0, as ezc3d reads it: one less than Nexus, QTM and Mokka show), both "
+                        "included; either end may be left out")
     s.set_defaults(func=_cmd_diagnose)
 
     s = sub.add_parser("skeleton", formatter_class=_Help, epilog=_epilog(
