@@ -354,8 +354,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "identcheck[osim]")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#; C3D from the header's first "
-                        "frame counted from 0, as ezc3d reads it: one less than Nexus, QTM and Mokka show), both "
-                        "included; either end may be left out")
+                        "frame, 1-based, as Nexus, QTM and Mokka show it), both included; either end may be left "
+                        "out")
     s.set_defaults(func=_cmd_fit)
 
     s = sub.add_parser("plan", formatter_class=_Help, epilog=_epilog("identcheck plan examples/leg.toml --noise-mm 1 --motion functional", "every joint is uniquely identifiable", "some joint is not (suggestions names the markers to add)"),
@@ -399,8 +399,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "the gap each closed, and the joints (opens offline in a browser)")
     s.add_argument("--frames", metavar="START:END", default=None,
                    help="only these frames, in the file's own numbering (TRC Frame#; C3D from the header's first "
-                        "frame counted from 0, as ezc3d reads it: one less than Nexus, QTM and Mokka show), both "
-                        "included; either end may be left out")
+                        "frame, 1-based, as Nexus, QTM and Mokka show it), both included; either end may be left "
+                        "out")
     s.set_defaults(func=_cmd_diagnose)
 
     s = sub.add_parser("skeleton", formatter_class=_Help, epilog=_epilog(

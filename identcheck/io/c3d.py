@@ -440,9 +440,11 @@ def read_c3d(path) -> MarkerData:
     if residuals is not None and np.shape(residuals)[1:] == (n_points, n_frames):
         xyz[(np.asarray(residuals)[0] < 0).T] = np.nan
     try:
-        first = int(c3d["header"]["points"]["first_frame"])
+        # the header's first frame is 1-based (C3D's own numbering, what Nexus, QTM and Mokka show); ezc3d gives it
+        # less one
+        first = int(c3d["header"]["points"]["first_frame"]) + 1
     except (KeyError, TypeError, ValueError):
-        first = 0
+        first = 1
     check_units(xyz, factor, "POINT:UNITS", src)
     far = far_samples(xyz)
     if len(far):
@@ -494,7 +496,7 @@ MAX_FRAMES = 65535
 """Most frames a C3D file's header and its 16-bit POINT:FRAMES can count (ezc3d silently keeps only these)."""
 
 
-def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 0) -> None:
+def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 1) -> None:
     """Write marker trajectories as a C3D file (float storage, ``POINT:UNITS = "mm"``).
 
     Parameters
@@ -506,7 +508,8 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     labels : sequence of str
     rate_hz : float
     first_frame : int
-        The header's first frame, as ezc3d reports it (what :func:`read_c3d` returns).
+        The number of the first frame, 1-based as the C3D header holds it (what :func:`read_c3d` returns; at least 1,
+        as a TRC file's first Frame#).
 
     Raises
     ------
@@ -534,7 +537,7 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     points = np.ones((4, n_markers, n_frames))
     points[:3] = xyz.transpose(2, 1, 0)
     c3d["data"]["points"] = points
-    c3d["header"]["points"]["first_frame"] = max(int(first_frame), 0)
+    c3d["header"]["points"]["first_frame"] = max(int(first_frame), 1) - 1        # (ezc3d's is the header's less 1)
     try:
         with replacing(path) as tmp:
             beside = tmp.with_name(tmp.name + ".c3d")    # ezc3d appends ".c3d" to any other ending, ".C3D" too

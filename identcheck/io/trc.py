@@ -52,8 +52,8 @@ class MarkerData(NamedTuple):
     labels: tuple
     rate_hz: float
     first_frame: int = 0
-    """The file's own number of its first frame (TRC: the first row's Frame#; C3D: the header's first
-    frame as ezc3d reports it, the numbering of QTM): row i is the file's frame ``first_frame + i``."""
+    """The file's own number of its first frame (TRC: the first row's Frame#; C3D: the header's first frame, 1-based,
+    as Nexus, QTM and Mokka show it; ezc3d reads it less one): row i is the file's frame ``first_frame + i``."""
 
 
 MAX_CELL_CHARS = 64

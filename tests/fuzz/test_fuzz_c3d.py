@@ -192,7 +192,8 @@ def test_a_corrupt_name_length_is_quoted_short(corpus, tmp_path):
 @pytest.mark.parametrize("value", [1e30, -1e7, math.inf])
 def test_a_far_sample_is_named_by_frame_and_marker(run, corpus, tmp_path, leg_markers, value):
     """A sample 10 km away, 1e30 (a sentinel for 'missing') or infinite in a C3D: exit 2 naming the marker
-    and the frame (before: 'no frame has a valid pose', naming neither)."""
+    and the frame (before: 'no frame has a valid pose', naming neither): row 57 of a C3D whose header's 1-based
+    first frame is 1 is its frame 58."""
     from identcheck.io.c3d import write_c3d
 
     xyz, labels, rate = leg_markers
@@ -201,4 +202,4 @@ def test_a_far_sample_is_named_by_frame_and_marker(run, corpus, tmp_path, leg_ma
     path = tmp_path / "far.c3d"
     write_c3d(path, xyz, labels, rate)
     res = run(["fit", LEG, path])
-    assert res.code == 2 and res.names(path, "'RTHI'", "frame 57"), res.err
+    assert res.code == 2 and res.names(path, "'RTHI'", "frame 58"), res.err

@@ -51,3 +51,28 @@ def test_bad_frames_argument_is_named():
     t = Trial(np.zeros((10, 1, 3)), ["M"], 100.0, "t", first_frame=1)
     with pytest.raises(InputError, match="START:END"):
         t.frames("a-b")
+
+
+@settings(max_examples=15, deadline=None)
+@given(first=st.integers(1, 30000), n=st.integers(2, 40))
+def test_a_c3d_numbers_its_frames_as_its_header_does_and_as_its_trc_would(tmp_path_factory, first, n):
+    """The C3D header's first frame is 1-based (what Nexus, QTM and Mokka show; ezc3d reads it less one): a C3D whose
+    header says `first` numbers its rows from `first`, a write and read keep the numbering, and the same trial written
+    as a TRC numbers its frames alike (a C3D had numbered them one less, so the same frame had two numbers)."""
+    import ezc3d
+
+    from identcheck.io.c3d import write_c3d
+
+    folder = tmp_path_factory.mktemp("c3d")
+    xyz = np.arange(n * 6, dtype=float).reshape(n, 2, 3) + 100.0
+    write_c3d(folder / "t.c3d", xyz, ["A", "B"], 100.0, first_frame=first)
+    with open(folder / "t.c3d", "rb") as f:
+        head = f.read(10)
+    assert int.from_bytes(head[6:8], "little") == first             # the header's word 4, as the spec reads it
+    c3d = Trial.from_file(folder / "t.c3d")
+    assert c3d.first_frame == first and c3d.frame_number(n - 1) == first + n - 1
+    assert int(ezc3d.c3d(str(folder / "t.c3d"))["header"]["points"]["first_frame"]) == first - 1
+    write_trc(folder / "t.trc", xyz, ["A", "B"], 100.0, first_frame=first)
+    assert Trial.from_file(folder / "t.trc").first_frame == first
+    c3d.to_file(folder / "again.c3d")
+    assert Trial.from_file(folder / "again.c3d").first_frame == first
