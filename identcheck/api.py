@@ -352,7 +352,9 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
     (:mod:`identcheck.fit.marker_value`).
 
     ``max_seconds`` bounds the motion and robustness analyses together (default
-    :data:`identcheck.plan.analysis.ANALYSES_BUDGET_S`); what they leave unchecked is listed in ``unfinished``.
+    :data:`identcheck.plan.analysis.ANALYSES_BUDGET_S`), and separately the search for the fewest markers to add and
+    the witness searches; what they leave unchecked is listed in ``unfinished``. ``noise_mm`` above
+    :data:`identcheck.fit.predict.MAX_NOISE_MM` is refused (no capture system's noise).
 
     Returns
     -------

@@ -485,9 +485,7 @@ finds every one of them."""
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
-MAX_NOISE_MM = 1000.0
-"""The largest marker noise `plan --noise-mm` predicts for: a metre is beyond any capture system (a prediction at
-1e300 mm had printed a 300-digit standard error)."""
+
 RATE_HZ = (0.01, 1e6)               # a simulated capture's rate: its times print (6 decimals) and rise frame by frame
 
 
@@ -572,6 +570,8 @@ def preflight(a) -> list:
     if a.verb == "plan" and a.max_seconds is not None and not 0 < a.max_seconds <= 86400:
         problems.append(f"--max-seconds {a.max_seconds}: a positive number of seconds, at most a day")
     if a.verb == "plan" and a.noise_mm is not None:
+        from identcheck.fit.predict import MAX_NOISE_MM
+
         if not 0 < a.noise_mm <= MAX_NOISE_MM:
             problems.append(f"--noise-mm {a.noise_mm}: a positive noise level in mm, at most {MAX_NOISE_MM:g} (no "
                             "capture system's markers are a metre off; typical systems 0.1-2 mm)")

@@ -29,8 +29,10 @@ trial whose units field scaled its numbers up (millimetres in a file that says c
 joint was reported 10 times too far, exit 0), or markers mislabelled across bodies."""
 
 SMALLEST_REACH_SHARE = 1 / 4
-"""A segment the model declares L long (``length_mm``) has some marker of the model at least L/4 away from its
-markers (the median over the frames where both are seen): the markers of a body spread over its segments' lengths
+"""A segment the model declares L long (``length_mm``) has some marker, on it or on a segment within two joints of
+it, at least L/4 away from its markers (the median over the frames where both are seen; not every marker of the
+model: on a whole body a head marker 1.2 m from a thigh, read in centimetres as 120 mm, would pass a thigh of 420
+mm): the markers of a body spread over its segments' lengths
 (a thigh cluster lies half a thigh from the pelvis and from the shank's markers; the minimal hip of Pham et al., a
 knee marker 400 mm from three pelvis markers, reaches 1.07 times the thigh's declared 420 mm; the bundled leg's thigh
 markers reach 1.5 times it). A trial whose farthest marker is nearer is in a larger unit than its units field says:
@@ -275,7 +277,8 @@ class Trial:
         """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
         return self._xyz[:, self.index(name)].copy()
 
-    def require_usable(self, labels: Sequence[str], where: dict | None = None, lengths: dict | None = None) -> None:
+    def require_usable(self, labels: Sequence[str], where: dict | None = None, lengths: dict | None = None,
+                       neighbours: dict | None = None) -> None:
         """Raise unless every label is in the trial, visible in at least one frame, no two of them coincide and no
         segment's markers lie farther apart than a body segment can.
 
@@ -286,7 +289,11 @@ class Trial:
         where : dict, optional
             label -> the model's segment holding it (named in the message).
         lengths : dict, optional
-            segment -> its declared length (mm), which may make a segment longer than :data:`LONGEST_SEGMENT_MM`.
+            segment -> its declared length (mm), which may make a segment longer than :data:`LONGEST_SEGMENT_MM`, and
+            which its markers must reach a share of (:data:`SMALLEST_REACH_SHARE`).
+        neighbours : dict, optional
+            segment -> the segments near it (the model's: within two joints): a segment's reach is measured to its
+            own markers and theirs (default: to every marker of `labels`).
 
         Raises
         ------
@@ -325,7 +332,7 @@ class Trial:
                             "every frame where both are seen, which two real markers cannot be; one marker exported "
                             "under two labels? fix the labelling, or remove one from the model")
         problems += self._overlong_segments(present, where, lengths or {})
-        problems += self._undersized_segments(present, where, lengths or {})
+        problems += self._undersized_segments(present, where, lengths or {}, neighbours)
         if problems:
             raise InputError(problems, source=self._source)
 
@@ -334,8 +341,8 @@ class Trial:
         (at most :data:`SPAN_FRAMES` of them, evenly spread), (len(a), len(b)); NaN where two are never seen together
         or are the same marker."""
         rows = np.unique(np.linspace(0, self.n_frames - 1, min(self.n_frames, SPAN_FRAMES)).astype(int))
-        xa = self._xyz[rows][:, [self._index[n] for n in a]]
-        xb = self._xyz[rows][:, [self._index[n] for n in b]]
+        xa = self._xyz[np.ix_(rows, [self._index[n] for n in a])]
+        xb = self._xyz[np.ix_(rows, [self._index[n] for n in b])]
         d = np.linalg.norm(xa[:, :, None] - xb[:, None], axis=3)                    # (frames, a, b)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)                      # (pairs never seen together)
@@ -343,26 +350,31 @@ class Trial:
         out[np.array(a)[:, None] == np.array(b)[None, :]] = np.nan
         return out
 
-    def _undersized_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
-        """A problem for each segment the model declares long (`declared`: segment -> mm, ``length_mm``) that has no
-        marker of `labels` as far as :data:`SMALLEST_REACH_SHARE` of that length from its own markers (`where`: label
-        -> segment), naming the farthest pair: a units field that scaled the numbers down."""
+    def _undersized_segments(self, labels: Sequence[str], where: dict, declared: dict,
+                             neighbours: dict | None = None) -> list[str]:
+        """A problem for each segment the model declares long (`declared`: segment -> mm, ``length_mm``) none of whose
+        markers lies :data:`SMALLEST_REACH_SHARE` of that length from a marker of its own or of a segment near it
+        (`neighbours`: segment -> segments; default every marker of `labels`; `where`: label -> segment), naming the
+        farthest pair: a units field that scaled the numbers down. (Measured to every marker of a whole body, a head
+        1.2 m from a thigh, read as 120 mm, would have let centimetres pass.)"""
         out = []
         for segment, length in declared.items():
             own = [lab for lab in labels if where.get(lab) == segment]
-            if not own or not length or len(labels) < 2:
+            near = set(neighbours.get(segment, ())) | {segment} if neighbours is not None else None
+            partners = [lab for lab in labels if near is None or where.get(lab) in near]
+            if not own or not length or len(partners) < 2:
                 continue
-            d = self._median_distances(own, list(labels))
+            d = self._median_distances(own, partners)
             if not np.isfinite(d).any():
                 continue
             i, j = np.unravel_index(np.nanargmax(d), d.shape)
             reach = float(d[i, j])
             if reach < SMALLEST_REACH_SHARE * float(length):
-                out.append(f"segment {segment!r} is declared {float(length):g} mm long (length_mm), but no marker of "
-                           f"the model lies farther than {reach:.3g} mm from its markers ({own[i]!r} to "
-                           f"{list(labels)[j]!r}, median over the frames where both are seen): are the coordinates "
-                           f"in a larger unit than the file's units field says (centimetres in a file that says mm)? "
-                           f"fix the units field, or the model's length_mm")
+                out.append(f"segment {segment!r} is declared {float(length):g} mm long (length_mm), but no marker on "
+                           f"it or near it lies farther than {reach:.1f} mm from its markers ({own[i]!r} to "
+                           f"{partners[j]!r}, median over the frames where both are seen): are the coordinates in a "
+                           f"larger unit than the file's units field says (centimetres in a file that says mm)? fix "
+                           f"the units field, or the model's length_mm")
         return out
 
     def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:

@@ -61,6 +61,11 @@ def noise_free_fit(model, motion: str = "functional", n_frames: int = 1000, seed
     return sim, tree
 
 
+MAX_NOISE_MM = 1000.0
+"""The largest marker noise a prediction is made for: a metre is beyond any capture system (at 1e300 mm a prediction
+had printed a 300-digit standard error)."""
+
+
 def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 1000, seed: int = 0,
             fitted=None, exact_candidates: dict | None = None) -> dict:
     """joint -> predicted ``practical`` dict (see the module docstring) for `model` under `motion`; `fitted`:
@@ -70,8 +75,9 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
     joint's closest rivals, that many minus one, tie exactly: on 200 noise-free frames of the minimal leg two of
     the knee's three twins were still 1.4 mm² above the truth after 2000 iterations, crawling along the roll of a
     thigh posed by two points, and would have been called rejected 22 % of the time."""
-    if not (noise_mm > 0):
-        raise InputError([f"--noise-mm {noise_mm}: a positive noise level (mm per coordinate)"])
+    if not (0 < noise_mm <= MAX_NOISE_MM):
+        raise InputError([f"--noise-mm {noise_mm}: a positive noise level in mm per coordinate, at most "
+                          f"{MAX_NOISE_MM:g} (no capture system's markers are a metre off)"])
     sim, tree = fitted if fitted is not None else noise_free_fit(model, motion, n_frames, seed)
     if tree.best is None:
         return {j: {"verdict": "undetermined", "reason": f"no whole-tree fit of the simulated trial: {tree.problem}",

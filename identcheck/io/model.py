@@ -234,10 +234,18 @@ class Model:
 
     def require_markers_in(self, trial, names=None) -> None:
         """:meth:`identcheck.trial.Trial.require_usable` for the model's markers (or `names` of them) in `trial`, each
-        named with its segment, and each segment's declared length (``length_mm``) allowed for its span."""
+        named with its segment, each segment's declared length (``length_mm``) allowed for its span and asked of its
+        markers' reach to the markers of the segments within two joints of it."""
         names = self.markers if names is None else names
+        beside: dict = {}
+        for j in self.joints.values():
+            beside.setdefault(j.parent, set()).add(j.child)
+            beside.setdefault(j.child, set()).add(j.parent)
+        # within two joints: a shank marker at the tuberosity and a thigh marker at the epicondyle are 6 cm apart,
+        # the pelvis's markers beyond them half a metre
+        near = {s: set(b).union(*(beside[t] for t in b)) for s, b in beside.items()}
         trial.require_usable(names, {m: self.marker_segment(m) for m in names},
-                             {name: seg.length_mm for name, seg in self.segments.items() if seg.length_mm})
+                             {name: seg.length_mm for name, seg in self.segments.items() if seg.length_mm}, near)
 
     def parent_joint(self, segment: str) -> Joint | None:
         """The joint whose child is `segment` (None for the root)."""

@@ -39,7 +39,8 @@ class PlanResult:
         Present when an analysis ran out of its time budget: the joints (``motion_needed``; their
         ``motion_needed`` is then null) and markers (``robustness``) the motion and robustness analyses left, the
         joints ``--witness`` did not search (``witness``), the joints the search for the fewest markers to add was
-        settling when it stopped (``suggestions``; nothing is then suggested), and the ``reason``.
+        settling when it stopped (``suggestions``; nothing is then suggested), ``suggestions_minimal`` False when the
+        check that no plan with fewer markers passes stopped, and the ``reason``.
     suggestions_unique, suggestions_unique_note
         The fewest markers after which the propagation settles every joint uniquely, when they differ from
         ``suggestions`` (jointly identifiable joints' candidates are not counted).

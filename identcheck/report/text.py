@@ -272,6 +272,8 @@ def plan_text(result) -> str:
         left = [f"{len(u[k])} {what}" for k, what in (("motion_needed", "joints' motion"), ("robustness", "markers"),
                                                      ("witness", "joints' witness"),
                                                      ("suggestions", "joints' fewest markers to add")) if u.get(k)]
+        if u.get("suggestions_minimal") is False:
+            left.append("whether fewer markers would do")
         lines.append(f"not analysed: {', '.join(left)} ({u['reason']})")
     c = doc["certificate"]
     lines.append(f"certificate: {c['method']}; {c['frames']} frames; P(wrong) <= {c['failure_probability_bound']:.1e}")

@@ -93,3 +93,19 @@ def test_a_trial_in_centimetres_labelled_mm_is_refused_on_the_bundled_models(tmp
         write_trc(small, trial.xyz / 10.0, trial.labels, trial.rate_hz)          # (in mm, as it says)
         assert cli.main([verb, str(root / f"{name}.toml"), str(small), "--json"]) == 2
         assert cli.main([verb, str(root / f"{name}.toml"), str(good), "--json"]) in (0, 1)
+
+
+def test_the_reach_is_measured_to_the_segments_near_it_not_to_a_far_head():
+    """A whole body in centimetres written as mm: a thigh (declared 420 mm) whose pelvis marker lies 45 "mm" away and a
+    head marker 120 "mm" away. Measured to every marker, the head's 120 mm cleared a quarter of 420; measured to the
+    segments within two joints of the thigh (the pelvis here), the trial is refused and the pelvis marker named."""
+    rng = np.random.default_rng(5)
+    thigh = rng.normal(0.0, 5.0, (50, 3))
+    xyz = np.stack([thigh, thigh + [45.0, 0.0, 0.0], thigh + [0.0, 0.0, 120.0]], axis=1)
+    trial = Trial(xyz, ["T", "P", "H"], 100.0, source="body.trc")
+    where = {"T": "thigh", "P": "pelvis", "H": "head"}
+    trial.require_usable(["T", "P", "H"], where, {"thigh": 420.0})                  # every marker: the head passes it
+    with pytest.raises(InputError) as info:
+        trial.require_usable(["T", "P", "H"], where, {"thigh": 420.0}, {"thigh": {"pelvis"}})
+    msg = str(info.value)
+    assert "segment 'thigh' is declared 420 mm long" in msg and "'T' to 'P'" in msg and "45.0 mm" in msg, msg
