@@ -113,3 +113,28 @@ def test_the_round_chooses_as_if_every_proposal_were_fitted_in_full(stubbed, cap
     if screened and not near:
         assert eff.fits == len(screened)
         assert [(x[0], x[2].where) for x in order] == [(x[0], x[2].where) for x in order2]
+
+
+class PartlyImplausible(Stub):
+    """A stub whose proposal 0 cannot be what it claims (a delay noise alone may make, say)."""
+
+    def implausible(self, prop):
+        return "noise alone may make it" if prop.where["n"] == 0 else ""
+
+
+def test_a_round_considered_again_logs_each_refusal_once(stubbed, caplog):
+    """An implausible candidate above the bar and one refused for the joints are logged when first considered; the
+    round then fits its screened proposal in full (nothing was adopted) and considers them again, without logging them
+    a second time; the screened one is adopted."""
+    caplog.set_level("INFO", logger="identcheck")
+    props = [SimpleNamespace(where={"n": i}) for i in range(3)]
+    full = {id(props[0]): Candidate(1000.0, 1.0, 3), id(props[1]): Candidate(800.0, 50.0, 3),
+            id(props[2]): Candidate(70.0, 1.0, 3)}
+    eff = PartlyImplausible(full)
+    tried = [(full[id(p)].value, eff, p, full[id(p)]) for p in props[:2]]
+    bars = W.Bars(0.0, 800.0, 10.0, 0, 10.0)
+    _, adopted, _, _ = W.choose(None, None, None, tried, [(7.0, eff, props[2])], bars, {}, 0.0, None, 1)
+    said = [r.getMessage() for r in caplog.records if "not adopted" in r.getMessage()]
+    assert adopted is not None and adopted[2] is props[2] and eff.fits == 1
+    assert len(said) == 2 and len(set(said)) == 2, said
+    assert any("noise alone" in m for m in said) and any("undetermined" in m for m in said), said
