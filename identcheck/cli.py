@@ -485,7 +485,6 @@ finds every one of them."""
 MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tangents() (no SymPy import here)
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
-
 RATE_HZ = (0.01, 1e6)               # a simulated capture's rate: its times print (6 decimals) and rise frame by frame
 
 
