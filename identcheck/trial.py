@@ -386,19 +386,15 @@ class Trial:
         for lab in labels:
             if lab in where:
                 by_segment.setdefault(where[lab], []).append(lab)
-        rows = np.unique(np.linspace(0, self.n_frames - 1, min(self.n_frames, SPAN_FRAMES)).astype(int))
         out = []
         for segment, names in by_segment.items():
             limit = max(LONGEST_SEGMENT_MM, 1.5 * float(declared.get(segment) or 0.0))
-            xyz = self._xyz[rows][:, [self._index[n] for n in names]]
-            widest, pair = 0.0, None
-            for i in range(len(names)):
-                for j in range(i + 1, len(names)):
-                    d = np.linalg.norm(xyz[:, i] - xyz[:, j], axis=1)
-                    d = d[np.isfinite(d)]
-                    if len(d) and float(np.median(d)) > widest:
-                        widest, pair = float(np.median(d)), (names[i], names[j])
-            if pair is not None and widest > limit:
+            d = self._median_distances(names, names)
+            if not np.isfinite(d).any():
+                continue
+            i, j = np.unravel_index(np.nanargmax(d), d.shape)
+            widest, pair = float(d[i, j]), (names[i], names[j])
+            if widest > limit:
                 out.append(f"segment {segment!r} spans {widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over "
                            f"the frames where both are seen): no body segment is that long; are the coordinates in a "
                            f"smaller unit than the file's units field says (millimetres in a file that says cm or m)? "
