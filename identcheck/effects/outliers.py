@@ -3,9 +3,9 @@
 Detector: samples whose 3-D residual is beyond what noise gives once in the whole trial (the χ²₃
 quantile at 1 % over all samples) and the largest of their frame; under serially correlated noise also those whose
 departure from their neighbours in time is (:func:`spike_residuals`; a sample beside a larger one judged without it,
-:func:`beside_errors`) (a gross error drags the poses of its frame, so other markers fail the bound too, less). Augmentation: those samples are set aside
-(weight 0, three parameters each), the model refitted, and the test repeated until no new sample
-fails it (a frame with two gross errors loses the second in the next round).
+:func:`beside_errors`) (a gross error drags the poses of its frame, so other markers fail the bound too, less).
+Augmentation: those samples are set aside (weight 0, three parameters each), the model refitted, and the test
+repeated until no new sample fails it (a frame with two gross errors loses the second in the next round).
 
 Gross errors are sparse and brief in each marker too: a marker with more than :data:`MAX_FRACTION` of its seen
 samples flagged, or a run of flagged frames longer than :data:`MAX_RUN_S`, carries something systematic (a slip's
