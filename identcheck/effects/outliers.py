@@ -13,6 +13,8 @@ lasting offset, a swap, skin motion), and those samples are not set aside: the o
 """
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 from scipy.special import chdtri
 
@@ -72,11 +74,15 @@ def beside_errors(residuals: np.ndarray, seen: np.ndarray, phi: float, departure
     out = departure.astype(float)
     r = np.where(seen[..., None], residuals, 0.0)
     taken = np.zeros((F, M), dtype=bool)
-    while True:                                    # each pass takes one sample: at most F·M passes
-        k = int(np.argmax(np.where(taken, -np.inf, out)))
-        t, m = divmod(k, M)
-        if taken[t, m] or not out[t, m] > bound:
-            return out
+    # the samples beyond the bound, largest first (a heap; an entry whose value has changed since is skipped): each
+    # is taken once, and each taken one judges two neighbours again, so the passes are at most three per sample
+    # beyond the bound
+    heap = [(-out[t, m], t, m) for t, m in zip(*np.nonzero(out > bound))]
+    heapq.heapify(heap)
+    while heap:
+        value, t, m = heapq.heappop(heap)
+        if taken[t, m] or -value != out[t, m]:
+            continue
         taken[t, m] = True
         for s in (t - 1, t + 1):
             if not 0 <= s < F or taken[s, m]:
@@ -85,6 +91,9 @@ def beside_errors(residuals: np.ndarray, seen: np.ndarray, phi: float, departure
             usable = 0 <= other < F and seen[s, m] and seen[other, m] and not taken[other, m]
             out[s, m] = (float(np.sum((r[s, m] - phi * r[other, m]) ** 2)) / (scale2 * (1.0 + phi * phi))
                          if usable else 0.0)
+            if out[s, m] > bound:
+                heapq.heappush(heap, (-out[s, m], s, m))
+    return out
 
 
 def noise_bound(ctx) -> float:
