@@ -125,3 +125,36 @@ def test_two_errors_in_a_row_both_stand_out(seed, phi, size, ratio):
     noise[t + 1, 0] += size * ratio * rng.choice([-1.0, 1.0]) * direction
     adjusted, _ = _beside(noise, phi, 30.0)
     assert adjusted[t, 0] > 30.0 and adjusted[t + 1, 0] > 30.0
+
+
+def _beside_by_search(residuals, seen, phi, departure, scale2, bound):
+    """beside_errors written the plain way: the largest sample not yet taken, searched over every sample."""
+    F, M = departure.shape
+    out, taken = departure.astype(float), np.zeros((F, M), bool)
+    r = np.where(seen[..., None], residuals, 0.0)
+    while True:
+        t, m = divmod(int(np.argmax(np.where(taken, -np.inf, out))), M)
+        if taken[t, m] or not out[t, m] > bound:
+            return out
+        taken[t, m] = True
+        for s in (t - 1, t + 1):
+            if 0 <= s < F and not taken[s, m]:
+                o = 2 * s - t
+                ok = 0 <= o < F and seen[s, m] and seen[o, m] and not taken[o, m]
+                out[s, m] = np.sum((r[s, m] - phi * r[o, m]) ** 2) / (scale2 * (1 + phi * phi)) if ok else 0.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 0.95), st.integers(2, 60), st.integers(1, 4), st.floats(0.0, 0.3))
+def test_the_heap_takes_the_samples_a_plain_search_would(seed, phi, n_frames, n_markers, rate):
+    rng = np.random.default_rng(seed)
+    noise = _ar1(rng, n_frames, n_markers, phi, 1.0)
+    hit = rng.random((n_frames, n_markers)) < rate
+    noise[hit] += rng.uniform(-15.0, 15.0, (int(hit.sum()), 3))
+    seen = rng.random((n_frames, n_markers)) > 0.15
+    spike, has = spike_residuals(noise, seen, phi)
+    scale2 = max((1 - phi ** 2) / (1 + phi ** 2), 1e-3)
+    departure = np.where(has, np.sum(np.nan_to_num(spike) ** 2, axis=2), 0.0) / scale2
+    res = np.nan_to_num(np.where(seen[..., None], noise, np.nan))
+    assert np.array_equal(beside_errors(res, seen, phi, departure, scale2, 20.0),
+                          _beside_by_search(res, seen, phi, departure, scale2, 20.0))
