@@ -48,6 +48,11 @@ class Conditioning:
     noise_mm: float | None
 
 
+EXACTLY_COPLANAR = 1e-9
+"""Planarity (smallest principal spread over the largest) below which (3,1) samples are coplanar to rounding: no
+sphere is determined, and :func:`identify` raises."""
+
+
 def conditioning(xyz, noise_mm: float | None = None, *, min_planarity: float = 0.05) -> Conditioning:
     """Near-coplanarity check of (3,1) samples, with the uncertainty it predicts.
 
@@ -121,7 +126,7 @@ def identify(xyz, precision: int | None = None, *, rel_tol: float = 1e-6, noise_
     nearly coplanar samples then warn with the motion to add, exactly coplanar ones raise.
     """
     cond = conditioning(xyz if precision is None else np.array(xyz, dtype=float), noise_mm)
-    if cond.planarity < 1e-9:
+    if cond.planarity < EXACTLY_COPLANAR:
         raise _coplanar_error(cond)
     if not cond.ok:
         warnings.warn(cond.reason, IdentifiabilityWarning, stacklevel=2)
