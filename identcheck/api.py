@@ -204,6 +204,12 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
         warnings.simplefilter("always")
         data = _frames(trial, frames)
     model = _model_with_joints(model, "fit")
+    if export_osim is not None:
+        from identcheck.fit.osim import name_problems
+
+        problems = name_problems(model)
+        if problems:
+            raise InputError([f"--export-osim {export_osim}: " + p for p in problems], source=model.source)
     doc = fit_trial(model, data, progress=progress, export=export_markers,
                     on_fit=keep if report is not None or export_osim is not None else None)
     doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read

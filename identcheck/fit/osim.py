@@ -32,6 +32,26 @@ def opensim_missing() -> str:
     return ""
 
 
+INVALID_CHARACTERS = "\\*+ \t/"
+"""Characters OpenSim refuses in a component's name (its error: 'contains invalid characters of: \\*+ \\t/'): a body,
+joint or marker named with one stopped OpenSim after the whole fit, with a traceback and then a crash of the process
+(a segment "fore arm", a joint "hip r", a marker "R*KNEE")."""
+
+
+def name_problems(model) -> list[str]:
+    """What in `model` (an :class:`identcheck.io.model.Model`) OpenSim cannot name: each segment, joint and marker
+    whose name holds one of :data:`INVALID_CHARACTERS`, or none ([]). Checked before the fit."""
+    shown = {" ": "a space", "\t": "a tab"}
+    out = []
+    for kind, names in (("segment", list(model.segments)), ("joint", list(model.joints)), ("marker", model.markers)):
+        for name in names:
+            bad = sorted({c for c in name if c in INVALID_CHARACTERS})
+            if bad:
+                out.append(f"{kind} {name!r}: OpenSim does not allow {', '.join(shown.get(c, repr(c)) for c in bad)} in "
+                           "a name; rename it in the model file to export it with --export-osim")
+    return out
+
+
 def hinge_frames(axis: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pin joint's frame in the parent (columns: its axes, z on the hinge axis) and in the child, such that
     ``F_p · Rot(z, θ) · F_cᵀ = Rot(axis, θ) · rest``, the fit's relative rotation at hinge angle θ."""

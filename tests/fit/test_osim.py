@@ -123,3 +123,24 @@ def test_the_export_leaves_no_opensim_log_where_it_runs(tmp_path, monkeypatch):
     export_osim(tmp_path / "leg.osim", got["fit"])
     osim.Model(str(tmp_path / "leg.osim"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["leg.osim"]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.text(alphabet="abcXYZ_.-0", min_size=1, max_size=6), st.sampled_from(list("\\*+ \t/")),
+       st.sampled_from(["segment", "joint", "marker"]))
+def test_names_opensim_refuses_are_named_before_the_fit(stem, bad, kind):
+    """A segment, joint or marker whose name OpenSim refuses is reported by name (the fit is not run): it had
+    stopped OpenSim after the whole fit, with a traceback and then a crash of the process."""
+    from identcheck.fit.osim import name_problems
+    from identcheck.io.model import Model
+
+    def model(names):
+        return Model.from_dict({"units": "mm", "segments": {
+            "pelvis": {"markers": ["LASI", "RASI", "SACR"]},
+            names["segment"]: {"markers": ["RGT", "RTHI", names["marker"]]}},
+            "joints": {names["joint"]: {"type": "spherical", "parent": "pelvis", "child": names["segment"]}}})
+
+    names = {"segment": "thigh", "joint": "hip", "marker": "RKNE"}
+    problems = name_problems(model(dict(names, **{kind: stem + bad + stem})))
+    assert len(problems) == 1 and problems[0].startswith(f"{kind} {stem + bad + stem!r}")
+    assert name_problems(model(dict(names, **{kind: stem + "_" + stem}))) == []
