@@ -47,8 +47,9 @@ def name_problems(model) -> list[str]:
         for name in names:
             bad = sorted({c for c in name if c in INVALID_CHARACTERS})
             if bad:
-                out.append(f"{kind} {name!r}: OpenSim does not allow {', '.join(shown.get(c, repr(c)) for c in bad)} in "
-                           "a name; rename it in the model file to export it with --export-osim")
+                which = ", ".join(shown.get(c, repr(c)) for c in bad)
+                out.append(f"{kind} {name!r}: OpenSim does not allow {which} in a name; rename it in the model file "
+                           "to export it with --export-osim")
     return out
 
 
