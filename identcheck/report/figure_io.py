@@ -19,9 +19,21 @@ def figure(**kw):
     return Figure(**kw)
 
 
+def as_written(fig) -> None:
+    """Every text of ``fig`` drawn as written, never read as matplotlib's math notation: the figures show the names
+    of a model's segments, joints and markers, and a name holding ``$`` (``"knee$\\undefinedcmd{x$"``) had stopped
+    ``plan --figure`` and ``diagnose --plots`` with a parse error. (None of identcheck's own labels uses the
+    notation.)"""
+    from matplotlib.text import Text
+
+    for text in fig.findobj(Text):
+        text.set_parse_math(False)
+
+
 def save(fig, path, dpi: int = 110, rect=None) -> Path:
     """Lay out ``fig`` (within ``rect``, figure fraction, when room is kept for a legend) and write it to
     ``path`` (PNG/SVG by extension); returns the path."""
+    as_written(fig)
     fig.tight_layout(rect=rect)
     with replacing(path) as tmp:
         fig.savefig(tmp, dpi=dpi)           # the temporary name keeps the ending that chooses the format
@@ -35,6 +47,7 @@ def svg_text(fig, rect=None) -> str:
 
     from matplotlib import rc_context
 
+    as_written(fig)
     fig.tight_layout(rect=rect)
     buf = io.StringIO()
     with rc_context({"svg.hashsalt": "identcheck", "svg.fonttype": "none"}):
