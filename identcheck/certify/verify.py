@@ -7,6 +7,7 @@ digits, local certificates replayed, tables re-checked row by row.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 
 from identcheck.certify import counterexamples, jacobian
@@ -76,6 +77,39 @@ def read(path) -> dict:
     return doc
 
 
+MAX_EXPONENT = 4300
+"""The largest power of ten a number written in a certificate may carry (``1e4300``): its exact rational has as many
+digits as Python reads from text by default. A certificate's own numbers are fractions of a few hundred digits at
+most; ``1e100000000`` in a sample had kept ``verify`` computing an exact 10^100000000 past any time limit."""
+MAX_TEXT = 100_000
+"""The longest text (characters) one field of a certificate may hold."""
+_NUMBER = re.compile(r"\s*[+-]?(?:\d[\d_]*\.?\d*|\.\d+)(?:[eE][+-]?(\d+))?"
+                     r"(?:\s*/\s*[+-]?(?:\d[\d_]*\.?\d*|\.\d+)(?:[eE][+-]?(\d+))?)?\s*")
+
+
+def oversized(doc, path: str = "") -> list[str]:
+    """The fields of `doc` (a JSON value) no certificate holds: a text longer than :data:`MAX_TEXT`, or a number
+    written as text with a power of ten beyond :data:`MAX_EXPONENT`, each as ``"field PATH: ..."``; checked before
+    anything is computed from them."""
+    out = []
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            out += oversized(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            out += oversized(v, f"{path}[{i}]")
+    elif isinstance(doc, str):
+        if len(doc) > MAX_TEXT:
+            out.append(f"field {path}: a text of {len(doc)} characters, beyond the {MAX_TEXT} a certificate holds")
+        else:
+            number = _NUMBER.fullmatch(doc)
+            powers = [e for e in number.groups() if e] if number else []
+            if any(len(e.lstrip("0")) > 6 or int(e) > MAX_EXPONENT for e in powers):
+                out.append(f"field {path}: the number {doc[:40]!r}{'...' if len(doc) > 40 else ''} carries a power of "
+                           f"ten beyond 1e{MAX_EXPONENT}, which no certificate holds")
+    return out
+
+
 def verify(certificate, source: str | None = None, progress=None) -> VerifyResult:
     """Re-check ``certificate`` (a path to a saved certificate or table, or its JSON object).
 
@@ -100,6 +134,10 @@ def verify(certificate, source: str | None = None, progress=None) -> VerifyResul
     if not isinstance(fmt, str) or fmt not in FORMATS:
         raise InputError([f"unknown certificate format {fmt!r} (expected one of {', '.join(FORMATS)})"],
                          source=source)
+    huge = oversized(doc)
+    if huge:
+        return VerifyResult(ok=False, problems=tuple(f"malformed {fmt} document ({p})" for p in huge),
+                            certificate=source, format=fmt)
     if progress:
         progress(f"re-checking {source} ({fmt}) from its own data")
     problems = []

@@ -1,8 +1,9 @@
 """Exact rank over the rationals, and replayable certificates."""
 import json
+import time
 
 import sympy as sp
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 from identcheck.certify import exact_rank as certify
 from identcheck import cli
@@ -87,3 +88,41 @@ def test_samples_beyond_the_distinct_tangents_are_refused_before_any_work(capsys
     assert "--samples 676" in capsys.readouterr().err
     draws = certify.draw_angles(case("revolute", 2, 1), __import__("random").Random(3), 675)
     assert all(len(set(col)) == 675 for col in zip(*draws))
+
+
+def _numeric_paths(doc, path=()):
+    """The paths of the text fields of `doc` that read as exact numbers."""
+    from fractions import Fraction
+
+    if isinstance(doc, dict):
+        return [p for k, v in doc.items() for p in _numeric_paths(v, path + (k,))]
+    if isinstance(doc, list):
+        return [p for i, v in enumerate(doc) for p in _numeric_paths(v, path + (i,))]
+    if isinstance(doc, str):
+        try:
+            Fraction(doc)
+            return [path]
+        except (ValueError, ZeroDivisionError):
+            return []
+    return []
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10**6), st.integers(4301, 10**12), st.sampled_from(["1e{}", "-3E+{}", "2.5e{}/7", "1/1e{}"]))
+def test_a_number_with_a_huge_power_of_ten_is_rejected_by_field_at_once(pick, power, form):
+    """A number no certificate holds (a power of ten beyond 1e4300) is named by its field and rejected before any
+    arithmetic: 1e100000000 in a sample had kept verify computing past any time limit."""
+    from identcheck.certify.verify import verify
+
+    cert = certify.rank("revolute", 2, 1, seed=3).to_dict()
+    paths = _numeric_paths(cert)
+    path = paths[pick % len(paths)]
+    node = cert
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = form.format(power)
+    started = time.process_time()
+    result = verify(cert)
+    assert not result.ok and time.process_time() - started < 5.0
+    named = "".join(f"[{k}]" if isinstance(k, int) else f".{k}" for k in path).lstrip(".")
+    assert any(f"field {named}:" in p for p in result.problems)
