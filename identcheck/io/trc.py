@@ -10,7 +10,8 @@ Layout (tab-separated; line numbers from 1)::
     6+ 1  0.000  x  y  z  x  y  z ...     (blank lines are skipped; empty cell = occluded)
 
 Coordinates are converted to millimetres. The frame rate comes from ``DataRate`` (``CameraRate`` if
-absent); Frame# gives the file's numbering of its frames, and Frame# and Time must not go backwards.
+absent), and the Time column must step at it (within 1 % over the file); Frame# gives the file's numbering of its
+frames, and Frame# and Time must not go backwards.
 """
 from __future__ import annotations
 
@@ -266,6 +267,9 @@ def read_trc(path) -> MarkerData:
         raise InputError(problems, source=src)
     xyz = values.reshape(len(rows), len(labels), 3)
     _check_samples(xyz * factor, factor, rows, linenos, labels, src)
+    clash = _rate_against_time(rows, linenos, rate_hz)
+    if clash:
+        raise InputError([clash], source=src)
     partial = np.isnan(xyz).any(axis=2) & ~np.isnan(xyz).all(axis=2)
     if partial.any():
         f, m = np.argwhere(partial)[0]
@@ -300,6 +304,27 @@ def _column(rows: list, col: int) -> np.ndarray | None:
         return np.array([float(r[col]) for r in rows])
     except (ValueError, IndexError):
         return None
+
+
+RATE_TOLERANCE = 0.01
+"""How far (relative) the rate the Time column steps at, over the whole file, may stand from ``DataRate`` (a time
+printed with few decimals rounds each step: at 60 Hz with three decimals, 0.017 s or 0.016 s)."""
+
+
+def _rate_against_time(rows: list, linenos: list, rate_hz: float) -> str:
+    """'' when the Time column (seconds) steps at ``DataRate`` from row to row (each row a frame, as the reader takes
+    them), else what disagrees: every delay, velocity and frequency comes from the rate, and a DataRate of 1000 over a
+    Time column stepping by 0.01 s had read a 37.4 ms delay as 3.74 ms, silently. Not checked when the column is not
+    numeric or its times do not rise."""
+    times = _column(rows, 1)
+    if times is None or len(rows) < 3 or not times[-1] > times[0]:
+        return ""
+    per_frame = float(times[-1] - times[0]) / (len(times) - 1)      # the whole span: rounded steps average out
+    if abs(rate_hz * per_frame - 1.0) <= RATE_TOLERANCE:
+        return ""
+    return (f"line 3: DataRate {rate_hz:g} Hz, but the Time column steps by {per_frame:.6g} s a frame (lines "
+            f"{linenos[0]}-{linenos[-1]}), a rate of {1.0 / per_frame:.6g} Hz: which is right? Correct DataRate (or "
+            "the Time column) so that they agree")
 
 
 def _frame_order(rows: list, linenos: list) -> list[str]:
