@@ -576,6 +576,15 @@ def preflight(a) -> list:
                             "capture system's markers are a metre off; typical systems 0.1-2 mm)")
         if a.frames is not None and capture.frames_problem(a.frames):
             problems.append(f"--frames {capture.frames_problem(a.frames)}")
+        if a.motion is not None:
+            from identcheck.fit.predict import MOTIONS
+
+            if str(a.motion).lower().endswith(TRIAL_SUFFIXES):
+                if not os.path.isfile(a.motion):
+                    problems.append(f"--motion {a.motion}: no such trial file")
+            elif a.motion not in MOTIONS:
+                problems.append(f"--motion {a.motion!r}: one of {', '.join(MOTIONS)}, or a recorded trial "
+                                f"({', '.join(TRIAL_SUFFIXES)})")
     elif a.verb == "plan":
         given = [f"--{o} {getattr(a, o)}" for o in ("motion", "frames") if getattr(a, o) is not None]
         if given:

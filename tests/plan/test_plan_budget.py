@@ -4,6 +4,7 @@ report progress, instead of running on; within the budget they analyse everythin
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -132,3 +133,16 @@ def test_the_check_that_fewer_markers_would_not_do_stops_at_its_budget_and_says_
     assert sorted(s["segment"] for s in res["suggestions"]) == [f"leaf{k}" for k in range(6)]
     assert res["unfinished"]["suggestions_minimal"] is False and res["suggestions_check"]["minimal"] is False
     assert "may not be the fewest" in res["unfinished"]["reason"]
+
+
+@pytest.mark.parametrize("motion", ["bogus", "Functional", "no_such_trial.trc", "flexion,small"])
+def test_a_motion_plan_cannot_use_is_refused_before_any_analysis(motion, monkeypatch, capsys):
+    """``--motion`` is checked with the arguments (exit 2), not after the whole analysis (a 60-segment chain had run
+    7.6 s before its name was refused)."""
+    def analysed(*args, **kwargs):
+        raise AssertionError("the plan was analysed")
+
+    monkeypatch.setattr(api, "plan", analysed)
+    model = str(Path(__file__).resolve().parents[2] / "examples" / "leg.toml")
+    assert cli.main(["plan", model, "--noise-mm", "1", "--motion", motion]) == 2
+    assert "--motion" in capsys.readouterr().err
