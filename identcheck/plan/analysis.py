@@ -602,27 +602,33 @@ def _with_extra(spec: tree_rank.TreeSpec, extra: dict) -> tree_rank.TreeSpec:
     return tree_rank.TreeSpec(spec.root, markers, spec.joints, spec.frozen, spec.known)
 
 
-def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0) -> dict:
+def fewest_local(spec: tree_rank.TreeSpec, rows: dict, seed: int = 0, budget: Budget | None = None) -> dict:
     """A finding: the fewest markers, kept from this plan, for which every joint stays locally identifiable
-    (greedy removal, each removal checked by the whole-tree rank)."""
-    current = spec
-    removed = []
-    changed = True
-    while changed:
-        changed = False
-        for seg, ms in current.markers.items():
-            for m in ms:
-                cand = current.without(m)
-                if all(j.local for j in tree_rank.analyse(cand, "GFp", seed).joints.values()):
-                    current, changed = cand, True
-                    removed.append(m)
-                    break
-            if changed:
-                break
+    (greedy removal, each removal checked by the whole-tree rank), within `budget`.
+
+    Each marker is tried once, in order: a marker that cannot go leaves a joint undetermined, and with fewer markers
+    beside it still would (the whole-tree rank only falls as markers go), so trying it again after later removals,
+    as a restart from the first marker after each removal did, finds nothing new; that had taken the square of the
+    markers' count in ranks (a 20-segment chain of 3 markers each past 120 s, whatever ``--max-seconds`` said). Out
+    of time, the markers not tried yet are kept and ``complete`` is false."""
+    budget = budget or Budget(float("inf"))
+    current, removed = spec, []
+    markers = [m for ms in spec.markers.values() for m in ms]
+    complete = True
+    for k, m in enumerate(markers, 1):
+        if budget.spent():
+            complete = False
+            break
+        budget.tick("fewest markers keeping every joint locally identifiable", k, len(markers))
+        cand = current.without(m)
+        if all(j.local for j in tree_rank.analyse(cand, "GFp", seed).joints.values()):
+            current = cand
+            removed.append(m)
     kept = sum(len(ms) for ms in current.markers.values())
     return {"markers": kept, "removable": removed,
             "per_segment": {s: list(ms) for s, ms in current.markers.items()},
-            "method": "greedy removal while every joint stays locally identifiable (whole-tree rank)"}
+            "method": "greedy removal while every joint stays locally identifiable (whole-tree rank)",
+            "complete": complete}
 
 
 def _suggestion_keys(fix: Fix) -> dict:
@@ -701,6 +707,10 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
             doc["joints"][n]["motion_needed"] = None if "motion_needed" in budget.skipped else needs[n]
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed, budget, windows)
+    if fewest:
+        doc["fewest_local"] = fewest_local(spec, rows, seed, Budget(max_seconds, progress))
+        if not doc["fewest_local"]["complete"]:
+            doc.setdefault("unfinished", {})["fewest_local"] = True
     reasons = []
     if budget.skipped:
         doc["unfinished"] = dict(doc.get("unfinished", {}), **budget.skipped)
@@ -714,10 +724,12 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
     if "suggestions_minimal" in doc.get("unfinished", {}):
         reasons.append(f"the check that no plan with fewer markers passes stopped at its budget of {budget.seconds:g} "
                        "s: the suggestion passes but may not be the fewest; `plan --max-seconds` raises it")
+    if doc.get("unfinished", {}).get("fewest_local"):
+        seconds = ANALYSES_BUDGET_S if max_seconds is None else max_seconds
+        reasons.append(f"the greedy removal behind fewest_local stopped at its budget of {seconds:g} s: the markers "
+                       "not tried yet are kept; `plan --max-seconds` raises it")
     if reasons:
         doc["unfinished"]["reason"] = "; ".join(reasons)
-    if fewest:
-        doc["fewest_local"] = fewest_local(spec, rows, seed)
     undetermined = {n: list(plan.rank.joints[n].undetermined) for n, j in plan.joints.items() if not j["local"]}
     if undetermined:
         doc["undetermined"] = undetermined

@@ -256,8 +256,10 @@ def plan_text(result) -> str:
         lines.append("shared motion: " + doc["shared_motion"])
     if doc.get("fewest_local"):
         f = doc["fewest_local"]
+        stopped = "; stopped at its time budget: the markers not tried yet are kept" if f.get("complete") is False \
+            else ""
         lines.append(f"fewest markers keeping every joint locally identifiable: {f['markers']} "
-                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']})")
+                     f"(can drop {', '.join(f['removable']) or 'none'}; {f['method']}{stopped})")
     if doc.get("practical_suggestions"):
         lines.append("one more marker, by predicted gain: " + _practical_suggestions_text(doc["practical_suggestions"]))
     elif doc.get("practical_suggestions_note"):

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from identcheck import api, cli
 
@@ -146,3 +147,51 @@ def test_a_motion_plan_cannot_use_is_refused_before_any_analysis(motion, monkeyp
     model = str(Path(__file__).resolve().parents[2] / "examples" / "leg.toml")
     assert cli.main(["plan", model, "--noise-mm", "1", "--motion", motion]) == 2
     assert "--motion" in capsys.readouterr().err
+
+
+def test_fewest_out_of_time_keeps_what_it_did_not_try_and_says_so(tmp_path):
+    """``--fewest``'s greedy removal stops at its budget (a 20-segment chain had run past 120 s whatever
+    ``--max-seconds`` said): nothing removed beyond what it tried, ``complete`` false, ``unfinished`` and the text
+    say so."""
+    from identcheck.report.text import plan_text
+
+    model = chain_model(tmp_path / "chain.toml", 6)
+    res = api.plan(model, fewest=True, motion=False, robust=False, max_seconds=1e-9)
+    doc = res.to_dict()
+    f = doc["fewest_local"]
+    assert f["complete"] is False and f["removable"] == [] and doc["unfinished"]["fewest_local"] is True
+    assert "fewest_local stopped at its budget" in doc["unfinished"]["reason"]
+    assert "stopped at its time budget" in plan_text(res)
+
+
+def _restarting_removal(spec, seed: int = 0) -> list:
+    """The greedy removal as it was written first: after each removal, start again from the first marker."""
+    from identcheck.certify import tree_rank
+
+    removed, changed = [], True
+    while changed:
+        changed = False
+        for m in [m for ms in spec.markers.values() for m in ms]:
+            cand = spec.without(m)
+            if all(j.local for j in tree_rank.analyse(cand, "GFp", seed).joints.values()):
+                spec, changed = cand, True
+                removed.append(m)
+                break
+    return removed
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(st.integers(1, 3), min_size=2, max_size=5), st.lists(st.booleans(), min_size=4, max_size=4))
+def test_trying_each_marker_once_removes_what_restarting_removed(tmp_path_factory, counts, balls):
+    """The whole-tree rank only falls as markers go, so a marker that cannot go cannot go later either: one pass
+    over the markers removes exactly what restarting from the first marker after each removal did."""
+    from identcheck.certify import tree_rank
+    from identcheck.io.model import Model
+    from identcheck.plan.analysis import fewest_local
+
+    segs = {f"s{i}": {"markers": [f"m{i}{k}" for k in range(c)]} for i, c in enumerate(counts)}
+    joints = {f"j{i}": {"type": "spherical" if balls[i % len(balls)] else "revolute", "parent": f"s{i}",
+                        "child": f"s{i + 1}"} for i in range(len(counts) - 1)}
+    spec = tree_rank.TreeSpec.from_model(Model.from_dict({"units": "mm", "segments": segs, "joints": joints}))
+    found = fewest_local(spec, {}, 0)
+    assert found["complete"] and found["removable"] == _restarting_removal(spec)
