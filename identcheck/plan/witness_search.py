@@ -23,6 +23,7 @@ The joint constraints hold exactly for every parameter value (:mod:`identcheck.p
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import mpmath
@@ -135,10 +136,17 @@ def _residual(L, x, F, data):
     return (K.positions(L, x, F) - data).ravel()
 
 
-def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, frames_only: bool = False):
+def past(deadline: float | None) -> bool:
+    """Whether ``time.monotonic()`` is beyond `deadline` (never, without one)."""
+    return deadline is not None and time.monotonic() > deadline
+
+
+def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, frames_only: bool = False,
+                 deadline: float | None = None):
     """Minimum-norm Gauss-Newton to a zero residual, halving a step that would raise the residual;
     ``extra(x) -> (value, gradient)`` adds one equation, as one more least-squares row (met exactly when
-    the system is consistent, as along a family of exact solutions).
+    the system is consistent, as along a family of exact solutions); no iteration begins past `deadline`
+    (``time.monotonic()``).
     Returns (x, max |marker error|)."""
     x = x.copy()
     data = np.asarray(data, dtype=float)
@@ -152,6 +160,8 @@ def gauss_newton(L: K.Layout, x, F: int, data, extra=None, max_iter: int = 40, f
     c, r = cost(x)
     history = [np.abs(r).max(initial=0.0)]
     for _ in range(max_iter):
+        if past(deadline):
+            break
         J = jacobian(L, x, F, frames_only)
         rows, rhs = [J], [-r]
         if extra is not None:
@@ -351,7 +361,7 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
               undetermined: list | None = None, held_out_truth: np.ndarray | None = None, n_held_out: int = 0,
               change: float = 0.05, via: tuple = (),
               case_points: dict | None = None, judged: tuple = (), n_random: int = 0, seed: int = 0,
-              memo: dict | None = None) -> "Search":
+              memo: dict | None = None, deadline: float | None = None) -> "Search":
     """Search for and verify an alternative skeleton with ``joint``'s quantities changed that reproduces
     the trial of the true skeleton ``truth_x`` (its vector over ``n_frames`` frames). The trial is the
     truth's markers evaluated at 50 digits (the truth's float parameters taken as exact), so truth and
@@ -365,6 +375,9 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     ``judged``: the points the whole-tree verdict judged each joint against (:class:`~identcheck.plan.
     tree_kinematics.Layout`), so an alternative counts as different only by the joint's own quantities.
 
+    No start is descended, and no Gauss-Newton iteration begins, past `deadline` (``time.monotonic()``); the search
+    then says so (``out_of_time``).
+
     Returns a :class:`Search`: the first verified witness, else the best unverified attempt (``verified``
     False), else none — which is not a proof that nothing exists."""
     L = K.Layout(spec, judged)
@@ -373,7 +386,9 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
     best, misses, back = None, [], 0
     for cand, err in _candidates(L, truth_x, F, data, joint, method, undetermined, change, via, case_points,
-                                 n_random, seed, memo):
+                                 n_random, seed, memo, deadline):
+        if past(deadline):
+            break
         if err is None:
             back += 1
             continue
@@ -385,7 +400,7 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
             return Search(w, back + len(misses) + 1, back, min(misses, default=None))
         if best is None or w.held_out_residual_mm < best.held_out_residual_mm:
             best = w
-    return Search(best, back + len(misses) + (best is not None), back, min(misses, default=None))
+    return Search(best, back + len(misses) + (best is not None), back, min(misses, default=None), past(deadline))
 
 
 @dataclass
@@ -398,10 +413,11 @@ class Search:
     attempts: int
     back_to_truth: int
     closest_miss_mm: float | None
+    out_of_time: bool = False
 
 
 def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=(), case_points=None, n_random=0,
-                seed=0, memo=None):
+                seed=0, memo=None, deadline=None):
     """(skeleton, max marker error) after Gauss-Newton from each start, most promising first (a generator):
     an error below ``TOL_FLOAT`` is a candidate alternative, None a start that led back to the truth."""
     def done(cand, err):        # err None: it converged back to the truth
@@ -416,8 +432,12 @@ def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=()
         raise ValueError(f"unknown method {method!r}")
     def descend(key, make):         # Gauss-Newton from each start once, whichever joint's search asks first
         if memo is None or key not in memo:
-            runs = [gauss_newton(L, start, F, data) for start in make()]
-            if memo is None:
+            runs = []
+            for start in make():
+                if past(deadline):
+                    return runs                          # cut short: not kept for the next search
+                runs.append(gauss_newton(L, start, F, data, deadline=deadline))
+            if past(deadline) or memo is None:
                 return runs
             memo[key] = runs
         return memo[key]

@@ -195,3 +195,35 @@ def test_trying_each_marker_once_removes_what_restarting_removed(tmp_path_factor
     spec = tree_rank.TreeSpec.from_model(Model.from_dict({"units": "mm", "segments": segs, "joints": joints}))
     found = fewest_local(spec, {}, 0)
     assert found["complete"] and found["removable"] == _restarting_removal(spec)
+
+
+def test_a_witness_search_under_way_stops_at_its_deadline(tmp_path):
+    """A search past its deadline descends no start and says so (``out_of_time``), and Gauss-Newton begins no
+    iteration; the plan then answers the joint ``not_searched`` and lists it unfinished (a 20-segment chain's first
+    search had run past 120 s with a 5 s budget)."""
+    import time
+
+    import numpy as np
+
+    from identcheck.certify import tree_rank
+    from identcheck.io.model import Model
+    from identcheck.plan import tree_kinematics as K
+    from identcheck.plan import witness as plan_witness
+    from identcheck.plan import witness_search as W
+    from identcheck.plan.analysis import analyse
+
+    model = Model.from_toml(chain_model(tmp_path / "chain.toml", 5))       # its last joint is not identifiable
+    spec = tree_rank.TreeSpec.from_model(model)
+    p = analyse(spec)
+    todo = [n for n, j in p.joints.items() if not j["identifiable"]]
+    assert todo
+    name = todo[0]
+    truth, held = plan_witness.simulated_truth(model, spec, 20, seed=2)
+    gone = time.monotonic() - 1.0
+    search = W.construct(spec, truth, 20, name, "isolated" if p.joints[name]["local"] else "family",
+                         undetermined=p.rank.joints[name].undetermined, held_out_truth=held, n_held_out=20,
+                         deadline=gone)
+    assert search.out_of_time and search.attempts == 0 and search.witness is None
+    L = K.Layout(spec)
+    moved, _ = W.gauss_newton(L, truth + 0.01, 20, W.trial(L, truth, 20), deadline=gone)
+    assert np.array_equal(moved, truth + 0.01)
