@@ -21,6 +21,7 @@ import numpy as np
 from identcheck.skeleton import Skeleton
 from identcheck.errors import InputError
 from identcheck.io.jsonable import plain
+from identcheck.io.model import refuse_exported_points
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
@@ -281,6 +282,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     trial, unprefixed = trial.unprefixed(model.markers)
     if unprefixed:
         warnings.warn(unprefixed, UserWarning, stacklevel=2)
+    refuse_exported_points(trial, model.joints)
     model.require_markers_in(trial)
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)

@@ -8,7 +8,7 @@ import math
 from identcheck.errors import InputError
 from identcheck.estimate.closed_forms import fit_model
 from identcheck.estimate.screen_findings import with_screen_findings
-from identcheck.io.model import reserved_names
+from identcheck.io.model import refuse_exported_points
 
 log = logging.getLogger("identcheck")
 
@@ -80,13 +80,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     from identcheck.fit.whole_tree import merge_report, misfit_warnings
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
-    reserved = reserved_names(model.joints)
-    clash = sorted(set(reserved) & set(trial.labels))
-    if clash:
-        raise InputError([f"marker {m!r} carries the name fit gives a virtual marker of joint {reserved[m]!r}; rename "
-                          "it" for m in clash] + [
-            "a file `--export-markers` wrote holds such points: they are a fit's output, not measured markers; fit "
-            "the trial it was exported from"], source=trial.source)
+    refuse_exported_points(trial, model.joints)
     model.require_markers_in(trial)
     trial, spikes = without_spikes(trial)
     centred, offset = trial.recentred()

@@ -20,6 +20,7 @@ from identcheck.infer.joint_markers import markers_on_joints
 from identcheck.infer.joint_types import classify_posed, classify_small, noise_wobble_deg
 from identcheck.infer.model_writer import check_model, model_text, write_model
 from identcheck.infer.result import SkeletonResult
+from identcheck.io.model import refuse_exported_points
 from identcheck.infer.tree import FLOOR_TRUST, infer_tree
 from identcheck.infer.two_segments import check_groups
 from identcheck.io.model import virtual_names
@@ -211,6 +212,16 @@ def _export(path, trial, columns: dict) -> None:
     trial.replace(xyz=np.concatenate([data, extra], axis=1), labels=trial.labels + tuple(columns)).to_file(path)
 
 
+def exported_joints(labels) -> list:
+    """The joints whose virtual markers `labels` hold as ``--export-markers`` writes them: ``J.centre``, or both
+    ``J.axis0`` and ``J.axis1`` (a trial has no model here, so the names alone tell; a single ``X.axis0`` may be a
+    marker's own name)."""
+    names = set(labels)
+    balls = [m[:-len(".centre")] for m in names if m.endswith(".centre") and len(m) > len(".centre")]
+    hinges = [m[:-len(".axis0")] for m in names if m.endswith(".axis0") and m[:-1] + "1" in names]
+    return sorted(set(balls) | set(hinges))
+
+
 def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "--segments",
                    root: str | None = None, out=None, export=None, progress=None) -> SkeletonResult:
     """Infer the segments, the tree and the joint types from a trial, write the model file, play the trial back.
@@ -243,6 +254,7 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
         in `segments`, no group with a pose), or a bad root.
     """
     say = progress or (lambda msg: None)
+    refuse_exported_points(trial, exported_joints(trial.labels))
     say("grouping the markers into rigid segments" if segments is None else f"segments from {segments_source}")
     grouping = group_markers(trial) if segments is None else given_grouping(trial, segments, segments_source)
     centred, offset = trial.recentred()

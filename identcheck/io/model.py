@@ -477,6 +477,21 @@ def reserved_names(joints) -> dict[str, str]:
     return {n: j for j in joints for kind in JOINT_TYPES for n in virtual_names(j, kind)}
 
 
+def refuse_exported_points(trial, joints) -> None:
+    """Raise InputError when `trial` holds a marker named like a virtual marker of one of `joints` (``hip_r.centre``,
+    ``knee_r.axis0``): a file ``--export-markers`` wrote, whose joint points are a fit's output, not measured
+    markers. ``fit`` refused such a file; ``diagnose`` had fitted it as measured, and named no effect."""
+    from identcheck.errors import InputError
+
+    reserved = reserved_names(joints)
+    clash = sorted(set(reserved) & set(trial.labels))
+    if clash:
+        raise InputError([f"marker {m!r} carries the name fit gives a virtual marker of joint {reserved[m]!r}; rename "
+                          "it" for m in clash] + [
+            "a file `--export-markers` wrote holds such points: they are a fit's output, not measured markers; use "
+            "the trial it was exported from"], source=trial.source)
+
+
 def _reserved_markers(segments: Mapping[str, Segment], joints: Mapping[str, Joint]) -> list[str]:
     """A marker named like a joint's virtual marker (``hip_r.centre``): the two would be taken for each other."""
     reserved = reserved_names(joints)

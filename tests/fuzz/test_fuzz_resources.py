@@ -208,7 +208,7 @@ def test_an_exported_marker_file_given_back_to_fit_says_where_it_came_from(run, 
     out = tmp_path / "with_joints.trc"
     assert run(["fit", LEG, corpus / "leg.trc", "--export-markers", out]).code in (0, 1)
     res = run(["fit", LEG, out])
-    assert res.code == 2 and res.names("virtual marker", "--export-markers", "fit the trial it was exported from"), \
+    assert res.code == 2 and res.names("virtual marker", "--export-markers", "use the trial it was exported from"), \
         res.err
 
 
