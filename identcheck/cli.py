@@ -368,8 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fast", action="store_true", help="skip the per-marker robustness and motion analyses")
     s.add_argument("--max-seconds", type=float, default=None, metavar="S",
                    help="time budget of the robustness and motion analyses together (default 30), separately of "
-                        "the search for the fewest markers to add (default 30) and of the --witness searches "
-                        "(default 120); what they leave unchecked is listed under 'unfinished'")
+                        "the search for the fewest markers to add (default 30), of --fewest (default 30) and of "
+                        "the --witness searches (default 120); what they leave unchecked is listed under "
+                        "'unfinished'")
     s.add_argument("--fewest", action="store_true",
                    help="also report the fewest of the plan's markers that keep every joint locally identifiable")
     s.add_argument("--witness", action="store_true",
@@ -577,14 +578,10 @@ def preflight(a) -> list:
         if a.frames is not None and capture.frames_problem(a.frames):
             problems.append(f"--frames {capture.frames_problem(a.frames)}")
         if a.motion is not None:
-            from identcheck.fit.predict import MOTIONS
+            from identcheck.fit.predict import motion_problem
 
-            if str(a.motion).lower().endswith(TRIAL_SUFFIXES):
-                if not os.path.isfile(a.motion):
-                    problems.append(f"--motion {a.motion}: no such trial file")
-            elif a.motion not in MOTIONS:
-                problems.append(f"--motion {a.motion!r}: one of {', '.join(MOTIONS)}, or a recorded trial "
-                                f"({', '.join(TRIAL_SUFFIXES)})")
+            if motion_problem(a.motion):
+                problems.append(motion_problem(a.motion))
     elif a.verb == "plan":
         given = [f"--{o} {getattr(a, o)}" for o in ("motion", "frames") if getattr(a, o) is not None]
         if given:

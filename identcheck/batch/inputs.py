@@ -273,16 +273,14 @@ def _plan_jobs(items, model, frames, noise_mm, motion, seed, fast, problems) -> 
         if motion not in (None, "", []):
             problems.append("--motion applies with --noise-mm (the practical verdicts); give both")
         return [(os.path.abspath(m), None, plan_settings(seed, fast, None, None, None)) for m in models]
-    from identcheck.fit.predict import MOTIONS
+    from identcheck.fit.predict import MOTIONS, motion_problem
 
     checked = []
     for m in motions:
-        if m in MOTIONS:
-            checked.append(m)
-        elif _is_trial(m) and Path(m).is_file():
-            checked.append(os.path.abspath(m))
+        if motion_problem(m):
+            problems.append(motion_problem(m))
         else:
-            problems.append(f"--motion {m}: one of {', '.join(MOTIONS)}, or a recorded trial (.trc, .c3d)")
+            checked.append(m if m in MOTIONS else os.path.abspath(m))
     return [(os.path.abspath(m), None, plan_settings(seed, fast, s, mo, n_frames))
             for m in models for s in noises for mo in checked]
 

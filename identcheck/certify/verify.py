@@ -77,10 +77,11 @@ def read(path) -> dict:
     return doc
 
 
-MAX_EXPONENT = 4300
-"""The largest power of ten a number written in a certificate may carry (``1e4300``): its exact rational has as many
-digits as Python reads from text by default. A certificate's own numbers are fractions of a few hundred digits at
-most; ``1e100000000`` in a sample had kept ``verify`` computing an exact 10^100000000 past any time limit."""
+MAX_DIGITS = 4000
+"""The most digits a number written in a certificate may have, and the largest power of ten it may carry (``1e4000``):
+below the 4300 digits Python turns into text by default. A certificate's own numbers are fractions of a few hundred
+digits at most; ``1e100000000`` in a sample had kept ``verify`` computing an exact 10^100000000 past any time limit,
+and ``1e4300`` had been rejected with Python's own message, naming no field."""
 MAX_TEXT = 100_000
 """The longest text (characters) one field of a certificate may hold."""
 _NUMBER = re.compile(r"\s*[+-]?(?:\d[\d_]*\.?\d*|\.\d+)(?:[eE][+-]?(\d+))?"
@@ -89,8 +90,8 @@ _NUMBER = re.compile(r"\s*[+-]?(?:\d[\d_]*\.?\d*|\.\d+)(?:[eE][+-]?(\d+))?"
 
 def oversized(doc, path: str = "") -> list[str]:
     """The fields of `doc` (a JSON value) no certificate holds: a text longer than :data:`MAX_TEXT`, or a number
-    written as text with a power of ten beyond :data:`MAX_EXPONENT`, each as ``"field PATH: ..."``; checked before
-    anything is computed from them."""
+    written as text with more than :data:`MAX_DIGITS` digits or a power of ten beyond it, each as
+    ``"field PATH: ..."``; checked before anything is computed from them."""
     out = []
     if isinstance(doc, dict):
         for k, v in doc.items():
@@ -104,9 +105,10 @@ def oversized(doc, path: str = "") -> list[str]:
         else:
             number = _NUMBER.fullmatch(doc)
             powers = [e for e in number.groups() if e] if number else []
-            if any(len(e.lstrip("0")) > 6 or int(e) > MAX_EXPONENT for e in powers):
-                out.append(f"field {path}: the number {doc[:40]!r}{'...' if len(doc) > 40 else ''} carries a power of "
-                           f"ten beyond 1e{MAX_EXPONENT}, which no certificate holds")
+            digits = sum(c.isdigit() for c in doc) if number else 0
+            if any(len(e.lstrip("0")) > 6 or int(e) > MAX_DIGITS for e in powers) or digits > MAX_DIGITS:
+                out.append(f"field {path}: the number {doc[:40]!r}{'...' if len(doc) > 40 else ''} has more than "
+                           f"{MAX_DIGITS} digits or a power of ten beyond 1e{MAX_DIGITS}, which no certificate holds")
     return out
 
 

@@ -9,11 +9,13 @@ The test is the median of three: per coordinate, the median of a sample and its 
 whenever that coordinate moves one way through the three frames, however fast; it differs only where the
 coordinate turns back within a frame, and there real motion is slow (the turn is where its velocity passes zero).
 A sample more than :data:`GROSS_JUMP_MM` from that median is a gross error: out by that much and back within
-one frame each is 20 m/s each way at 100 Hz. Smaller gross errors (15-60 mm ghosts) are ``diagnose``'s
-``outliers`` effect, which models them; this only keeps the impossible ones from wrecking the fits that effect
-starts from. A spike beside a gap, or two in a row, is not seen here (the median needs both neighbours, and two
-equal spikes are each other's median); beside a jump the median is the other neighbour, so in the fastest
-motions (some 10 m/s at 50 Hz) a good sample next to a jump can go too: one sample lost, never a jump kept.
+one frame each is 20 m/s each way at 100 Hz (below 49 Hz the limit grows with the frame interval squared,
+:func:`jump_limit`: at 15 Hz and below it passes 3.5 m, and a coordinate multiplied by ten is no longer caught
+here). Smaller gross errors (15-60 mm ghosts) are ``diagnose``'s ``outliers`` effect, which models them; this only
+keeps the impossible ones from wrecking the fits that effect starts from. A spike beside a gap, or two in a row, is
+not seen here (the median needs both neighbours, and two equal spikes are each other's median); beside a jump the
+median is the other neighbour, so in the fastest motions (some 10 m/s at 50 Hz) a good sample next to a jump can go
+too: one sample lost, never a jump kept.
 """
 from __future__ import annotations
 

@@ -49,6 +49,18 @@ went unreported. The number of starts stays capped (:data:`identcheck.bundle.sta
 one-joint change), each one bounded in time; the one-joint changes left out are said (``rivals_note``)."""
 
 
+def motion_problem(motion: str) -> str:
+    """'' when `motion` names one of :data:`MOTIONS` or an existing recorded trial (.trc, .c3d), else what is wrong:
+    checked with the arguments, before any analysis (``plan`` and ``batch``)."""
+    import os
+
+    if motion in MOTIONS:
+        return ""
+    if str(motion).lower().endswith((".trc", ".c3d")):
+        return "" if os.path.isfile(motion) else f"--motion {motion}: no such trial file"
+    return f"--motion {motion}: one of {', '.join(MOTIONS)}, or a recorded trial (.trc, .c3d)"
+
+
 def noise_free_fit(model, motion: str = "functional", n_frames: int = 1000, seed: int = 0, progress=None):
     """(the noise-free simulated capture of `model` under `motion`, the whole-tree fit of it from every candidate
     start): the truth the prediction linearises at (its best fit reproduces the simulator's skeleton)."""

@@ -481,8 +481,6 @@ def refuse_exported_points(trial, joints) -> None:
     """Raise InputError when `trial` holds a marker named like a virtual marker of one of `joints` (``hip_r.centre``,
     ``knee_r.axis0``): a file ``--export-markers`` wrote, whose joint points are a fit's output, not measured
     markers. ``fit`` refused such a file; ``diagnose`` had fitted it as measured, and named no effect."""
-    from identcheck.errors import InputError
-
     reserved = reserved_names(joints)
     clash = sorted(set(reserved) & set(trial.labels))
     if clash:

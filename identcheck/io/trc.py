@@ -307,20 +307,29 @@ def _column(rows: list, col: int) -> np.ndarray | None:
 
 
 RATE_TOLERANCE = 0.01
-"""How far (relative) the rate the Time column steps at, over the whole file, may stand from ``DataRate`` (a time
-printed with few decimals rounds each step: at 60 Hz with three decimals, 0.017 s or 0.016 s)."""
+"""How far (relative) the rate the Time column steps at, over the whole file, may stand from ``DataRate``, beyond what
+its printed digits can say (a time printed with few decimals rounds: at 60 Hz with three decimals each step reads
+0.017 s or 0.016 s, and over a short file the last digit alone is more than 1 %)."""
 
 
 def _rate_against_time(rows: list, linenos: list, rate_hz: float) -> str:
-    """'' when the Time column (seconds) steps at ``DataRate`` from row to row (each row a frame, as the reader takes
-    them), else what disagrees: every delay, velocity and frequency comes from the rate, and a DataRate of 1000 over a
-    Time column stepping by 0.01 s had read a 37.4 ms delay as 3.74 ms, silently. Not checked when the column is not
-    numeric or its times do not rise."""
-    times = _column(rows, 1)
+    """'' when the Time column (seconds) steps at ``DataRate`` per frame over the file, else what disagrees: every
+    delay, velocity and frequency comes from the rate, and a DataRate of 1000 over a Time column stepping by 0.01 s had
+    read a 37.4 ms delay as 3.74 ms, silently. The frames are counted by Frame# where it rises by whole numbers (a file
+    with rows left out is not a wrong rate), else by rows; the tolerance is :data:`RATE_TOLERANCE` or the Time
+    column's last printed digit over its span, whichever is larger. Not checked when Time is not numeric or does not
+    rise."""
+    times, frames = _column(rows, 1), _column(rows, 0)
     if times is None or len(rows) < 3 or not times[-1] > times[0]:
         return ""
-    per_frame = float(times[-1] - times[0]) / (len(times) - 1)      # the whole span: rounded steps average out
-    if abs(rate_hz * per_frame - 1.0) <= RATE_TOLERANCE:
+    whole = frames is not None and np.all(np.abs(frames) < 1e9) and np.all(frames == np.round(frames)) \
+        and np.all(np.diff(frames) > 0)              # (a frame number no capture reaches is no count of frames)
+    steps = float(frames[-1] - frames[0]) if whole else float(len(times) - 1)
+    span = float(times[-1] - times[0])
+    per_frame = span / steps
+    decimals = max((len(r[1].split(".")[1]) if "." in r[1] and "e" not in r[1].lower() else 0) for r in rows[:50])
+    tolerance = max(RATE_TOLERANCE, 10.0 ** -decimals / span)
+    if abs(rate_hz * per_frame - 1.0) <= tolerance:
         return ""
     return (f"line 3: DataRate {rate_hz:g} Hz, but the Time column steps by {per_frame:.6g} s a frame (lines "
             f"{linenos[0]}-{linenos[-1]}), a rate of {1.0 / per_frame:.6g} Hz: which is right? Correct DataRate (or "

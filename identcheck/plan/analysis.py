@@ -707,8 +707,9 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
             doc["joints"][n]["motion_needed"] = None if "motion_needed" in budget.skipped else needs[n]
     if robust:
         doc["robustness"] = robustness(spec, plan, rows, seed, budget, windows)
+    fewest_budget = Budget(max_seconds, progress)
     if fewest:
-        doc["fewest_local"] = fewest_local(spec, rows, seed, Budget(max_seconds, progress))
+        doc["fewest_local"] = fewest_local(spec, rows, seed, fewest_budget)
         if not doc["fewest_local"]["complete"]:
             doc.setdefault("unfinished", {})["fewest_local"] = True
     reasons = []
@@ -725,9 +726,8 @@ def plan_model(model, seed: int = 0, motion: bool = True, robust: bool = True, s
         reasons.append(f"the check that no plan with fewer markers passes stopped at its budget of {budget.seconds:g} "
                        "s: the suggestion passes but may not be the fewest; `plan --max-seconds` raises it")
     if doc.get("unfinished", {}).get("fewest_local"):
-        seconds = ANALYSES_BUDGET_S if max_seconds is None else max_seconds
-        reasons.append(f"the greedy removal behind fewest_local stopped at its budget of {seconds:g} s: the markers "
-                       "not tried yet are kept; `plan --max-seconds` raises it")
+        reasons.append(f"the greedy removal behind fewest_local stopped at its budget of {fewest_budget.seconds:g} s: "
+                       "the markers not tried yet are kept; `plan --max-seconds` raises it")
     if reasons:
         doc["unfinished"]["reason"] = "; ".join(reasons)
     undetermined = {n: list(plan.rank.joints[n].undetermined) for n, j in plan.joints.items() if not j["local"]}

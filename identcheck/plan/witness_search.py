@@ -230,14 +230,14 @@ def _quantity_fn(L, label, joint):
     return f, with_grad
 
 
-def _along_family(L, x0, F, data, joint, label, change, stages=4):
+def _along_family(L, x0, F, data, joint, label, change, stages=4, deadline=None):
     f, with_grad = _quantity_fn(L, label, joint)
     v0 = f(x0)
     x = x0
     for s in range(1, stages + 1):
         target = v0 + change * s / stages * max(abs(v0), FAMILY_FLOOR)
-        x, err = gauss_newton(L, x, F, data, extra=lambda z: with_grad(z, target), max_iter=15)
-    x, err = gauss_newton(L, x, F, data, max_iter=10)
+        x, err = gauss_newton(L, x, F, data, extra=lambda z: with_grad(z, target), max_iter=15, deadline=deadline)
+    x, err = gauss_newton(L, x, F, data, max_iter=10, deadline=deadline)
     return x, err
 
 
@@ -384,10 +384,11 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
     F = n_frames
     data = trial(L, truth_x, F)
     held_out = trial(L, held_out_truth, n_held_out) if n_held_out else None
-    best, misses, back = None, [], 0
+    best, misses, back, cut = None, [], 0, past(deadline)
     for cand, err in _candidates(L, truth_x, F, data, joint, method, undetermined, change, via, case_points,
                                  n_random, seed, memo, deadline):
-        if past(deadline):
+        if past(deadline):           # (a run the deadline cut short is no finding)
+            cut = True
             break
         if err is None:
             back += 1
@@ -400,7 +401,8 @@ def construct(spec: TreeSpec, truth_x: np.ndarray, n_frames: int, joint: str, me
             return Search(w, back + len(misses) + 1, back, min(misses, default=None))
         if best is None or w.held_out_residual_mm < best.held_out_residual_mm:
             best = w
-    return Search(best, back + len(misses) + (best is not None), back, min(misses, default=None), past(deadline))
+    cut = cut or past(deadline)      # (the starts may have stopped at it without a finding to break on)
+    return Search(best, back + len(misses) + (best is not None), back, min(misses, default=None), cut)
 
 
 @dataclass
@@ -426,7 +428,9 @@ def _candidates(L, truth_x, F, data, joint, method, undetermined, change, via=()
     if method == "family":
         for label in (undetermined or []):
             for ch in (change, -change, change / 5, -change / 5):
-                yield done(*_along_family(L, truth_x, F, data, joint, label, ch))
+                if past(deadline):
+                    return
+                yield done(*_along_family(L, truth_x, F, data, joint, label, ch, deadline=deadline))
         return
     if method != "isolated":
         raise ValueError(f"unknown method {method!r}")

@@ -1,6 +1,6 @@
 """``identify`` on a ball joint (spherical (3,q)) whose child hardly moves in its parent's frame: a sphere through a
 point that stays put is a tiny sphere around it, so the exact solver's one joint is no answer. A static trial, one
-turned by a fraction of a degree, or one whose child marker moves by no more than the noise is degenerate (exit 1
+turned by a fraction of a degree, or one whose child markers move by no more than the noise is degenerate (exit 1
 with what to record); a joint that turns is identified as before, near the truth."""
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def _true_distances(sim) -> dict:
 @given(st.integers(0, 2**31 - 1), st.floats(0.0, 1.0), st.sampled_from([0.0, 0.3, 1.0]))
 def test_a_ball_joint_that_hardly_turns_is_degenerate_not_unique(tmp_path_factory, seed, rom_deg, noise_mm):
     _, trial = _trial(tmp_path_factory.mktemp("still"), seed, rom_deg, noise_mm)
-    with pytest.raises(DegenerateError, match="hardly moves|does not place"):
+    with pytest.raises(DegenerateError, match="hardly moves"):
         api.identify(HIP, trial)
 
 
