@@ -194,14 +194,6 @@ MOTION_SIGMAS = 10.0
 of the one that moves most, along its widest direction) for a sphere through their samples to mean anything: a marker
 that stays put is fitted best by a tiny sphere around itself (a static hip trial gave a knee marker 0.00 mm from the
 centre, the truth 402.5 mm, exit 0)."""
-STILL_DEG = 2.0
-"""A ball joint whose child marker that moves most turns less than this, seen from the parent markers' mean, has
-hardly moved: the same tolerance ``fit`` and ``diagnose`` hold a joint's rotation to
-(:data:`identcheck.estimate.obrien.HINGE_TOL_DEG`). A subject standing still sways: on a real static pose a thigh
-marker moved 2.1 mm RMS in the pelvis's frame, 400 mm away, and its sphere put the hip 3.4 mm from it. (A joint that
-turns a few degrees more still leaves the exact solver's sphere biased small under noise: a hip turned ±5° under
-0.5 mm of noise put the knee marker 150-265 mm from the centre, truth 402.5 mm; ``fit`` judges that, ``identify``
-does not.)"""
 
 
 def _noise_sd(model: Model, trial: Trial, joint: str) -> float:
@@ -220,8 +212,15 @@ def _noise_sd(model: Model, trial: Trial, joint: str) -> float:
 
 def _require_motion(sel: np.ndarray, parent, child, sigma: float, source) -> None:
     """Raise DegenerateError when no child marker moves in the parent's frame well beyond the noise
-    (:data:`MOTION_SIGMAS`) and by more than :data:`STILL_DEG` seen from the parent markers: the joint hardly moved.
-    The joint is judged by the marker that moves most (one near the centre barely moves however the joint turns)."""
+    (:data:`MOTION_SIGMAS`) and turns, seen from the parent markers' mean, by more than the tolerance ``fit`` and
+    ``diagnose`` hold a joint's rotation to (:data:`identcheck.estimate.obrien.HINGE_TOL_DEG`): the joint hardly
+    moved. The joint is judged by the marker that moves most (one near the centre barely moves however the joint
+    turns). A subject standing still sways: on a real static pose a thigh marker moved 2.1 mm RMS in the pelvis's
+    frame, 400 mm away, and its sphere put the hip 3.4 mm from it. (A joint that turns a few degrees more still leaves
+    the exact solver's sphere biased small under noise: a hip turned ±5° under 0.5 mm of noise put the knee marker
+    150-265 mm from the centre, truth 402.5 mm; ``fit`` judges that, ``identify`` does not.)"""
+    from identcheck.estimate.obrien import HINGE_TOL_DEG as STILL_DEG    # (SciPy, as the noise estimate already)
+
     rot, _ = parent_frame(sel[:, 0], sel[:, 1], sel[:, 2] - sel[:, 0], names=(parent[0], parent[1], parent[2]))
     local = to_local(rot, sel[:, 0], sel)
     floor = max(sigma, 1e-6 * float(np.sqrt(np.mean(local[:, 3:] ** 2))))     # noise-free: float32 file precision

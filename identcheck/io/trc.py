@@ -10,8 +10,8 @@ Layout (tab-separated; line numbers from 1)::
     6+ 1  0.000  x  y  z  x  y  z ...     (blank lines are skipped; empty cell = occluded)
 
 Coordinates are converted to millimetres. The frame rate comes from ``DataRate`` (``CameraRate`` if
-absent), and the Time column must step at it (within 1 % over the file); Frame# gives the file's numbering of its
-frames, and Frame# and Time must not go backwards.
+absent), and the Time column must step at it (within 1 %, or its last printed digit, over the file); Frame#
+gives the file's numbering of its frames, and Frame# and Time must not go backwards.
 """
 from __future__ import annotations
 
