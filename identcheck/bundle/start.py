@@ -88,9 +88,16 @@ def state_from_joints(model, chain: Skeleton, data: np.ndarray, joints: dict):
 
 def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
     """:func:`state_from_joints` from each joint's first candidate of the closed-form fits
-    (:func:`~identcheck.estimate.closed_forms.fit_model`)."""
+    (:func:`~identcheck.estimate.closed_forms.fit_model`). A joint the closed forms left without one, because an
+    ambiguous joint above it lent no points, is started as ``fit`` starts it: from the first combination that
+    restarts it from that joint's candidates (:func:`start_combinations`). A one-marker shank below a one-marker
+    thigh had stopped ``diagnose`` as a foot no points pose, where ``fit`` determined every joint."""
     fitted, _ = fit_model(model, trial)
-    return state_from_joints(model, chain, data, {n: est for n, (est, _info) in fitted.items() if est is not None})
+    joints = {n: est for n, (est, _info) in fitted.items() if est is not None}
+    if any(j not in joints for j in chain.joints):
+        combos = start_combinations(chain, fitted, lambda fixed: fit_model(model, trial, fixed=fixed)[0], data)[0]
+        joints = combos[0] if combos else joints
+    return state_from_joints(model, chain, data, joints)
 
 
 def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float, source: str = "<array>"):

@@ -12,7 +12,7 @@ from identcheck.io.model import refuse_exported_points
 
 log = logging.getLogger("identcheck")
 
-__all__ = ["fit_model", "report", "fit_closed_then_tree", "fit_trial"]
+__all__ = ["fit_model", "report", "fit_closed_then_tree", "fit_trial", "with_restarted"]
 
 def _num(x):
     return None if x is None or not math.isfinite(x) else float(x)
@@ -54,10 +54,38 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     from identcheck.fit.whole_tree import STARTS_BUDGET_S, fit_tree  # imported when used, as fit_trial's own imports
 
     fitted, points = fit_model(model, trial, progress=progress)
-    tree = fit_tree(model, trial, fitted, progress=progress,
-                    restart=lambda fixed: fit_model(model, trial, fixed=fixed)[0],
+    restarts: list = []
+
+    def restart(fixed: dict) -> dict:
+        again = fit_model(model, trial, fixed=fixed)[0]
+        restarts.append((fixed, again))
+        return again
+
+    tree = fit_tree(model, trial, fitted, progress=progress, restart=restart,
                     starts_budget_s=STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s)
-    return fitted, points, tree
+    return with_restarted(fitted, restarts, tree), points, tree
+
+
+def with_restarted(fitted: dict, restarts: list, tree) -> dict:
+    """The closed-form joints, with each joint the first pass left without a start (an ambiguous joint above it
+    lent no virtual points) taken from the restart the best whole-tree minimum began at, when a marker beyond could
+    decide every joint that restart took a candidate of: its case is then the one its markers and that candidate's
+    points make. A one-marker shank below a one-marker thigh, with a marker on the foot, is posed by the knee's axis
+    points once a knee candidate is taken, so the ankle is revolute (3,1), identifiable, where ``fit`` had called it
+    revolute (1,1), not identifiable (exit 1), beside a whole-tree answer that determined it, against ``plan``'s
+    certificate. A joint below a knee nothing decides (ERRATA E1) inherits its candidates: it stays as the first
+    pass left it, not identifiable, as ``plan`` says (locally, not uniquely). `restarts`: (the candidates taken,
+    the closed forms they gave) per restart."""
+    if tree.best is None:
+        return fitted
+    joints = tree.best.fit.chain.joints
+    for fixed, again in restarts:
+        if all(j in again for j in joints) and tuple(id(again[j][0]) for j in joints) == tree.best.start:
+            if any(getattr(fitted[n][0], "nothing_beyond", True) for n in fixed):
+                return fitted
+            return {name: again[name] if est is None and again[name][0] is not None else (est, info)
+                    for name, (est, info) in fitted.items()}
+    return fitted
 
 
 def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:

@@ -1,0 +1,78 @@
+"""A chain of one-marker segments below a posed pelvis: the closed forms cannot start the ankle until the knee (an
+ambiguous revolute (2,1)) lends it axis points, and ``fit``, ``diagnose`` and ``plan`` must then agree on what
+is identifiable. ``fit`` had reported such an ankle ``revolute(1,1)``, not identifiable (exit 1), beside a
+whole-tree answer that determined it, and ``diagnose`` had refused the trial as a foot no points pose."""
+from __future__ import annotations
+
+import warnings
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck import api
+from identcheck.bundle.start import closed_form_state
+from identcheck.fit.whole_tree import skeleton_of
+from identcheck.fit.workflow import with_restarted
+from identcheck.io.model import Model
+from identcheck.simulate.rigid import simulate
+
+
+def _chain(ankle: str) -> Model:
+    return Model.from_dict({
+        "units": "mm",
+        "segments": {"pelvis": {"markers": ["P1", "P2", "P3"]}, "thigh": {"markers": ["T1"], "length_mm": 420},
+                     "shank": {"markers": ["S1"], "length_mm": 400}, "foot": {"markers": ["F1"], "length_mm": 200}},
+        "joints": {"hip": {"type": "spherical", "parent": "pelvis", "child": "thigh"},
+                   "knee": {"type": "revolute", "parent": "thigh", "child": "shank"},
+                   "ankle": {"type": ankle, "parent": "shank", "child": "foot"}}})
+
+
+@settings(max_examples=2)
+@given(seed=st.integers(0, 10_000), ankle=st.sampled_from(["revolute", "spherical"]))
+def test_fit_and_plan_agree_on_a_chain_of_one_marker_segments(seed, ankle):
+    """Random subjects of the chain: every joint ``plan`` certifies identifiable, ``fit`` calls identifiable, with
+    the case ``plan`` names (the ankle posed by the shank marker and the knee's two axis points: (3,1))."""
+    model = _chain(ankle)
+    planned = api.plan(model, motion=False, robust=False, suggest=False).to_dict()["joints"]
+    trial = simulate(model, n_frames=500, noise_mm=0.3, seed=seed).trial
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = api.fit(model, trial).joints
+    assert planned["ankle"]["identifiable"] and planned["ankle"]["case"] == f"{ankle}(3,1)"
+    for name, j in fitted.items():
+        assert j["identifiable"] == planned[name]["identifiable"], name
+    assert fitted["ankle"]["case"] == planned["ankle"]["case"]
+
+
+def test_diagnose_can_start_below_an_ambiguous_knee():
+    """The starting state of the whole tree (``diagnose``'s) poses every segment, the one-marker foot included."""
+    model = _chain("revolute")
+    sim = simulate(model, n_frames=300, noise_mm=0.3, seed=7)
+    chain = skeleton_of(model, sim.trial)
+    data = sim.trial.select(chain.labels).as_array()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        state = closed_form_state(model, sim.trial, chain, data)
+    assert np.isfinite(state.local).all() and set(state.theta) == {"knee", "ankle"}
+    assert all(np.isfinite(v).all() for v in state.theta.values())
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=6), st.integers(0, 5), st.booleans(), st.booleans())
+def test_restarted_joints_come_from_the_restart_the_best_minimum_began_at(missing, which, matched, decidable):
+    """Joints the first pass left without an estimate (and only those) are taken from the restart whose estimates
+    started the best minimum, when a marker beyond could decide the joint that restart took a candidate of; with no
+    such restart, none that could be decided, or no whole-tree fit, the first pass stands."""
+    names = ["ambiguous"] + [f"j{k}" for k in range(len(missing))]
+    first = {n: (None if gone else SimpleNamespace(nothing_beyond=False), {"case": "first"})
+             for n, gone in zip(names[1:], missing)}
+    first["ambiguous"] = (SimpleNamespace(nothing_beyond=not decidable), {"case": "first"})
+    restarts = [({"ambiguous": object()}, {n: (object(), {"case": f"restart {r}"}) for n in names}) for r in range(3)]
+    pick = which % 3
+    start = tuple(id(restarts[pick][1][n][0]) for n in names) if matched else ()
+    tree = SimpleNamespace(best=SimpleNamespace(start=start, fit=SimpleNamespace(chain=SimpleNamespace(joints=names))))
+    out = with_restarted(first, restarts, tree)
+    for n in names:
+        expected = restarts[pick][1][n] if (first[n][0] is None and matched and decidable) else first[n]
+        assert out[n] == expected
+    assert with_restarted(first, restarts, SimpleNamespace(best=None)) is first
