@@ -397,7 +397,11 @@ def read_c3d(path) -> MarkerData:
     layout = _header_layout(raw)
     scale, start = _value(params, "POINT", "SCALE", problems), _value(params, "POINT", "DATA_START", problems)
     in_file = None
-    if layout is not None and scale is not None and len(scale) and np.isfinite(layout["scale"]) \
+    if scale is not None and len(scale) and float(scale[0]) == 0:
+        problems.append("POINT:SCALE is 0: the C3D library multiplies every stored coordinate by it, so every "
+                        "marker would read as 0 (never visible); a valid file gives the length of one stored integer "
+                        "unit (positive), or a negative number for floating-point data")
+    elif layout is not None and scale is not None and len(scale) and np.isfinite(layout["scale"]) \
             and layout["scale"] != 0 and float(scale[0]) != 0 and (float(scale[0]) < 0) != (layout["scale"] < 0):
         problems.append(f"POINT:SCALE is {float(scale[0]):g} ({'floating-point' if float(scale[0]) < 0 else 'integer'} "
                         f"data) but the header's scale is {layout['scale']:g} "

@@ -90,3 +90,21 @@ def test_more_frames_than_a_c3d_counts_are_refused_before_writing(tmp_path):
     with pytest.raises(InputError, match="65536 frames; a C3D file counts at most 65535"):
         write_c3d(path, np.zeros((65536, 1, 3)), ["M"], 100.0)
     assert not path.exists()
+
+
+@settings(max_examples=4, deadline=None)
+@given(n_frames=st.integers(20, 80), n_markers=st.integers(1, 4), negative=st.booleans(), seed=st.integers(0, 1000))
+def test_a_point_scale_of_zero_is_an_error_naming_it_not_markers_never_seen(tmp_path_factory, n_frames, n_markers,
+                                                                            negative, seed):
+    """POINT:SCALE 0 (or -0) makes the C3D library read every coordinate as 0: the file is refused by that field,
+    not read as markers that are never visible (what the fit had said)."""
+    import ezc3d
+
+    tmp = tmp_path_factory.mktemp("c3d")
+    _written(tmp, n_frames, n_markers, seed)
+    c3d = ezc3d.c3d(str(tmp / "ok.c3d"))
+    c3d["parameters"]["POINT"]["SCALE"]["value"] = np.array([-0.0 if negative else 0.0])
+    c3d.write(str(tmp / "scale0.c3d"))
+    with pytest.raises(InputError, match="POINT:SCALE is 0") as err:
+        read_c3d(tmp / "scale0.c3d")
+    assert "scale0.c3d" in str(err.value)
