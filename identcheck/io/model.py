@@ -369,6 +369,10 @@ def _parse_segments(raw, scale: float, problems: list[str]) -> dict[str, Segment
             markers = [m for m in markers if isinstance(m, str) and m.strip()] if isinstance(markers, list) else []
         kept = []
         for m in markers:
+            if m != m.strip():      # a trial's labels are read without them: the name could never be found
+                problems.append(f"{key}.markers: {m!r} has spaces at its start or end, which no label read from a "
+                                f"C3D or TRC file keeps (it would never be found in a trial): write {m.strip()!r}")
+                continue
             if m in owner:
                 where = "twice in" if owner[m] == name else f"in both segments.{owner[m]}.markers and"
                 problems.append(f"duplicate marker {m!r}: listed {where} {key}.markers")

@@ -415,3 +415,20 @@ def test_lengths_and_positions_beyond_100_m_are_refused(tmp_path, line, key):
 def test_an_axis_is_a_direction_of_any_length(tmp_path):
     model = Model.from_toml(write(tmp_path, MINIMAL.replace('"spherical"', '"revolute"\naxis = [0.0, 0.0, 1e9]')))
     assert model.joints["hip_r"].axis == (0.0, 0.0, 1.0)
+
+
+@given(name=st.text(st.characters(whitelist_categories=("Lu", "Ll", "Nd")), min_size=1, max_size=8),
+       before=st.sampled_from(["", " ", "\t"]), after=st.sampled_from(["", " ", "  ", "\t"]))
+def test_a_marker_name_with_spaces_at_its_ends_is_refused_naming_it(name, before, after):
+    """Labels read from C3D and TRC files lose the spaces at their ends, so a model name keeping them could never be
+    found in a trial: it is refused by its segment's field, with the name to write instead."""
+    name = "Q" + name          # not one of the other markers' names
+    padded = before + name + after
+    d = {"segments": {"pelvis": {"markers": ["A", "B", padded]}, "thigh": {"markers": ["C"]}},
+         "joints": {"hip": {"type": "spherical", "parent": "pelvis", "child": "thigh"}}}
+    if padded == name:
+        assert name in Model.from_dict(d).markers
+        return
+    with pytest.raises(InputError) as err:
+        Model.from_dict(d)
+    assert "segments.pelvis.markers" in str(err.value) and repr(name) in str(err.value)
