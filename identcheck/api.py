@@ -126,7 +126,11 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
     from identcheck.simulate.rigid import simulate as simulate_model
 
-    sim = simulate_model(load_model(model), seed=seed, **kw)
+    model = load_model(model)
+    if not model.markers:       # a file of frames and no markers: no reader (this one included) takes it
+        raise InputError(["the model lists no markers on any segment: a trial of it would hold no data; add "
+                          "markers = [...] to its segments"], source=model.source)
+    sim = simulate_model(model, seed=seed, **kw)
     if effect is not None:
         from identcheck.effects.registry import SEED_OFFSET, inject_effect   # the effects load only when used
         sim = inject_effect(sim, effect, seed=seed + SEED_OFFSET if effect_seed is None else effect_seed)

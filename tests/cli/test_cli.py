@@ -90,6 +90,19 @@ def test_simulate_bad_extension_and_effect(tmp_path, capsys):
     assert (tmp_path / "x.trc").exists()
 
 
+@pytest.mark.parametrize("ext", [".trc", ".c3d"])
+def test_simulate_refuses_a_model_without_markers_and_writes_nothing(tmp_path, capsys, ext):
+    """A model whose segments list no markers had been simulated into a file of frames alone, which no reader (the
+    TRC reader of this package included) takes."""
+    model = tmp_path / "bare.toml"
+    model.write_text('[segments.pelvis]\nmarkers = []\n[segments.thigh]\nmarkers = []\n'
+                     '[joints.hip]\ntype = "spherical"\nparent = "pelvis"\nchild = "thigh"\n')
+    assert cli.main(["simulate", str(model), "--out", str(tmp_path / f"x{ext}")]) == 2
+    err = capsys.readouterr().err
+    assert "bare.toml" in err and "no markers" in err
+    assert not (tmp_path / f"x{ext}").exists()
+
+
 def test_flexion_only_hip_is_named_coplanar_with_the_motion_to_add(tmp_path, capsys):
     model = str(ROOT / "examples" / "hip_31.toml")
     exact, noisy = tmp_path / "flex.trc", tmp_path / "flex_noisy.trc"
