@@ -16,6 +16,7 @@ gives the file's numbering of its frames, and Frame# and Time must not go backwa
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -164,6 +165,13 @@ def _cells(line: str) -> list[str]:
 
 
 # ---------------------------------------------------------------------- reading
+def _lines(text: str) -> list[str]:
+    """The file's lines, ended by LF, CRLF or CR alone: a form feed, vertical tab or other separator
+    ``str.splitlines`` also breaks at is part of a line (it had shifted every later line number by one)."""
+    lines = re.split(r"\r\n|\r|\n", text)
+    return lines[:-1] if lines and lines[-1] == "" else lines
+
+
 def read_trc(path) -> MarkerData:
     """Read an OpenSim TRC file.
 
@@ -200,7 +208,7 @@ def read_trc(path) -> MarkerData:
     if "\x00" in text[:4096]:
         raise InputError(["binary content: not a text TRC file (a C3D file needs the .c3d extension)"],
                          source=src)
-    lines = text.splitlines()
+    lines = _lines(text)
     if len(lines) < 5:
         raise InputError([f"truncated header: only {len(lines)} line(s); a TRC file has 5 header "
                           "lines (PathFileType, keys, values, marker names, X/Y/Z) before the data"],
