@@ -129,7 +129,8 @@ class Trial:
 
     __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source", "_first_frame")
 
-    def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>", first_frame: int = 0):
+    def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>",
+                 first_frame: int | None = None):
         problems: list[str] = []
         xyz = _float_array(xyz, source, copy=True)  # copy: the trial owns its data
         if xyz.ndim != 3 or xyz.shape[2] != 3:
@@ -154,7 +155,7 @@ class Trial:
         if len(far):
             f, m = far[0]
             problems.append(f"infinite coordinate or one farther than {FARTHEST_MM / 1e6:g} km from the origin in "
-                            f"{len(far)} sample(s) (first: frame {int(first_frame) + f}, row {f}, marker "
+                            f"{len(far)} sample(s) (first: frame {int(first_frame or 0) + f}, row {f}, marker "
                             f"{labels[m]!r}): not marker positions; use NaN for occluded samples")
         if problems:
             raise InputError(problems, source=source)
@@ -164,7 +165,7 @@ class Trial:
         self._index = {lab: i for i, lab in enumerate(labels)}
         self._rate_hz = rate_hz
         self._source = source
-        self._first_frame = int(first_frame)
+        self._first_frame = None if first_frame is None else int(first_frame)   # None: no file numbered it
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -516,11 +517,11 @@ class Trial:
     @property
     def first_frame(self) -> int:
         """The file's own number of row 0 (TRC Frame#, C3D header first frame; 0 for arrays)."""
-        return self._first_frame
+        return 0 if self._first_frame is None else self._first_frame
 
     def frame_number(self, row) -> int | np.ndarray:
         """The file's frame number(s) of row index(es) `row`."""
-        return self._first_frame + np.asarray(row) if np.ndim(row) else self._first_frame + int(row)
+        return self.first_frame + np.asarray(row) if np.ndim(row) else self.first_frame + int(row)
 
     def frames(self, spec: str) -> "Trial":
         """The frames ``START:END`` of the file's own numbering, both included (either end may be left out).
@@ -531,7 +532,7 @@ class Trial:
             Not ``START:END`` with integers, or a range holding no frame of the trial (the message gives
             the trial's own range).
         """
-        first, last = self._first_frame, self._first_frame + self.n_frames - 1
+        first, last = self.first_frame, self.first_frame + self.n_frames - 1
         try:
             start, end = frame_range(spec)
         except ValueError:
@@ -546,16 +547,28 @@ class Trial:
             warnings.warn(f"{self._source}: --frames {spec} reaches beyond the file's frames ({first} to {last}): "
                           f"using {max(start, first)}:{min(end, last)}", UserWarning, stacklevel=2)
         lo, hi = max(start, first) - first, min(end, last) - first
-        return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, first + lo)
+        numbered = None if self._first_frame is None and lo == 0 else first + lo
+        return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, numbered)
 
     # ------------------------------------------------------------------ writers
     def to_trc(self, path) -> None:
-        """Write an OpenSim TRC file in mm."""
-        write_trc(path, self._xyz, self._labels, self._rate_hz, first_frame=self._first_frame)
+        """Write an OpenSim TRC file in mm, its frames numbered as the file this trial was read from (from 0 when
+        that file's were), from 1 for a trial made from an array."""
+        write_trc(path, self._xyz, self._labels, self._rate_hz, first_frame=self._file_numbering())
 
     def to_c3d(self, path) -> None:
-        """Write a C3D file in mm (32-bit float coordinates)."""
-        write_c3d(path, self._xyz, self._labels, self._rate_hz, first_frame=self._first_frame)
+        """Write a C3D file in mm (32-bit float coordinates), numbered as :meth:`to_trc` numbers a TRC; a C3D
+        counts frames from 1, so a trial numbered from 0 or below is written from 1, with a warning."""
+        first = self._file_numbering()
+        if first < 1:
+            warnings.warn(f"{path}: a C3D file numbers its frames from 1: the trial's frames {first} to "
+                          f"{first + self.n_frames - 1} are written as 1 to {self.n_frames}", UserWarning,
+                          stacklevel=2)
+        write_c3d(path, self._xyz, self._labels, self._rate_hz, first_frame=first)
+
+    def _file_numbering(self) -> int:
+        """The number a written file gives row 0: the file's own, or 1 for a trial no file numbered."""
+        return 1 if self._first_frame is None else self._first_frame
 
     def to_file(self, path) -> None:
         """Write ``.trc`` or ``.c3d`` by extension (any case)."""

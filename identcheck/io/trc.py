@@ -504,8 +504,9 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
         Marker names (no tabs or line breaks).
     rate_hz : float
     first_frame : int
-        Frame# of the first row (TRC frames count from 1: a smaller number is written as 1); Time is
-        ``(Frame# - 1) / rate``.
+        Frame# of the first row, written as given (a file numbered from 0 is exported from 0: writing it from 1 had
+        put ``--export-markers``' frames one number off the ones ``diagnose`` names). Time is ``(Frame# - 1) / rate``
+        in a file numbered from 1 or later; one numbered from 0 or below starts at time 0.
 
     Raises
     ------
@@ -523,7 +524,7 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     head = [
         f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
         "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
-        f"{rate}\t{rate}\t{n_frames}\t{n_markers}\tmm\t{rate}\t{max(int(first_frame), 1)}\t{n_frames}",
+        f"{rate}\t{rate}\t{n_frames}\t{n_markers}\tmm\t{rate}\t{int(first_frame)}\t{n_frames}",
         "Frame#\tTime\t" + "".join(f"{lab}\t\t\t" for lab in labels).rstrip("\t") + "\t\t",
         "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, n_markers + 1)),
         "",
@@ -531,8 +532,8 @@ def write_trc(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     flat = xyz.reshape(n_frames, 3 * n_markers)
     cells = np.char.mod("%.8f", flat)
     cells[np.isnan(flat)] = ""
-    first = max(int(first_frame), 1)
+    first = int(first_frame)
     frames = np.char.mod("%d", np.arange(first, first + n_frames))
-    times = np.char.mod("%.6f", (np.arange(n_frames) + first - 1) / rate_hz)
+    times = np.char.mod("%.6f", (np.arange(n_frames) + max(first - 1, 0)) / rate_hz)
     body = ["\t".join((f, t, *row)) for f, t, row in zip(frames, times, cells)]
     atomic_write(path, "\n".join(head + body) + "\n")

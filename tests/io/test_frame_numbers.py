@@ -76,3 +76,28 @@ def test_a_c3d_numbers_its_frames_as_its_header_does_and_as_its_trc_would(tmp_pa
     assert Trial.from_file(folder / "t.trc").first_frame == first
     c3d.to_file(folder / "again.c3d")
     assert Trial.from_file(folder / "again.c3d").first_frame == first
+
+
+@settings(max_examples=15, deadline=None)
+@given(first=st.integers(-3, 40), n=st.integers(2, 30), cut=st.integers(0, 5))
+def test_a_trial_written_as_a_trc_keeps_the_numbering_it_was_read_with(tmp_path_factory, first, n, cut):
+    """A TRC numbered from `first` (0 or below included), read, cut and written again, numbers its rows as the file
+    did (a file numbered from 0 had been written from 1, so an export's frames sat one off the frames ``diagnose``
+    names); a trial made from an array is written from 1; a C3D, which counts from 1, is written from 1 with a
+    warning when the trial's numbering starts below."""
+    folder = tmp_path_factory.mktemp("num")
+    xyz = np.arange(n * 3, dtype=float).reshape(n, 1, 3) + 100.0
+    write_trc(folder / "a.trc", xyz, ["M"], 100.0, first_frame=first)
+    read = Trial.from_file(folder / "a.trc")
+    assert read.first_frame == first
+    part = read.frames(f"{first + min(cut, n - 1)}:")
+    part.to_file(folder / "b.trc")
+    again = Trial.from_file(folder / "b.trc")
+    assert again.first_frame == first + min(cut, n - 1)
+    assert np.array_equal(again.as_array(), part.as_array())
+    Trial(xyz, ["M"], 100.0).to_file(folder / "c.trc")
+    assert Trial.from_file(folder / "c.trc").first_frame == 1
+    if first < 1:
+        with pytest.warns(UserWarning, match="numbers its frames from 1"):
+            read.to_file(folder / "d.c3d")
+        assert Trial.from_file(folder / "d.c3d").first_frame == 1
