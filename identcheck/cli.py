@@ -202,8 +202,8 @@ def _cmd_batch(a) -> int:
 
     try:
         df = api.batch(a.batch_verb, a.inputs, a.out, model=a.model, frames=a.frames, noise_mm=a.noise_mm,
-                       motion=a.motion, seed=a.seed, fast=a.fast, workers=a.workers, scheduler=a.scheduler,
-                       dashboard=a.dashboard, progress=True)
+                       motion=a.motion, seed=0 if a.seed is None else a.seed, fast=a.fast, workers=a.workers,
+                       scheduler=a.scheduler, dashboard=a.dashboard, progress=True)
     except KeyboardInterrupt:
         print(f"identcheck batch: interrupted; every job finished so far is saved in {a.out}: the same command "
               "completes the rest", file=sys.stderr)
@@ -461,7 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="plan: sweep these noise levels (practical verdicts)")
     s.add_argument("--motion", metavar="NAME|TRIAL[,...]", default=None,
                    help="plan: with --noise-mm, sweep these motions (functional, flexion, small, or recorded trials)")
-    s.add_argument("--seed", type=_seed, default=0, help="plan: seed of the random prime and point")
+    s.add_argument("--seed", type=_seed, default=None, help="plan: seed of the random prime and point (default 0)")
     s.add_argument("--fast", action="store_true", help="plan: skip the per-marker robustness and motion analyses")
     s.add_argument("--json", action="store_true", help="print the counts and the failed jobs as JSON")
     s.set_defaults(func=_cmd_batch)
@@ -487,6 +487,11 @@ MAX_RANK_SAMPLES = 675              # identcheck.certify.exact_rank.distinct_tan
 PRECISION_DIGITS = (15, 1000)
 MAX_SIMULATED_FRAMES = 1_000_000     # a million frames of a body model is already gigabytes
 RATE_HZ = (0.01, 1e6)               # a simulated capture's rate: its times print (6 decimals) and rise frame by frame
+
+
+MAX_WORKERS_PER_CPU = 4
+"""``batch --workers`` above this many per CPU is refused: a local cluster of that many processes only shares the
+CPUs, each with its own copy of the libraries (memory), and a typo of 200 had started 200."""
 
 
 def preflight(a) -> list:
@@ -601,6 +606,17 @@ def preflight(a) -> list:
             problems.append(f"--dashboard {a.dashboard}: {_bad_address(a.dashboard)}")
         if a.workers is not None and a.workers < 1:
             problems.append(f"--workers {a.workers}: 1 or more")
+        elif a.workers is not None and a.workers > MAX_WORKERS_PER_CPU * (os.cpu_count() or 1):
+            problems.append(f"--workers {a.workers}: at most {MAX_WORKERS_PER_CPU} per CPU ("
+                            f"{MAX_WORKERS_PER_CPU * (os.cpu_count() or 1)} on this machine): each worker is a process "
+                            "with its own copy of the numerical libraries, and more than the CPUs only share them")
+        plan_only = [opt for opt, given in (("--noise-mm", a.noise_mm is not None), ("--motion", a.motion is not None),
+                                            ("--seed", a.seed is not None), ("--fast", a.fast)) if given]
+        if plan_only and a.batch_verb != "plan":
+            one = len(plan_only) == 1
+            problems.append(f"{', '.join(plan_only)}: {'an option' if one else 'options'} of batch plan only; batch "
+                            f"{a.batch_verb} would ignore {'it' if one else 'them'} (drop {'it' if one else 'them'}, "
+                            "or run batch plan on the model)")
         if a.workers is not None and a.scheduler:
             problems.append("--workers sizes the local cluster; with --scheduler the cluster's own workers run the "
                             "jobs: give one of them")

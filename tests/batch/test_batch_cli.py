@@ -1,5 +1,6 @@
 """``identcheck batch`` arguments, without a cluster: a missing extra or a bad argument is exit 2 with one clear
 message and nothing written."""
+import os
 import sys
 from pathlib import Path
 
@@ -34,7 +35,12 @@ def test_bad_arguments_are_exit_2_before_any_work(tmp_path, capsys):
                       ([MODEL, str(tmp_path / "t"), "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
                        "with --scheduler the cluster's own workers run the jobs"),
                       ([str(tmp_path / "t" / "a.trc"), "--model", str(tmp_path / "t" / "a.trc")],
-                       "a.trc is a trial")):
+                       "a.trc is a trial"),
+                      ([MODEL, str(tmp_path / "t"), "--workers", str(cli.MAX_WORKERS_PER_CPU * ((os.cpu_count() or 1))
+                                                                    + 1)], "per CPU"),
+                      ([MODEL, str(tmp_path / "t"), "--noise-mm", "1"], "--noise-mm: an option of batch plan only"),
+                      ([MODEL, str(tmp_path / "t"), "--seed", "0", "--fast"],
+                       "--seed, --fast: options of batch plan only")):
         assert cli.main(["batch", "fit", *argv, "--out", str(out)]) == 2, argv
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err, (argv, err)
