@@ -8,6 +8,7 @@ expected: the message asks for a report). Progress and warnings go to stderr, re
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import ctypes.util
 import logging
@@ -779,6 +780,10 @@ def main(argv=None) -> int:
         return int(exc.code or 0) and 2
     logging.basicConfig(level=logging.INFO if a.verbose else logging.WARNING, stream=sys.stderr,
                         format="identcheck: %(message)s")
+    if sys.stdout is None:      # started with its standard output closed: Python drops every print silently
+        print(f"identcheck {a.verb}: standard output is closed, so the answer would be lost; run with it open "
+              "(redirect it to a file, or to /dev/null to keep only the exit code)", file=sys.stderr)
+        return 2
     problems = preflight(a)
     if problems:
         for msg in problems:
@@ -788,7 +793,10 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("always", IdentifiabilityWarning)
             warnings.showwarning = _show_warning
-            return a.func(a)
+            with _named_stdout():
+                code = a.func(a)
+                sys.stdout.flush()      # a full or failing standard output is reported here, not lost at exit
+            return code
     except InputError as exc:
         print(f"identcheck {a.verb}: {exc}", file=sys.stderr)
         return 2
@@ -815,6 +823,52 @@ def main(argv=None) -> int:
         return 3
 
 
+class _NamedStream:
+    """A text stream whose failed writes name it: an error without a file name (a full disk, a failing device) raised
+    while printing the answer had been reported against the command's input files."""
+
+    def __init__(self, stream, name: str):
+        self._stream, self._name = stream, name
+
+    def _named(self, call, *args):
+        try:
+            return call(*args)
+        except OSError as exc:
+            if exc.filename is None:
+                exc.filename = self._name
+            raise
+
+    def write(self, text):
+        return self._named(self._stream.write, text)
+
+    def flush(self):
+        return self._named(self._stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _named_stdout():
+    """Standard output as a :class:`_NamedStream` for the verb's run (restored after)."""
+    stream = sys.stdout
+    sys.stdout = _NamedStream(stream, "standard output")
+    try:
+        yield
+    finally:
+        sys.stdout = stream
+
+
+def _stdout_fails() -> bool:
+    """Whether standard output refuses what is pending for it (a full disk, a failing device): an error without a
+    file name, raised while printing the answer, is then standard output's, not an input file's."""
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        return True
+    return False
+
+
 def _outputs(a) -> str:
     """The files and folders the command writes, for a message about a failed write."""
     opts = FILE_OUTPUTS.get(a.verb, ()) + DIR_OUTPUTS.get(a.verb, ())
@@ -833,10 +887,13 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def run() -> None:
-    """Console-script entry point. A reader that closes the pipe early (``| head``) ends the output quietly."""
+    """Console-script entry point. A reader that closes the pipe early (``| head``) ends the output quietly; output
+    standard output refused (reported by :func:`main`) is dropped, so Python does not fail again on it at exit."""
     try:
-        sys.exit(main())
+        code = main()
     except BrokenPipeError:
-        devnull = os.open(os.devnull, os.O_WRONLY)       # keep Python from failing again on flushing stdout
+        code = 0
+    if sys.stdout is not None and _stdout_fails():
+        devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        sys.exit(0)
+    sys.exit(code)

@@ -1,5 +1,6 @@
 """The CLI end to end: the README's main job, contract exit codes, clear errors."""
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -142,6 +143,33 @@ def test_ctrl_c_is_one_line_and_exit_130_not_a_traceback(monkeypatch, capsys, ve
     assert cli.main([a if not a.endswith(".toml") else str(ROOT / a) for a in argv]) == 130
     err = capsys.readouterr().err
     assert err.strip() == f"identcheck {verb}: interrupted" and "Traceback" not in err
+
+
+def test_a_full_standard_output_is_named_not_the_input_files():
+    """Writing the answer to a full device is exit 2 naming standard output (it had named the model and trial)."""
+    import subprocess
+    import sys
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full on this system")
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "identcheck", "rank", "revolute", "2", "1", "--json"], stdout=full,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    assert done.returncode == 2
+    assert "identcheck rank: standard output: No space left on device" in done.stderr
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr
+
+
+def test_a_closed_standard_output_is_refused_before_any_work():
+    """Started with standard output closed, Python drops every print: the command had run and exited 0 with its
+    answer lost. It is refused, exit 2, saying so."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "identcheck", "rank", "revolute", "2", "1"],
+                          preexec_fn=lambda: os.close(1), stderr=subprocess.PIPE, text=True, timeout=120)
+    assert done.returncode == 2
+    assert "standard output is closed" in done.stderr and "revolute (2,1)" not in done.stderr
 
 
 def test_version_and_no_blas_variables_set_on_import():
