@@ -482,7 +482,7 @@ def derive(out="derivations/out", regenerate: bool = False):
     ----------
     regenerate : bool
         Rewrite the generated modules that differ from the fresh print (else a difference makes the
-        result not ``ok``).
+        result not ``ok``), and the derivations' cache the package ships (:mod:`identcheck.certify.seed`).
 
     Returns
     -------
@@ -493,8 +493,12 @@ def derive(out="derivations/out", regenerate: bool = False):
     from identcheck.derive.result import derive_and_write
     from identcheck.solve.generated.writer import sync
 
+    from identcheck.certify import seed
+
     res = derive_and_write(out)
-    return dataclasses.replace(res, generated=sync(write=regenerate))
+    generated = sync(write=regenerate)
+    shipped = dict(seed.write(), written=True) if regenerate else dict(seed.status(), written=False)
+    return dataclasses.replace(res, generated=generated, seed=shipped)
 
 
 def batch(verb: str, inputs, out, model=None, frames=None, noise_mm=None, motion=None, seed: int = 0,

@@ -277,11 +277,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action=_Version, nargs=0, help="show the installed version and exit")
     sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
 
-    s = sub.add_parser("derive", formatter_class=_Help, epilog=_epilog("identcheck derive --out derivations/out --json", "every derivation agrees with the paper (or a recorded erratum) and the generated code is up to date", "an unrecorded disagreement, or stale generated code (--regenerate rewrites it)"),
+    s = sub.add_parser("derive", formatter_class=_Help, epilog=_epilog("identcheck derive --out derivations/out --json", "every derivation agrees with the paper (or a recorded erratum) and the generated code is up to date", "an unrecorded disagreement, or stale generated code or shipped cache (--regenerate rewrites them)"),
                        help="regenerate and check every derivation against the paper")
     s.add_argument("--out", default="derivations/out", help="directory for the rendered Markdown")
     s.add_argument("--regenerate", action="store_true",
-                   help="rewrite the solvers' generated code (identcheck/solve/generated/) from these derivations")
+                   help="rewrite the solvers' generated code (identcheck/solve/generated/) from these derivations, "
+                        "and the derivation cache the package ships (identcheck/derive/seed/)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_derive)
 

@@ -131,11 +131,15 @@ class _Symbolic:
 @lru_cache(maxsize=1)
 def _symbolic_key() -> str:
     """What the compiled Jacobians depend on: this module (the differentiation and compilation), the joint
-    models and the symbols, with SymPy's version (:func:`identcheck.derive.cache.files_key`)."""
+    models and the symbols, with SymPy's version (:func:`identcheck.derive.cache.files_key`), and python-flint's,
+    whose rationals they hold."""
+    import hashlib
+
     from identcheck.derive.cache import files_key
 
     here = Path(__file__).resolve()
-    return files_key([here, here.parent / "joint_models.py", here.parents[1] / "symbols.py"])
+    key = files_key([here, here.parent / "joint_models.py", here.parents[1] / "symbols.py"])
+    return hashlib.sha256(f"{key} flint {flint.__version__}".encode()).hexdigest()[:20]
 
 
 @lru_cache(maxsize=None)

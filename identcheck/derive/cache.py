@@ -5,9 +5,15 @@ Deriving Pham's revolute (2,1) system takes SymPy seconds. The solvers run commi
 derivation was edited and not yet printed again): then they come from here. The results are pickled under
 the user's cache directory (``$IDENTCHECK_CACHE``, else ``$XDG_CACHE_HOME/identcheck``, else
 ``~/.cache/identcheck``), keyed by a hash of every source file of :mod:`identcheck.derive`, of
-:mod:`identcheck.symbols` and of the SymPy and Python versions, so that any change to a derivation derives
-again. A cache that cannot be read or written is skipped (the derivation runs as
+:mod:`identcheck.symbols` and of the SymPy and Python (major.minor) versions, so that any change to a derivation
+derives again. A cache that cannot be read or written is skipped (the derivation runs as
 before); a file that fails to load is derived again and replaced. ``identcheck derive`` never uses it.
+
+The package ships the files a fresh cache would hold after ``identcheck table`` (:data:`SEED`, written by
+``identcheck derive --regenerate``: :mod:`identcheck.certify.seed`): a file missing from the user's cache is read
+from there when one of the same name, that is of the same key, is shipped. A fresh install whose SymPy and Python
+are those the seed was made with starts warm (the first ``identcheck table`` had derived everything again, 7-10 s
+of SymPy); any other derives as before. ``IDENTCHECK_SEED=off`` skips the seed.
 """
 from __future__ import annotations
 
@@ -22,6 +28,17 @@ from pathlib import Path
 from identcheck.io.atomic import atomic_write
 
 _MEMO: dict = {}
+
+SEED = Path(__file__).resolve().with_name("seed")
+"""The shipped cache files (see the module's docstring)."""
+
+
+def _seed_file(path: Path) -> Path | None:
+    """The shipped file of the same name as the cache file `path`, or None (none shipped, or the seed is off)."""
+    if os.environ.get("IDENTCHECK_SEED", "").strip().lower() in ("off", "0", "no", "false"):
+        return None
+    shipped = SEED / path.name
+    return shipped if shipped.is_file() else None
 
 
 def cache_dir() -> Path:
@@ -42,7 +59,7 @@ def source_key() -> str:
     for f in sorted(here.glob("*.py")) + [here.parent / "symbols.py"]:
         h.update(f.name.encode())
         h.update(f.read_bytes())
-    h.update(f"sympy {sympy.__version__} python {sys.version_info[:3]}".encode())
+    h.update(f"sympy {sympy.__version__} python {sys.version_info[:2]}".encode())
     return h.hexdigest()[:20]
 
 
@@ -71,6 +88,8 @@ def cached(name: str, derive):
         return _MEMO[name]
     path = cache_dir() / f"{name}-{source_key()}.pickle"
     result = _load(path)
+    if result is None and _seed_file(path) is not None:
+        result = _load(_seed_file(path))
     if result is None:
         result = derive()
         _save(path, result)
@@ -87,7 +106,8 @@ def printed(name: str, render):
         return _MEMO[memo_key]
     path = cache_dir() / f"{name}-{source_key()}.printed.json"
     try:
-        value = json.loads(path.read_text(encoding="utf-8"))
+        value = json.loads((path if path.is_file() or _seed_file(path) is None else _seed_file(path))
+                           .read_text(encoding="utf-8"))
     except (OSError, ValueError):
         value = render()
         try:
@@ -107,7 +127,7 @@ def files_key(paths) -> str:
     h = hashlib.sha256()
     for f in sorted(Path(p) for p in paths):
         h.update(f.name.encode() + b"\0" + f.read_bytes().replace(b"\r\n", b"\n") + b"\0")
-    h.update(f"sympy {sympy.__version__} python {sys.version_info[:3]}".encode())
+    h.update(f"sympy {sympy.__version__} python {sys.version_info[:2]}".encode())
     return h.hexdigest()[:20]
 
 
@@ -119,7 +139,9 @@ def entry(name: str, key: str, item, compute):
     path = cache_dir() / f"{name}-{key}.pickle"
     if store is None:
         store = _load(path)
-        store = store if isinstance(store, dict) else {}
+        if not isinstance(store, dict) and _seed_file(path) is not None:
+            store = _load(_seed_file(path))
+        store = dict(store) if isinstance(store, dict) else {}
         _MEMO[("entries", name, key)] = store
     if item not in store:
         store[item] = compute()

@@ -1,7 +1,7 @@
 """What ``identcheck derive`` returns: every derivation, checked against the printed paper and written out."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
@@ -19,21 +19,28 @@ class DeriveResult:
     generated : tuple
         The solvers' generated modules compared with a fresh print of these derivations, one status per
         module (:class:`identcheck.solve.generated.writer.ModuleStatus`: ``ok`` when it holds the print).
+    seed : dict
+        The derivations' cache as the package ships it (:func:`identcheck.certify.seed.status`): ``applies``
+        (the running SymPy and Python are the ones it was made with), ``current`` (it holds every file the
+        sources' keys name), ``missing``, ``made_with``, and ``written`` when this run rewrote it.
     """
 
     derivations: tuple
     out: str
     files: tuple
     generated: tuple = ()
+    seed: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
-        """Every check agrees with the print or is a recorded erratum, and every generated module is current."""
-        return all(dv.ok for dv in self.derivations) and all(g.ok for g in self.generated)
+        """Every check agrees with the print or is a recorded erratum, every generated module is current, and the
+        shipped cache serves the sources (where it applies: under other versions the cache derives anew)."""
+        seed_ok = not self.seed.get("applies") or self.seed.get("current", False)
+        return all(dv.ok for dv in self.derivations) and all(g.ok for g in self.generated) and seed_ok
 
     def to_dict(self) -> dict:
         """``{"ok", "out", "files", "derivations": [{name, title, source, ok, checks}], "generated": [{case,
-        path, up_to_date, written, ok}]}``, as ``identcheck derive --json`` prints it."""
+        path, up_to_date, written, ok}], "seed": {...}}``, as ``identcheck derive --json`` prints it."""
         return {
             "ok": self.ok,
             "out": self.out,
@@ -45,6 +52,7 @@ class DeriveResult:
                            for c in dv.checks],
             } for dv in self.derivations],
             "generated": [g.to_dict() for g in self.generated],
+            "seed": dict(self.seed),
         }
 
 

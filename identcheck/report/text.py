@@ -49,6 +49,13 @@ def derive_text(result) -> str:
         state = ("rewritten" if g["written"] else "up to date" if g["up_to_date"]
                  else "STALE: run identcheck derive --regenerate")
         lines.append(f"generated code {g['path']}: {state}")
+    seed = rep.get("seed") or {}
+    if seed:
+        made = ", ".join(f"{k} {v}" for k, v in (seed.get("made_with") or {}).items()) or "no index"
+        state = ("rewritten" if seed.get("written") else "up to date" if seed.get("current")
+                 else f"made with {made}, not this SymPy/Python: a fresh cache derives" if not seed.get("applies")
+                 else f"STALE ({len(seed.get('missing', []))} files): run identcheck derive --regenerate")
+        lines.append(f"shipped derivation cache: {state}")
     lines.append(f"written to {rep['out']}")
     return "\n".join(lines)
 
