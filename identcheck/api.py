@@ -490,10 +490,9 @@ def derive(out="derivations/out", regenerate: bool = False):
     """
     import dataclasses
 
+    from identcheck.certify import seed
     from identcheck.derive.result import derive_and_write
     from identcheck.solve.generated.writer import sync
-
-    from identcheck.certify import seed
 
     res = derive_and_write(out)
     generated = sync(write=regenerate)

@@ -888,8 +888,9 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def run() -> None:
-    """Console-script entry point. A reader that closes the pipe early (``| head``) ends the output quietly; output
-    standard output refused (reported by :func:`main`) is dropped, so Python does not fail again on it at exit."""
+    """Console-script entry point. A reader that closes the pipe early (``| head``) ends the output quietly; what a
+    failing standard output still holds (:func:`main` reported it) is dropped, so Python does not fail on it again
+    at exit."""
     try:
         code = main()
     except BrokenPipeError:
