@@ -285,7 +285,12 @@ def read_trc(path) -> MarkerData:
                       f"line {linenos[f]}, marker {labels[m]!r}); treating them as occluded",
                       UserWarning, stacklevel=3)
         xyz[partial] = np.nan
-    return MarkerData(xyz * factor, tuple(labels), rate_hz, _first_frame(rows, linenos, src))
+    first, at = _frame_positions(rows, linenos, src)
+    if at is not None:          # rows the file leaves out: gaps at their own frame numbers
+        full = np.full((int(at[-1]) + 1,) + xyz.shape[1:], np.nan)
+        full[at] = xyz
+        xyz = full
+    return MarkerData(xyz * factor, tuple(labels), rate_hz, first)
 
 
 def _check_samples(mm: np.ndarray, factor: float, rows: list, linenos: list, labels, src: str) -> None:
@@ -362,9 +367,18 @@ def _frame_order(rows: list, linenos: list) -> list[str]:
     return problems
 
 
-def _first_frame(rows: list, linenos: list, src: str) -> int:
-    """The Frame# of the first data row (the file's numbering); frame numbers must rise one by one, else a
-    warning says the row index is used instead."""
+MAX_FILLED = 20
+"""A TRC whose Frame# skips numbers is read with the frames it leaves out as gaps, up to this many frames per row the
+file holds (a file of every 20th frame); beyond, it is refused naming the line of the largest skip."""
+
+
+def _frame_positions(rows: list, linenos: list, src: str) -> tuple[int, np.ndarray | None]:
+    """(the Frame# of the first data row, each row's position counted in frames from it, or None when the rows are
+    consecutive). Frame numbers that skip (rows dropped by an exporter, a file of every other frame) keep their
+    numbers: the frames left out become gaps, so that a frame's number, its time and ``--frames`` stay the file's.
+    They had been renumbered by row, with a warning, and every frame after the first skip was named, cut and
+    exported under another frame's number (its time with it). Frame numbers that are not whole numbers number the
+    rows from 1, with a warning."""
     def number(cell: str) -> float:
         try:
             return float(cell)
@@ -379,14 +393,24 @@ def _first_frame(rows: list, linenos: list, src: str) -> int:
         warnings.warn(f"{src}: the Frame# column is not a whole number at line {linenos[bad[0]]} ({cell!r}"
                       f"{f' and {len(bad) - 1} more rows' if len(bad) > 1 else ''}); frames are numbered from 1 by row",
                       UserWarning, stacklevel=4)
-        return 1
+        return 1, None
     numbers = numbers.astype(np.int64)
     steps = np.diff(numbers)
-    if len(steps) and np.any(steps != 1):
-        k = int(np.flatnonzero(steps != 1)[0])
-        warnings.warn(f"{src}: Frame# does not rise by one at line {linenos[k + 1]} ({numbers[k]} then "
-                      f"{numbers[k + 1]}); frames are numbered from {numbers[0]} by row", UserWarning, stacklevel=4)
-    return int(numbers[0])
+    if not len(steps) or np.all(steps == 1):
+        return int(numbers[0]), None
+    at = numbers - numbers[0]
+    k = int(np.argmax(steps))
+    if at[-1] + 1 > MAX_FILLED * len(rows):
+        raise InputError([f"line {linenos[k + 1]}: Frame# jumps from {numbers[k]} to {numbers[k + 1]}: the rows "
+                          f"span {int(at[-1]) + 1:,} frames for {len(rows):,} rows, too few to be a recording with "
+                          "frames left out; correct the Frame# column"], source=src)
+    skips = np.flatnonzero(steps > 1)
+    first = int(skips[0])
+    warnings.warn(f"{src}: Frame# skips from {numbers[first]} to {numbers[first + 1]} at line {linenos[first + 1]}"
+                  f"{f' and in {len(skips) - 1} more places' if len(skips) > 1 else ''}: the "
+                  f"{int(at[-1]) + 1 - len(rows):,} frames the file leaves out are read as gaps, so that every frame "
+                  "keeps its number and time", UserWarning, stacklevel=4)
+    return int(numbers[0]), at
 
 
 def _parse_header(keys_line: str, values_line: str, problems: list[str]):

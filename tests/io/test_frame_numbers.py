@@ -101,3 +101,51 @@ def test_a_trial_written_as_a_trc_keeps_the_numbering_it_was_read_with(tmp_path_
         with pytest.warns(UserWarning, match="numbers its frames from 1"):
             read.to_file(folder / "d.c3d")
         assert Trial.from_file(folder / "d.c3d").first_frame == 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(first=st.integers(0, 500), n=st.integers(3, 60), data=st.data())
+def test_rows_a_trc_leaves_out_are_gaps_at_their_own_frame_numbers(tmp_path_factory, first, n, data):
+    """A TRC whose Frame# skips numbers (rows dropped by an exporter) keeps the file's numbering: the frame numbered
+    k holds the row numbered k, the frames left out are gaps, and a cut by --frames takes the file's frames. The
+    rows had been renumbered one by one, so every frame after the first skip had another frame's number."""
+    folder = tmp_path_factory.mktemp("skip")
+    xyz = np.random.default_rng(n).normal(0.0, 100.0, (n, 2, 3))
+    write_trc(folder / "all.trc", xyz, ["A", "B"], 100.0, first_frame=first)
+    lines = (folder / "all.trc").read_text().splitlines()
+    dropped = data.draw(st.sets(st.integers(1, n - 2), max_size=n - 3), label="dropped rows")
+    kept = sorted(set(range(n)) - dropped)
+    head = lines[:6]
+    cells = head[2].split("\t")
+    cells[2] = str(len(kept))                                       # NumFrames: the rows the file holds
+    head[2] = "\t".join(cells)
+    (folder / "some.trc").write_text("\n".join(head + [lines[6 + k] for k in kept]) + "\n")
+    if dropped:
+        with pytest.warns(UserWarning, match="Frame# skips"):
+            t = Trial.from_file(folder / "some.trc")
+    else:
+        t = Trial.from_file(folder / "some.trc")
+    assert t.first_frame == first + kept[0] and t.n_frames == kept[-1] - kept[0] + 1
+    got = t.as_array()
+    for row in range(t.n_frames):
+        k = kept[0] + row
+        if k in kept:
+            np.testing.assert_allclose(got[row], xyz[k], atol=1e-6)
+        else:
+            assert np.isnan(got[row]).all()
+    last = t.frames(f"{first + kept[-1]}:")
+    assert last.n_frames == 1 and np.allclose(last.as_array()[0], xyz[kept[-1]], atol=1e-6)
+
+
+def test_a_frame_number_far_beyond_the_rows_is_refused_naming_its_line(tmp_path):
+    """A Frame# that leaps past any plausible count of left-out frames is an error naming its line, not an array of
+    gaps of that length."""
+    path = tmp_path / "t.trc"
+    write_trc(path, np.ones((10, 1, 3)), ["A"], 100.0)
+    lines = path.read_text().splitlines()
+    cells = lines[15].split("\t")                     # the last row (line 16), frame 10
+    cells[0], cells[1] = "100000000", f"{(100000000 - 1) / 100.0:.6f}"     # its time agrees: only the count is off
+    lines[15] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="line 16: Frame# jumps from 9 to 100000000"):
+        Trial.from_file(path)

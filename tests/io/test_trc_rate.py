@@ -56,7 +56,7 @@ def test_times_rounded_to_few_decimals_agree_with_their_rate(tmp_path_factory, r
 @settings(max_examples=20, deadline=None)
 @given(st.floats(10.0, 500.0), st.integers(20, 300), st.integers(0, 10**6))
 def test_rows_left_out_are_no_wrong_rate(tmp_path_factory, rate, n, seed):
-    """Frame# counts the frames: a file whose middle rows were left out (a warning says Frame# jumps) keeps its
+    """Frame# counts the frames: a file whose middle rows were left out (a warning says Frame# skips) keeps its
     rate."""
     path = _trc(tmp_path_factory.mktemp("rate") / "t.trc", rate, n, seed)
     lines = path.read_text().splitlines(keepends=True)
@@ -67,5 +67,5 @@ def test_rows_left_out_are_no_wrong_rate(tmp_path_factory, rate, n, seed):
     cells[2] = str(len(kept))
     head[2] = "\t".join(cells)
     path.write_text("".join(head + kept))
-    with pytest.warns(UserWarning, match="Frame# does not rise by one"):
+    with pytest.warns(UserWarning, match="Frame# skips"):
         assert read_trc(path).rate_hz == pytest.approx(rate, rel=1e-4)
