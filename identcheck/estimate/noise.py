@@ -132,6 +132,12 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
                 dist = np.linalg.norm(pts[:, 0] - pts[:, 1], axis=1)
                 sd, n = frame_to_frame_sd(dist)
                 if not np.isfinite(sd):
+                    # too few runs of three consecutive frames (every other frame blank): the seen frames in
+                    # order, as a trial at a lower rate (the estimate had been lost, and with it every check
+                    # that needs the noise: skeleton called such a trial settled)
+                    dist = dist[np.isfinite(dist)]
+                    sd, n = frame_to_frame_sd(dist)
+                if not np.isfinite(sd):
                     continue
                 pair_sd[f"{labels[idx[a]]}-{labels[idx[b]]}"] = sd / np.sqrt(2.0)
                 phis.append(ar1_coefficient(dist))

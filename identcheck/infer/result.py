@@ -53,11 +53,13 @@ class SkeletonResult:
     def ok(self) -> bool:
         """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
         group held together beyond the rigidity tolerance (``grouping.widened``) or moving inside beyond the noise
-        (``may_be_two_segments``). A marker that moves with both segments of a joint (``markers_on_joints``) leaves it
-        settled: whichever segment carries it, it moves the same."""
-        widened = (self.other.get("grouping") or {}).get("widened")
+        (``may_be_two_segments``), which needs the marker noise: an inferred grouping whose noise could not be
+        estimated (``noise`` null) is not settled. A marker that moves with both segments of a joint
+        (``markers_on_joints``) leaves it settled: whichever segment carries it, it moves the same."""
+        grouping = self.other.get("grouping") or {}
+        unchecked = self.other.get("noise") is None and grouping.get("source") == "inferred"
         return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
-                and not widened and not self.other.get("may_be_two_segments"))
+                and not grouping.get("widened") and not self.other.get("may_be_two_segments") and not unchecked)
 
     @classmethod
     def from_dict(cls, doc: dict) -> "SkeletonResult":

@@ -279,7 +279,11 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
            "root": tree.root, "root_rule": tree.root_rule, "grouping": grouping.to_dict(),
            "noise": None if noise is None else {"sigma_mm": noise.sigma_mm, "lag1": noise.lag1,
                                                 "n_pairs": noise.n_pairs},
-           "warnings": list(grouping.warnings), "model": None, "playback": None,
+           "warnings": list(grouping.warnings) + ([
+               "the marker noise could not be estimated (no two markers of one group are seen together in enough "
+               "frames): whether a group may be two segments was not checked, so the skeleton is not called "
+               "settled"] if noise is None and grouping.source == "inferred" else []),
+           "model": None, "playback": None,
            "may_be_two_segments": (check_groups(trial.xyz, trial.labels, segs, grouping.spread_mm, noise.sigma_mm)
                                    if noise is not None and grouping.source == "inferred" else []),
            "markers_on_joints": (markers_on_joints(trial.xyz, trial.labels, placed, joints)
