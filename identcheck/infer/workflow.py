@@ -11,6 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from identcheck.errors import InputError
+from identcheck.io.trc import units_problem
 from identcheck.estimate.hierarchy import rebuild, relative_rotations
 from identcheck.estimate.joint import AXIS_HANDLE_MM
 from identcheck.estimate.noise import noise_floor
@@ -255,6 +256,11 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
     """
     say = progress or (lambda msg: None)
     refuse_exported_points(trial, exported_joints(trial.labels))
+    shrunk, _ = units_problem(trial.as_array(), 1.0, "the trial's units field")
+    if shrunk:      # the readers only warn (a small rig could span that little), but the grouping's tolerances are mm
+        raise InputError([f"{shrunk} The markers are grouped into segments by tolerances in mm (0.5 mm and more), "
+                          "within which every marker of a body that small is rigid with every other: fix the units "
+                          "field (or the coordinates) first"], source=trial.source)
     say("grouping the markers into rigid segments" if segments is None else f"segments from {segments_source}")
     grouping = group_markers(trial) if segments is None else given_grouping(trial, segments, segments_source)
     centred, offset = trial.recentred()

@@ -117,6 +117,17 @@ def test_all_markers_rigid(tmp_path, capsys):
     assert rc == 2 and "rigid.trc" in err and "one rigid body" in err
 
 
+def test_metres_labelled_mm_are_refused_before_any_grouping(leg, tmp_path, capsys):
+    """The leg written in metres in a file that says mm: refused naming the span (the readers only warn), no model
+    written; the grouping's mm tolerances had found a two-segment whole body there and written it."""
+    case, _, _ = leg
+    path = tmp_path / "metres.trc"
+    case.trial.replace(xyz=case.trial.as_array() / 1000.0).to_file(path)
+    rc, stdout, err = run(["skeleton", path, "--out", tmp_path / "m.toml"], capsys)
+    assert rc == 2 and "metres.trc" in err and "are the coordinates in metres?" in err and not stdout
+    assert not (tmp_path / "m.toml").exists()
+
+
 def test_never_visible_marker(tmp_path, capsys):
     case = make_case(1, 3)
     X = case.trial.as_array()
