@@ -34,7 +34,10 @@ def report(model, fitted: dict, points: dict) -> dict:
                          "estimator": None, "markers_used": info}
             continue
         dist = lambda e: {m: _num(e.distance(x)) for m, x in adjacent.items()}  # noqa: E731
-        out[name] = {"type": jt.type, "case": info["case"], "unique": bool(est.unique), "identifiable": True,
+        # structurally, as the table and plan say it: a case whose twins nothing beyond it decides (revolute (2,1),
+        # ERRATA E1) is locally identifiable only, whatever the closed form found
+        out[name] = {"type": jt.type, "case": info["case"], "unique": bool(est.unique),
+                     "identifiable": not est.nothing_beyond,
                      "marker_distances": dist(est),
                      "alternatives": [{"marker_distances": dist(a), "rms_residual": _num(a.rms_residual)}
                                       for a in est.alternatives],

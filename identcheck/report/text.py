@@ -118,9 +118,11 @@ def fit_text(result) -> str:
     lines = []
     for name, j in document(result)["joints"].items():
         head = f"{name}: {j['case']} by {j['estimator'] or '-'}"
-        if not j["identifiable"]:
+        if not j["identifiable"] and not j["marker_distances"]:
             lines.append(f"{head}: NOT IDENTIFIABLE. {j['excitation']['reason']}")
             continue
+        if not j["identifiable"]:       # equal twins nothing beyond decides (ERRATA E1): every candidate is shown
+            head += "; locally identifiable only"
         unc = ("no standard error bounds every marker distance" if j["uncertainty_mm"] is None
                else f"uncertainty {j['uncertainty_mm']:.3g} mm (largest standard error of a marker distance)")
         rms = "-" if j["rms_residual"] is None else f"{j['rms_residual']:.3g}"

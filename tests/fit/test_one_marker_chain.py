@@ -76,3 +76,15 @@ def test_restarted_joints_come_from_the_restart_the_best_minimum_began_at(missin
         expected = restarts[pick][1][n] if (first[n][0] is None and matched and decidable) else first[n]
         assert out[n] == expected
     assert with_restarted(first, restarts, SimpleNamespace(best=None)) is first
+
+
+def test_fit_calls_a_knee_nothing_decides_not_identifiable_as_plan_does(examples):
+    """The bundled sparse leg: its revolute (2,1) knee has no marker beyond it, so generic data leave four joints
+    (ERRATA E1): ``plan`` and the table say not identifiable (locally only); ``fit`` had said identifiable."""
+    model = Model.from_toml(examples / "sparse_leg.toml")
+    planned = api.plan(model, motion=False, robust=False, suggest=False).to_dict()["joints"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = api.fit(model, simulate(model, n_frames=400, noise_mm=0.3, seed=3).trial).joints
+    assert not planned["knee_r"]["identifiable"] and planned["knee_r"]["local"]
+    assert {n: j["identifiable"] for n, j in fitted.items()} == {n: j["identifiable"] for n, j in planned.items()}
