@@ -19,7 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from identcheck.skeleton import Skeleton
-from identcheck.errors import InputError
+from identcheck.errors import DegenerateError, InputError
 from identcheck.io.jsonable import plain
 from identcheck.io.model import refuse_exported_points
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
@@ -295,7 +295,16 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     chain = Skeleton.from_model(model)
     if progress:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
-    state = _naming(files, start_state, model, chain, data, trial.rate_hz)
+    try:
+        state = _naming(files, start_state, model, chain, data, trial.rate_hz)
+    except DegenerateError as exc:
+        seg = exc.segment
+        if seg in model.segments and not model.segments[seg].markers:    # the plan's limit, not the trial's
+            raise DegenerateError(
+                f"model {model.source}: segment {seg!r} has no markers and no joint points pose it; diagnose fits "
+                "every segment of the model at once (fit leaves such a segment, and the joints below it, out): give "
+                "it markers, or diagnose with a model that leaves it out", segment=seg) from None
+        raise
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)
     h = Hypothesis(chain, fit.terms, data, weights, fit)
