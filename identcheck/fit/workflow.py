@@ -54,19 +54,34 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     from each of its candidates (the restart). What ``fit`` runs after its label screen, and what ``plan
     --noise-mm`` linearises at (``starts_budget_s``: seconds after which no new start is fitted, default
     :data:`identcheck.fit.whole_tree.STARTS_BUDGET_S`)."""
-    from identcheck.fit.whole_tree import STARTS_BUDGET_S, fit_tree  # imported when used, as fit_trial's own imports
+    from identcheck.bundle.start import refined_closed_forms   # imported when used, as fit_trial's own imports
+    from identcheck.fit.whole_tree import STARTS_BUDGET_S, fit_tree, misfit_warnings
 
     fitted, points = fit_model(model, trial, progress=progress)
-    restarts: list = []
+    budget = STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s
+    best = None
+    # the raw closed forms first; when their whole-tree fit ends with the residuals following the angles (or none
+    # was made) and a joint's points pose a sparse segment, the closed forms refined on their two segments too
+    # (:func:`~identcheck.bundle.start.refined_closed_forms`), and the lower whole-tree fit kept
+    for attempt in range(2):
+        if attempt and best[1].best is not None and not misfit_warnings(best[1], model, trial):
+            break
+        start = fitted if not attempt else refined_closed_forms(model, trial, fitted)
+        if attempt and start is fitted:
+            break
+        restarts: list = []
 
-    def restart(fixed: dict) -> dict:
-        again = fit_model(model, trial, fixed=fixed)[0]
-        restarts.append((fixed, again))
-        return again
+        def restart(fixed: dict, restarts=restarts) -> dict:
+            again = fit_model(model, trial, fixed=fixed)[0]
+            restarts.append((fixed, again))
+            return again
 
-    tree = fit_tree(model, trial, fitted, progress=progress, restart=restart,
-                    starts_budget_s=STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s)
-    return with_restarted(fitted, restarts, tree), points, tree
+        tree = fit_tree(model, trial, start, progress=progress, restart=restart, starts_budget_s=budget)
+        if best is None or (tree.best is not None and (best[1].best is None
+                                                       or tree.best.fit.rss < best[1].best.fit.rss)):
+            best = (start, tree, restarts)
+    start, tree, restarts = best
+    return with_restarted(start, restarts, tree), points, tree
 
 
 def with_restarted(fitted: dict, restarts: list, tree) -> dict:
