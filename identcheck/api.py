@@ -218,12 +218,36 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
                     on_fit=keep if report is not None or export_osim is not None else None)
     doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
                        if issubclass(w.category, UserWarning)] + doc["warnings"]
+    if not all(j["identifiable"] for j in doc["joints"].values()):
+        _certified_identifiability(model, doc)
     res = FitResult.from_dict(doc)
     if export_osim is not None and not scene.get("fitted"):
         raise InputError([f"--export-osim {export_osim}: no whole-tree fit to export"], source=data.source)
     if report is not None:
         _write_report(report, "fit", res.to_dict(), scene.get("scene"), f"{data.source} (model {model.source})")
     return res
+
+
+def _certified_identifiability(model, doc: dict) -> None:
+    """Each joint's ``identifiable`` in `doc` (``fit``'s JSON, changed in place) as ``plan`` certifies it for the
+    model (the whole tree's exact rank, every joint's points included), where ``fit`` had judged a joint by the case
+    its closed form met. The two had disagreed: a joint whose closed form could not start (its points seen as one
+    line after two one-marker segments, an ambiguous joint above it) was called not identifiable where ``plan``
+    certifies it, and a revolute (2,1) decided by markers two joints beyond was called undecidable. A joint ``plan``
+    certifies that ``fit`` could not start says so instead of "not identifiable". Run only when ``fit`` called some
+    joint not identifiable (the plan's rank costs 0.02-0.15 s)."""
+    planned = plan(model, motion=False, robust=False, suggest=False).joints
+    for name, j in doc["joints"].items():
+        certified = bool((planned.get(name) or {}).get("identifiable", j["identifiable"]))
+        if certified and not j["identifiable"] and not j["marker_distances"]:
+            why = (f"identifiable ({planned[name]['case']}: plan's exact certificate), but no closed form could start "
+                   f"it from {j['case']} with markers {j['markers_used'].get('parent_markers')} | "
+                   f"{j['markers_used'].get('child_markers')}, so nothing bounds it here; the markers the plan uses "
+                   f"are {planned[name].get('uses_virtual_markers') or 'its own'}")
+            j["excitation"] = {"ok": False, "reason": why}
+            if j.get("practical"):
+                j["practical"] = dict(j["practical"], reason=why)
+        j["identifiable"] = certified
 
 
 def _write_report(path, kind: str, doc: dict, scene, title: str, figures: list | None = ()) -> None:

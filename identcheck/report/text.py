@@ -118,8 +118,9 @@ def fit_text(result) -> str:
     lines = []
     for name, j in document(result)["joints"].items():
         head = f"{name}: {j['case']} by {j['estimator'] or '-'}"
-        if not j["identifiable"] and not j["marker_distances"]:
-            lines.append(f"{head}: NOT IDENTIFIABLE. {j['excitation']['reason']}")
+        if not j["marker_distances"]:
+            lines.append(f"{head}: {'NO ESTIMATE' if j['identifiable'] else 'NOT IDENTIFIABLE'}. "
+                         f"{j['excitation']['reason']}")
             continue
         if not j["identifiable"]:       # equal twins nothing beyond decides (ERRATA E1): every candidate is shown
             head += "; locally identifiable only"

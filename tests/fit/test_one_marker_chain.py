@@ -118,3 +118,29 @@ def test_a_chain_of_one_marker_segments_is_fitted_to_the_noise(seed):
         truth = sim.truth.marker_distances(name)
         for m, d in j["marker_distances"].items():
             assert abs(d - truth[m]) < 15.0, (name, m, d, truth[m])
+
+
+@settings(max_examples=2)
+@given(seed=st.integers(0, 10_000))
+@example(seed=21)
+def test_fit_says_identifiable_what_plan_certifies(seed):
+    """A ball joint after two one-marker segments (3 | 3 | 1 | 1 | 1 markers): its closed form can see its three
+    points (the marker and the hinge's two) as one line and meet spherical (2,1), not identifiable, where ``plan``
+    certifies (3,1). ``fit``'s ``identifiable`` is the plan's for every joint (and a joint it could not start says
+    so, rather than not identifiable)."""
+    model = Model.from_dict({
+        "units": "mm",
+        "segments": {"s0": {"markers": ["A1", "A2", "A3"]}, "s1": {"markers": ["B1", "B2", "B3"]},
+                     "s2": {"markers": ["C1"]}, "s3": {"markers": ["D1"]}, "s4": {"markers": ["E1"]}},
+        "joints": {"j1": {"type": "spherical", "parent": "s0", "child": "s1"},
+                   "j2": {"type": "revolute", "parent": "s1", "child": "s2"},
+                   "j3": {"type": "revolute", "parent": "s2", "child": "s3"},
+                   "j4": {"type": "spherical", "parent": "s3", "child": "s4"}}})
+    planned = api.plan(model, motion=False, robust=False, suggest=False).joints
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = api.fit(model, simulate(model, n_frames=800, noise_mm=0.5, seed=seed).trial).joints
+    for name, j in fitted.items():
+        assert j["identifiable"] == planned[name]["identifiable"], name
+        if j["identifiable"] and not j["marker_distances"]:
+            assert "plan's exact certificate" in j["excitation"]["reason"]
