@@ -805,7 +805,14 @@ def main(argv=None) -> int:
         where = f"{a.trial}: " if getattr(a, "trial", None) and str(a.trial) not in str(exc) else ""
         print(f"identcheck {a.verb}: degenerate data: {where}{exc}", file=sys.stderr)
         if getattr(a, "json", False):   # exit 1 is an answer, and --json promises one document for it
-            _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {})})
+            try:
+                with _named_stdout():
+                    _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {})})
+                    sys.stdout.flush()
+            except OSError as err:      # (the answer could not be written: said, not lost)
+                print(f"identcheck {a.verb}: {err.filename or 'standard output'}: {err.strerror or err}",
+                      file=sys.stderr)
+                return 2
         return 1
     except BrokenPipeError:
         raise

@@ -127,10 +127,10 @@ class Trial:
     (5, 2, (5, 3))
     """
 
-    __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source", "_first_frame")
+    __slots__ = ("_xyz", "_labels", "_index", "_rate_hz", "_source", "_first_frame", "_numbered")
 
     def __init__(self, xyz, labels: Sequence[str], rate_hz: float, source: str = "<array>",
-                 first_frame: int | None = None):
+                 first_frame: int | None = None, numbered: bool | None = None):
         problems: list[str] = []
         xyz = _float_array(xyz, source, copy=True)  # copy: the trial owns its data
         if xyz.ndim != 3 or xyz.shape[2] != 3:
@@ -165,7 +165,10 @@ class Trial:
         self._index = {lab: i for i, lab in enumerate(labels)}
         self._rate_hz = rate_hz
         self._source = source
-        self._first_frame = None if first_frame is None else int(first_frame)   # None: no file numbered it
+        self._first_frame = 0 if first_frame is None else int(first_frame)
+        # whether a file numbered the frames (default: when a first frame is given); an array's rows are counted
+        # from 0 here and written from 1, whatever part of it is cut or rebuilt
+        self._numbered = first_frame is not None if numbered is None else bool(numbered)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
@@ -504,7 +507,7 @@ class Trial:
             raise InputError([f"marker(s) missing from the trial: {', '.join(missing)}"],
                              source=self._source)
         cols = [self._index[lab] for lab in labels]
-        return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source, self._first_frame)
+        return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source, self._first_frame, self._numbered)
 
     def replace(self, xyz=None, labels=None, rate_hz=None, source=None, first_frame=None) -> "Trial":
         """A new trial with some parts replaced (positions in mm); the rest is shared."""
@@ -512,12 +515,13 @@ class Trial:
                      self._labels if labels is None else labels,
                      self._rate_hz if rate_hz is None else rate_hz,
                      self._source if source is None else source,
-                     self._first_frame if first_frame is None else first_frame)
+                     self._first_frame if first_frame is None else first_frame,
+                     self._numbered if first_frame is None else True)
 
     @property
     def first_frame(self) -> int:
         """The file's own number of row 0 (TRC Frame#, C3D header first frame; 0 for arrays)."""
-        return 0 if self._first_frame is None else self._first_frame
+        return self._first_frame
 
     def frame_number(self, row) -> int | np.ndarray:
         """The file's frame number(s) of row index(es) `row`."""
@@ -547,13 +551,12 @@ class Trial:
             warnings.warn(f"{self._source}: --frames {spec} reaches beyond the file's frames ({first} to {last}): "
                           f"using {max(start, first)}:{min(end, last)}", UserWarning, stacklevel=2)
         lo, hi = max(start, first) - first, min(end, last) - first
-        numbered = None if self._first_frame is None and lo == 0 else first + lo
-        return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, numbered)
+        return Trial(self._xyz[lo:hi + 1], self._labels, self._rate_hz, self._source, first + lo, self._numbered)
 
     # ------------------------------------------------------------------ writers
     def to_trc(self, path) -> None:
         """Write an OpenSim TRC file in mm, its frames numbered as the file this trial was read from (from 0 when
-        that file's were), from 1 for a trial made from an array."""
+        that file's were); a trial made from an array has its row r written as frame r + 1, cut or not."""
         write_trc(path, self._xyz, self._labels, self._rate_hz, first_frame=self._file_numbering())
 
     def to_c3d(self, path) -> None:
@@ -567,8 +570,9 @@ class Trial:
         write_c3d(path, self._xyz, self._labels, self._rate_hz, first_frame=first)
 
     def _file_numbering(self) -> int:
-        """The number a written file gives row 0: the file's own, or 1 for a trial no file numbered."""
-        return 1 if self._first_frame is None else self._first_frame
+        """The number a written file gives row 0: the file's own, or one more than the row's own count for a trial
+        no file numbered (an array's row r is written as frame r + 1, cut or not)."""
+        return self._first_frame if self._numbered else self._first_frame + 1
 
     def to_file(self, path) -> None:
         """Write ``.trc`` or ``.c3d`` by extension (any case)."""

@@ -104,8 +104,9 @@ def refined_closed_forms(model, trial, fitted: dict) -> dict:
     effects that were not there. Refined, the first hinge is its two segments' maximum likelihood before it lends
     its points. Not always the better start: a real gait trial's hip seen through one thigh marker (151 frames),
     refined alone, led the whole tree to a minimum at 2.13 mm instead of 1.73. So it is a start beside the raw
-    closed forms' (``fit`` fits the whole tree from both and keeps the lower; ``diagnose`` compares it with the
-    other starts when its rigid fit leaves a gap, :func:`better_start`), never in their place."""
+    closed forms' (``fit`` tries it when its first whole-tree fit misfits,
+    :func:`identcheck.fit.workflow.fit_closed_then_tree`; ``diagnose`` compares it with the other starts when its
+    rigid fit leaves a gap, :func:`better_start`), never in their place."""
     from dataclasses import replace
 
     fixed: dict = {}
@@ -143,7 +144,7 @@ def _two_segment_fit(model, trial, joint: str, est):
         state = state_from_joints(sub, chain, data, {joint: est})
         fit = fit_chain(chain, data, state, weights=np.all(np.isfinite(data), axis=2).astype(float),
                         max_iter=REFINE_ITER)
-    except _CANNOT_START:
+    except CANNOT_START:
         return None
     R, t, s = fit.seg_R[jt.parent], fit.seg_t[jt.parent], fit.state
     world = lambda v: np.einsum("fij,j->fi", R, v)  # noqa: E731
@@ -190,7 +191,8 @@ PICK_ITER = 40
 """Iterations of each of those fits: the starts that reach the noise had been the highest after 8 (see
 :func:`better_start`), and converged within 35."""
 
-_CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
+CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
+"""What a start that cannot be made raises: it is skipped, never the fit."""
 
 
 def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float, margin: float,
@@ -217,11 +219,14 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
     try:
         fitted, _ = fit_model(model, trial)
         combos = start_combinations(chain, fitted, lambda fixed: fit_model(model, trial, fixed=fixed)[0], data)[0]
-        refined = refined_closed_forms(model, trial, fitted)
-        if refined is not fitted and all(refined[j][0] is not None for j in chain.joints):
-            combos.append({j: refined[j][0] for j in chain.joints})      # the refined closed forms' start too
-    except _CANNOT_START:
+    except CANNOT_START:
         return None
+    try:                                    # the refined closed forms' start too, when they can be made
+        refined = refined_closed_forms(model, trial, fitted)
+        if refined is not fitted and all(refined.get(j, (None,))[0] is not None for j in chain.joints):
+            combos.append({j: refined[j][0] for j in chain.joints})
+    except CANNOT_START:
+        pass
     if len(combos) < 2:
         return None
     idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), PICK_FRAMES)).astype(int))
@@ -231,7 +236,7 @@ def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, 
             state = state_from_joints(model, chain, data, combo)
             ends.append((fit_chain(chain, data[idx], state.at_frames(idx), weights=weights[idx],
                                    max_iter=max_iter).rss, state))
-        except _CANNOT_START:
+        except CANNOT_START:
             ends.append((np.inf, None))
     k = min(range(len(ends)), key=lambda i: ends[i][0])
     # the first combination is :func:`start_state`'s unless a joint had no closed form of its own (then every

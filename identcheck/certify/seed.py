@@ -3,10 +3,10 @@
 ``table``, ``rank``, ``verify`` and ``plan`` take SymPy's results (the derivations, their printed forms, the joint
 models and their compiled Jacobians) from the user's disk cache. :func:`write` fills an empty cache by running the
 table in a fresh process, as a new user's first ``identcheck table`` would, and ships its files with an index of the
-SymPy and Python versions they were made with. :func:`status` says whether the shipped files serve the sources as
-they are now: when the running versions are the seed's, every cache file the current keys name must be shipped
-(a derivation or a joint model edited since is a stale seed); under other versions the seed does not apply, and
-the cache derives as before.
+SymPy, Python and python-flint versions they were made with. :func:`status` says whether the shipped files serve the
+sources as they are now: when the running versions are the seed's, every cache file the current keys name must be
+shipped (a derivation or a joint model edited since is a stale seed); under other versions the seed does not apply,
+and the cache derives as before.
 """
 from __future__ import annotations
 
@@ -18,17 +18,21 @@ import sys
 import tempfile
 from pathlib import Path
 
+from identcheck.derive import CASE_DERIVATION
 from identcheck.derive.cache import SEED, source_key
 
 INDEX = "index.json"
-DERIVED = ("revolute21", "spherical22", "spherical31")   # the derivations the table reads, and prints
+DERIVED = tuple(sorted(set(CASE_DERIVATION.values())))   # the derivations the table reads, and prints
 
 
 def versions() -> dict:
-    """The versions a cache key holds besides the sources: SymPy's, and Python's major.minor."""
+    """The versions a cache key holds besides the sources: SymPy's, Python's major.minor, and python-flint's (whose
+    rationals the compiled Jacobians hold)."""
+    import flint
     import sympy
 
-    return {"sympy": sympy.__version__, "python": f"{sys.version_info[0]}.{sys.version_info[1]}"}
+    return {"sympy": sympy.__version__, "python": f"{sys.version_info[0]}.{sys.version_info[1]}",
+            "flint": flint.__version__}
 
 
 def expected() -> list:
@@ -57,8 +61,12 @@ def write(timeout_s: float = 900.0) -> dict:
     """Fill an empty cache with the table's SymPy work (a fresh process, the seed off) and ship its files in
     place of the seed's; the new :func:`status`. Raises RuntimeError when the table fails or a file the current
     keys name was not made."""
+    if status()["current"]:
+        return status()         # pickles are not byte for byte the same from run to run: a current seed is kept
     with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, IDENTCHECK_CACHE=tmp, IDENTCHECK_SEED="off")
+        package = str(Path(__file__).resolve().parents[2])       # this package's, whatever the caller's folder
+        env = dict(os.environ, IDENTCHECK_CACHE=tmp, IDENTCHECK_SEED="off",
+                   PYTHONPATH=os.pathsep.join(filter(None, [package, os.environ.get("PYTHONPATH")])))
         done = subprocess.run([sys.executable, "-c", "from identcheck.certify.table import table; table()"],
                               env=env, capture_output=True, text=True, timeout=timeout_s)
         if done.returncode != 0:

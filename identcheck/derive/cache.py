@@ -105,10 +105,15 @@ def printed(name: str, render):
     if memo_key in _MEMO:
         return _MEMO[memo_key]
     path = cache_dir() / f"{name}-{source_key()}.printed.json"
-    try:
-        value = json.loads((path if path.is_file() or _seed_file(path) is None else _seed_file(path))
-                           .read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    value = None
+    for where in (path, _seed_file(path)):           # the user's file, else the shipped one
+        try:
+            value = json.loads(where.read_text(encoding="utf-8")) if where is not None else None
+        except (OSError, ValueError):
+            value = None
+        if value is not None:
+            break
+    if value is None:
         value = render()
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -300,10 +300,10 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     except DegenerateError as exc:
         seg = exc.segment
         if seg in model.segments and not model.segments[seg].markers:    # the plan's limit, not the trial's
-            raise DegenerateError(
-                f"model {model.source}: segment {seg!r} has no markers and no joint points pose it; diagnose fits "
-                "every segment of the model at once (fit leaves such a segment, and the joints below it, out): give "
-                "it markers, or diagnose with a model that leaves it out", segment=seg) from None
+            raise InputError([
+                f"segments.{seg}.markers: none, and no joint points pose the segment: diagnose fits every segment of "
+                "the model at once (fit leaves such a segment, and the joints below it, out); give it markers, or "
+                "diagnose with a model that leaves it out"], source=model.source) from None
         raise
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)

@@ -76,7 +76,7 @@ def without_spikes(trial: Trial) -> tuple[Trial, dict | None]:
                f"frames before and after put their marker, a jump out and back that no body makes in one frame at "
                f"{trial.rate_hz:g} Hz (a ghost marker or a corrupt coordinate); left out: {shown}{more}")
     frames = sorted({int(r) for r in rows})
-    return (Trial(xyz, trial.labels, trial.rate_hz, trial.source, trial.frame_number(0)),
+    return (trial.replace(xyz=xyz),
             {"kind": "gross_error", "message": message, "markers": markers, "frames": frames,
              "count": int(len(rows)),
              "file_frames": [trial.frame_number(f) for f in frames]})

@@ -53,35 +53,82 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     forms, and the joints whose closed form needs a candidate of an ambiguous joint above them started again
     from each of its candidates (the restart). What ``fit`` runs after its label screen, and what ``plan
     --noise-mm`` linearises at (``starts_budget_s``: seconds after which no new start is fitted, default
-    :data:`identcheck.fit.whole_tree.STARTS_BUDGET_S`)."""
-    from identcheck.bundle.start import refined_closed_forms   # imported when used, as fit_trial's own imports
-    from identcheck.fit.whole_tree import STARTS_BUDGET_S, fit_tree, misfit_warnings
+    :data:`identcheck.fit.whole_tree.STARTS_BUDGET_S`).
+
+    When that fit ends with the residuals following the angles and a joint's points pose a sparse segment, the
+    closed forms refined joint by joint on their two segments (:func:`~identcheck.bundle.start.refined_closed_forms`)
+    are fitted too, first alone (one Levenberg-Marquardt fit of the same tree): only when that ends well below
+    (:data:`REFINED_GAIN`) is the whole-tree fit made again from them, and kept if its minimum is lower on the same
+    markers. A 3 | 1 | 1 hinge chain
+    had stalled at 2.5-2.7 times the noise in 3 of 12 clean trials; a second whole-tree fit every time (intervals,
+    bootstrap) had doubled ``fit`` on a real gait trial with skin motion (48 -> 95 s), where the refined start is
+    no lower."""
+    from identcheck.fit.whole_tree import STARTS_BUDGET_S, misfit_warnings  # imported when used
 
     fitted, points = fit_model(model, trial, progress=progress)
     budget = STARTS_BUDGET_S if starts_budget_s is None else starts_budget_s
-    best = None
-    # the raw closed forms first; when their whole-tree fit ends with the residuals following the angles (or none
-    # was made) and a joint's points pose a sparse segment, the closed forms refined on their two segments too
-    # (:func:`~identcheck.bundle.start.refined_closed_forms`), and the lower whole-tree fit kept
-    for attempt in range(2):
-        if attempt and best[1].best is not None and not misfit_warnings(best[1], model, trial):
-            break
-        start = fitted if not attempt else refined_closed_forms(model, trial, fitted)
-        if attempt and start is fitted:
-            break
-        restarts: list = []
-
-        def restart(fixed: dict, restarts=restarts) -> dict:
-            again = fit_model(model, trial, fixed=fixed)[0]
-            restarts.append((fixed, again))
-            return again
-
-        tree = fit_tree(model, trial, start, progress=progress, restart=restart, starts_budget_s=budget)
-        if best is None or (tree.best is not None and (best[1].best is None
-                                                       or tree.best.fit.rss < best[1].best.fit.rss)):
-            best = (start, tree, restarts)
-    start, tree, restarts = best
+    start, (tree, restarts) = fitted, _tree_from(model, trial, fitted, progress, budget)
+    if tree.best is not None and misfit_warnings(tree, model, trial):
+        refined = _refined_start(model, trial, fitted, tree)
+        if refined is not None:
+            again, again_restarts = _tree_from(model, trial, refined, progress, budget)
+            if again.best is not None and again.best.fit.chain.labels == tree.best.fit.chain.labels \
+                    and again.best.fit.rss < tree.best.fit.rss:
+                start, tree, restarts = refined, again, again_restarts
     return with_restarted(start, restarts, tree), points, tree
+
+
+REFINED_GAIN = 0.9
+"""The refined start's fit must end below this share of the first whole-tree fit's cost for the whole-tree fit to be
+made again from it: a wrong minimum sits far above (a 3 | 1 | 1 chain at 2.5-2.7 times the noise: 6-8 times the
+cost); walk2's sparse legs, whose residuals follow the angles through skin motion, ended 0.2 % lower from it, which
+had cost a second whole-tree fit (48 -> 95 s) for no verdict changed."""
+
+
+def _tree_from(model, trial, fitted: dict, progress, budget: float) -> tuple:
+    """(the whole-tree fit from the closed forms `fitted`, the restarts it made: (fixed, closed forms) each)."""
+    from identcheck.fit.whole_tree import fit_tree
+
+    restarts: list = []
+
+    def restart(fixed: dict) -> dict:
+        again = fit_model(model, trial, fixed=fixed)[0]
+        restarts.append((fixed, again))
+        return again
+
+    return fit_tree(model, trial, fitted, progress=progress, restart=restart, starts_budget_s=budget), restarts
+
+
+def _refined_start(model, trial, fitted: dict, tree):
+    """The refined closed forms (:func:`~identcheck.bundle.start.refined_closed_forms`) when one fit of the whole
+    tree from them ends lower than `tree`'s best minimum on the same markers; None otherwise, or when they cannot be
+    made or started (the raw closed forms' fit stands)."""
+    import warnings as _w
+
+    import numpy as np
+
+    from identcheck.bundle.chain import fit_chain
+    from identcheck.bundle.start import CANNOT_START, PICK_FRAMES, PICK_ITER, refined_closed_forms, state_from_joints
+
+    best = tree.best.fit
+    chain = best.chain
+    with _w.catch_warnings():               # a start that is not kept must not leave its warnings in the report
+        _w.simplefilter("ignore")
+        try:
+            refined = refined_closed_forms(model, trial, fitted)
+            if refined is fitted or any(refined.get(j, (None,))[0] is None for j in chain.joints):
+                return None
+            data = trial.select(chain.labels).as_array()
+            state = state_from_joints(model, chain, data, {j: refined[j][0] for j in chain.joints})
+            # compared on frames spread over the trial, as diagnose compares its starts (better_start): the first
+            # fit's cost there against the refined start's fit to them alone
+            idx = np.unique(np.linspace(0, len(data) - 1, min(len(data), PICK_FRAMES)).astype(int))
+            seen = np.all(np.isfinite(data[idx]), axis=2)
+            fit = fit_chain(chain, data[idx], state.at_frames(idx), weights=seen.astype(float), max_iter=PICK_ITER)
+        except CANNOT_START:
+            return None
+    first = float(np.sum(np.where(seen[..., None], best.pred[idx] - data[idx], 0.0) ** 2))
+    return refined if fit.rss < REFINED_GAIN * first else None
 
 
 def with_restarted(fitted: dict, restarts: list, tree) -> dict:

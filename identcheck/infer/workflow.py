@@ -256,7 +256,7 @@ def infer_skeleton(trial, segments: dict | None = None, segments_source: str = "
     """
     say = progress or (lambda msg: None)
     refuse_exported_points(trial, exported_joints(trial.labels))
-    shrunk, _ = units_problem(trial.as_array(), 1.0, "the trial's units field")
+    shrunk, _ = units_problem(trial.as_array(), 1.0, "the file's units field (POINT:UNITS or Units)")
     if shrunk:      # the readers only warn (a small rig could span that little), but the grouping's tolerances are mm
         raise InputError([f"{shrunk} The markers are grouped into segments by tolerances in mm (0.5 mm and more), "
                           "within which every marker of a body that small is rigid with every other: fix the units "

@@ -262,7 +262,7 @@ def read_trc(path) -> MarkerData:
     elif not rows and not bad_width:
         problems.append("no data rows after the header (data start on line 6)")
     if n_frames_hdr is not None and rows and not bad_width:
-        if len(rows) < n_frames_hdr:
+        if len(rows) < n_frames_hdr and _frame_span(rows) != n_frames_hdr:    # (frames left out are gaps)
             problems.append(f"line 3 says NumFrames = {n_frames_hdr} but the file has only {len(rows)} "
                             f"data rows (lines {linenos[0]}-{linenos[-1]}); the file looks truncated")
         elif len(rows) > n_frames_hdr:
@@ -365,6 +365,16 @@ def _frame_order(rows: list, linenos: list) -> list[str]:
                             f"{linenos[k]}): {name} must {'rise' if col == 0 else 'not fall'} from row to row; the "
                             "rows are out of order")
     return problems
+
+
+def _frame_span(rows: list) -> int | None:
+    """How many frames the rows span by their Frame# (last − first + 1), or None when Frame# is not whole numbers
+    rising: what a NumFrames that counts the frames an exporter left out gives."""
+    frames = _column(rows, 0)
+    if frames is None or not (np.all(np.abs(frames) < 2.0 ** 53) and np.all(frames == np.round(frames))
+                              and np.all(np.diff(frames) > 0)):
+        return None
+    return int(frames[-1] - frames[0]) + 1
 
 
 MAX_FILLED = 20

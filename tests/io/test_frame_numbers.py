@@ -117,7 +117,8 @@ def test_rows_a_trc_leaves_out_are_gaps_at_their_own_frame_numbers(tmp_path_fact
     kept = sorted(set(range(n)) - dropped)
     head = lines[:6]
     cells = head[2].split("\t")
-    cells[2] = str(len(kept))                                       # NumFrames: the rows the file holds
+    span = data.draw(st.booleans(), label="NumFrames counts the frames left out")
+    cells[2] = str(kept[-1] - kept[0] + 1 if span else len(kept))   # NumFrames: the rows held, or the span
     head[2] = "\t".join(cells)
     (folder / "some.trc").write_text("\n".join(head + [lines[6 + k] for k in kept]) + "\n")
     if dropped:
@@ -149,3 +150,26 @@ def test_a_frame_number_far_beyond_the_rows_is_refused_naming_its_line(tmp_path)
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match="line 16: Frame# jumps from 9 to 100000000"):
         Trial.from_file(path)
+
+
+@settings(max_examples=15, deadline=None)
+@given(n=st.integers(4, 40), cut=st.integers(0, 3), spike=st.booleans())
+def test_an_arrays_rows_keep_their_written_numbers_when_cut_or_cleaned(tmp_path_factory, n, cut, spike):
+    """A trial made from an array writes its row r as frame r + 1, whether written whole, cut with --frames (its
+    own row numbers), or rebuilt without a gross spike: a cut had been written from its cut's number and a cleaned
+    trial from 0, so one row had three numbers."""
+    from identcheck.estimate.spikes import without_spikes
+
+    folder = tmp_path_factory.mktemp("arr")
+    xyz = np.cumsum(np.random.default_rng(n).normal(0.0, 1.0, (n, 2, 3)), axis=0) + 500.0
+    if spike:
+        xyz[n // 2, 0] += 5000.0
+    t = Trial(xyz, ["A", "B"], 100.0)
+    t.to_file(folder / "whole.trc")
+    assert Trial.from_file(folder / "whole.trc").first_frame == 1
+    part = t.frames(f"{cut}:")
+    part.to_file(folder / "part.trc")
+    assert Trial.from_file(folder / "part.trc").first_frame == cut + 1
+    clean, _ = without_spikes(t)
+    clean.to_file(folder / "clean.trc")
+    assert Trial.from_file(folder / "clean.trc").first_frame == 1
