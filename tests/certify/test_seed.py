@@ -126,3 +126,31 @@ def test_the_cache_reads_a_shipped_file_only_for_what_it_lacks(tmp_path_factory,
     if not from_seed:
         saved = pickle.loads((tmp / "user" / "things-k.pickle").read_bytes())
         assert saved == ({} if off else shipped) | {wanted: -1}
+
+
+@settings(max_examples=10, deadline=None)
+@given(shipped=st.lists(st.integers(), max_size=4), user=st.sampled_from(["none", "corrupt", "own"]),
+       off=st.booleans())
+def test_printed_forms_come_from_the_users_file_then_the_shipped_one(tmp_path_factory, shipped, user, off):
+    """The printed forms: the user's file when it reads, else the shipped one (a missing or corrupt user file alike),
+    else a fresh render saved to the user's cache; the shipped file is never written."""
+    tmp = tmp_path_factory.mktemp("printed")
+    (tmp / "seed").mkdir()
+    (tmp / "user").mkdir()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cache, "SEED", tmp / "seed")
+        mp.setenv("IDENTCHECK_CACHE", str(tmp / "user"))
+        mp.setenv("IDENTCHECK_SEED", "off" if off else "on")
+        mp.setattr(cache, "_MEMO", {})
+        name = f"demo-{cache.source_key()}.printed.json"
+        (tmp / "seed" / name).write_text(json.dumps(shipped))
+        if user == "corrupt":
+            (tmp / "user" / name).write_text("{not json")
+        elif user == "own":
+            (tmp / "user" / name).write_text(json.dumps(["own"]))
+        value = cache.printed("demo", lambda: ["rendered"])
+    expected = ["own"] if user == "own" else (["rendered"] if off else shipped)
+    assert value == expected
+    assert json.loads((tmp / "seed" / name).read_text()) == shipped
+    if expected == ["rendered"]:
+        assert json.loads((tmp / "user" / name).read_text()) == ["rendered"]
