@@ -282,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="derivations/out", help="directory for the rendered Markdown")
     s.add_argument("--regenerate", action="store_true",
                    help="rewrite the solvers' generated code (identcheck/solve/generated/) from these derivations, "
-                        "and the derivation cache the package ships (identcheck/derive/seed/)")
+                        "and the derivation cache the package ships (identcheck/derive/seed/) when it is stale")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_cmd_derive)
 
@@ -809,6 +809,8 @@ def main(argv=None) -> int:
                 with _named_stdout():
                     _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {})})
                     sys.stdout.flush()
+            except BrokenPipeError:     # a reader that stopped early: quiet, as everywhere (run())
+                raise
             except OSError as err:      # (the answer could not be written: said, not lost)
                 print(f"identcheck {a.verb}: {err.filename or 'standard output'}: {err.strerror or err}",
                       file=sys.stderr)

@@ -510,7 +510,8 @@ class Trial:
         return Trial(self._xyz[:, cols], labels, self._rate_hz, self._source, self._first_frame, self._numbered)
 
     def replace(self, xyz=None, labels=None, rate_hz=None, source=None, first_frame=None) -> "Trial":
-        """A new trial with some parts replaced (positions in mm); the rest is shared."""
+        """A new trial with some parts replaced (positions in mm); the rest is shared. A `first_frame` given is a
+        file's numbering (written as given), not an array's row count."""
         return Trial(self._xyz if xyz is None else xyz,
                      self._labels if labels is None else labels,
                      self._rate_hz if rate_hz is None else rate_hz,
@@ -520,7 +521,8 @@ class Trial:
 
     @property
     def first_frame(self) -> int:
-        """The file's own number of row 0 (TRC Frame#, C3D header first frame; 0 for arrays)."""
+        """The file's own number of row 0 (TRC Frame#, C3D header first frame); for a trial made from an array, the
+        row's own count (0, or the first row kept by :meth:`frames`)."""
         return self._first_frame
 
     def frame_number(self, row) -> int | np.ndarray:

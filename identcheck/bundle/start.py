@@ -102,9 +102,11 @@ def refined_closed_forms(model, trial, fitted: dict) -> dict:
     pose through those points put the second's at 26.5 mm (truth 92.4, rms 10 mm), and the whole-tree fit from there
     stopped at 2.7 times the noise with both joints 10-60 mm off, in 3 of 12 simulated trials; ``diagnose`` then named
     effects that were not there. Refined, the first hinge is its two segments' maximum likelihood before it lends
-    its points. Not always the better start: a real gait trial's hip seen through one thigh marker (151 frames),
+    its points (a joint whose parent has three markers of its own and whose sparse child has a joint below it).
+    Not always the better start: a real gait trial's hip seen through one thigh marker (151 frames),
     refined alone, led the whole tree to a minimum at 2.13 mm instead of 1.73. So it is a start beside the raw
-    closed forms' (``fit`` tries it when its first whole-tree fit misfits,
+    closed forms' (``fit`` tries it when its first whole-tree fit misfits and a fit from it on spread frames ends well
+    below,
     :func:`identcheck.fit.workflow.fit_closed_then_tree`; ``diagnose`` compares it with the other starts when its
     rigid fit leaves a gap, :func:`better_start`), never in their place."""
     from dataclasses import replace
@@ -123,11 +125,12 @@ def refined_closed_forms(model, trial, fitted: dict) -> dict:
 
 
 def _lends_to_a_sparse_segment(model, joint: str) -> bool:
-    """Whether `joint`'s points pose a segment with fewer than three markers from which another joint hangs."""
+    """Whether `joint`'s points pose its child, a segment with fewer than three markers from which another joint
+    hangs, while its parent is posed by three markers of its own (the two-segment fit's root: a one-marker parent
+    leaves that fit more unknowns a frame than samples, and it drifts)."""
     jt = model.joints[joint]
-    return any(len(model.segments[seg].markers) < 3
-               and any(seg in (o.parent, o.child) for n, o in model.joints.items() if n != joint)
-               for seg in (jt.parent, jt.child))
+    return (len(model.segments[jt.parent].markers) >= 3 and len(model.segments[jt.child].markers) < 3
+            and any(o.parent == jt.child for n, o in model.joints.items() if n != joint))
 
 
 def _two_segment_fit(model, trial, joint: str, est):

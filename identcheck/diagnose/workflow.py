@@ -299,7 +299,8 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         state = _naming(files, start_state, model, chain, data, trial.rate_hz)
     except DegenerateError as exc:
         seg = exc.segment
-        if seg in model.segments and not model.segments[seg].markers:    # the plan's limit, not the trial's
+        lent = sum(1 if j.type == "spherical" else 2 for j in model.joints.values() if seg in (j.parent, j.child))
+        if seg in model.segments and not model.segments[seg].markers and lent < 3:   # the plan's, not the trial's
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment: diagnose fits every segment of "
                 "the model at once (fit leaves such a segment, and the joints below it, out); give it markers, or "

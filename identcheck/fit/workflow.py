@@ -71,10 +71,22 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     if tree.best is not None and misfit_warnings(tree, model, trial):
         refined = _refined_start(model, trial, fitted, tree)
         if refined is not None:
-            again, again_restarts = _tree_from(model, trial, refined, progress, budget)
-            if again.best is not None and again.best.fit.chain.labels == tree.best.fit.chain.labels \
-                    and again.best.fit.rss < tree.best.fit.rss:
+            import warnings as _w
+
+            from identcheck.bundle.start import CANNOT_START
+
+            with _w.catch_warnings(record=True) as said:   # said again only if this fit is kept
+                _w.simplefilter("always")
+                try:
+                    again, again_restarts = _tree_from(model, trial, refined, progress, budget)
+                except CANNOT_START:
+                    again = None
+            kept = tree.best.fit
+            if again is not None and again.best is not None \
+                    and again.best.fit.chain.labels == kept.chain.labels and again.best.fit.rss < kept.rss:
                 start, tree, restarts = refined, again, again_restarts
+                for w in said:
+                    _w.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return with_restarted(start, restarts, tree), points, tree
 
 
@@ -100,9 +112,9 @@ def _tree_from(model, trial, fitted: dict, progress, budget: float) -> tuple:
 
 
 def _refined_start(model, trial, fitted: dict, tree):
-    """The refined closed forms (:func:`~identcheck.bundle.start.refined_closed_forms`) when one fit of the whole
-    tree from them ends lower than `tree`'s best minimum on the same markers; None otherwise, or when they cannot be
-    made or started (the raw closed forms' fit stands)."""
+    """The refined closed forms (:func:`~identcheck.bundle.start.refined_closed_forms`) when a fit of the whole tree
+    from them to spread frames ends below :data:`REFINED_GAIN` of `tree`'s best minimum's cost on those frames (the
+    same markers); None otherwise, or when they cannot be made or started (the raw closed forms' fit stands)."""
     import warnings as _w
 
     import numpy as np

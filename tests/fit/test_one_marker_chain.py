@@ -122,6 +122,7 @@ def test_a_chain_of_one_marker_segments_is_fitted_to_the_noise(seed):
 
 @settings(max_examples=2)
 @given(seed=st.integers(0, 10_000))
+@example(seed=0)        # j4's closed form meets spherical (2,1): no estimate, certified identifiable by the plan
 @example(seed=21)
 def test_fit_says_identifiable_what_plan_certifies(seed):
     """A ball joint after two one-marker segments (3 | 3 | 1 | 1 | 1 markers): its closed form can see its three
