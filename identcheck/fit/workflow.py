@@ -59,10 +59,9 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
     closed forms refined joint by joint on their two segments (:func:`~identcheck.bundle.start.refined_closed_forms`)
     are fitted too, first alone (one Levenberg-Marquardt fit of the same tree): only when that ends well below
     (:data:`REFINED_GAIN`) is the whole-tree fit made again from them, and kept if its minimum is lower on the same
-    markers. A 3 | 1 | 1 hinge chain
-    had stalled at 2.5-2.7 times the noise in 3 of 12 clean trials; a second whole-tree fit every time (intervals,
-    bootstrap) had doubled ``fit`` on a real gait trial with skin motion (48 -> 95 s), where the refined start is
-    no lower."""
+    markers. A 3 | 1 | 1 hinge chain had stalled at 2.5-2.7 times the noise in 3 of 12 clean trials; a second
+    whole-tree fit every time (intervals, bootstrap) had doubled ``fit`` on a real gait trial with skin motion
+    (48 -> 95 s), where the refined start is no lower."""
     from identcheck.fit.whole_tree import STARTS_BUDGET_S, misfit_warnings  # imported when used
 
     fitted, points = fit_model(model, trial, progress=progress)
