@@ -103,10 +103,9 @@ def refined_closed_forms(model, trial, fitted: dict) -> dict:
     stopped at 2.7 times the noise with both joints 10-60 mm off, in 3 of 12 simulated trials; ``diagnose`` then named
     effects that were not there. Refined, the first hinge is its two segments' maximum likelihood before it lends
     its points (a joint whose parent has three markers of its own and whose sparse child has a joint below it).
-    Not always the better start: a real gait trial's hip seen through one thigh marker (151 frames),
-    refined alone, led the whole tree to a minimum at 2.13 mm instead of 1.73. So it is a start beside the raw
-    closed forms' (``fit`` tries it when its first whole-tree fit misfits and a fit from it on spread frames ends well
-    below,
+    Not always the better start: a real gait trial's hip seen through one thigh marker (151 frames), refined alone,
+    led the whole tree to a minimum at 2.13 mm instead of 1.73. So it is a start beside the raw closed forms' (``fit``
+    tries it when its first whole-tree fit misfits and a fit from it on spread frames ends well below,
     :func:`identcheck.fit.workflow.fit_closed_then_tree`; ``diagnose`` compares it with the other starts when its
     rigid fit leaves a gap, :func:`better_start`), never in their place."""
     from dataclasses import replace
