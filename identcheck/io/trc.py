@@ -335,9 +335,9 @@ def _rate_against_time(rows: list, linenos: list, rate_hz: float) -> str:
     times, frames = _column(rows, 1), _column(rows, 0)
     if times is None or len(rows) < 3 or not times[-1] > times[0]:
         return ""
-    whole = frames is not None and np.all(np.abs(frames) < 1e9) and np.all(frames == np.round(frames)) \
-        and np.all(np.diff(frames) > 0)              # (a frame number no capture reaches is no count of frames)
-    steps = float(frames[-1] - frames[0]) if whole else float(len(times) - 1)
+    span_frames = _frame_span(rows)
+    whole = span_frames is not None and np.all(np.abs(frames) < 1e9)   # (no capture reaches such frame numbers)
+    steps = float(span_frames - 1) if whole else float(len(times) - 1)
     span = float(times[-1] - times[0])
     per_frame = span / steps
     decimals = max((len(r[1].split(".")[1]) if "." in r[1] and "e" not in r[1].lower() else 0) for r in rows[:50])
