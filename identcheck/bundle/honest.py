@@ -55,8 +55,8 @@ class Minimum:
     markers below a segment not posed by itself (``fit.whole_tree._without_incidental_rolls``). Its distances, centre,
     axis, covariance and verdict all come from that one refit, never a mix of two fits (a covariance the
     bootstrap widened, :func:`with_sampling_spread`, is put here too)."""
-    upstream_weights: np.ndarray | None = None
-    """The sample weights of the refit in ``upstream`` (the markers below the cut weighted 0)."""
+    upstream_weights: dict = field(default_factory=dict)
+    """joint -> the sample weights of its refit in ``upstream`` (the markers below the cuts weighted 0)."""
     spread: dict = field(default_factory=dict)
     """joint -> {"draws": n, "ratio": largest bootstrap-over-linear standard error} where the sampling spread was
     measured (:func:`with_sampling_spread`)."""
@@ -286,7 +286,7 @@ def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, wei
     quadratic interval becomes ``d ± 1.96 SE`` with the method ``bootstrap`` (``bootstrap+model_error``), a profile
     interval is widened to hold ``d ± t₉₅ · spread`` (``profile+bootstrap``), an interval that claims no bound stays;
     the joint's covariance (centre, axis, weakest direction) grows by the largest variance ratio among its distances.
-    ``weights``: the sample weights of ``best.fit`` (the upstream refit's are ``best.upstream_weights``)."""
+    ``weights``: the sample weights of ``best.fit`` (an upstream refit's are in ``best.upstream_weights``)."""
     groups: dict = {}
     if not best.fit.converged:                    # no maximum of the likelihood: its intervals are withdrawn anyway
         return best
@@ -296,13 +296,13 @@ def with_sampling_spread(best: Minimum, data, rate_hz: float, progress=None, wei
         fit, cov = best.upstream.get(j, (best.fit, best.cov))
         grads = distance_gradients(fit.chain, fit.state, len(cov.information))[j]
         if grads and max(cov.frame_noise_ratio(g) for _, g in grads.values()) > SPREAD_TRIGGER ** 2:
-            groups.setdefault(id(fit), (fit, cov, j in best.upstream, []))[3].append(j)
+            groups.setdefault(id(fit), (fit, cov, best.upstream_weights.get(j, weights), []))[3].append(j)
     if not groups:
         return best
     distances, intervals, upstream, spread = dict(best.distances), dict(best.intervals), dict(best.upstream), {}
-    for fit, cov, up, joints in groups.values():
+    for fit, cov, fit_weights, joints in groups.values():
         found, draws = sampling_spread(fit, data, joints, cov.sigma_mm, cov.lag1, rate_hz,
-                                       weights=best.upstream_weights if up else weights, progress=progress,
+                                       weights=fit_weights, progress=progress,
                                        threads=profile_threads())
         for j, per in found.items():
             dist, ivs, ratio = dict(distances[j]), dict(intervals.get(j, {})), 1.0
