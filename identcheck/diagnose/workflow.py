@@ -22,6 +22,7 @@ from identcheck.skeleton import Skeleton
 from identcheck.errors import DegenerateError, InputError
 from identcheck.io.jsonable import plain
 from identcheck.io.model import refuse_exported_points
+from identcheck.io.trc import centimetres_suspected
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
@@ -284,6 +285,9 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         warnings.warn(unprefixed, UserWarning, stacklevel=2)
     refuse_exported_points(trial, model.joints)
     model.require_markers_in(trial)
+    small = centimetres_suspected(trial.as_array(), trial.source)
+    if small:
+        warnings.warn(small, UserWarning, stacklevel=2)
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
     files = f"{trial.source} (model {model.source})"

@@ -182,6 +182,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
     from identcheck.fit.whole_tree import merge_report, misfit_warnings
+    from identcheck.io.trc import centimetres_suspected
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
     refuse_exported_points(trial, model.joints)
@@ -214,6 +215,8 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
         notes.append({"kind": "starts_left_out", "message": (
             f"{trial.source}: {tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations of candidate "
             "joints were not tried (a cap on count and time): a joint listed unique could have a rival among them")})
+    small = centimetres_suspected(trial.as_array(), trial.source)
+    notes += [{"kind": "units", "message": small}] if small else []
     rep["warnings"] = list({n["message"]: n for n in notes}.values())
     rep["anatomical"] = None
     if tree.best is not None:

@@ -101,14 +101,9 @@ def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool
     """Whether the file's units field (at `where`, read as `factor` to mm) contradicts its coordinates `xyz` (mm,
     as converted): the message and whether it is an error (else a warning); ('', False) when they agree or there
     is too little to tell (no frame with three markers seen)."""
-    seen = np.isfinite(xyz).all(axis=2)
-    rows = np.flatnonzero(seen.sum(axis=1) >= 3)
-    if not len(rows):
+    span = frame_span(xyz)
+    if span is None:
         return "", False
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        box = np.nanmax(xyz[rows], axis=1) - np.nanmin(xyz[rows], axis=1)
-    span = float(np.median(np.linalg.norm(box, axis=1)))
     name = next((k for k, v in UNITS_TO_MM.items() if v == factor), "?")
     low, high = BODY_SPAN_MM
     if span > high and factor > 1.0:
@@ -122,6 +117,37 @@ def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool
         return (f"{where} says {name}, but the markers of a frame span only {span:.3g} mm (median over frames): are "
                 "the coordinates in metres?"), False
     return "", False
+
+
+def frame_span(xyz: np.ndarray) -> float | None:
+    """What the markers of one frame span: the median over the frames with three markers seen of their bounding
+    box's diagonal (units of `xyz`); None when no frame has three."""
+    seen = np.isfinite(xyz).all(axis=2)
+    rows = np.flatnonzero(seen.sum(axis=1) >= 3)
+    if not len(rows):
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        box = np.nanmax(xyz[rows], axis=1) - np.nanmin(xyz[rows], axis=1)
+    return float(np.median(np.linalg.norm(box, axis=1)))
+
+
+SMALL_SPAN_MM = 250.0
+"""A frame span (mm) below which the trial may be centimetres labelled mm (:func:`centimetres_suspected`): a lower
+limb in cm spans about 100 "mm" and a whole body 200, where in mm a knee alone (two thigh markers and one on the
+shank) spans 300 and a leg 1 000. A hand or a small animal can span that little in mm, so it is said as a question."""
+
+
+def centimetres_suspected(xyz: np.ndarray, source: str) -> str:
+    """A warning when the markers of a frame (`xyz`, mm as read) span less than :data:`SMALL_SPAN_MM` (but not so
+    little that the readers already asked about metres): centimetres in a file that says mm make every distance
+    reported ten times too small, and nothing else in a fit shows it. '' otherwise."""
+    span = frame_span(xyz)
+    if span is None or not BODY_SPAN_MM[0] <= span < SMALL_SPAN_MM:
+        return ""
+    return (f"{source}: the markers of a frame span only {span:.0f} mm (median over frames): a body part that small, "
+            "or coordinates in cm in a file that says mm? In cm every distance here is ten times too small: fix "
+            "the file's units field (POINT:UNITS or Units)")
 
 
 def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel: int = 4) -> None:

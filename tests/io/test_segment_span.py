@@ -109,3 +109,49 @@ def test_the_reach_is_measured_to_the_segments_near_it_not_to_a_far_head():
         trial.require_usable(["T", "P", "H"], where, {"thigh": 420.0}, {"thigh": {"pelvis"}})
     msg = str(info.value)
     assert "segment 'thigh' is declared 420 mm long" in msg and "'T' to 'P'" in msg and "45.0 mm" in msg, msg
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(1.0, 3000.0), st.integers(3, 12), st.integers(0, 2**32 - 1))
+def test_a_trial_spanning_less_than_a_limb_is_asked_about_centimetres(span, n_markers, seed):
+    """Markers whose frames span `span` mm (the diagonal of their bounding box): a question about centimetres (naming
+    the file and the span) from 10 mm, where the readers' question about metres stops, up to 250 mm; nothing from
+    there."""
+    from identcheck.io.trc import SMALL_SPAN_MM, centimetres_suspected, frame_span
+
+    rng = np.random.default_rng(seed)
+    unit = rng.random((1, n_markers, 3)) + rng.normal(0.0, 1e-3, (30, n_markers, 3))
+    xyz = unit * (span / frame_span(unit))
+    said = centimetres_suspected(xyz, "tiny.trc")
+    assert bool(said) == (10.0 <= frame_span(xyz) < SMALL_SPAN_MM), (span, said)
+    if said:
+        assert said.startswith("tiny.trc:") and f"{frame_span(xyz):.0f} mm" in said and "units field" in said
+
+
+def test_a_knee_in_centimetres_labelled_mm_is_warned_about_by_fit_and_diagnose(tmp_path):
+    """The bundled knee, its segment lengths taken out of the model (so that nothing refuses the trial), simulated
+    and written with every coordinate divided by 10 under the same 'mm': ``fit`` says so in its warnings (kind
+    ``units``), ``diagnose`` on standard error; as simulated (a 300 mm span), neither says anything of units."""
+    import warnings as pywarnings
+    from pathlib import Path
+
+    from identcheck import api
+    from identcheck.io.trc import read_trc, write_trc
+
+    model = tmp_path / "knee.toml"
+    text = (Path(__file__).resolve().parents[2] / "examples" / "knee_21.toml").read_text()
+    model.write_text("\n".join(line for line in text.splitlines() if not line.startswith("length_mm")))
+    good, small = tmp_path / "knee.trc", tmp_path / "knee_cm.trc"
+    api.simulate(model, good, seed=3, n_frames=300)
+    trial = read_trc(good)
+    write_trc(small, trial.xyz / 10.0, trial.labels, trial.rate_hz)
+    with pywarnings.catch_warnings(record=True) as said:
+        pywarnings.simplefilter("always")
+        kinds = {w["kind"] for w in api.fit(model, small).to_dict()["warnings"]}
+        assert "units" in kinds
+        assert "units" not in {w["kind"] for w in api.fit(model, good).to_dict()["warnings"]}
+    assert not any("span only" in str(w.message) for w in said)       # (fit puts it in its JSON, not on stderr)
+    with pywarnings.catch_warnings(record=True) as said:
+        pywarnings.simplefilter("always")
+        api.diagnose(model, small)
+    assert any("knee_cm.trc" in str(w.message) and "in cm" in str(w.message) for w in said)
