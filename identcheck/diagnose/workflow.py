@@ -178,6 +178,9 @@ class Diagnosis:
     sd_limit_mm : float
         The joints' worst standard error an adopted effect may leave (:data:`SD_GROWTH` times the rigid fit's, at
         least :data:`MAX_SD_MM`).
+    left_out : dict
+        joint -> (declared type, why) for the joints left out with the segments nothing poses (:class:`Unposed`):
+        reported undetermined, with no distances.
     """
 
     ctx: Context
@@ -192,13 +195,16 @@ class Diagnosis:
     progress: object = field(default=None, compare=False, repr=False)
     not_adopted: tuple = ()
     sd_limit_mm: float = MAX_SD_MM
+    left_out: dict = field(default_factory=dict)
 
     @cached_property
     def joints(self) -> dict:
-        """Each joint as ``fit`` reports it, from the model with the adopted effects (:func:`joint_report`).
-        Judged once, when first asked for: profile likelihoods and bootstrap refits can take up to a minute each
-        for a weakly determined joint, and the JSON, the text and the HTML report all read the same answer."""
-        return joint_report(self.ctx, self.after, self.progress, self.steps)
+        """Each joint as ``fit`` reports it, from the model with the adopted effects (:func:`joint_report`), and
+        each joint left out (:attr:`left_out`) undetermined, without distances. Judged once, when first asked for:
+        profile likelihoods and bootstrap refits can take up to a minute each for a weakly determined joint, and the
+        JSON, the text and the HTML report all read the same answer."""
+        out = joint_report(self.ctx, self.after, self.progress, self.steps)
+        return out | {j: left_out_answer(kind, why) for j, (kind, why) in self.left_out.items()}
 
     def numbered(self, where: dict) -> dict:
         """`where` with its row indices also in the file's numbering."""
@@ -277,6 +283,39 @@ def _naming(files: str, call, *args):
         raise exc.naming(files) from None
 
 
+class Unposed(Exception):
+    """The rigid fit cannot start because a segment below `joint` (its child) cannot be posed: no markers and too few
+    joint points (a foot without markers), or markers the trial hardly shows. :func:`diagnose` leaves that joint and
+    everything hanging from it out, as ``fit`` does, and says `why`."""
+
+    def __init__(self, joint: str, why: str):
+        super().__init__(why)
+        self.joint, self.why = joint, why
+
+
+def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis, dict]:
+    """:func:`start`, leaving out each joint whose child segment cannot be posed (:class:`Unposed`) with everything
+    below it, and starting again on the rest (once per joint at most): (context, rigid fit, {joint left out:
+    (its declared type, why)}). The model in the context is the one without them."""
+    left_out: dict = {}
+    full = model
+    while True:
+        try:
+            ctx, h = start(model, trial, progress)
+            return ctx, h, left_out
+        except Unposed as exc:
+            smaller, gone = model.without_subtrees([exc.joint])
+            if not smaller.joints:
+                raise InputError([f"joint {exc.joint}: {exc.why}; no joint would be left to diagnose"],
+                                 source=full.source) from None
+            for j, above in gone.items():
+                left_out[j] = (full.joints[j].type, exc.why if j == above else
+                               f"it hangs below {above}, which diagnose left out: {exc.why}")
+            if progress:
+                progress(f"leaving out {', '.join(gone)}: {exc.why}")
+            model = smaller
+
+
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial` (a subject prefix taken off its labels first, with a warning:
     :meth:`identcheck.trial.Trial.unprefixed`)."""
@@ -301,14 +340,19 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     try:
         state = _naming(files, start_state, model, chain, data, trial.rate_hz)
-    except DegenerateError as exc:
+    except (DegenerateError, InputError) as exc:
         seg = exc.segment
         lent = sum(1 if j.type == "spherical" else 2 for j in model.joints.values() if seg in (j.parent, j.child))
-        if seg in model.segments and not model.segments[seg].markers and lent < 3:   # the plan's, not the trial's
+        markerless = seg in model.segments and not model.segments[seg].markers and lent < 3   # the plan's
+        above = model.parent_joint(seg) if seg in model.segments else None
+        if above is not None:
+            raise Unposed(above.name, (f"segments.{seg}.markers: none, and the joints beside it lend fewer than "
+                                       "three points: nothing poses the segment") if markerless else str(exc),
+                          ) from None
+        if markerless:
             raise InputError([
-                f"segments.{seg}.markers: none, and no joint points pose the segment: diagnose fits every segment of "
-                "the model at once (fit leaves such a segment, and the joints below it, out); give it markers, or "
-                "diagnose with a model that leaves it out"], source=model.source) from None
+                f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "
+                "segment is posed from it; give it markers"], source=model.source) from None
         raise
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)
@@ -393,9 +437,11 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
         warnings.warn(spikes["message"], UserWarning, stacklevel=2)
     trial, offset = trial.recentred()
     try:
-        ctx, base = start(model, trial, progress)
+        ctx, base, left_out = start_leaving_out(model, trial, progress)
     except InputError as exc:
         raise with_screen_findings(exc, [], spikes) from None
+    for j, (_type, why) in left_out.items():
+        warnings.warn(f"{trial.source}: joint {j} left out: {why}", UserWarning, stacklevel=2)
     test0 = consistency(ctx, base)
     h, steps, adopted_effects, dropped, dropped_steps = base, [], [], set(), []
     rigid_limit = max(SD_GROWTH * worst_sd(ctx, base), MAX_SD_MM)
@@ -481,7 +527,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     kept = {place(st.name, st.where) for st in steps}
     not_adopted = sorted((r for key, r in refused.items() if key not in kept), key=lambda r: -r.score)
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
-                     tuple(dropped_steps), progress, tuple(not_adopted), limit)
+                     tuple(dropped_steps), progress, tuple(not_adopted), limit, left_out)
 
 
 SCREEN_FROM = 100.0
@@ -793,6 +839,17 @@ def said(name: str, where: dict) -> str:
     out += f" on {where['segment']}" if "segment" in where else ""
     markers = [str(m) for m in where.get("markers") or ()]
     return out + (f" ({', '.join(markers)}{' together' if where.get('together') else ''})" if markers else "")
+
+
+def left_out_answer(declared: str, why: str) -> dict:
+    """The report of a joint diagnose left out (:class:`Unposed`): ``fit``'s keys, undetermined, no distance, no
+    interval, no geometry, and why."""
+    return {"type": declared, "declared_type": declared, "unique": False, "geometry": None, "marker_distances": {},
+            "marker_distances_ci95": {}, "interval_method": {}, "uncertainty_mm": None, "alternatives": [],
+            "rejected_candidates": [],
+            "practical": {"verdict": "undetermined", "reason": f"left out: {why}", "tolerance_mm": None,
+                          "weakest_direction_parent": None, "weakest_se_mm": None, "motion_advice": ""},
+            "rms_residual": None, "excitation": {"ok": False, "reason": f"left out: {why}"}}
 
 
 def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) -> dict:

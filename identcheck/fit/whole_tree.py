@@ -76,20 +76,6 @@ def skeleton_of(model, trial) -> Skeleton:
     return Skeleton.from_model(model, markers=seen)
 
 
-def without_subtrees(model, joints) -> tuple:
-    """(the model without `joints` and everything hanging from them, {each joint left out: the one of `joints` it
-    is or hangs below}, parents first)."""
-    cut: dict = {}                                             # segment left out -> the joint of `joints` above it
-    gone: dict = {}
-    for j in model.joint_order:                                # parents before children
-        jt = model.joints[j]
-        if j in joints or jt.parent in cut:
-            cut[jt.child] = j if j in joints else cut[jt.parent]
-            gone[j] = cut[jt.child]
-    keep = {j: jt for j, jt in model.joints.items() if j not in gone}
-    return replace(model, segments={n: s for n, s in model.segments.items() if n not in cut}, joints=keep), gone
-
-
 def _rarely_seen(model, trial, joints) -> str:
     """The markers of the segments below `joints` that the trial shows in fewer than half its frames, with their
     counts: the usual reason a segment cannot be posed or seen to move."""
@@ -119,7 +105,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
         stuck = {j for j in stuck if j in model.joints}
         if tree.best is not None or not stuck:
             break
-        smaller, gone = without_subtrees(model, stuck)
+        smaller, gone = model.without_subtrees(stuck)
         if not smaller.joints:
             break
         why = tree.problem + _rarely_seen(model, trial, stuck)

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 from identcheck.errors import InputError
@@ -259,6 +259,20 @@ class Model:
         """Markers on the parent and on the child segment of `joint` (the p and q of a case)."""
         j = self.joints[joint]
         return self.segments[j.parent].markers, self.segments[j.child].markers
+
+    def without_subtrees(self, joints) -> tuple["Model", dict]:
+        """(this model without `joints` and everything hanging from them, {each joint left out: the one of `joints`
+        it is or hangs below}, parents first): what a whole-tree fit leaves out when a segment cannot be posed (a
+        foot without markers), so that the rest of the tree is fitted."""
+        cut: dict = {}                                             # segment left out -> the joint of `joints` above it
+        gone: dict = {}
+        for j in self.joint_order:                                 # parents before children
+            jt = self.joints[j]
+            if j in joints or jt.parent in cut:
+                cut[jt.child] = j if j in joints else cut[jt.parent]
+                gone[j] = cut[jt.child]
+        keep = {j: jt for j, jt in self.joints.items() if j not in gone}
+        return replace(self, segments={n: s for n, s in self.segments.items() if n not in cut}, joints=keep), gone
 
     def to_dict(self) -> dict:
         """The TOML-shaped dictionary (coordinates in mm, ``units = "mm"``); ``from_dict`` inverts it."""

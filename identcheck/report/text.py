@@ -188,6 +188,8 @@ def diagnose_text(diag) -> str:
             for name, j in rep["joints"].items()]
     lines += table(rows, ["joint", "type", "rms residual (mm)", "uncertainty (mm)", "marker distances (mm)"],
                    indent="   ", floatfmt=".3g")
+    lines += [f"   {name}: {j['practical']['reason']}" for name, j in rep["joints"].items()
+              if not j["marker_distances"] and j["practical"]["reason"].startswith("left out")]
     scale = max((j.get("practical", {}).get("scale_sd", 0.0) for j in rep["joints"].values()), default=0.0)
     if scale > 0:
         lines.append(f"   the uncertainties include a standard deviation of {100 * scale:.2g} % of every length: "

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.uncertainty import bartlett_bandwidth, long_run_covariance, prewhitened_long_run
-from identcheck.fit.whole_tree import fit_tree, joint_answers, without_subtrees
+from identcheck.fit.whole_tree import fit_tree, joint_answers
 from identcheck.fit.workflow import fit_model
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
@@ -475,7 +475,7 @@ def test_a_ball_between_two_cuts_answers_without_the_markers_below_the_lower_one
     for j in ("j2", "j3"):
         assert j in tree.best.upstream and not tree.best.upstream_weights[j][:, e1].any(), j
         assert tree.best.upstream_weights[j].sum() > 0
-    short, _ = without_subtrees(model, ["j4"])
+    short, _ = model.without_subtrees(["j4"])
     alone, alone_ans = _answers(short, trial.select([m for m in trial.labels if m != "E1"]))
     assert alone.best is not None, alone.problem
     for m, d in ans["j3"]["marker_distances"].items():
