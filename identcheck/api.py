@@ -214,12 +214,15 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
         problems = name_problems(model)
         if problems:
             raise InputError([f"--export-osim {export_osim}: " + p for p in problems], source=model.source)
+    planned = _planned_once(model)
     doc = fit_trial(model, data, progress=progress, export=export_markers,
-                    on_fit=keep if report is not None or export_osim is not None else None)
+                    on_fit=keep if report is not None or export_osim is not None else None,
+                    decided=lambda joints: {j for j in joints if (planned().get(j) or {}).get("identifiable")
+                                            and (planned().get(j) or {}).get("candidates") == 1})
     doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
                        if issubclass(w.category, UserWarning)] + doc["warnings"]
     if not all(j["identifiable"] for j in doc["joints"].values()):
-        _certified_identifiability(model, doc)
+        _certified_identifiability(doc, planned())
     res = FitResult.from_dict(doc)
     if export_osim is not None and not scene.get("fitted"):
         raise InputError([f"--export-osim {export_osim}: no whole-tree fit to export"], source=data.source)
@@ -228,15 +231,26 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     return res
 
 
-def _certified_identifiability(model, doc: dict) -> None:
+def _planned_once(model):
+    """A function returning ``plan``'s joints for `model` (exact ranks, no motion), computed on the first call only:
+    ``fit`` asks for it only where its closed forms left a joint undecided or not identifiable (0.02-0.15 s)."""
+    kept: list = []
+
+    def planned() -> dict:
+        if not kept:
+            kept.append(plan(model, motion=False, robust=False, suggest=False).joints)
+        return kept[0]
+    return planned
+
+
+def _certified_identifiability(doc: dict, planned: dict) -> None:
     """Each joint's ``identifiable`` in `doc` (``fit``'s JSON, changed in place) as ``plan`` certifies it for the
     model (the whole tree's exact rank, every joint's points included), where ``fit`` had judged a joint by the case
     its closed form met. The two had disagreed: a joint whose closed form could not start (its points seen as one
     line after two one-marker segments, an ambiguous joint above it) was called not identifiable where ``plan``
     certifies it, and a revolute (2,1) decided by markers two joints beyond was called undecidable. A joint ``plan``
     certifies that ``fit`` could not start says so instead of "not identifiable". Run only when ``fit`` called some
-    joint not identifiable (the plan's rank costs 0.02-0.15 s)."""
-    planned = plan(model, motion=False, robust=False, suggest=False).joints
+    joint not identifiable (the plan's rank costs 0.02-0.15 s). `planned`: ``plan``'s joints for the model."""
     for name, j in doc["joints"].items():
         certified = bool((planned.get(name) or {}).get("identifiable", j["identifiable"]))
         if certified and not j["identifiable"] and not j["marker_distances"]:

@@ -454,17 +454,25 @@ def _jumped(j: dict, joint: str, deg: float, row: int, trial) -> dict:
     return j
 
 
-def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = None) -> dict:
+def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = None, decided=None) -> dict:
     """The contract's ``fit`` JSON with the whole-tree answer in place of the closed-form one: each joint's
     marker distances, 95 % intervals, uncertainty, alternatives (likelihood ratio), practical verdict and
     ``unique`` (= determined); the closed-form estimate stays as ``start`` (and in ``notes``). Without a
     whole-tree fit, no joint is called unique: the closed-form numbers stay, marked undetermined. A joint in
     ``jumps`` (:func:`identcheck.bundle.continuity.angle_jumps`) with any interval bounded is undetermined with
     unbounded intervals (the fit through the jump is not the joint's), and ``warnings`` holds an ``angle_jump`` for
-    each such joint."""
+    each such joint. A joint whose closed-form case admits equal twins with nothing beyond it to decide
+    (:func:`rep_unique`) is ``ambiguous`` (:func:`joint_answers`) unless `decided` (called with those joints) says the
+    whole model's exact certificate calls it unique: points from other joints on its segments decide the twins in the
+    whole-tree likelihood (a hinge after a one-marker root, its child's two markers joined by a second hinge's axis:
+    the closed form's twins fitted thousands of χ² units worse, and ``fit`` had called it ambiguous beside
+    ``plan``'s unique)."""
     joints, jumped = {}, []
     undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
                    if j.get("marker_distances") and not rep_unique(j)}
+    if undecidable and decided is not None:
+        sure = decided(list(undecidable))
+        undecidable = {name: v for name, v in undecidable.items() if name not in sure}
     answers = joint_answers(tree, model, undecidable) if tree.best is not None else {}
     residual = None
     if tree.best is not None:

@@ -164,7 +164,7 @@ def with_restarted(fitted: dict, restarts: list, tree) -> dict:
     return fitted
 
 
-def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
+def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=None) -> dict:
     """Everything ``identcheck fit`` does, as one library call: screen the labels, start every joint with
     the closed-form estimators, fit the whole tree by maximum likelihood from every candidate, and report
     (the contract's ``fit`` JSON: joints, ``noise``, ``warnings``).
@@ -173,7 +173,9 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     raised by the estimators and a model misfit are all in ``warnings`` (dicts with ``message`` and ``kind`` and,
     where there is one, ``markers`` / ``frames``). `on_fit`, when given, is called as ``on_fit(trial, fit, offset)``
     with the whole-tree fit (if one was made), the trial it was fitted to and what that trial was moved by: what a
-    figure of the fit needs (:func:`identcheck.fit.scene.fit_scene`)."""
+    figure of the fit needs (:func:`identcheck.fit.scene.fit_scene`). `decided`, when given, is called with the joints
+    whose closed-form case admits equal twins with nothing beyond it to decide them, and returns those the whole
+    model's exact certificate calls unique all the same (:func:`identcheck.fit.whole_tree.merge_report`)."""
     import warnings as _w
 
     from identcheck.bundle.continuity import angle_jumps
@@ -199,7 +201,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None) -> dict:
     jumps = {}
     if tree.best is not None:
         jumps = angle_jumps(tree.best.fit, screened.select(tree.best.fit.chain.labels).as_array(), screened.rate_hz)
-    rep = merge_report(report(model, fitted, points), tree, model, screened, jumps)
+    rep = merge_report(report(model, fitted, points), tree, model, screened, jumps, decided)
     notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + ([spikes] if spikes else [])
     notes += list(swaps)
     notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
