@@ -59,6 +59,31 @@ class Skeleton:
         """Unknowns per frame: the root pose plus each joint's angles."""
         return 6 + sum(3 if self.types[j] == "spherical" else 1 for j in self.joints)
 
+    def frame_free(self) -> int:
+        """Unknowns per frame that change no prediction, in the configurations where the tree's structure alone says so
+        (markers in general position): a segment hung from a ball joint whose points all lie on one line through its
+        centre turns about that line unseen, with what hangs below it by ball joints alone turning back (one marker and
+        nothing below; no marker and one ball joint below), and with no marker and nothing below every angle of its
+        joint is unseen; the root likewise (one marker and one ball joint below it, or no marker and one ball joint:
+        its whole turn). A fit's parameter count leaves them out (:func:`identcheck.bundle.chain.fit_chain`): counted,
+        a trial's gap was held to a noise floor one parameter a frame too low, and ``diagnose`` called clean trials of
+        a hinge and a ball after two one-marker segments unexplained (gap²/floor² 1.24 against a limit of 1.17, the
+        free turns' share of the degrees of freedom: 1 000 of 6 000)."""
+        free = 0
+        for seg in self.segments:
+            up = [j for j in self.joints if self.child[j] == seg]
+            down = [j for j in self.joints if self.parent[j] == seg]
+            n = len(self.seg_markers[seg])
+            balls_only = all(self.types[k] == "spherical" for k in down)
+            kind = self.types[up[0]] if up else "root"
+            if kind == "revolute":
+                free += 1 if n == 0 and not down else 0
+            elif not down:
+                free += 3 if n == 0 else (1 if n == 1 else 0)
+            elif balls_only and len(down) == 1:
+                free += (3 if kind == "root" else 1) if n == 0 else (1 if n == 1 and kind == "root" else 0)
+        return free
+
     def gauge(self) -> int:
         """Parameter directions that change no prediction: each segment frame (6), and each hinge's
         slide along its axis and angle offset (2)."""

@@ -179,7 +179,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
         if deadline is not None and time.monotonic() > deadline:
             break
     n_samples = int((w > 0).sum())
-    n_params = int(frame_has.sum()) * chain.frame_dof() + n_const(chain, terms) - null_count(chain, terms)
+    n_params = (int(frame_has.sum()) * (chain.frame_dof() - chain.frame_free()) + n_const(chain, terms)
+                - null_count(chain, terms))
     rss = _cost(pred, y, w) if penalty else cost
     return Fit(chain, terms, s, pred, rss, n_samples, n_params, it, converged, R, t)
 

@@ -45,7 +45,8 @@ def converged_fit(chain: Skeleton, data, state, progress=None, weights=None, ter
     Δχ² 100; converged, that gap was gone."""
     line = Progress(progress, first_after_s=ITERATION_REPORT_S, every_s=ITERATION_REPORT_S)
     done = 0
-    nu = max(int(np.isfinite(np.asarray(data)).all(axis=2).sum()) * 3 - len(data) * chain.frame_dof(), 1)
+    nu = max(int(np.isfinite(np.asarray(data)).all(axis=2).sum()) * 3
+             - len(data) * (chain.frame_dof() - chain.frame_free()), 1)
     fast_tol = FAST_CHI2_TOL / nu           # the cost is about nu sigma²: this is FAST_CHI2_TOL in chi² units
 
     def said(it, cost):

@@ -127,9 +127,9 @@ class Fit:
     pred: np.ndarray             # (F, M, 3)
     rss: float                   # Σ w |x̂ − y|², mm²
     n_samples: int               # visible (weight > 0) marker samples
-    n_params: int                # free parameters net of the gauge: every unknown of a frame with samples
-    #                              (the residual's degrees of freedom count only the determined ones:
-    #                              uncertainty.frame_rank)
+    n_params: int                # free parameters net of the gauge: every unknown of a frame with samples but
+    #                              those the tree's structure leaves free (Skeleton.frame_free); the covariance's
+    #                              degrees of freedom count the ones its samples determine (uncertainty.frame_rank)
     iterations: int
     converged: bool
     seg_R: dict = field(default_factory=dict)

@@ -51,3 +51,45 @@ def test_frame_rank_counts_what_the_samples_see(k, missing, seed):
     J[:, :, :missing] = 0.0
     A = np.transpose(J, (0, 2, 1)) @ J
     assert frame_rank(A) == 5 * (k - missing)
+
+
+@st.composite
+def _trees(draw):
+    """A random tree of 2-5 segments (each joint's parent among the segments before it), 0-3 markers a segment (the
+    root at least one, three on some segment), ball or hinge joints."""
+    n = draw(st.integers(2, 5))
+    counts = [draw(st.integers(1, 3))] + [draw(st.integers(0, 3)) for _ in range(n - 1)]
+    if max(counts) < 3:
+        counts[draw(st.integers(0, n - 1))] = 3
+    parents = [None] + [draw(st.integers(0, k - 1)) for k in range(1, n)]
+    types = [draw(st.sampled_from(["spherical", "revolute"])) for _ in range(n)]
+    return Model.from_dict({
+        "units": "mm",
+        "segments": {f"s{k}": {"markers": [f"m{k}_{i}" for i in range(counts[k])]} for k in range(n)},
+        "joints": {f"j{k}": {"type": types[k], "parent": f"s{parents[k]}", "child": f"s{k}"} for k in range(1, n)}})
+
+
+@settings(max_examples=40, deadline=None)
+@given(model=_trees(), seed=st.integers(0, 10 ** 5))
+def test_a_fit_counts_the_unknowns_a_frame_determines(model, seed):
+    """Random trees, every marker seen: a fit's per-frame parameter count (``frame_dof − frame_free``, frames times)
+    is the rank the samples give the per-frame unknowns (:func:`frame_rank`), so that its degrees of freedom are the
+    residual's. The free turns of one-marker ends after a ball joint had been counted as parameters."""
+    from hypothesis import assume
+
+    from identcheck.bundle.start import start_state
+    from identcheck.bundle.uncertainty import frame_scores
+    from identcheck.errors import DegenerateError, InputError
+
+    sim = simulate(model, n_frames=40, noise_mm=0.3, seed=seed)
+    chain = skeleton_of(model, sim.trial)
+    data = sim.trial.select(chain.labels).as_array()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            state = start_state(model, chain, data, sim.trial.rate_hz)
+        except (DegenerateError, InputError, ValueError, np.linalg.LinAlgError):
+            assume(False)
+        fit = fit_chain(chain, data, state, max_iter=5)
+    determined = frame_scores(fit, data)[3]
+    assert len(data) * (chain.frame_dof() - chain.frame_free()) == determined
