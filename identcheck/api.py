@@ -14,6 +14,7 @@ Heavy modules (SymPy, SciPy) are imported by the verbs that need them, when call
 from __future__ import annotations
 
 import functools
+import os
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -46,15 +47,46 @@ def _one_blas_thread(verb, with_scipy: bool = True):
     return run
 
 
+def _path_argument(value, what: str, expected: str):
+    """`value` when it can name a file (a str or an os.PathLike); else an InputError naming the argument, what it
+    expects and what it got: an int had been read as an open file descriptor ("Bad file descriptor"), a list or an
+    array had failed deep in pathlib."""
+    if isinstance(value, (str, os.PathLike)):
+        return value
+    shown = " ".join(repr(value).split())
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    raise InputError([f"{what}: expected {expected}, got {type(value).__name__} {shown}"])
+
+
+def _number_argument(value, what: str, integer: bool = False):
+    """`value` when it is a number (an int, for `integer`; not a bool), else an InputError naming the argument."""
+    import numbers
+
+    kind = numbers.Integral if integer else numbers.Real
+    if isinstance(value, kind) and not isinstance(value, bool):
+        return value
+    raise InputError([f"{what}: expected {'an integer' if integer else 'a number'}, got {type(value).__name__} "
+                      f"{value!r:.60}"])
+
+
 def load_model(model) -> Model:
     """A :class:`~identcheck.io.model.Model` from a TOML file (a Model is returned as it is).
 
     Raises
     ------
     InputError
-        Every problem of the file at once (unknown marker, joint cycle, ...), naming file and line.
+        Every problem of the file at once (unknown marker, joint cycle, ...), naming file and line; an argument that
+        is neither a Model nor a path, naming what it got.
     """
-    return model if isinstance(model, Model) else Model.from_toml(model)
+    return model if isinstance(model, Model) else Model.from_toml(_model_argument(model))
+
+
+def _model_argument(model):
+    """`model` when it is a Model or can name its file, else the InputError of :func:`_path_argument`: checked before
+    a verb reads its trial, so that a bad argument is named before a long file is read."""
+    if isinstance(model, Model):
+        return model
+    return _path_argument(model, "model", "a Model or the path of its .toml file")
 
 
 def _model_with_joints(model, verb: str) -> Model:
@@ -85,7 +117,10 @@ def read_trial(trial) -> Trial:
     """
     from identcheck.trial import Trial   # here, not at the top: a verb that reads no trial (plan) needs no NumPy
 
-    return trial if isinstance(trial, Trial) else Trial.from_file(trial)
+    if isinstance(trial, Trial):
+        return trial
+    return Trial.from_file(_path_argument(trial, "trial", "a Trial or the path of a .c3d or .trc file (an array: "
+                                                           "identcheck.Trial(xyz, labels, rate_hz))"))
 
 
 @_one_blas_thread
@@ -120,7 +155,7 @@ def simulate(model, out=None, seed: int = 0, effect: str | None = None, effect_s
     """
     from identcheck.trial import FORMATS
 
-    out_path = None if out is None else Path(out)
+    out_path = None if out is None else Path(_path_argument(out, "out", "the path of a .trc or .c3d file"))
     if out_path is not None and out_path.suffix.lower() not in FORMATS:
         raise InputError([f"unknown trial file extension {out_path.suffix or '(none)'!r} (expected "
                           f"one of {', '.join(FORMATS)})"], source=str(out_path))
@@ -204,6 +239,7 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
 
             write_osim(export_osim, fit, name=Path(str(model.source)).stem or "identcheck")
 
+    _model_argument(model)
     with warnings.catch_warnings(record=True) as read:        # the reader's findings belong in the JSON too
         warnings.simplefilter("always")
         data = _frames(trial, frames)
@@ -319,6 +355,7 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
     model = _model_with_joints(model, "diagnose")
+    _model_argument(model)
     data = _frames(trial, frames)
     diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
     if export_markers is not None:
@@ -411,6 +448,9 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
     from identcheck.plan.analysis import plan_model
     from identcheck.plan.result import PlanResult
 
+    if noise_mm is not None:
+        _number_argument(noise_mm, "noise_mm")
+    _number_argument(seed, "seed", integer=True)
     if noise_mm is not None and capture.frames_problem(frames):
         raise InputError([f"frames {capture.frames_problem(frames)}"])
     m = load_model(model)
@@ -475,8 +515,17 @@ def table(seed: int = 0, joints=None, progress=None):
     -------
     TableResult
     """
+    from identcheck.certify.joint_models import JOINTS
     from identcheck.certify.table import table as make_table
 
+    _number_argument(seed, "seed", integer=True)
+    if joints is not None:
+        joints = [joints] if isinstance(joints, str) else list(joints)
+        unknown = [j for j in joints if str(j).lower() not in JOINTS]
+        if unknown:
+            raise InputError([f"joints: unknown joint type(s) {', '.join(map(repr, unknown))}; known types: "
+                              f"{', '.join(JOINTS)}"])
+        joints = [str(j).lower() for j in joints]
     return make_table(seed=seed, joints=joints, progress=progress)
 
 
@@ -492,6 +541,8 @@ def rank(joint: str, p: int, q: int, samples: int | None = None, seed: int = 0, 
     """
     from identcheck.certify.exact_rank import rank as exact_rank
 
+    for value, what in ((p, "p"), (q, "q"), (seed, "seed")) + (((samples, "samples"),) if samples is not None else ()):
+        _number_argument(value, what, integer=True)
     return exact_rank(joint, p, q, n_samples=samples, seed=seed, progress=progress)
 
 
@@ -507,6 +558,8 @@ def verify(certificate, progress=None):
     """
     from identcheck.certify.verify import verify as verify_certificate
 
+    if not isinstance(certificate, dict):
+        _path_argument(certificate, "certificate", "the path of a saved certificate or table, or its JSON object")
     return verify_certificate(certificate, progress=progress)
 
 

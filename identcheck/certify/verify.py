@@ -62,7 +62,7 @@ def read(path) -> dict:
     """
     raw = read_input(path, "certificate file (JSON)")
     try:
-        doc = json.loads(raw.decode("utf-8"))
+        doc = json.loads(raw.decode("utf-8-sig"))      # (a byte-order mark, as some editors save, is not content)
     except UnicodeDecodeError as exc:
         raise InputError([f"not UTF-8 text (byte {exc.start}): a certificate is a JSON file"], source=str(path)) from None
     except json.JSONDecodeError as exc:
