@@ -277,6 +277,11 @@ class Trial:
             raise InputError([f"no marker {name!r} in the trial (it has {self.n_markers}: "
                               f"{', '.join(self._labels)})"], source=self._source) from None
 
+    def seen(self, labels: Sequence[str]) -> set:
+        """The names of `labels` the trial has and shows at least once (a frame with all three coordinates)."""
+        return {m for m in labels
+                if m in self._index and bool(np.isfinite(self._xyz[:, self._index[m]]).all(axis=1).any())}
+
     def marker(self, name: str) -> np.ndarray:
         """Trajectory of one marker, shape (n_frames, 3), mm (a copy)."""
         return self._xyz[:, self.index(name)].copy()

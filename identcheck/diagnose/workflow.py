@@ -296,9 +296,21 @@ class Unposed(Exception):
 def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis, dict]:
     """:func:`start`, leaving out each joint whose child segment cannot be posed (:class:`Unposed`) with everything
     below it, and starting again on the rest (once per joint at most): (context, rigid fit, {joint left out:
-    (its declared type, why)}). The model in the context is the one without them."""
-    left_out: dict = {}
+    (its declared type, why)}). The model in the context is the one without them. A root nothing poses (no marker
+    the trial shows, fewer than three joint points) is left out first with its joints, the subtree with the most
+    markers below it diagnosed (:meth:`identcheck.io.model.Model.below_root`), as ``fit`` does."""
     full = model
+    model, gone = model.below_root(trial.seen(model.markers))
+    why = (f"segment {full.root!r} (the root) has no marker the trial shows and its joints lend fewer than three "
+           f"points: nothing poses it; the tree from segment {model.root!r} down is diagnosed without it")
+    left_out = {j: (full.joints[j].type, why if j == above else f"it hangs below {above}, which diagnose left out: "
+                    f"{why}") for j, above in gone.items()}
+    if gone and not model.joints:
+        raise InputError([f"segments.{full.root}.markers: none the trial shows, and its joints lend fewer than three "
+                          "points: nothing poses the model's root, and every joint hangs from it; give it markers"],
+                         source=full.source)
+    if gone and progress:
+        progress(f"leaving out {', '.join(gone)}: {why}")
     while True:
         try:
             ctx, h = start(model, trial, progress)

@@ -67,13 +67,23 @@ class TreeFit:
 
 def skeleton_of(model, trial) -> Skeleton:
     """The model's tree with only the markers the trial shows at least once."""
-    seen = set()
-    data = trial.as_array()
-    col = {m: i for i, m in enumerate(trial.labels)}
-    for m in model.markers:
-        if m in col and np.isfinite(data[:, col[m]]).all(axis=1).any():
-            seen.add(m)
-    return Skeleton.from_model(model, markers=seen)
+    return Skeleton.from_model(model, markers=trial.seen(model.markers))
+
+
+def without_an_unposed_root(model, trial, closed_form: dict) -> tuple:
+    """(the model below its root when nothing poses the root, the closed forms of its joints, {joint left out: why}):
+    a root without a marker the trial shows, whose joints lend fewer than three points (:meth:`Model.below_root`),
+    leaves every joint undetermined, a fully marked knee below a pelvis without markers among them (an independent
+    check found 28 such joints). The subtree of the root's child with the most markers is fitted; the root's joints,
+    and its other subtrees, are left out and say why. The model as it is when the root is posed."""
+    smaller, gone = model.below_root(trial.seen(model.markers))
+    if not gone:
+        return model, closed_form, {}
+    why = (f"segment {model.root!r} (the root) has no marker the trial shows and its joints lend fewer than three "
+           f"points: nothing poses it; the tree from segment {smaller.root!r} down is fitted without it")
+    left_out = {j: why if j == above else f"it hangs below {above}, which the fit left out: {why}"
+                for j, above in gone.items()}
+    return smaller, {k: v for k, v in closed_form.items() if k in smaller.joints}, left_out
 
 
 def _rarely_seen(model, trial, joints) -> str:
@@ -99,7 +109,9 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
     A joint no start can be made for (no closed form, a child segment no frame poses, a hinge that never turns) is
     left out with every joint below it, and the rest of the tree is fitted without their markers: a foot marker
     seen in five frames no longer keeps the hip and knee from their fit. ``left_out`` says why, per joint."""
-    left_out: dict = {}
+    model, closed_form, left_out = without_an_unposed_root(model, trial, closed_form)
+    if left_out and progress:
+        progress(f"whole-tree fit without {', '.join(left_out)}: {next(iter(left_out.values()))}")
     while True:
         tree, stuck = _fit_once(model, trial, closed_form, progress, restart, starts_budget_s)
         stuck = {j for j in stuck if j in model.joints}

@@ -274,6 +274,36 @@ class Model:
         keep = {j: jt for j, jt in self.joints.items() if j not in gone}
         return replace(self, segments={n: s for n, s in self.segments.items() if n not in cut}, joints=keep), gone
 
+    def below_root(self, markers=None) -> tuple["Model", dict]:
+        """(the subtree of the root's child with the most markers, {each joint left out: the root's joint it is or
+        hangs below}): what is fitted when the root has no marker (of `markers`, a set of names, when given: those the
+        trial shows) and its joints lend fewer than three points, so that nothing poses it; the model itself and {}
+        otherwise (or when the root has no joint). The other subtrees of such a root are left out with it: its pose,
+        which would join them, is not seen."""
+        seen = [m for m in self.segments[self.root].markers if markers is None or m in markers]
+        down = self.child_joints(self.root)
+        lent = sum(1 if j.type == "spherical" else 2 for j in down)
+        if seen or lent >= 3 or not down:
+            return self, {}
+
+        def count(segment: str) -> int:
+            n = sum(1 for m in self.segments[segment].markers if markers is None or m in markers)
+            return n + sum(count(j.child) for j in self.child_joints(segment))
+
+        keep = max(down, key=lambda j: count(j.child))
+        inside, stack = set(), [keep.child]
+        while stack:
+            seg = stack.pop()
+            inside.add(seg)
+            stack += [j.child for j in self.child_joints(seg)]
+        joints = {n: j for n, j in self.joints.items() if j.parent in inside}
+        gone = {}
+        for n in self.joint_order:
+            j = self.joints[n]
+            if n not in joints:
+                gone[n] = n if j.parent == self.root else gone[self.parent_joint(j.parent).name]
+        return replace(self, segments={n: s for n, s in self.segments.items() if n in inside}, joints=joints), gone
+
     def to_dict(self) -> dict:
         """The TOML-shaped dictionary (coordinates in mm, ``units = "mm"``); ``from_dict`` inverts it."""
         segs = {}

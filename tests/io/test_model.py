@@ -432,3 +432,38 @@ def test_a_marker_name_with_spaces_at_its_ends_is_refused_naming_it(name, before
     with pytest.raises(InputError) as err:
         Model.from_dict(d)
     assert "segments.pelvis.markers" in str(err.value) and repr(name) in str(err.value)
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_below_a_root_nothing_poses_is_the_subtree_with_the_most_markers(data):
+    """Random trees with a markerless root whose joints lend fewer than three points: the model below it is the
+    subtree of the root's child with the most markers (all its segments and joints, none else); every other joint is
+    left out, under the root's joint it hangs from. A root with a marker, or lent three points, is kept as it is."""
+    n = data.draw(st.integers(2, 7))
+    parents = [None] + [data.draw(st.integers(0, k - 1)) for k in range(1, n)]
+    counts = [data.draw(st.integers(0, 3)) for _ in range(n)]
+    types = [data.draw(st.sampled_from(["spherical", "revolute"])) for _ in range(n)]
+    model = Model.from_dict({
+        "units": "mm", "segments": {f"s{k}": {"markers": [f"m{k}_{i}" for i in range(counts[k])]} for k in range(n)},
+        "joints": {f"j{k}": {"type": types[k], "parent": f"s{parents[k]}", "child": f"s{k}"} for k in range(1, n)}})
+    below, gone = model.below_root()
+    lent = sum(1 if types[k] == "spherical" else 2 for k in range(1, n) if parents[k] == 0)
+    if counts[0] or lent >= 3:
+        assert below is model and gone == {}
+        return
+
+    def subtree(k):
+        return {k} | {s for c in range(1, n) if parents[c] == k for s in subtree(c)}
+
+    kids = [k for k in range(1, n) if parents[k] == 0]
+    weight = {k: sum(counts[s] for s in subtree(k)) for k in kids}
+    assert set(below.segments) == {f"s{s}" for s in subtree(int(below.root[1:]))}
+    assert int(below.root[1:]) in kids and weight[int(below.root[1:])] == max(weight.values())
+    assert set(below.joints) | set(gone) == set(model.joints) and not set(below.joints) & set(gone)
+    for j, above in gone.items():
+        assert model.joints[above].parent == "s0"
+        k = int(j[1:])
+        while parents[k] != 0:
+            k = parents[k]
+        assert above == f"j{k}"
