@@ -158,7 +158,8 @@ def run_rivals(name: str, model: Model, trials: int, frames: int, noise_mm: floa
     """plan's rejection probability of every other minimum of the noise-free fit against the rejection rate over
     `trials` noisy captures: each capture fitted from the truth and from the rival, to convergence, and the
     rival rejected when its likelihood-ratio statistic (ΔRSS / σ²) exceeds χ²₁(0.95) = 3.84."""
-    from identcheck.fit.whole_tree import REJECT_CHI2, _same
+    from identcheck.bundle.honest import same_distances as _same
+    from identcheck.fit.whole_tree import REJECT_CHI2
 
     t0 = time.perf_counter()
     fitted = noise_free_fit(model, motion, frames, seed)

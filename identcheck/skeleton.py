@@ -59,6 +59,15 @@ class Skeleton:
         """Unknowns per frame: the root pose plus each joint's angles."""
         return 6 + sum(3 if self.types[j] == "spherical" else 1 for j in self.joints)
 
+    def joints_below(self, joint: str) -> list:
+        """The joints in the subtree hanging from `joint` (not itself), parents first."""
+        segs, out = {self.child[joint]}, []
+        for k in self.joints:                      # parents before children
+            if self.parent[k] in segs:
+                out.append(k)
+                segs.add(self.child[k])
+        return out
+
     def frame_free(self) -> int:
         """Unknowns per frame that change no prediction, in the configurations where the tree's structure alone says so
         (markers in general position): a segment hung from a ball joint whose points all lie on one line through its

@@ -48,13 +48,14 @@ class Minimum:
     model_error: dict = field(default_factory=dict)
     """joint -> model-error standard deviation (mm) already inside its distances' standard errors."""
     rivals: dict = field(default_factory=dict)
-    """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded
-    joint (``fit.whole_tree._without_incidental_rolls``), for the joints refitted so; others use ``TreeFit.others``."""
+    """joint -> [(Minimum, Δχ², p)]: the other minima as judged without the markers below an unbounded joint
+    (:func:`identcheck.bundle.incidental.without_incidental_rolls`), for the joints refitted so; others use
+    ``TreeFit.others``."""
     upstream: dict = field(default_factory=dict)
     """joint -> (fit, covariance) its answer comes from when that is not this minimum's own: the refit without the
-    markers below a segment not posed by itself (``fit.whole_tree._without_incidental_rolls``). Its distances, centre,
-    axis, covariance and verdict all come from that one refit, never a mix of two fits (a covariance the
-    bootstrap widened, :func:`with_sampling_spread`, is put here too)."""
+    markers below a segment not posed by itself (:func:`identcheck.bundle.incidental.without_incidental_rolls`). Its
+    distances, centre, axis, covariance and verdict all come from that one refit, never a mix of two fits (a
+    covariance the bootstrap widened, :func:`with_sampling_spread`, is put here too)."""
     upstream_weights: dict = field(default_factory=dict)
     """joint -> the sample weights of its refit in ``upstream`` (the markers below the cuts weighted 0)."""
     spread: dict = field(default_factory=dict)
@@ -66,6 +67,17 @@ class Minimum:
     scale_sd: float = 0.0
     """Relative standard deviation of every length, inside the distances' standard errors and intervals
     (:func:`with_scale_error`): the capture's own scale, where the trial shows its calibration off."""
+
+
+SAME_MM = 0.5
+"""Two minima whose every marker distance agrees within this (mm) are one: converged fits reach the same minimum to
+about 1e-3 mm."""
+
+
+def same_distances(a: Minimum, b: Minimum, joints=None) -> bool:
+    """Whether two minima give the same marker distances (within :data:`SAME_MM`) for `joints` (default: all)."""
+    return all(abs(d - b.distances[j][mk][0]) <= SAME_MM
+               for j in (joints or a.distances) for mk, (d, _) in a.distances[j].items())
 
 
 MOVING_CENTRE_REASON = (
@@ -366,13 +378,22 @@ def with_misfit(m: Minimum, data, modelled: tuple = ()) -> Minimum:
 
 def assess(fit, data, weights=None, progress=None, rate_hz: float | None = None, scale_sd: float = 0.0,
            modelled: tuple = ()) -> Minimum:
-    """One fit judged by every rule: covariance, model error, honest intervals, and with the trial's frame rate the
-    sampling spread where the linearisation is off (what ``diagnose`` reports; ``fit`` does the same for its best
-    minimum, then weighs the other candidates); `scale_sd`: the relative uncertainty of the capture's scale the
+    """One fit judged by every rule: covariance, model error, honest intervals, the joints above a segment posed only
+    through the joints below it refitted without the markers that see its roll (when the fit has no effect terms:
+    :func:`identcheck.bundle.incidental.without_incidental_rolls`), and with the trial's frame rate the sampling spread
+    where the linearisation is off (what ``diagnose`` reports; ``fit`` does the same for its best minimum, then weighs
+    the other candidates); `scale_sd`: the relative uncertainty of the capture's scale the
     trial showed (:func:`with_scale_error`), 0 when it showed none; `modelled`: the motions with the angles the
     fit's effect terms take up (:func:`with_misfit`)."""
+    from identcheck.bundle.incidental import without_incidental_rolls   # (it builds on this module)
+
     best = with_misfit(minimum(fit, data, weights), data, modelled)
-    best = replace(best, intervals=honest_intervals(best, data, likelihood_scale(best), progress, weights))
+    scale = likelihood_scale(best)
+    best = replace(best, intervals=honest_intervals(best, data, scale, progress, weights))
+    if not fit.terms.ordered():
+        # the joints above a segment posed only through the joints below it, from a refit without what sees its roll
+        # (as ``fit`` judges them): with effect terms, the refit would leave the terms of the markers it sets aside free
+        best = without_incidental_rolls(best, [], data, best.model_error, scale, weights)
     if rate_hz is not None:
         best = with_sampling_spread(best, data, rate_hz, progress, weights)
     return with_scale_error(best, scale_sd)

@@ -20,10 +20,11 @@ import warnings
 import numpy as np
 from scipy.special import chndtr
 
+from identcheck.bundle.honest import posed_by_itself, same_distances
 from identcheck.bundle.practical import TOLERANCE_MM, Z95
 from identcheck.bundle.uncertainty import distance_gradients
 from identcheck.errors import InputError
-from identcheck.fit.whole_tree import REJECT_CHI2, _same, posed_by_itself
+from identcheck.fit.whole_tree import REJECT_CHI2
 from identcheck.fit.workflow import fit_closed_then_tree
 from identcheck.simulate.rigid import simulate
 
@@ -105,7 +106,7 @@ def predict(model, noise_mm: float, motion: str = "functional", n_frames: int = 
         free = [m for m, (_, g) in grads[j].items() if best.cov.free(g)]
         rivals = []
         twins = max(int((exact_candidates or {}).get(j) or 1) - 1, 0)
-        differing = sorted((m for m, _, _ in tree.others if not _same(m, best, [j])), key=lambda m: m.fit.rss)
+        differing = sorted((m for m, _, _ in tree.others if not same_distances(m, best, [j])), key=lambda m: m.fit.rss)
         for k, m in enumerate(differing):
             gap = max(m.fit.rss - best.fit.rss, 0.0)
             lam = gap / noise_mm ** 2

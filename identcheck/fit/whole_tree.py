@@ -33,24 +33,22 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import chdtrc
 
-from identcheck.bundle.chain import fit_chain
-from identcheck.bundle.converge import MAX_ITER, converged_fit
-from identcheck.bundle.honest import (NO_BOUND, Minimum, ci, honest_intervals, joint_answer, likelihood_scale,
-                                      minimum, posed_above, posed_by_itself, with_misfit, with_model_error,
+from identcheck.bundle.converge import converged_fit
+from identcheck.bundle.honest import (SAME_MM, Minimum, ci, honest_intervals, joint_answer, likelihood_scale, minimum,
+                                      posed_above, posed_by_itself, same_distances, with_misfit, with_model_error,
                                       with_sampling_spread, without_bounds)
-from identcheck.bundle.misfit import angle_dependence, model_error_sd
+from identcheck.bundle.incidental import without_incidental_rolls
 from identcheck.bundle.model import n_const
 from identcheck.bundle.start import state_from_joints
 from identcheck.bundle.starts import candidates, start_combinations
-from identcheck.bundle.uncertainty import covariance, distance_gradients
+from identcheck.bundle.uncertainty import distance_gradients
 from identcheck.errors import DegenerateError, InputError
 from identcheck.skeleton import Skeleton
 
 STARTS_BUDGET_S = 90.0   # no new start after this many seconds (the ones left out are counted and reported)
-MAX_RIVALS = 4           # other minima refitted for the joints above an unbounded one (the best ones)
 REJECT_CHI2 = 3.841      # χ²₁ 95 % quantile: a candidate this much worse (noise model's units) is rejected
-SAME_MM = 0.5            # two minima whose every marker distance agrees within this are one (converged fits
-                         # reach the same minimum to ~1e-3 mm)
+
+
 @dataclass
 class TreeFit:
     """The whole-tree answer: the best minimum, the others with their likelihood-ratio statistics."""
@@ -173,130 +171,10 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
     model_error = best.model_error
     others = [(with_model_error(m, model_error), delta, p) for m, delta, p in others]
     best = replace(best, intervals=honest_intervals(best, data, scale, progress))
-    best = _without_incidental_rolls(best, others, data, model_error, scale)
+    best = without_incidental_rolls(best, others, data, model_error, scale)
     best = with_sampling_spread(best, data, trial.rate_hz, progress)
     return TreeFit(best, others, n_starts=tried, starts_left_out=left_out, one_joint_starts=singles,
                    one_joint_left_out=singles_cut), set()
-
-
-def joints_below(chain: Skeleton, joint: str) -> list:
-    """The joints in the subtree hanging from `joint` (not itself)."""
-    segs, out = {chain.child[joint]}, []
-    for k in chain.joints:                      # parents before children
-        if chain.parent[k] in segs:
-            out.append(k)
-            segs.add(chain.child[k])
-    return out
-
-
-def _without_incidental_rolls(best: Minimum, others: list, data, model_error: dict, scale: float) -> Minimum:
-    """The other joints refitted without the markers below each joint that hangs from a segment not posed by
-    itself (:func:`posed_by_itself`).
-
-    Those markers are all that sees the segment's roll in each frame; a likelihood with one free roll per
-    frame prefers joints whose marker orbits absorb the noise (the incidental-parameter bias), and through the
-    shared segment that bias reaches the joints above: on simulated 3 pelvis / 1 thigh / 1 shank legs the
-    hip came out 5-17 mm off at ±2-5 mm. Without them, the joints above are fitted from what poses them.
-    The cut joints keep their intervals and the whole fit's distances.
-
-    Every such joint is cut, whether or not its own interval came out wide: when the one below the one-marker
-    thigh happened to look narrow the hip kept the information the rolls lend it, and its intervals were half
-    the spread of its estimates (simulated minimal legs, white and AR(1) noise, 10 replicates each: the hip's
-    standard error switched between 0.2 and 1.4 mm from one noise draw to the next).
-
-    The joints above no cut are refitted without the markers below every cut; a joint at or below a cut, without
-    those below the cuts beneath it (:func:`_refit_groups`): on a chain of 3 | 1 | 3 | 1 | 1 markers (balls, then a
-    hinge) the third ball, below the one-marker second segment, kept the roll the hinge's one child marker lends the
-    one-marker fourth segment, and its four distances were 0.2-1.4 mm off at ±0.4 mm (6 standard errors; fitted
-    without that marker, ±0.8 mm around the truth)."""
-    chain = best.fit.chain
-    cut = [j for j in chain.joints if not posed_by_itself(chain, chain.parent[j], best.fit)]
-    if not cut:
-        return best
-    unbounded = {j for j, per in best.intervals.items() if any(how in NO_BOUND for _, how in per.values())}
-    groups = _refit_groups(chain, cut, unbounded)
-    if not groups:
-        return best
-    dist, intervals, rivals, upstream, weights = dict(best.distances), dict(best.intervals), {}, {}, {}
-    errors_out = {j: sd for j, sd in model_error.items() if sd > 0}
-    misfits = []
-    for left_out, keep in groups:
-        w = np.ones(data.shape[:2])
-        for c in left_out:
-            w[:, chain.downstream[c]] = 0.0
-        refitted, found_rivals, errors, misfit, found = _upstream_refit(best, others, data, model_error, scale, w,
-                                                                        keep)
-        for j in keep:
-            dist[j] = refitted.distances[j]
-            if j in found:
-                intervals[j] = found[j]
-            else:
-                intervals.pop(j, None)
-            rivals[j] = found_rivals
-            upstream[j] = (refitted.fit, refitted.cov)
-            weights[j] = w
-            errors_out.pop(j, None)
-            if errors.get(j, 0.0) > 0:
-                errors_out[j] = errors[j]
-        misfits.append(misfit)
-    merged = dict(best.misfit)
-    for misfit in reversed(misfits):        # the first group's (the joints above every cut) stands where they meet
-        merged.update(misfit)
-    return replace(best, distances=dist, intervals=intervals, rivals=rivals, upstream=upstream,
-                   upstream_weights=weights, model_error=errors_out, misfit=merged)
-
-
-def _refit_groups(chain: Skeleton, cut: list, unbounded: set) -> list:
-    """[(the cut joints whose markers below are left out, the joints answered from that refit)], the joints above
-    every cut first: they are refitted without the markers below any cut (every roll left out); a joint at or below a
-    cut without those below the cuts beneath it (its own markers stay: they are what sees it), and it keeps the
-    whole fit when no cut lies beneath it. Joints whose intervals claim no bound are left as they are."""
-    below = set(cut) | {k for c in cut for k in joints_below(chain, c)}
-    groups: dict = {}
-    for j in chain.joints:
-        if j in unbounded:
-            continue
-        left_out = tuple(cut) if j not in below else tuple(c for c in cut if c in joints_below(chain, j))
-        if left_out:
-            groups.setdefault(left_out, []).append(j)
-    return sorted(groups.items(), key=lambda g: g[0] != tuple(cut))
-
-
-def _upstream_refit(best: Minimum, others: list, data, model_error: dict, scale: float, w: np.ndarray,
-                    keep: list) -> tuple:
-    """The refit of :func:`_without_incidental_rolls` for the joints `keep`, the samples weighted `w`: (the refit
-    as a Minimum; its rivals, [(Minimum, Δχ², p)] among the first :data:`MAX_RIVALS` other minima refitted alike; the
-    model errors; the markers' misfit judged on it; the honest intervals of `keep` where the quadratic one is not
-    trusted)."""
-    chain = best.fit.chain
-    seen = np.where(w[..., None] > 0, data, np.nan)         # the markers below the cut are not data here
-
-    def refit(m: Minimum, errors: dict) -> Minimum:
-        fit = fit_chain(chain, data, m.fit.state, weights=w, max_iter=MAX_ITER)
-        cov = covariance(fit, data, weights=w)
-        grads = distance_gradients(chain, fit.state, len(cov.information))
-        dist = dict(m.distances)
-        for j in keep:
-            dist[j] = {k: (d, float(np.hypot(cov.se(g), errors.get(j, 0.0)))) for k, (d, g) in grads[j].items()}
-        return replace(m, fit=fit, cov=cov, distances=dist)
-
-    first = fit_chain(chain, data, best.fit.state, weights=w, max_iter=MAX_ITER)
-    misfit = angle_dependence(first, seen)                  # judged on the fit the joints above come from
-    errors = dict(model_error)
-    errors.update({j: model_error_sd(first, j, misfit) for j in keep})
-    errors = {j: sd for j, sd in errors.items() if sd > 0}
-    upstream = refit(replace(best, fit=first), errors)
-    rivals = []
-    for m, _, _ in others[:MAX_RIVALS]:
-        r = refit(m, errors)
-        if any(not _same(r, upstream, [j]) for j in keep):
-            delta = max(r.fit.rss - upstream.fit.rss, 0.0) / scale
-            rivals.append((r, float(delta), float(chdtrc(1, delta))))
-    # the joints judged by the same rules on the fit they now come from: a wide one's quadratic interval from this
-    # refit is as untrustworthy as the whole fit's was (minimal legs in gait: hips 100 mm off at ±10 mm)
-    judged = replace(upstream, misfit=misfit, model_error={j: errors[j] for j in keep if j in errors})
-    redone = honest_intervals(judged, data, scale, weights=w)
-    return upstream, rivals, errors, misfit, {j: redone[j] for j in keep if j in redone}
 
 
 def _located(fit, start: tuple) -> Minimum:
@@ -311,15 +189,9 @@ def _distinct(minima: list) -> list:
     """Minima with the same marker distances (within SAME_MM) kept once, best first."""
     kept = []
     for m in minima:
-        if not any(_same(m, k) for k in kept):
+        if not any(same_distances(m, k) for k in kept):
             kept.append(m)
     return kept
-
-
-def _same(a: Minimum, b: Minimum, joints=None) -> bool:
-    """Whether two minima give the same marker distances (within SAME_MM) for `joints` (default: all)."""
-    return all(abs(d - b.distances[j][mk][0]) <= SAME_MM
-               for j in (joints or a.distances) for mk, (d, _) in a.distances[j].items())
 
 
 def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict:
@@ -338,7 +210,7 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
     out = {}
     for j in chain.joints:
         differing = [(m, delta, p) for m, delta, p in best.rivals.get(j, tree.others)
-                     if not _same(m, best, [j])]                                             # this joint differs
+                     if not same_distances(m, best, [j])]                                             # this joint differs
         alts = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                  "marker_distances_ci95": ci(m.distances[j]),
                  "delta_chi2": round(delta, 3), "p_value": round(p, 4),
@@ -419,6 +291,44 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
                         "widened for it by a rule of thumb, not a calibrated bias. `identcheck diagnose` models the "
                         "motion.",
              "markers": [m.marker for m in moving], "joints": joints, "kind": "model_misfit"}]
+
+
+def gap_warnings(tree: TreeFit, model, trial) -> list:
+    """An ``unexplained_gap`` warning (dict with ``message``, ``kind``, ``ratio``, ``limit``) when the whole-tree fit
+    leaves more than the measurement noise explains, by ``diagnose``'s stated test
+    (:func:`identcheck.bundle.hypothesis.consistency`: the prewhitened residual against a noise floor estimated without
+    the joint model, from the distances within segments); [] when it does not, or when no segment has two markers to
+    estimate the noise from. What it catches that :func:`misfit_warnings` does not: motion the joint angles do not
+    drive (a knee turning a few degrees about axes across its hinge, in a smooth random profile, read by the fit's
+    noise model as correlated noise: an independent check's knees were reported determined at ±1-3 mm with no
+    warning, exit 0, the residual twice the noise)."""
+    from identcheck.bundle.hypothesis import Context, Hypothesis, consistency
+    from identcheck.estimate.noise import noise_floor
+
+    fit = tree.best.fit
+    chain = fit.chain
+    data = trial.select(chain.labels).as_array()
+    try:
+        noise = noise_floor(data, chain.labels, {s: [chain.labels[i] for i in chain.seg_markers[s]]
+                                                 for s in chain.segments})
+    except (InputError, DegenerateError, ValueError):
+        return []
+    seen = np.isfinite(data).all(axis=2)
+    if not noise.sigma_mm > 0 or not seen.any():
+        return []
+    ctx = Context(model, chain.labels, trial.rate_hz, data, noise, int(seen.sum()), trial.source)
+    test = consistency(ctx, Hypothesis(chain, fit.terms, data, seen.astype(float), fit))
+    if test["consistent"]:
+        return []
+    gap = float(np.sqrt(fit.rss / max(int(seen.sum()), 1)))
+    return [{"kind": "unexplained_gap", "ratio": round(test["ratio"], 3), "limit": round(test["limit"], 3),
+             "message": (f"{trial.source}: the whole-tree fit leaves {gap:.3g} mm RMS where the measurement noise "
+                         f"({noise.sigma_mm:.3g} mm a coordinate, from the distances within segments) would leave "
+                         f"{ctx.noise.floor(ctx.n_samples, fit.n_params):.3g} (gap²/floor² {test['ratio']:.3g}, "
+                         f"limit {test['limit']:.3g}): the rigid-joint model misses something (a joint that turns "
+                         "about more axes than declared, skin or marker motion, errors in the data), and the "
+                         "intervals describe the best rigid approximation to the trial, not the joint. "
+                         "`identcheck diagnose` names what it misses")}]
 
 
 def _distinct_alternatives(alternatives: list, best: dict) -> list:
