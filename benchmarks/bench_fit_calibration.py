@@ -12,7 +12,9 @@ Reported per category (noise kind × marker set × motion) and overall:
 - verdicts: determined / ambiguous / undetermined counts;
 - confidently wrong: joints called ``determined`` with a marker distance off by more than 3 half-widths and
   more than 2 mm (must be 0);
-- misfit flagged: share of soft-tissue trials with a ``model_misfit`` warning;
+- misfit flagged: share of trials with a ``model_misfit`` warning (of the soft-tissue ones: all, ideally);
+- gap flagged: share of trials with an ``unexplained_gap`` warning (the residual beyond the noise floor: all the
+  soft-tissue ones ideally, few of the others: the test's false alarms);
 - seconds per trial.
 An ambiguous joint counts as covered when any of its listed candidates' intervals holds the truth.
 
@@ -91,8 +93,9 @@ def fit_and_score(stem: str, model: Path, trc: Path, truth: dict) -> dict:
             rows.append({"joint": name, "marker": m, "verdict": verdict, "covered": bool(covered), "half": half,
                          "err": err, "wrong": verdict == "determined" and err > max(WRONG_FACTOR * half, WRONG_MIN_MM),
                          "method": j.get("interval_method", {}).get(m)})
-    misfit = any(w.get("kind") == "model_misfit" for w in res.get("warnings", []))
-    return {"stem": stem, "rows": rows, "seconds": seconds, "misfit_flagged": misfit}
+    kinds = {w.get("kind") for w in res.get("warnings", [])}
+    return {"stem": stem, "rows": rows, "seconds": seconds, "misfit_flagged": "model_misfit" in kinds,
+            "gap_flagged": "unexplained_gap" in kinds}
 
 
 def _finite(x) -> float | None:
@@ -129,6 +132,7 @@ def group_summary(rs: list) -> dict:
         "verdicts": dict(verdicts),
         "confidently_wrong_joints": len({(r["stem"], x["joint"]) for r in rs for x in r.get("rows", []) if x.get("wrong")}),
         "misfit_flagged": round(float(np.mean([r.get("misfit_flagged", False) for r in rs])), 3),
+        "gap_flagged": round(float(np.mean([r.get("gap_flagged", False) for r in rs])), 3),
         "median_seconds": round(float(np.median([r["seconds"] for r in rs])), 2),
     }
 
@@ -171,11 +175,11 @@ def main(argv=None) -> int:
         return 0
     summary = summarise(results, categories)
     print(f"{'category':<40} {'trials':>6} {'dist':>5} {'cover':>6} {'c.det':>6} {'half':>7} {'rmse':>7} "
-          f"{'wrong':>5} {'misfit':>6}  verdicts")
+          f"{'wrong':>5} {'misfit':>6} {'gap':>5}  verdicts")
     for key, s in summary.items():
         print(f"{key:<40} {s['trials']:>6} {s['distances']:>5} {s['coverage'] or 0:>6.3f} "
               f"{s['coverage_determined'] or 0:>6.3f} {s['median_half_width_mm'] if s['median_half_width_mm'] is not None else float('inf'):>7.2f} {s['rms_error_mm'] or 0:>7.2f} "
-              f"{s['confidently_wrong_joints']:>5} {s['misfit_flagged']:>6.2f}  {s['verdicts']}")
+              f"{s['confidently_wrong_joints']:>5} {s['misfit_flagged']:>6.2f} {s['gap_flagged']:>5.2f}  {s['verdicts']}")
     figure(summary, a.figure)
     write_json(a.out, a.key, {"summary": summary, "trials_dir": str(a.trials), "n_trials": len(results),
                               "machine": machine_info()})

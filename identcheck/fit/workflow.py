@@ -183,7 +183,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=Non
     from identcheck.estimate.spikes import without_spikes
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
-    from identcheck.fit.whole_tree import merge_report, misfit_warnings
+    from identcheck.fit.whole_tree import gap_warnings, merge_report, misfit_warnings
     from identcheck.io.trc import centimetres_suspected
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
@@ -209,6 +209,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=Non
     notes += rep["warnings"]                # the joints whose angle jumped (merge_report)
     if tree.best is not None:
         notes += misfit_warnings(tree, model, screened)
+        notes += gap_warnings(tree, model, screened)
         if not tree.best.fit.converged:
             notes.append({"kind": "not_converged", "message": (
                 f"{trial.source}: the whole-tree fit did not converge (its iteration and time budget ran out): no "
