@@ -354,8 +354,7 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
     from identcheck.diagnose import workflow
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
-    model = _model_with_joints(model, "diagnose")
-    _model_argument(model)
+    model = _model_with_joints(model, "diagnose")         # (the model is read before the trial, as fit's is)
     data = _frames(trial, frames)
     diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
     if export_markers is not None:
@@ -463,7 +462,9 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
     if str(practical_motion).lower().endswith((".trc", ".c3d")):
         from identcheck.fit.workflow import fit_trial
 
-        fitted = fit_trial(m, read_trial(practical_motion), progress=progress)["joints"]
+        fitted = fit_trial(m, read_trial(practical_motion), progress=progress,
+                           decided=lambda joints: {j for j in joints if res.joints.get(j, {}).get("identifiable")
+                                                   and res.joints[j].get("candidates") == 1})["joints"]
         practical = {j: dict(v["practical"], predicted=True, motion=str(practical_motion)) for j, v in fitted.items()}
         extra = {"practical_suggestions_note": "one more marker is valued on a named motion only (a recorded trial's "
                                                "fit is not kept)"}

@@ -33,7 +33,7 @@ def without_incidental_rolls(best: Minimum, others: list, data, model_error: dic
     frame prefers joints whose marker orbits absorb the noise (the incidental-parameter bias), and through the
     shared segment that bias reaches the joints above: on simulated 3 pelvis / 1 thigh / 1 shank legs the
     hip came out 5-17 mm off at ±2-5 mm. Without them, the joints above are fitted from what poses them.
-    The cut joints keep their intervals and the whole fit's distances.
+    A cut joint with no cut beneath it keeps its intervals and the whole fit's distances.
 
     Every such joint is cut, whether or not its own interval came out wide: when the one below the one-marker
     thigh happened to look narrow the hip kept the information the rolls lend it, and its intervals were half
@@ -100,7 +100,7 @@ def refit_groups(chain: Skeleton, cut: list, unbounded: set) -> list:
 
 def _upstream_refit(best: Minimum, others: list, data, model_error: dict, scale: float, w: np.ndarray,
                     keep: list) -> tuple:
-    """The refit of :func:`_without_incidental_rolls` for the joints `keep`, the samples weighted `w`: (the refit
+    """The refit of :func:`without_incidental_rolls` for the joints `keep`, the samples weighted `w`: (the refit
     as a Minimum; its rivals, [(Minimum, Δχ², p)] among the first :data:`MAX_RIVALS` other minima refitted alike; the
     model errors; the markers' misfit judged on it; the honest intervals of `keep` where the quadratic one is not
     trusted)."""

@@ -21,7 +21,7 @@ import numpy as np
 from identcheck.skeleton import Skeleton
 from identcheck.errors import DegenerateError, InputError
 from identcheck.io.jsonable import plain
-from identcheck.io.model import refuse_exported_points
+from identcheck.io.model import left_out_reasons, refuse_exported_points, unposed_root
 from identcheck.io.trc import centimetres_suspected
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
@@ -181,6 +181,8 @@ class Diagnosis:
     left_out : dict
         joint -> (declared type, why) for the joints left out with the segments nothing poses (:class:`Unposed`):
         reported undetermined, with no distances.
+    joint_order : tuple
+        The model's joints, parents first: the order :attr:`joints` reports them in (the left-out ones included).
     """
 
     ctx: Context
@@ -196,6 +198,7 @@ class Diagnosis:
     not_adopted: tuple = ()
     sd_limit_mm: float = MAX_SD_MM
     left_out: dict = field(default_factory=dict)
+    joint_order: tuple = ()
 
     @cached_property
     def joints(self) -> dict:
@@ -204,7 +207,8 @@ class Diagnosis:
         profile likelihoods and bootstrap refits can take up to a minute each for a weakly determined joint, and the
         JSON, the text and the HTML report all read the same answer."""
         out = joint_report(self.ctx, self.after, self.progress, self.steps)
-        return out | {j: left_out_answer(kind, why) for j, (kind, why) in self.left_out.items()}
+        out |= {j: left_out_answer(kind, why) for j, (kind, why) in self.left_out.items()}
+        return {j: out[j] for j in self.joint_order if j in out} | out        # in the model's order
 
     def numbered(self, where: dict) -> dict:
         """`where` with its row indices also in the file's numbering."""
@@ -296,19 +300,21 @@ class Unposed(Exception):
 def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis, dict]:
     """:func:`start`, leaving out each joint whose child segment cannot be posed (:class:`Unposed`) with everything
     below it, and starting again on the rest (once per joint at most): (context, rigid fit, {joint left out:
-    (its declared type, why)}). The model in the context is the one without them. A root nothing poses (no marker
-    the trial shows, fewer than three joint points) is left out first with its joints, the subtree with the most
-    markers below it diagnosed (:meth:`identcheck.io.model.Model.below_root`), as ``fit`` does."""
+    (its declared type, why)}). The model in the context is the one without them. A root nothing poses (no marker,
+    fewer than three joint points) is left out first with its joints, the subtree below it that holds joints
+    diagnosed (:meth:`identcheck.io.model.Model.below_root`), as ``fit`` does; the trial is checked against the whole
+    model first (a marker it never shows is refused, as ``fit`` refuses it)."""
     full = model
-    model, gone = model.below_root(trial.seen(model.markers))
-    why = (f"segment {full.root!r} (the root) has no marker the trial shows and its joints lend fewer than three "
-           f"points: nothing poses it; the tree from segment {model.root!r} down is diagnosed without it")
-    left_out = {j: (full.joints[j].type, why if j == above else f"it hangs below {above}, which diagnose left out: "
-                    f"{why}") for j, above in gone.items()}
+    unprefixed, _ = trial.unprefixed(model.markers)         # (start says so, once)
+    refuse_exported_points(unprefixed, model.joints)
+    model.require_markers_in(unprefixed)
+    model, gone = model.below_root()
     if gone and not model.joints:
-        raise InputError([f"segments.{full.root}.markers: none the trial shows, and its joints lend fewer than three "
-                          "points: nothing poses the model's root, and every joint hangs from it; give it markers"],
+        raise InputError([f"segments.{full.root}.markers: none, and its joints lend fewer than three points: nothing "
+                          "poses the model's root, and every joint hangs from it; give it markers"],
                          source=full.source)
+    why = unposed_root(full, model, "diagnosed")
+    left_out = {j: (full.joints[j].type, reason) for j, reason in left_out_reasons(gone, why, "diagnose").items()}
     if gone and progress:
         progress(f"leaving out {', '.join(gone)}: {why}")
     while True:
@@ -320,9 +326,8 @@ def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis,
             if not smaller.joints:
                 raise InputError([f"joint {exc.joint}: {exc.why}; no joint would be left to diagnose"],
                                  source=full.source) from None
-            for j, above in gone.items():
-                left_out[j] = (full.joints[j].type, exc.why if j == above else
-                               f"it hangs below {above}, which diagnose left out: {exc.why}")
+            left_out.update({j: (full.joints[j].type, reason)
+                             for j, reason in left_out_reasons(gone, exc.why, "diagnose").items()})
             if progress:
                 progress(f"leaving out {', '.join(gone)}: {exc.why}")
             model = smaller
@@ -354,8 +359,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         state = _naming(files, start_state, model, chain, data, trial.rate_hz)
     except (DegenerateError, InputError) as exc:
         seg = exc.segment
-        lent = sum(1 if j.type == "spherical" else 2 for j in model.joints.values() if seg in (j.parent, j.child))
-        markerless = seg in model.segments and not model.segments[seg].markers and lent < 3   # the plan's
+        markerless = seg in model.segments and not model.segments[seg].markers and model.joint_points(seg) < 3
         above = model.parent_joint(seg) if seg in model.segments else None
         if above is not None:
             raise Unposed(above.name, (f"segments.{seg}.markers: none, and the joints beside it lend fewer than "
@@ -539,7 +543,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     kept = {place(st.name, st.where) for st in steps}
     not_adopted = sorted((r for key, r in refused.items() if key not in kept), key=lambda r: -r.score)
     return Diagnosis(ctx, base, h, tuple(steps), test0, consistency(ctx, h), offset, int(trial.frame_number(0)),
-                     tuple(dropped_steps), progress, tuple(not_adopted), limit, left_out)
+                     tuple(dropped_steps), progress, tuple(not_adopted), limit, left_out, tuple(model.joint_order))
 
 
 SCREEN_FROM = 100.0

@@ -43,6 +43,7 @@ from identcheck.bundle.start import state_from_joints
 from identcheck.bundle.starts import candidates, start_combinations
 from identcheck.bundle.uncertainty import distance_gradients
 from identcheck.errors import DegenerateError, InputError
+from identcheck.io.model import left_out_reasons, unposed_root
 from identcheck.skeleton import Skeleton
 
 STARTS_BUDGET_S = 90.0   # no new start after this many seconds (the ones left out are counted and reported)
@@ -72,15 +73,12 @@ def without_an_unposed_root(model, trial, closed_form: dict) -> tuple:
     """(the model below its root when nothing poses the root, the closed forms of its joints, {joint left out: why}):
     a root without a marker the trial shows, whose joints lend fewer than three points (:meth:`Model.below_root`),
     leaves every joint undetermined, a fully marked knee below a pelvis without markers among them (an independent
-    check found 28 such joints). The subtree of the root's child with the most markers is fitted; the root's joints,
-    and its other subtrees, are left out and say why. The model as it is when the root is posed."""
+    check found 28 such joints). The subtree of the root's child that holds joints, and the most markers, is fitted;
+    the root's joints, and its other subtrees, are left out and say why. The model as it is when the root is posed."""
     smaller, gone = model.below_root(trial.seen(model.markers))
     if not gone:
         return model, closed_form, {}
-    why = (f"segment {model.root!r} (the root) has no marker the trial shows and its joints lend fewer than three "
-           f"points: nothing poses it; the tree from segment {smaller.root!r} down is fitted without it")
-    left_out = {j: why if j == above else f"it hangs below {above}, which the fit left out: {why}"
-                for j, above in gone.items()}
+    left_out = left_out_reasons(gone, unposed_root(model, smaller, "fitted"), "the fit")
     return smaller, {k: v for k, v in closed_form.items() if k in smaller.joints}, left_out
 
 
@@ -118,9 +116,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
         smaller, gone = model.without_subtrees(stuck)
         if not smaller.joints:
             break
-        why = tree.problem + _rarely_seen(model, trial, stuck)
-        for j, above in gone.items():
-            left_out[j] = why if j == above else f"it hangs below {above}, which the fit left out: {why}"
+        left_out.update(left_out_reasons(gone, tree.problem + _rarely_seen(model, trial, stuck), "the fit"))
         if progress:
             progress(f"whole-tree fit without {', '.join(gone)}: {tree.problem}")
         model, closed_form = smaller, {k: v for k, v in closed_form.items() if k in smaller.joints}
@@ -395,7 +391,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
     joints, jumped = {}, []
     undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
                    if j.get("marker_distances") and not rep_unique(j)}
-    if undecidable and decided is not None:
+    if undecidable and decided is not None and tree.best is not None:     # (unused without a whole-tree fit)
         sure = decided(list(undecidable))
         undecidable = {name: v for name, v in undecidable.items() if name not in sure}
     answers = joint_answers(tree, model, undecidable) if tree.best is not None else {}

@@ -260,6 +260,20 @@ class Model:
         j = self.joints[joint]
         return self.segments[j.parent].markers, self.segments[j.child].markers
 
+    def joint_points(self, segment: str) -> int:
+        """How many points the joints beside `segment` fix on it once their other segments are posed: a ball joint's
+        centre one, a hinge's axis two (three in general position pose a segment without markers)."""
+        return sum(1 if j.type == "spherical" else 2 for j in self.joints.values() if segment in (j.parent, j.child))
+
+    def segments_below(self, segment: str) -> set:
+        """`segment` and every segment hanging from it."""
+        out, stack = set(), [segment]
+        while stack:
+            seg = stack.pop()
+            out.add(seg)
+            stack += [j.child for j in self.child_joints(seg)]
+        return out
+
     def without_subtrees(self, joints) -> tuple["Model", dict]:
         """(this model without `joints` and everything hanging from them, {each joint left out: the one of `joints`
         it is or hangs below}, parents first): what a whole-tree fit leaves out when a segment cannot be posed (a
@@ -275,34 +289,32 @@ class Model:
         return replace(self, segments={n: s for n, s in self.segments.items() if n not in cut}, joints=keep), gone
 
     def below_root(self, markers=None) -> tuple["Model", dict]:
-        """(the subtree of the root's child with the most markers, {each joint left out: the root's joint it is or
-        hangs below}): what is fitted when the root has no marker (of `markers`, a set of names, when given: those the
-        trial shows) and its joints lend fewer than three points, so that nothing poses it; the model itself and {}
-        otherwise (or when the root has no joint). The other subtrees of such a root are left out with it: its pose,
-        which would join them, is not seen."""
-        seen = [m for m in self.segments[self.root].markers if markers is None or m in markers]
-        down = self.child_joints(self.root)
-        lent = sum(1 if j.type == "spherical" else 2 for j in down)
-        if seen or lent >= 3 or not down:
-            return self, {}
+        """(the model below its root while nothing poses the root, {each joint left out: the root's joint it is or
+        hangs below}): a root with no marker (of `markers`, a set of names, when given: those the trial shows) whose
+        joints lend fewer than three points (:meth:`joint_points`) is left out with its joints, and the subtree of
+        its child that holds joints (and of those, the most markers) kept, again while its own root is posed by
+        nothing; the model itself and {} when the root is posed (or has no joint). The other subtrees of such a root
+        are left out with it: its pose, which would join them, is not seen."""
+        model, gone = self, {}
+        while True:
+            seen = [m for m in model.segments[model.root].markers if markers is None or m in markers]
+            down = model.child_joints(model.root)
+            if seen or model.joint_points(model.root) >= 3 or not down:
+                return model, gone
 
-        def count(segment: str) -> int:
-            n = sum(1 for m in self.segments[segment].markers if markers is None or m in markers)
-            return n + sum(count(j.child) for j in self.child_joints(segment))
+            def weight(joint) -> tuple:
+                below = model.segments_below(joint.child)
+                n = sum(1 for s in below for m in model.segments[s].markers if markers is None or m in markers)
+                return len(below) > 1, n
 
-        keep = max(down, key=lambda j: count(j.child))
-        inside, stack = set(), [keep.child]
-        while stack:
-            seg = stack.pop()
-            inside.add(seg)
-            stack += [j.child for j in self.child_joints(seg)]
-        joints = {n: j for n, j in self.joints.items() if j.parent in inside}
-        gone = {}
-        for n in self.joint_order:
-            j = self.joints[n]
-            if n not in joints:
-                gone[n] = n if j.parent == self.root else gone[self.parent_joint(j.parent).name]
-        return replace(self, segments={n: s for n, s in self.segments.items() if n in inside}, joints=joints), gone
+            keep = max(down, key=weight)
+            inside = model.segments_below(keep.child)
+            for n in model.joint_order:
+                j = model.joints[n]
+                if j.parent not in inside:
+                    gone[n] = n if j.parent == model.root else gone[model.parent_joint(j.parent).name]
+            model = replace(model, segments={n: s for n, s in model.segments.items() if n in inside},
+                            joints={n: j for n, j in model.joints.items() if j.parent in inside})
 
     def to_dict(self) -> dict:
         """The TOML-shaped dictionary (coordinates in mm, ``units = "mm"``); ``from_dict`` inverts it."""
@@ -649,3 +661,19 @@ def _order(segments, joints) -> tuple[str, tuple[str, ...]]:
             order.append(name)
             queue.append(joints[name].child)
     return root, tuple(order)
+
+
+def left_out_reasons(gone: dict, why: str, by: str) -> dict:
+    """{joint: why it is left out} for `gone` ({joint left out: the joint it is or hangs below},
+    :meth:`Model.without_subtrees`, :meth:`Model.below_root`): `why` for the joints themselves, and for those below them
+    that they hang below one `by` (the verb) left out, and why."""
+    return {j: why if j == above else f"it hangs below {above}, which {by} left out: {why}"
+            for j, above in gone.items()}
+
+
+def unposed_root(full: Model, below: Model, done: str) -> str:
+    """Why the joints :meth:`Model.below_root` leaves out are left out (`full` the model, `below` what it kept, `done`
+    what is done with the rest: "fitted", "diagnosed")."""
+    return (f"the root {full.root!r} has no marker the trial shows and its joints lend fewer than three points, so "
+            f"nothing poses it (nor what joins it to segment {below.root!r}); the tree from segment {below.root!r} "
+            f"down is {done} without them")

@@ -146,8 +146,9 @@ def centimetres_suspected(xyz: np.ndarray, source: str) -> str:
     if span is None or not BODY_SPAN_MM[0] <= span < SMALL_SPAN_MM:
         return ""
     return (f"{source}: the markers of a frame span only {span:.0f} mm (median over frames): a body part that small, "
-            "or coordinates in cm in a file that says mm? In cm every distance here is ten times too small: fix "
-            "the file's units field (POINT:UNITS or Units)")
+            "or coordinates ten times too small for the units they are read in (centimetres in a file that says mm)? "
+            "Then every distance here is ten times too small: fix the units (a file's POINT:UNITS or Units field, an "
+            "array's units)")
 
 
 def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel: int = 4) -> None:

@@ -434,36 +434,47 @@ def test_a_marker_name_with_spaces_at_its_ends_is_refused_naming_it(name, before
     assert "segments.pelvis.markers" in str(err.value) and repr(name) in str(err.value)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(data=st.data())
-def test_below_a_root_nothing_poses_is_the_subtree_with_the_most_markers(data):
-    """Random trees with a markerless root whose joints lend fewer than three points: the model below it is the
-    subtree of the root's child with the most markers (all its segments and joints, none else); every other joint is
-    left out, under the root's joint it hangs from. A root with a marker, or lent three points, is kept as it is."""
+def test_below_a_root_nothing_poses_is_a_subtree_whose_root_is_posed(data):
+    """Random trees with a markerless root: :meth:`Model.below_root` keeps a whole subtree of the model whose root is
+    posed (a marker, three joint points, or no joint below it), and leaves out every other joint, each under a left-out
+    joint that maps to itself; a root with a marker, or lent three points, is kept as it is. A subtree holding joints
+    is preferred to a leaf: a seven-marker leaf had been kept over a fully marked hinge beside it."""
     n = data.draw(st.integers(2, 7))
     parents = [None] + [data.draw(st.integers(0, k - 1)) for k in range(1, n)]
-    counts = [data.draw(st.integers(0, 3)) for _ in range(n)]
+    counts = [0] + [data.draw(st.integers(0, 7)) for _ in range(n - 1)]
     types = [data.draw(st.sampled_from(["spherical", "revolute"])) for _ in range(n)]
     model = Model.from_dict({
         "units": "mm", "segments": {f"s{k}": {"markers": [f"m{k}_{i}" for i in range(counts[k])]} for k in range(n)},
         "joints": {f"j{k}": {"type": types[k], "parent": f"s{parents[k]}", "child": f"s{k}"} for k in range(1, n)}})
     below, gone = model.below_root()
-    lent = sum(1 if types[k] == "spherical" else 2 for k in range(1, n) if parents[k] == 0)
-    if counts[0] or lent >= 3:
+    if model.joint_points("s0") >= 3:
         assert below is model and gone == {}
         return
-
-    def subtree(k):
-        return {k} | {s for c in range(1, n) if parents[c] == k for s in subtree(c)}
-
-    kids = [k for k in range(1, n) if parents[k] == 0]
-    weight = {k: sum(counts[s] for s in subtree(k)) for k in kids}
-    assert set(below.segments) == {f"s{s}" for s in subtree(int(below.root[1:]))}
-    assert int(below.root[1:]) in kids and weight[int(below.root[1:])] == max(weight.values())
+    assert set(below.segments) == model.segments_below(below.root)
+    assert bool(below.segments[below.root].markers) or below.joint_points(below.root) >= 3 or not below.joints
     assert set(below.joints) | set(gone) == set(model.joints) and not set(below.joints) & set(gone)
-    for j, above in gone.items():
-        assert model.joints[above].parent == "s0"
-        k = int(j[1:])
-        while parents[k] != 0:
-            k = parents[k]
-        assert above == f"j{k}"
+    assert all(gone[above] == above for above in gone.values())
+
+
+def test_below_a_root_nothing_poses_a_subtree_with_joints_is_kept_over_a_leaf():
+    """A markerless pelvis with a seven-marker leaf on one ball joint and a 3 | 3 hinge below the other: the hinge's
+    subtree is kept (the leaf, more markers but no joint, had been); and a chain of two markerless segments is left
+    out whole, down to the first posed one."""
+    forked = Model.from_dict({"units": "mm", "segments": {
+        "P": {"markers": []}, "T": {"markers": [f"t{i}" for i in range(7)]}, "A": {"markers": ["a1", "a2", "a3"]},
+        "B": {"markers": ["b1", "b2", "b3"]}}, "joints": {
+        "jt": {"type": "spherical", "parent": "P", "child": "T"},
+        "ja": {"type": "spherical", "parent": "P", "child": "A"},
+        "jb": {"type": "revolute", "parent": "A", "child": "B"}}})
+    below, gone = forked.below_root()
+    assert below.root == "A" and set(below.joints) == {"jb"} and gone == {"jt": "jt", "ja": "ja"}
+    chain = Model.from_dict({"units": "mm", "segments": {
+        "A": {"markers": []}, "B": {"markers": []}, "C": {"markers": ["c1", "c2", "c3"]},
+        "D": {"markers": ["d1", "d2", "d3"]}}, "joints": {
+        "j1": {"type": "spherical", "parent": "A", "child": "B"},
+        "j2": {"type": "spherical", "parent": "B", "child": "C"},
+        "j3": {"type": "revolute", "parent": "C", "child": "D"}}})
+    below, gone = chain.below_root()
+    assert below.root == "C" and set(below.joints) == {"j3"} and gone == {"j1": "j1", "j2": "j2"}
