@@ -288,13 +288,15 @@ def _naming(files: str, call, *args):
 
 
 class Unposed(Exception):
-    """The rigid fit cannot start because a segment below `joint` (its child) cannot be posed: no markers and too few
-    joint points (a foot without markers), or markers the trial hardly shows. :func:`diagnose` leaves that joint and
-    everything hanging from it out, as ``fit`` does, and says `why`."""
+    """The rigid fit cannot start because a segment below `joint` (its child) cannot be posed or moved: no markers and
+    too few joint points (a foot without markers), markers the trial hardly shows, a hinge that never turns.
+    :func:`diagnose` leaves that joint and everything hanging from it out, as ``fit`` does, and says `why`; `cause`,
+    the error the start met (None for a segment without markers: the model's, not the trial's), is raised when no
+    joint would be left (a static trial stays a degenerate answer)."""
 
-    def __init__(self, joint: str, why: str):
+    def __init__(self, joint: str, why: str, cause: Exception | None = None):
         super().__init__(why)
-        self.joint, self.why = joint, why
+        self.joint, self.why, self.cause = joint, why, cause
 
 
 def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis, dict]:
@@ -324,6 +326,8 @@ def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis,
         except Unposed as exc:
             smaller, gone = model.without_subtrees([exc.joint])
             if not smaller.joints:
+                if exc.cause is not None:
+                    raise exc.cause
                 raise InputError([f"joint {exc.joint}: {exc.why}; no joint would be left to diagnose"],
                                  source=full.source) from None
             left_out.update({j: (full.joints[j].type, reason)
@@ -364,7 +368,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         if above is not None:
             raise Unposed(above.name, (f"segments.{seg}.markers: none, and the joints beside it lend fewer than "
                                        "three points: nothing poses the segment") if markerless else str(exc),
-                          ) from None
+                          None if markerless else exc) from None
         if markerless:
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "

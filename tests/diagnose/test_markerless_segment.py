@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from identcheck import cli
@@ -93,3 +94,22 @@ def test_a_knee_below_a_markerless_root_is_fitted_and_diagnosed(tmp_path):
             assert "has no marker the trial shows" in why or (joints is fitted and why.startswith("not identifiable")), why
     for m, (lo, hi) in fitted["j2"]["marker_distances_ci95"].items():
         assert lo - 0.05 <= diag["j2"]["marker_distances"][m] <= hi + 0.05, m
+
+
+def test_a_static_trial_stays_a_degenerate_answer(tmp_path, capsys, examples):
+    """A static trial of the bundled knee (its first pose held, with noise): the hinge never turns, so nothing is
+    left to diagnose once it is left out; the answer is the degenerate one (exit 1, ``{"ok": false, "degenerate":
+    ...}`` naming the trial), as before segments nothing poses were left out, not a refusal of the model (exit 2)."""
+    from identcheck.io.trc import write_trc
+    from identcheck.simulate.rigid import simulate
+    from identcheck.io.model import Model
+
+    model = examples / "knee_21.toml"
+    sim = simulate(Model.from_toml(model), n_frames=200, noise_mm=0.0, seed=1)
+    still = np.repeat(sim.trial.as_array()[:1], 200, axis=0) + np.random.default_rng(1).normal(0, 0.3, (200, 3, 3))
+    trial = tmp_path / "still.trc"
+    write_trc(trial, still, sim.trial.labels, sim.trial.rate_hz)
+    assert cli.main(["diagnose", str(model), str(trial), "--json"]) == 1
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert doc["ok"] is False and "still.trc" in doc["degenerate"] and "Traceback" not in out.err
