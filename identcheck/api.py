@@ -253,8 +253,7 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     planned = _planned_once(model)
     doc = fit_trial(model, data, progress=progress, export=export_markers,
                     on_fit=keep if report is not None or export_osim is not None else None,
-                    decided=lambda joints: {j for j in joints if (planned().get(j) or {}).get("identifiable")
-                                            and (planned().get(j) or {}).get("candidates") == 1})
+                    decided=lambda joints: _certified_unique(planned(), joints))
     doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
                        if issubclass(w.category, UserWarning)] + doc["warnings"]
     if not all(j["identifiable"] for j in doc["joints"].values()):
@@ -277,6 +276,12 @@ def _planned_once(model):
             kept.append(plan(model, motion=False, robust=False, suggest=False).joints)
         return kept[0]
     return planned
+
+
+def _certified_unique(planned: dict, joints) -> set:
+    """Those of `joints` that ``plan``'s joints (`planned`) certify identifiable with one candidate: what ``fit`` judges
+    by the likelihood although their closed form's case admits equal twins (:func:`fit_trial`'s ``decided``)."""
+    return {j for j in joints if (planned.get(j) or {}).get("identifiable") and planned[j].get("candidates") == 1}
 
 
 def _certified_identifiability(doc: dict, planned: dict) -> None:
@@ -463,8 +468,7 @@ def plan(model, seed: int = 0, motion: bool = True, robust: bool = True, suggest
         from identcheck.fit.workflow import fit_trial
 
         fitted = fit_trial(m, read_trial(practical_motion), progress=progress,
-                           decided=lambda joints: {j for j in joints if res.joints.get(j, {}).get("identifiable")
-                                                   and res.joints[j].get("candidates") == 1})["joints"]
+                           decided=lambda joints: _certified_unique(res.joints, joints))["joints"]
         practical = {j: dict(v["practical"], predicted=True, motion=str(practical_motion)) for j, v in fitted.items()}
         extra = {"practical_suggestions_note": "one more marker is valued on a named motion only (a recorded trial's "
                                                "fit is not kept)"}
