@@ -288,15 +288,14 @@ def _naming(files: str, call, *args):
 
 
 class Unposed(Exception):
-    """The rigid fit cannot start because a segment below `joint` (its child) cannot be posed or moved: no markers and
-    too few joint points (a foot without markers), markers the trial hardly shows, a hinge that never turns.
-    :func:`diagnose` leaves that joint and everything hanging from it out, as ``fit`` does, and says `why`; `cause`,
-    the error the start met (None for a segment without markers: the model's, not the trial's), is raised when no
-    joint would be left (a static trial stays a degenerate answer)."""
+    """The rigid fit cannot start because a segment below `joint` (its child) has no markers and its joints lend fewer
+    than three points (a foot without markers): the model's plan, not the trial. :func:`diagnose` leaves that joint and
+    everything hanging from it out, as ``fit`` does, and says `why`. (A segment the trial cannot pose or move, a
+    hinge that never turns in a static trial, stays a degenerate answer, as documented.)"""
 
-    def __init__(self, joint: str, why: str, cause: Exception | None = None):
+    def __init__(self, joint: str, why: str):
         super().__init__(why)
-        self.joint, self.why, self.cause = joint, why, cause
+        self.joint, self.why = joint, why
 
 
 def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis, dict]:
@@ -326,8 +325,6 @@ def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis,
         except Unposed as exc:
             smaller, gone = model.without_subtrees([exc.joint])
             if not smaller.joints:
-                if exc.cause is not None:
-                    raise exc.cause
                 raise InputError([f"joint {exc.joint}: {exc.why}; no joint would be left to diagnose"],
                                  source=full.source) from None
             left_out.update({j: (full.joints[j].type, reason)
@@ -361,14 +358,13 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     try:
         state = _naming(files, start_state, model, chain, data, trial.rate_hz)
-    except (DegenerateError, InputError) as exc:
+    except DegenerateError as exc:
         seg = exc.segment
         markerless = seg in model.segments and not model.segments[seg].markers and model.joint_points(seg) < 3
         above = model.parent_joint(seg) if seg in model.segments else None
-        if above is not None:
-            raise Unposed(above.name, (f"segments.{seg}.markers: none, and the joints beside it lend fewer than "
-                                       "three points: nothing poses the segment") if markerless else str(exc),
-                          None if markerless else exc) from None
+        if markerless and above is not None:
+            raise Unposed(above.name, f"segments.{seg}.markers: none, and the joints beside it lend fewer than three "
+                                      "points: nothing poses the segment") from None
         if markerless:
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "
