@@ -6,10 +6,10 @@ over normalised coordinates ``u`` of the volume the markers occupy: E symmetric 
 rotation or uniform scale would be absorbed by the segments; 5 parameters), the 6 quadratic monomials
 times 3-vectors (18) and the 10 cubic ones (30 more). Degree 3 holds the lens-like fields: a radial distortion
 ``|u − c|² (u − c)`` about any centre c is a cubic polynomial in u; over the metre or so a subject occupies, most of
-what a lens changes in the segments' shapes is its strain. Of the 53 fields, only those the criterion asks for are
+what a lens changes in the segments' shapes is its strain. Of the 56 fields, only those the criterion asks for are
 proposed (forward selection on the score test's moments, the choice charged: :mod:`identcheck.bundle.score_selection`),
 each strain on its own and the quadratic and the cubic fields each as one family (:data:`UNITS`): a scale error along
-the vertical axis (z) needs one strain field (along x or y two), a lens strains and the cubic family. Detector: the
+any axis of the volume needs one field (:data:`SCALED_AXES`), a lens strains and the cubic family. Detector: the
 score statistic of the fields, with what a rigid refit absorbs taken out (a segment's pose and constants absorb most
 of a linear field over the little volume it sweeps), on the criterion's scale for a field as slow as the markers'
 motion under correlated noise (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`; the
@@ -34,6 +34,15 @@ else (soft tissue on real data does this)."""
 _STRAIN = [np.diag([1.0, -1.0, 0.0]), np.diag([1.0, 1.0, -2.0]) / np.sqrt(3),
            np.array([[0, 1.0, 0], [1, 0, 0], [0, 0, 0]]), np.array([[0, 0, 1.0], [0, 0, 0], [1, 0, 0]]),
            np.array([[0, 0, 0], [0, 0, 1.0], [0, 1, 0]])]
+"""The five strains (symmetric, traceless) over the volume's normalised coordinates."""
+SCALED_AXES = (0, 1, 2)
+"""The axes along which a scale of the volume, less its uniform part, is also a field of its own (after the five
+strains): ``(e eᵀ − I/3)(x − c)`` in millimetres, x along the axis e. A volume scaled along one of its axes is a
+common calibration error (a wand or an L-frame off along one axis), and the normalised strains span it only in pairs
+(their coordinates are scaled by the volume's half-extents, so a scale in millimetres along an axis is no one of
+them): such a scale had paid two fields and their choice, and a held-out trial scaled 0.5 % along x (visible χ² 107)
+fitted 47.6 with the one field the criterion chose, short of the 50 a trial the consistency test passes asks for.
+The three sum to nothing (the uniform scale, which the segments absorb and no fit can tell, is in none of them)."""
 
 
 def volume(data: np.ndarray):
@@ -59,12 +68,14 @@ def monomial(u: np.ndarray, index: int) -> np.ndarray:
     return out
 
 
-FIELDS = {1: 5, 2: 23, 3: 53}
+FIELDS = {1: 8, 2: 26, 3: 56}
 """How many fields each degree has (each degree's fields begin with those of the degree below)."""
 _CUBIC = ("x^3", "y^3", "z^3", "x^2y", "x^2z", "y^2x", "y^2z", "z^2x", "z^2y", "xyz")
-FIELD_NAMES = (["strain xx-yy", "strain xx+yy-2zz", "shear xy", "shear xz", "shear yz"]
+FIELD_NAMES = (["strain xx-yy", "strain xx+yy-2zz", "shear xy", "shear xz", "shear yz", "scale along x",
+                "scale along y", "scale along z"]
                + [f"{m} along {d}" for m in MONOMIALS + _CUBIC for d in "xyz"])
-"""The 53 fields' names, in :func:`fields`' order: the traceless strains, then each quadratic and cubic monomial of
+"""The 56 fields' names, in :func:`fields`' order: the traceless strains and the scales along x, y and z less their
+uniform parts (:data:`SCALED_AXES`), then each quadratic and cubic monomial of
 the volume's normalised coordinates (:data:`_EXPONENTS`' order) along each axis."""
 
 
@@ -74,8 +85,12 @@ def field(data: np.ndarray, k: int, box=None) -> np.ndarray:
     part of a trial (default: the volume of `data` itself)."""
     c, h = volume(data) if box is None else box
     u = np.nan_to_num((data - c) / h)
-    if k < FIELDS[1]:
+    if k < len(_STRAIN):
         return float(np.mean(h)) * np.einsum("ij,fmj->fmi", _STRAIN[k], u)
+    if k < FIELDS[1]:
+        scale = -np.eye(3) / 3.0
+        scale[SCALED_AXES[k - len(_STRAIN)], SCALED_AXES[k - len(_STRAIN)]] += 1.0
+        return np.einsum("ij,fmj->fmi", scale, np.nan_to_num(data - c))
     mono, d = divmod(k - FIELDS[1], 3)
     out = np.zeros_like(u)
     out[..., d] = monomial(u, mono)
@@ -83,8 +98,8 @@ def field(data: np.ndarray, k: int, box=None) -> np.ndarray:
 
 
 def fields(data: np.ndarray, degree: int = 2, box=None) -> list:
-    """The distortion fields of degree up to `degree` at the positions `data` (:func:`field`): the 5 strains of
-    degree 1, 23 up to degree 2, 53 up to degree 3."""
+    """The distortion fields of degree up to `degree` at the positions `data` (:func:`field`): the 8 strains of
+    degree 1, 26 up to degree 2, 56 up to degree 3."""
     box = volume(data) if box is None else box
     return [field(data, k, box) for k in range(FIELDS[degree])]
 
@@ -100,7 +115,7 @@ CHUNK_ROWS = 8192
 
 
 def plain_gram(data: np.ndarray, weights: np.ndarray, box) -> np.ndarray:
-    """``XᵀWX`` (53, 53) for X the 53 fields at the positions `data` (F, M, 3) as columns, 0 where NaN, and W the
+    """``XᵀWX`` (56, 56) for X the 56 fields at the positions `data` (F, M, 3) as columns, 0 where NaN, and W the
     samples' `weights` (F, M; each marker's three coordinates alike): the plain part of the score test's Gram matrix
     (:func:`~identcheck.bundle.score_test.score_moments_streamed`). X (F·M·3 rows: 80 MB for a 42-marker body at 1500
     frames) is never formed whole, only chunks of frames."""
@@ -146,7 +161,7 @@ class SpatialDistortion(Effect):
                        clean=x + mono @ coef)
 
     def propose(self, ctx, hyp) -> list:
-        """One proposal: the fields the criterion asks for among the 53 (:func:`~identcheck.bundle.score_selection.
+        """One proposal: the fields the criterion asks for among the 56 (:func:`~identcheck.bundle.score_selection.
         forward_selection` on the score test's moments over :data:`UNITS`, the choice charged), its strength
         what a refit with them gains to first order, smooth in time like the markers' motion
         (:attr:`~identcheck.bundle.hypothesis.Context.smooth_share`); ``where["degree"]`` the highest degree among

@@ -206,7 +206,7 @@ def joint_answers(tree: TreeFit, model, undecidable: dict | None = None) -> dict
     out = {}
     for j in chain.joints:
         differing = [(m, delta, p) for m, delta, p in best.rivals.get(j, tree.others)
-                     if not same_distances(m, best, [j])]                                             # this joint differs
+                     if not same_distances(m, best, [j])]                                     # this joint differs
         alts = [{"marker_distances": {k: round(v[0], 3) for k, v in m.distances[j].items()},
                  "marker_distances_ci95": ci(m.distances[j]),
                  "delta_chi2": round(delta, 3), "p_value": round(p, 4),

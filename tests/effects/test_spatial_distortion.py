@@ -38,8 +38,9 @@ def test_the_chunked_gram_matrix_is_the_whole_designs(seed, frames, markers, chu
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_each_field_is_what_its_name_says(seed):
-    """At random points: a strain field is a symmetric traceless linear map of the normalised coordinates; a
-    monomial field ``m along d`` has only its d component, the monomial of the normalised coordinates."""
+    """At random points: a strain field is a symmetric traceless linear map of the normalised coordinates; ``scale
+    along d`` is ``(e eᵀ − I/3)(x − c)`` in millimetres; a monomial field ``m along d`` has only its d component, the
+    monomial of the normalised coordinates."""
     rng = np.random.default_rng(seed)
     data = rng.uniform(-800, 800, (7, 5, 3))
     centre, half = box = sd.volume(data)
@@ -55,6 +56,12 @@ def test_each_field_is_what_its_name_says(seed):
             continue
         mono, axis = name.split(" along ")
         d = "xyz".index(axis)
+        if mono == "scale":                 # a scale along the axis less its uniform part, in mm about the centre
+            expected = -(data - centre) / 3.0
+            expected[..., d] += data[..., d] - centre[d]
+            np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-9)
+            continue
+        d = "xyz".index(axis)
         x, y, z = u[..., 0], u[..., 1], u[..., 2]
         value = {"x^2": x * x, "y^2": y * y, "z^2": z * z, "xy": x * y, "xz": x * z, "yz": y * z, "x^3": x ** 3,
                  "y^3": y ** 3, "z^3": z ** 3, "x^2y": x * x * y, "x^2z": x * x * z, "y^2x": y * y * x,
@@ -64,9 +71,10 @@ def test_each_field_is_what_its_name_says(seed):
 
 
 def test_the_units_chosen_among_are_the_strains_one_by_one_and_each_higher_degree_whole():
-    """Every field in exactly one unit; each strain its own; the quadratic and the cubic fields each one family."""
+    """Every field in exactly one unit; each strain (and each axis's scale) its own; the quadratic and the cubic fields
+    each one family."""
     flat = sorted(k for u in sd.UNITS for k in u)
     assert flat == list(range(sd.FIELDS[3]))
     assert sd.UNITS[:sd.FIELDS[1]] == [[k] for k in range(sd.FIELDS[1])]
     assert [len(u) for u in sd.UNITS[sd.FIELDS[1]:]] == [sd.FIELDS[2] - sd.FIELDS[1], sd.FIELDS[3] - sd.FIELDS[2]]
-    assert all(sd.FIELD_NAMES[k].startswith(("strain", "shear")) for k in range(sd.FIELDS[1]))
+    assert all(sd.FIELD_NAMES[k].startswith(("strain", "shear", "scale")) for k in range(sd.FIELDS[1]))

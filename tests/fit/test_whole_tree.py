@@ -485,10 +485,10 @@ def test_a_ball_between_two_cuts_answers_without_the_markers_below_the_lower_one
 @settings(max_examples=40, deadline=None)
 @given(data=st.data())
 def test_every_joint_is_refitted_without_the_markers_below_the_cuts_beneath_it(data):
-    """The groups of :func:`identcheck.bundle.incidental.refit_groups` on random trees with random cuts: a joint above every cut leaves out every
-    cut's markers (the first group); a joint at or below a cut leaves out exactly the cuts beneath it, never its
-    own or one above it (those are its own markers); a joint with no cut beneath it, below one, and a joint whose
-    intervals claim no bound keep the whole fit."""
+    """The groups of :func:`identcheck.bundle.incidental.refit_groups` on random trees with random cuts: a joint
+    above every cut leaves out every cut's markers (the first group); a joint at or below a cut leaves out exactly the
+    cuts beneath it, never its own or one above it (those are its own markers); a joint with no cut beneath it, below
+    one, and a joint whose intervals claim no bound keep the whole fit."""
     from identcheck.bundle.incidental import refit_groups
 
     n = data.draw(st.integers(2, 8))
