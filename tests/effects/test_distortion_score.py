@@ -165,3 +165,29 @@ def test_diagnose_names_a_few_millimetres_of_scale_error_along_one_axis(axis):
     assert first["name"] == "spatial_distortion" and first["where"]["degree"] == 1
     # along z, whose half-extent is the volume's largest, the normalised strain xx+yy-2zz is as good a fit
     assert first["where"]["fields"] in ([f"scale along {'xyz'[axis]}"], ["strain xx+yy-2zz"] if axis == 2 else [])
+
+
+@pytest.mark.parametrize("seed", [3, 8])
+def test_diagnose_names_a_lens_about_a_centre_with_its_four_fields(seed):
+    """A volume distorted like a lens, ``k |u − c|² (u − c)`` over the normalised coordinates about a random centre c
+    near the volume's, about 4 mm at the markers' farthest, 0.6 mm white noise, 1500 frames: `diagnose` names a spatial
+    distortion first, with the lens's fields among those fitted (:data:`RADIAL`, linearised in the centre). As the
+    quadratic and the cubic families alone, a lens paid 48 parameters and their choice, and one at a held-out visible
+    χ² of 267 had named nothing."""
+    import identcheck as ic
+    from identcheck.effects.spatial_distortion import FIELD_NAMES, RADIAL
+
+    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=1500, noise_mm=0.0, seed=seed)
+    xyz = sim.trial.as_array().copy()
+    centre, half = volume(xyz)
+    rng = np.random.default_rng(seed)
+    c = rng.uniform(-0.3, 0.3, 3)
+    u = (xyz - centre) / half - c
+    lens = np.sum(u * u, axis=-1, keepdims=True) * u
+    xyz += 4.0 * lens / np.nanmax(np.linalg.norm(lens, axis=-1))
+    xyz += rng.normal(0, 0.6, xyz.shape)
+    report = ic.diagnose(model, sim.trial.replace(xyz=xyz)).to_dict()
+    first = report["effects"][0]
+    assert first["name"] == "spatial_distortion", report["effects"]
+    assert {FIELD_NAMES[k] for k in RADIAL} <= set(first["where"]["fields"]), first["where"]["fields"]

@@ -21,7 +21,7 @@ def test_the_chunked_gram_matrix_is_the_whole_designs(seed, frames, markers, chu
     weights = np.where(seen, rng.uniform(0.3, 1.0, seen.shape), 0.0)
     data = np.where(seen[..., None], data, np.nan)
     box = sd.volume(data)
-    flds = sd.fields(data, 3, box)
+    flds = [sd.field(data, k, box) for k in range(sd.N_FIELDS)]
     old_rows = sd.CHUNK_ROWS
     sd.CHUNK_ROWS = chunk
     try:
@@ -31,7 +31,7 @@ def test_the_chunked_gram_matrix_is_the_whole_designs(seed, frames, markers, chu
     X = np.stack([f.reshape(-1) for f in flds], axis=1)
     assert not np.any(X[np.repeat(~seen.reshape(-1), 3)])               # every field is 0 where the data are NaN
     want = X.T @ (np.repeat(weights.reshape(-1), 3)[:, None] * X)
-    assert got.shape == (sd.FIELDS[3], sd.FIELDS[3]) == (len(sd.FIELD_NAMES),) * 2
+    assert got.shape == (sd.N_FIELDS, sd.N_FIELDS) == (len(sd.FIELD_NAMES),) * 2
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10 * max(float(np.max(np.abs(want))), 1.0))
 
 
@@ -47,12 +47,21 @@ def test_each_field_is_what_its_name_says(seed):
     u = (data - centre) / half
     for k, name in enumerate(sd.FIELD_NAMES):
         f = sd.field(data, k, box)
-        assert np.array_equal(f, sd.fields(data, 3, box)[k])
+        assert k >= sd.FIELDS[3] or np.array_equal(f, sd.fields(data, 3, box)[k])
         if name.startswith(("strain", "shear")):
             E = np.linalg.lstsq(u.reshape(-1, 3), f.reshape(-1, 3), rcond=None)[0].T
             np.testing.assert_allclose(f.reshape(-1, 3), u.reshape(-1, 3) @ E.T, atol=1e-9 * np.max(np.abs(f)))
             np.testing.assert_allclose(E, E.T, atol=1e-9 * np.max(np.abs(E)))
             assert abs(np.trace(E)) <= 1e-9 * np.max(np.abs(E))
+            continue
+        if name.startswith("radial"):       # a lens k |u - c|^2 (u - c), linearised in c about 0
+            r2 = np.sum(u * u, axis=-1, keepdims=True)
+            if name == "radial":
+                np.testing.assert_allclose(f, r2 * u, rtol=1e-12, atol=1e-12)
+            else:
+                a = "xyz".index(name[-1])
+                e = np.eye(3)[a]
+                np.testing.assert_allclose(f, -(2 * u[..., a:a + 1] * u + r2 * e), rtol=1e-12, atol=1e-12)
             continue
         mono, axis = name.split(" along ")
         d = "xyz".index(axis)
@@ -72,9 +81,10 @@ def test_each_field_is_what_its_name_says(seed):
 
 def test_the_units_chosen_among_are_the_strains_one_by_one_and_each_higher_degree_whole():
     """Every field in exactly one unit; each strain (and each axis's scale) its own; the quadratic and the cubic fields
-    each one family."""
+    each one family, and the lens's four another."""
     flat = sorted(k for u in sd.UNITS for k in u)
-    assert flat == list(range(sd.FIELDS[3]))
+    assert flat == list(range(sd.N_FIELDS))
     assert sd.UNITS[:sd.FIELDS[1]] == [[k] for k in range(sd.FIELDS[1])]
-    assert [len(u) for u in sd.UNITS[sd.FIELDS[1]:]] == [sd.FIELDS[2] - sd.FIELDS[1], sd.FIELDS[3] - sd.FIELDS[2]]
+    assert [len(u) for u in sd.UNITS[sd.FIELDS[1]:]] == [sd.FIELDS[2] - sd.FIELDS[1], sd.FIELDS[3] - sd.FIELDS[2],
+                                                         len(sd.RADIAL)]
     assert all(sd.FIELD_NAMES[k].startswith(("strain", "shear", "scale")) for k in range(sd.FIELDS[1]))
