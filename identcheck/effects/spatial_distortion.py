@@ -115,8 +115,8 @@ def field(data: np.ndarray, k: int, box=None) -> np.ndarray:
 
 
 def fields(data: np.ndarray, degree: int = 2, box=None) -> list:
-    """The distortion fields of degree up to `degree` at the positions `data` (:func:`field`): the 8 strains of
-    degree 1, 26 up to degree 2, 56 up to degree 3."""
+    """The polynomial distortion fields of degree up to `degree` at the positions `data` (:func:`field`): the 8 strains
+    of degree 1, 26 up to degree 2, 56 up to degree 3 (the lens's four, :data:`RADIAL`, come after them)."""
     box = volume(data) if box is None else box
     return [field(data, k, box) for k in range(FIELDS[degree])]
 

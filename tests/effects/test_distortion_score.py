@@ -11,8 +11,8 @@ from identcheck.bundle.score_test import (score_moments, score_moments_streamed,
                                           unabsorbed_gram)
 from identcheck.bundle.hypothesis import Hypothesis
 from identcheck.bundle.model import Terms
-from identcheck.effects.spatial_distortion import (FIELDS, SCALED_AXES, field, fields, plain_gram, volume,
-                                                   where_fields_act)
+from identcheck.effects.spatial_distortion import (FIELDS, N_FIELDS, RADIAL, SCALED_AXES, field, fields, plain_gram,
+                                                   volume, where_fields_act)
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -103,8 +103,8 @@ def test_the_streamed_moments_are_the_moments(seed, strain_mm):
     w = np.where(rng.uniform(size=h.weights.shape) < 0.1, 0.0, rng.uniform(0.3, 1.0, h.weights.shape))
     at = np.where((w > 0)[..., None], h.fit.pred, np.nan)
     box = volume(at)
-    every = fields(at, 3, box)
-    assert len(every) == FIELDS[3] and all(np.array_equal(field(at, k, box), every[k]) for k in (0, 4, 5, 27, 52))
+    every = fields(at, 3, box) + [field(at, k, box) for k in RADIAL]         # (the lens's after the polynomials)
+    assert len(every) == N_FIELDS and all(np.array_equal(field(at, k, box), every[k]) for k in (0, 4, 5, 27, 52, 57))
     (n, G), = score_moments(h.fit, w, h.residuals(), [every])
     plain = plain_gram(at, w, box)
     n2, G2 = score_moments_streamed(h.fit, w, h.residuals(), iter(every), plain)
