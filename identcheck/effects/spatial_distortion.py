@@ -123,8 +123,9 @@ def fields(data: np.ndarray, degree: int = 2, box=None) -> list:
 
 UNITS = ([[k] for k in range(FIELDS[1])] + [list(range(FIELDS[1], FIELDS[2])), list(range(FIELDS[2], FIELDS[3]))]
          + [list(RADIAL)])
-"""What the selection of fields chooses among: each strain on its own (a calibration can be off along one axis, or
-sheared between two, alone), the 18 quadratic fields together and the 30 cubic ones together. A monomial field alone
+"""What the selection of fields chooses among: each strain and each axis's scale on its own (a calibration can be off
+along one axis, or sheared between two, alone), the 18 quadratic fields together, the 30 cubic ones together, and the
+lens's four (:data:`RADIAL`) together. A monomial field alone
 is no shape a calibration error takes, only a piece of a basis for one; chosen one by one, three or four of them
 fitted what a few markers do where they happen to pass, and skin moving on a shank or thigh was named a distortion
 (held-out draw 52, trials 1 and 81: 3–4 quadratic and cubic fields, scoring 139 against the shank skin's 54)."""
