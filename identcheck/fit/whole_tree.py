@@ -391,6 +391,7 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
     joints, jumped = {}, []
     undecidable = {name: (j["case"], j["alternatives"]) for name, j in rep["joints"].items()
                    if j.get("marker_distances") and not rep_unique(j)}
+    sure: set = set()
     if undecidable and decided is not None and tree.best is not None:     # (unused without a whole-tree fit)
         sure = decided(list(undecidable))
         undecidable = {name: v for name, v in undecidable.items() if name not in sure}
@@ -402,6 +403,8 @@ def merge_report(rep: dict, tree: TreeFit, model, trial, jumps: dict | None = No
         residual = dict(zip(fit.chain.labels, np.linalg.norm(data - fit.pred, axis=2).T))
     for name, j in rep["joints"].items():
         j = dict(j)
+        if name in sure:                    # the whole model's markers decide what the closed form's case could not
+            j["twins_undecidable"] = False
         j["start"] = {"estimator": j.get("estimator"), "marker_distances": j.get("marker_distances"),
                       "uncertainty_mm": j.get("uncertainty_mm"), "unique": j.get("unique")}
         j["start_alternatives"] = j.get("alternatives", [])
