@@ -69,13 +69,13 @@ def skeleton_of(model, trial) -> Skeleton:
     return Skeleton.from_model(model, markers=trial.seen(model.markers))
 
 
-def without_an_unposed_root(model, trial, closed_form: dict) -> tuple:
+def without_an_unposed_root(model, closed_form: dict) -> tuple:
     """(the model below its root when nothing poses the root, the closed forms of its joints, {joint left out: why}):
-    a root without a marker the trial shows, whose joints lend fewer than three points (:meth:`Model.below_root`),
+    a root without a marker, whose joints lend fewer than three points (:meth:`Model.below_root`),
     leaves every joint undetermined, a fully marked knee below a pelvis without markers among them (an independent
     check found 28 such joints). The subtree of the root's child that holds joints, and the most markers, is fitted;
     the root's joints, and its other subtrees, are left out and say why. The model as it is when the root is posed."""
-    smaller, gone = model.below_root(trial.seen(model.markers))
+    smaller, gone = model.below_root()
     if not gone:
         return model, closed_form, {}
     left_out = left_out_reasons(gone, unposed_root(model, smaller, "fitted"), "the fit")
@@ -105,7 +105,7 @@ def fit_tree(model, trial, closed_form: dict, progress=None, restart=None,
     A joint no start can be made for (no closed form, a child segment no frame poses, a hinge that never turns) is
     left out with every joint below it, and the rest of the tree is fitted without their markers: a foot marker
     seen in five frames no longer keeps the hip and knee from their fit. ``left_out`` says why, per joint."""
-    model, closed_form, left_out = without_an_unposed_root(model, trial, closed_form)
+    model, closed_form, left_out = without_an_unposed_root(model, closed_form)
     if left_out and progress:
         progress(f"whole-tree fit without {', '.join(left_out)}: {next(iter(left_out.values()))}")
     while True:

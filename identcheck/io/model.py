@@ -288,24 +288,22 @@ class Model:
         keep = {j: jt for j, jt in self.joints.items() if j not in gone}
         return replace(self, segments={n: s for n, s in self.segments.items() if n not in cut}, joints=keep), gone
 
-    def below_root(self, markers=None) -> tuple["Model", dict]:
+    def below_root(self) -> tuple["Model", dict]:
         """(the model below its root while nothing poses the root, {each joint left out: the root's joint it is or
-        hangs below}): a root with no marker (of `markers`, a set of names, when given: those the trial shows) whose
-        joints lend fewer than three points (:meth:`joint_points`) is left out with its joints, and the subtree of
-        its child that holds joints (and of those, the most markers) kept, again while its own root is posed by
-        nothing; the model itself and {} when the root is posed (or has no joint). The other subtrees of such a root
-        are left out with it: its pose, which would join them, is not seen."""
+        hangs below}): a root with no marker whose joints lend fewer than three points (:meth:`joint_points`) is left
+        out with its joints, and the subtree of its child that holds joints (and of those, the most markers) kept,
+        again while its own root is posed by nothing; the model itself and {} when the root is posed (or has no
+        joint). The other subtrees of such a root are left out with it: its pose, which would join them, is not seen.
+        (A root with markers the trial never shows is refused before this, as any such marker is.)"""
         model, gone = self, {}
         while True:
-            seen = [m for m in model.segments[model.root].markers if markers is None or m in markers]
             down = model.child_joints(model.root)
-            if seen or model.joint_points(model.root) >= 3 or not down:
+            if model.segments[model.root].markers or model.joint_points(model.root) >= 3 or not down:
                 return model, gone
 
             def weight(joint) -> tuple:
                 below = model.segments_below(joint.child)
-                n = sum(1 for s in below for m in model.segments[s].markers if markers is None or m in markers)
-                return len(below) > 1, n
+                return len(below) > 1, sum(len(model.segments[s].markers) for s in below)
 
             keep = max(down, key=weight)
             inside = model.segments_below(keep.child)
@@ -674,6 +672,6 @@ def left_out_reasons(gone: dict, why: str, by: str) -> dict:
 def unposed_root(full: Model, below: Model, done: str) -> str:
     """Why the joints :meth:`Model.below_root` leaves out are left out (`full` the model, `below` what it kept, `done`
     what is done with the rest: "fitted", "diagnosed")."""
-    return (f"the root {full.root!r} has no marker the trial shows and its joints lend fewer than three points, so "
+    return (f"the root {full.root!r} has no marker and its joints lend fewer than three points, so "
             f"nothing poses it (nor what joins it to segment {below.root!r}); the tree from segment {below.root!r} "
             f"down is {done} without them")
