@@ -176,3 +176,18 @@ def test_twins_the_whole_model_decides_are_not_called_ambiguous(seed):
     assert "no other marker decides" not in j1["practical"]["reason"]
     if not diag["effects"]:                         # (the same model, the same rules)
         assert j1["practical"]["verdict"] == diag["joints"]["j1"]["practical"]["verdict"]
+
+
+def test_plan_on_a_recorded_trial_judges_certified_twins_as_fit_does(tmp_path):
+    """``plan --noise-mm`` with a recorded trial as the motion fits it as ``fit`` does: the hinge after the one-marker
+    root, which the exact certificate calls unique, is not predicted ``ambiguous`` for want of a marker beyond it."""
+    model = Model.from_dict(HINGE_AFTER_ONE_MARKER_ROOT)
+    trial = tmp_path / "t.trc"
+    api.simulate(model, trial, seed=11, n_frames=500, noise_mm=0.3)       # (a seed whose hinge is bounded)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        predicted = api.plan(model, motion=False, robust=False, suggest=False, noise_mm=0.3,
+                             practical_motion=str(trial)).to_dict()["joints"]["j1"]["practical"]
+        fitted = api.fit(model, trial).to_dict()["joints"]["j1"]["practical"]
+    assert "no other marker decides" not in predicted["reason"]
+    assert predicted["verdict"] == fitted["verdict"]
