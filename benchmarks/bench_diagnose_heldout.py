@@ -117,6 +117,15 @@ data determine: the part of a moving centre that is linear in the angle is a shi
 ``joint_translation``), so a determined joint may sit away from that reference without being wrong about the data."""
 
 
+def moving_axis(effects: list, joint: str) -> bool:
+    """Whether the truth turns the hinge `joint` about a second axis with a profile of time (an ``extra_dof`` other
+    than a ball): its axis in the child then has no one place, and the truth's distances are to it at the generator's
+    zero turn, where ``diagnose`` places it at the trial's mean turn (a constant turn is the axis placed otherwise:
+    no data tell the two apart, and the report says which it gives)."""
+    return any(e["name"] == "extra_dof" and (e.get("where") or {}).get("joint") == joint
+               and (e.get("where") or {}).get("dof") not in (None, "ball") for e in effects)
+
+
 def other_type(diag_joint: dict, truth_joint: dict, effects: list, joint: str) -> bool:
     """Whether the joint `diagnose` reports is not of the truth's declared type, so that their marker distances measure
     different things (to a hinge's axis, to a ball's centre): the report's type differs, or the truth turns the
@@ -131,7 +140,8 @@ def joints_against_truth(diag: dict, truth: dict) -> dict:
     """Each joint's verdict and how its marker distances' 95 % intervals hold the truth's distances: joint ->
     {"verdict", "markers", "covered" (intervals holding the truth), "worst_miss_mm" (the largest distance from an
     interval to the truth, 0 when all hold it), "worst_error_mm" (largest |estimate - truth|), "moving_centre" (the
-    truth moves its centre: :data:`MOVING_CENTRE`), "other_type" (:func:`other_type`)}."""
+    truth moves its centre: :data:`MOVING_CENTRE`), "moving_axis" (:func:`moving_axis`), "other_type"
+    (:func:`other_type`)}."""
     out = {}
     for j, ans in diag.get("joints", {}).items():
         true = (truth.get("joints", {}).get(j) or {}).get("marker_distances") or {}
@@ -145,6 +155,7 @@ def joints_against_truth(diag: dict, truth: dict) -> dict:
         moving = any(e["name"] in MOVING_CENTRE and (e.get("where") or {}).get("joint") == j
                      for e in truth.get("effects", []))
         out[j] = {"verdict": ans["practical"]["verdict"], "markers": len(marks), "moving_centre": moving,
+                  "moving_axis": moving_axis(truth.get("effects", []), j),
                   "other_type": other_type(ans, truth.get("joints", {}).get(j) or {}, truth.get("effects", []), j),
                   "covered": sum(x == 0.0 for x in misses),
                   "worst_miss_mm": round(max(misses, default=0.0), 3),
@@ -245,12 +256,13 @@ def joints_summary(rows: list) -> dict:
     """The joints' answers against the truth over every trial: how many were called determined, how many of
     those had every 95 % interval hold the truth, and the determined ones whose intervals missed it by more than
     5 mm (a confident wrong number), with the worst miss, also counted without the joints whose true centre moves
-    (:data:`MOVING_CENTRE`) or that are not of the truth's type (:func:`other_type`); and the share of all intervals
-    that hold the truth, also without those joints (whose truth is a distance to a centre the data cannot have)."""
+    (:data:`MOVING_CENTRE`), whose hinge turns about a second axis (:func:`moving_axis`) or that are not of the
+    truth's type (:func:`other_type`); and the share of all intervals that hold the truth, also without those joints
+    (whose truth is a distance to a centre or axis the data cannot place)."""
     joints = [(r["stem"], j, a) for r in rows for j, a in (r.get("joints") or {}).items()]
     det = [(s, j, a) for s, j, a in joints if a["verdict"] == "determined"]
     wrong = [(s, j, a) for s, j, a in det if a["worst_miss_mm"] > 5.0]
-    fixed = lambda a: not a.get("moving_centre") and not a.get("other_type")    # noqa: E731
+    fixed = lambda a: not (a.get("moving_centre") or a.get("moving_axis") or a.get("other_type"))    # noqa: E731
     return {"joints": len(joints), "determined": len(det),
             "determined_fixed_centre": sum(fixed(a) for _, _, a in det),
             "determined_fixed_centre_missed_by_over_5mm": sum(fixed(a) for _, _, a in wrong),

@@ -11,11 +11,12 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from identcheck.bundle.chain import fit_chain, initial_state
-from identcheck.bundle.model import Terms, forward
+from identcheck.bundle.model import Terms, forward, second_axis
 from identcheck.bundle.hypothesis import TIME_KNOT_S, score, time_basis
 from identcheck.diagnose.workflow import diagnose, place, start, undetermined
 from identcheck.effects.extra_dof import ExtraDof, pivot_at_markers
 from identcheck.effects.time_offset import interpolation_loss, shifted
+from identcheck.geometry.rotations import rotvec_matrix
 from identcheck.io.model import Model
 from identcheck.simulate.rigid import simulate
 from identcheck.skeleton import Skeleton
@@ -190,6 +191,9 @@ def test_diagnose_names_a_knee_with_play_extra_dof():
     diag = diagnose(MODEL, trial)
     assert diag.steps and diag.steps[0].name == "extra_dof"
     assert diag.steps[0].where["needs"] == "a second rotation"
+    knee, hip = diag.joints["knee"]["practical"], diag.joints["hip"]["practical"]
+    assert "mean" in knee["axis_reference"] and MODEL.joints["knee"].child in knee["axis_reference"]
+    assert knee["axis_reference"] in knee["reason"] and "axis_reference" not in hip
 
 
 def test_interpolation_loss_is_zero_at_whole_frames_and_largest_half_way():
@@ -283,3 +287,34 @@ def test_moments_about_a_shifted_pivot_are_the_carriers_combined(K, shift, seed)
     scale = 1.0 + shift * shift
     np.testing.assert_allclose(n_s, T @ n, rtol=0, atol=1e-12 * scale * np.abs(n).max())
     np.testing.assert_allclose(G_s, T @ G @ T.T, rtol=0, atol=1e-12 * scale * np.abs(G).max())
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), beta=st.floats(0.0, np.pi), psi0_deg=st.floats(-15.0, 15.0))
+def test_a_constant_second_rotation_is_the_hinge_placed_otherwise_in_its_child(seed, beta, psi0_deg):
+    """Why ``diagnose`` says where it places a turned hinge's axis in the child (``axis_reference``): a second rotation
+    whose profile has a constant part ψ0 predicts every marker exactly as the profile less ψ0 does with the hinge's
+    rest rotation turned by ψ0 about the second axis, so the axis in the child (``restᵀ a``), and the child's
+    markers' distances to it, are a convention of the profile's mean (the time basis holds no constant)."""
+    n = 40
+    sim = simulate(MODEL, n_frames=n, seed=seed)
+    data = sim.clean.as_array()
+    chain = Skeleton.from_model(MODEL)
+    state = initial_state(chain, data)
+    basis = time_basis(n, sim.clean.rate_hz, 0.1)
+    coef = np.random.default_rng(seed).normal(scale=0.05, size=(basis.shape[1], 1))
+    psi0 = np.deg2rad(psi0_deg)
+    with_constant = state.copy()
+    with_constant.term_params = [np.vstack([coef, [[psi0]], [[0.0]]])]
+    constant_terms = Terms(rotations=[("knee", np.hstack([basis, np.ones((n, 1))]), beta)])
+    moved = state.copy()
+    u = second_axis(state.axis["knee"], beta)
+    moved.rest = dict(state.rest, knee=rotvec_matrix(psi0 * u)[0] @ state.rest["knee"])
+    moved.term_params = [np.vstack([coef, [[0.0]]])]
+    centred_terms = Terms(rotations=[("knee", basis, beta)])
+    np.testing.assert_allclose(forward(chain, constant_terms, with_constant)[3],
+                               forward(chain, centred_terms, moved)[3], atol=1e-8)
+    axis_child = lambda s: s.rest["knee"].T @ s.axis["knee"]            # noqa: E731
+    a0, a1 = axis_child(state), axis_child(moved)
+    turned = np.degrees(np.arctan2(np.linalg.norm(np.cross(a0, a1)), a0 @ a1))
+    assert turned == pytest.approx(abs(psi0_deg), abs=1e-6)
