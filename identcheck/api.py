@@ -16,10 +16,12 @@ from __future__ import annotations
 import functools
 import os
 import warnings
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from identcheck.errors import InputError
+from identcheck.errors import InputError, warning_kind
 from identcheck.io.model import Model
 from identcheck.plan import capture
 
@@ -254,7 +256,7 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     doc = fit_trial(model, data, progress=progress, export=export_markers,
                     on_fit=keep if report is not None or export_osim is not None else None,
                     decided=lambda joints: _certified_unique(planned(), joints))
-    doc["warnings"] = [{"kind": w.category.__name__, "message": str(w.message)} for w in read
+    doc["warnings"] = [{"kind": warning_kind(w.category), "message": str(w.message)} for w in read
                        if issubclass(w.category, UserWarning)] + doc["warnings"]
     if not all(j["identifiable"] for j in doc["joints"].values()):
         _certified_identifiability(doc, planned())
@@ -360,8 +362,10 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
     model = _model_with_joints(model, "diagnose")         # (the model is read before the trial, as fit's is)
-    data = _frames(trial, frames)
-    diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
+    with _shown_and_kept() as said:
+        data = _frames(trial, frames)
+        diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
+    diag = replace(diag, warnings=tuple({m: {"kind": k, "message": m} for k, m in said}.values()))
     if export_markers is not None:
         from identcheck.fit.export import export_markers as write_markers
 
@@ -374,6 +378,25 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
         _write_report(report, "diagnose", diag.to_dict(), scene, f"{data.source} (model {diag.ctx.model.source})",
                       _evidence_svgs(diag))
     return diag
+
+
+@contextmanager
+def _shown_and_kept():
+    """Warnings shown as they arise (as the warnings filters let them: on standard error from the command line) and
+    also kept, as ``(kind, message)`` (:func:`identcheck.errors.warning_kind`), for a verb's JSON: a units question
+    or a subject prefix said while the trial was read and diagnosed had reached standard error only."""
+    kept, shown = [], warnings.showwarning
+
+    def both(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, UserWarning):
+            kept.append((warning_kind(category), str(message)))
+        shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = both
+    try:
+        yield kept
+    finally:
+        warnings.showwarning = shown
 
 
 @_one_blas_thread

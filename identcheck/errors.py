@@ -74,6 +74,18 @@ class IdentifiabilityWarning(UserWarning):
     """Usable but near-degenerate data: the answer is sensitive to noise."""
 
 
+class UnitsWarning(UserWarning):
+    """The coordinates and the units they are read in disagree in a way that only suggests a mistake (a body spanning
+    a few "millimetres", or ten metres): the answer is computed, and every distance in it is off by the same factor
+    if the suspicion is right. Reported with the kind ``units`` (:func:`warning_kind`)."""
+
+
+def warning_kind(category: type) -> str:
+    """The ``kind`` a warning of this class has in the JSON ``warnings``: ``units`` for :class:`UnitsWarning`, else
+    the class's name."""
+    return "units" if issubclass(category, UnitsWarning) else category.__name__
+
+
 class StaleCodeWarning(RuntimeWarning):
     """A committed generated module no longer matches its derivation's sources: the functions were derived
     again at run time (SymPy, seconds). ``identcheck derive --regenerate`` rewrites the module."""

@@ -28,6 +28,13 @@ model declares the segment longer (``length_mm``): no limb, trunk or head is 3 m
 trial whose units field scaled its numbers up (millimetres in a file that says cm made a thigh 3.7 m long, and every
 joint was reported 10 times too far, exit 0), or markers mislabelled across bodies."""
 
+LONGEST_SHARE = 4.0
+"""The farthest two markers of a segment whose length the model declares (``length_mm``) may lie at most this many
+times that length apart (the median over the frames where both are seen): the bundled models' simulations span at
+most 1.2 times theirs (a foot's heel to toe beside its declared length). A segment spanning more is a trial whose
+numbers are ten times too large for their units, or a length written in the wrong unit: a thigh declared 420 mm whose
+markers lay 5 m apart had been fitted, its hip 1.3-1.5 m from them (exit 1, no warning)."""
+
 SMALLEST_REACH_SHARE = 1 / 4
 """A segment the model declares L long (``length_mm``) has some marker, on it or on a segment within two joints of
 it, at least L/4 away from its markers (the median over the frames where both are seen; not every marker of the
@@ -298,8 +305,9 @@ class Trial:
         where : dict, optional
             label -> the model's segment holding it (named in the message).
         lengths : dict, optional
-            segment -> its declared length (mm), which may make a segment longer than :data:`LONGEST_SEGMENT_MM`, and
-            which its markers must reach a share of (:data:`SMALLEST_REACH_SHARE`).
+            segment -> its declared length (mm), which sets how far apart its markers may lie in place of
+            :data:`LONGEST_SEGMENT_MM` (:data:`LONGEST_SHARE` of it), and which its markers must reach a share of
+            (:data:`SMALLEST_REACH_SHARE`).
         neighbours : dict, optional
             segment -> the segments near it (the model's: within two joints): a segment's reach is measured to its
             own markers and theirs (default: to every marker of `labels`).
@@ -310,7 +318,8 @@ class Trial:
             Names, at once, every marker missing from the trial, every marker never visible (not silently dropped:
             its segment and the joints beside it would change case without a word), every pair of markers
             that coincide (:meth:`coincident`), and every segment whose markers lie farther apart than a body
-            segment can (:data:`LONGEST_SEGMENT_MM`: a units field that scaled the numbers up).
+            segment can (:data:`LONGEST_SEGMENT_MM`, or :data:`LONGEST_SHARE` times its declared length: a units
+            field that scaled the numbers up).
         """
         where = where or {}
         seg = lambda lab: f" (segment {where[lab]!r})" if lab in where else ""  # noqa: E731
@@ -388,22 +397,30 @@ class Trial:
 
     def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
         """A problem for each segment (`where`: label -> segment) two of whose markers among `labels` lie more than
-        :data:`LONGEST_SEGMENT_MM` apart, or more than 1.5 times the segment's `declared` length (segment -> mm, the
-        model's ``length_mm``) when that is longer: the median of the two markers' distance over the frames where
-        both are seen (at most :data:`SPAN_FRAMES` of them, evenly spread), naming the farthest pair."""
+        :data:`LONGEST_SEGMENT_MM` apart or, where the model declares the segment's length (`declared`: segment -> mm,
+        ``length_mm``), more than :data:`LONGEST_SHARE` times that: the median of the two markers' distance over the
+        frames where both are seen (at most :data:`SPAN_FRAMES` of them, evenly spread), naming the farthest pair."""
         by_segment: dict = {}
         for lab in labels:
             if lab in where:
                 by_segment.setdefault(where[lab], []).append(lab)
         out = []
         for segment, names in by_segment.items():
-            limit = max(LONGEST_SEGMENT_MM, 1.5 * float(declared.get(segment) or 0.0))
+            length = float(declared.get(segment) or 0.0)
+            limit = LONGEST_SHARE * length if length > 0 else LONGEST_SEGMENT_MM
             d = self._median_distances(names, names)
             if not np.isfinite(d).any():
                 continue
             i, j = np.unravel_index(np.nanargmax(d), d.shape)
             widest, pair = float(d[i, j]), (names[i], names[j])
             if widest > limit:
+                if length > 0:
+                    out.append(f"segment {segment!r} is declared {length:g} mm long (length_mm), but its markers span "
+                               f"{widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over the frames where both "
+                               f"are seen), over {LONGEST_SHARE:g} times that: are the coordinates ten times too large "
+                               f"for their units (millimetres in a file that says cm, a scale factor off)? fix the "
+                               f"units field, the labels, or the model's length_mm")
+                    continue
                 out.append(f"segment {segment!r} spans {widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over "
                            f"the frames where both are seen): no body segment is that long; are the coordinates in a "
                            f"smaller unit than the file's units field says (millimetres in a file that says cm or m)? "

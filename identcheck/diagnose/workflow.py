@@ -19,10 +19,10 @@ from functools import cached_property
 import numpy as np
 
 from identcheck.skeleton import Skeleton
-from identcheck.errors import DegenerateError, InputError
+from identcheck.errors import DegenerateError, InputError, UnitsWarning
 from identcheck.io.jsonable import plain
 from identcheck.io.model import left_out_reasons, refuse_exported_points, unposed_root
-from identcheck.io.trc import centimetres_suspected
+from identcheck.io.trc import centimetres_suspected, scaled_up_suspected
 from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
@@ -183,6 +183,9 @@ class Diagnosis:
         reported undetermined, with no distances.
     joint_order : tuple
         The model's joints, parents first: the order :attr:`joints` reports them in (the left-out ones included).
+    warnings : tuple of dict
+        Every warning said while the trial was read and diagnosed, as ``{"kind", "message"}`` (as ``fit``'s JSON
+        gives them; set by :func:`identcheck.api.diagnose`).
     """
 
     ctx: Context
@@ -199,6 +202,7 @@ class Diagnosis:
     sd_limit_mm: float = MAX_SD_MM
     left_out: dict = field(default_factory=dict)
     joint_order: tuple = ()
+    warnings: tuple = ()
 
     @cached_property
     def joints(self) -> dict:
@@ -254,6 +258,7 @@ class Diagnosis:
                         for n, w, g in self.dropped],
             "not_adopted": [r.to_dict(self.numbered(r.where), self.sd_limit_mm) for r in self.not_adopted],
             "joints": self.joints,
+            "warnings": [dict(w) for w in self.warnings],
         }
 
 
@@ -342,9 +347,10 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         warnings.warn(unprefixed, UserWarning, stacklevel=2)
     refuse_exported_points(trial, model.joints)
     model.require_markers_in(trial)
-    small = centimetres_suspected(trial.as_array(), trial.source)
-    if small:
-        warnings.warn(small, UserWarning, stacklevel=2)
+    for said in (centimetres_suspected(trial.as_array(), trial.source),
+                 scaled_up_suspected(trial.select(model.markers).as_array(), trial.source)):
+        if said:
+            warnings.warn(said, UnitsWarning, stacklevel=2)
     data = trial.select(model.markers).as_array()
     seen = np.all(np.isfinite(data), axis=2)
     files = f"{trial.source} (model {model.source})"

@@ -184,7 +184,8 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=Non
     from identcheck.fit.anatomy import anatomical_report
     from identcheck.fit.export import export_markers
     from identcheck.fit.whole_tree import gap_warnings, merge_report, misfit_warnings
-    from identcheck.io.trc import centimetres_suspected
+    from identcheck.errors import warning_kind
+    from identcheck.io.trc import centimetres_suspected, scaled_up_suspected
 
     trial, unprefixed = trial.unprefixed(model.markers)     # Vicon's 'Subject:Marker' labels
     refuse_exported_points(trial, model.joints)
@@ -204,7 +205,7 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=Non
     rep = merge_report(report(model, fitted, points), tree, model, screened, jumps, decided)
     notes = ([{"kind": "subject_prefix", "message": unprefixed}] if unprefixed else []) + ([spikes] if spikes else [])
     notes += list(swaps)
-    notes += [{"message": str(c.message), "kind": c.category.__name__} for c in caught
+    notes += [{"message": str(c.message), "kind": warning_kind(c.category)} for c in caught
               if issubclass(c.category, UserWarning)]
     notes += rep["warnings"]                # the joints whose angle jumped (merge_report)
     if tree.best is not None:
@@ -218,8 +219,9 @@ def fit_trial(model, trial, progress=None, export=None, on_fit=None, decided=Non
         notes.append({"kind": "starts_left_out", "message": (
             f"{trial.source}: {tree.starts_left_out} of {tree.n_starts + tree.starts_left_out} combinations of candidate "
             "joints were not tried (a cap on count and time): a joint listed unique could have a rival among them")})
-    small = centimetres_suspected(trial.as_array(), trial.source)
-    notes += [{"kind": "units", "message": small}] if small else []
+    units = [centimetres_suspected(trial.as_array(), trial.source),
+             scaled_up_suspected(trial.select(model.markers).as_array(), trial.source)]
+    notes += [{"kind": "units", "message": said} for said in units if said]
     rep["warnings"] = list({n["message"]: n for n in notes}.values())
     rep["anatomical"] = None
     if tree.best is not None:

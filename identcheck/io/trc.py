@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from identcheck.errors import InputError
+from identcheck.errors import InputError, UnitsWarning
 from identcheck.io.atomic import atomic_write
 from identcheck.io.text import decode, plain, read_input
 
@@ -151,6 +151,22 @@ def centimetres_suspected(xyz: np.ndarray, source: str) -> str:
             "array's units)")
 
 
+def scaled_up_suspected(xyz: np.ndarray, source: str) -> str:
+    """A warning when the markers of a model (`xyz`, mm as read: the model's markers only, one subject, where a file
+    may hold several) span more than :data:`LARGE_SPAN_MM` in one frame (the median over frames): no body a model
+    describes spans that much, and coordinates ten times too large for their units (a scale factor off, or a units
+    field that says a smaller unit than the numbers are in) make every distance reported ten times too large, which
+    nothing else in a fit shows. '' otherwise. (Files whose units field scaled their numbers up are warned about when
+    read, :func:`units_problem`.)"""
+    span = frame_span(xyz)
+    if span is None or not LARGE_SPAN_MM < span <= BODY_SPAN_MM[1]:
+        return ""
+    return (f"{source}: the model's markers span {span / 1e3:.3g} m in a frame (median over frames), more than a "
+            "body spans: coordinates ten times too large for the units they are read in (a scale factor off, or a "
+            "units field naming a smaller unit than the numbers are in)? Then every distance here is ten times too "
+            "large: fix the units (a file's POINT:UNITS or Units field, or its scale)")
+
+
 def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel: int = 4) -> None:
     """:func:`units_problem` acted on, for both readers: an InputError for a contradiction, a warning for a
     suspicion, nothing when the units field and the coordinates agree."""
@@ -158,7 +174,7 @@ def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel
     if error:
         raise InputError([units], source=src)
     if units:
-        warnings.warn(f"{src}: {units}", UserWarning, stacklevel=stacklevel)
+        warnings.warn(f"{src}: {units}", UnitsWarning, stacklevel=stacklevel)
 
 
 def far_samples(xyz: np.ndarray) -> np.ndarray:

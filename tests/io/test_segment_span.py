@@ -155,3 +155,80 @@ def test_a_knee_in_centimetres_labelled_mm_is_warned_about_by_fit_and_diagnose(t
         pywarnings.simplefilter("always")
         api.diagnose(model, small)
     assert any("knee_cm.trc" in str(w.message) and "centimetres" in str(w.message) for w in said)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(150.0, 600.0), st.floats(4.6, 12.0), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
+def test_markers_spanning_several_times_their_declared_segment_are_refused(length, ratio, together, seed):
+    """A segment declared `length` mm long whose markers lie `ratio` times that apart (coordinates ten times too large
+    for their units): refused, naming the segment, its declared length and the span, however little the two markers
+    are seen together; declared long enough, the same markers pass."""
+    trial = _trial(ratio * length, together, seed)
+    where = {m: "thigh" for m in "ABC"}
+    with pytest.raises(InputError) as info:
+        trial.require_usable(["A", "B", "C"], where, {"thigh": length})
+    msg = str(info.value)
+    assert "span.trc" in msg and f"segment 'thigh' is declared {length:g} mm long (length_mm)" in msg, msg
+    assert "ten times too large" in msg and "length_mm" in msg, msg
+    trial.require_usable(["A", "B", "C"], where, {"thigh": ratio * length})
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(150.0, 600.0), st.floats(0.5, 3.5), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
+def test_markers_spanning_about_their_declared_segment_pass(length, ratio, together, seed):
+    _trial(ratio * length, together, seed).require_usable(["A", "B", "C"], {m: "thigh" for m in "ABC"},
+                                                          {"thigh": length})
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(500.0, 2e5), st.integers(3, 12), st.integers(0, 2**32 - 1))
+def test_a_model_spanning_more_than_a_body_is_asked_about_its_units(span, n_markers, seed):
+    """A model's markers whose frames span `span` mm: a question about coordinates ten times too large (naming the file
+    and the span in metres) beyond 5 m, up to the 100 km where the readers refuse a units field outright; nothing
+    below."""
+    from identcheck.io.trc import BODY_SPAN_MM, LARGE_SPAN_MM, frame_span, scaled_up_suspected
+
+    rng = np.random.default_rng(seed)
+    unit = rng.random((1, n_markers, 3)) + rng.normal(0.0, 1e-3, (30, n_markers, 3))
+    xyz = unit * (span / frame_span(unit))
+    said = scaled_up_suspected(xyz, "huge.trc")
+    assert bool(said) == (LARGE_SPAN_MM < frame_span(xyz) <= BODY_SPAN_MM[1]), (span, said)
+    if said:
+        assert said.startswith("huge.trc:") and f"{frame_span(xyz) / 1e3:.3g} m" in said and "ten times" in said
+
+
+def test_a_leg_ten_times_too_large_is_warned_about_by_fit_and_diagnose_and_refused_by_its_lengths(tmp_path):
+    """The bundled leg simulated and written with every coordinate scaled up under the same 'mm', as far as keeps every
+    segment within the 3 m no segment exceeds (the leg then spans over 5 m): with its segments' lengths taken out of
+    the model, ``fit`` and ``diagnose`` both answer and say so in their JSON warnings (kind ``units``), where nothing
+    had been said (times 10: hip distances of 1.3-1.5 m, exit 1; ``diagnose`` exit 0); with the lengths declared,
+    the trial is refused (exit 2) naming a segment and its length; as simulated, nothing is said."""
+    from pathlib import Path
+
+    from identcheck import api, cli
+    from identcheck.io.model import Model
+    from identcheck.io.trc import LARGE_SPAN_MM, frame_span, read_trc, write_trc
+
+    root = Path(__file__).resolve().parents[2] / "examples"
+    model = tmp_path / "leg.toml"
+    text = (root / "leg.toml").read_text()
+    model.write_text("\n".join(line for line in text.splitlines() if not line.startswith("length_mm")))
+    good, large = tmp_path / "leg.trc", tmp_path / "leg_x10.trc"
+    api.simulate(root / "leg.toml", good, seed=3, n_frames=120)
+    trial = read_trc(good)
+    segments = Model.from_toml(model).segments.values()
+    index = {lab: i for i, lab in enumerate(trial.labels)}
+    widest = max(np.nanmax(np.linalg.norm(trial.xyz[:, [index[m] for m in s.markers]][:, :, None]
+                                          - trial.xyz[:, [index[m] for m in s.markers]][:, None], axis=3))
+                 for s in segments)
+    factor = 0.95 * LONGEST_SEGMENT_MM / widest
+    assert factor * frame_span(trial.xyz) > LARGE_SPAN_MM                       # (the leg spans over 5 m)
+    write_trc(large, trial.xyz * factor, trial.labels, trial.rate_hz)
+    said = lambda doc: [w["message"] for w in doc["warnings"] if w["kind"] == "units"]       # noqa: E731
+    assert any("ten times too large" in m and "leg_x10.trc" in m for m in said(api.fit(model, large).to_dict()))
+    assert any("ten times too large" in m for m in said(api.diagnose(model, large).to_dict()))
+    assert not said(api.fit(model, good).to_dict())
+    with pytest.raises(InputError) as info:
+        api.fit(root / "leg.toml", large)
+    assert "declared" in str(info.value) and "length_mm" in str(info.value) and "leg_x10.trc" in str(info.value)
+    assert cli.main(["fit", str(root / "leg.toml"), str(large), "--json"]) == 2
