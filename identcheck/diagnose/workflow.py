@@ -363,7 +363,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     if progress:
         progress(f"fitting the rigid-joint model to {trial.n_frames} frames")
     try:
-        state = _naming(files, start_state, model, chain, data, trial.rate_hz)
+        state = _naming(files, start_state, model, chain, data, trial.rate_hz, trial.source)
     except DegenerateError as exc:
         seg = exc.segment
         markerless = seg in model.segments and not model.segments[seg].markers and model.joint_points(seg) < 3
