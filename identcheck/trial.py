@@ -584,13 +584,17 @@ class Trial:
         write_trc(path, self._xyz, self._labels, self._rate_hz, first_frame=self._file_numbering())
 
     def to_c3d(self, path) -> None:
-        """Write a C3D file in mm (32-bit float coordinates), numbered as :meth:`to_trc` numbers a TRC; a C3D
-        counts frames from 1, so a trial numbered from 0 or below is written from 1, with a warning."""
+        """Write a C3D file in mm (32-bit float coordinates), numbered as :meth:`to_trc` numbers a TRC; a C3D header
+        numbers frames from 1 to 65535 (16 bits), so a trial numbered from 0 or below, or beyond 65535, is written
+        from 1, with a warning (numbered from 70000, it had been written from 4464: the number less 65536)."""
+        from identcheck.io.c3d import MAX_FRAMES
+
         first = self._file_numbering()
-        if first < 1:
-            warnings.warn(f"{path}: a C3D file numbers its frames from 1: the trial's frames {first} to "
-                          f"{first + self.n_frames - 1} are written as 1 to {self.n_frames}", UserWarning,
-                          stacklevel=2)
+        last = first + self.n_frames - 1
+        if first < 1 or last > MAX_FRAMES:
+            warnings.warn(f"{path}: a C3D file numbers its frames from 1 to {MAX_FRAMES}: the trial's frames {first} "
+                          f"to {last} are written as 1 to {self.n_frames}", UserWarning, stacklevel=2)
+            first = 1
         write_c3d(path, self._xyz, self._labels, self._rate_hz, first_frame=first)
 
     def _file_numbering(self) -> int:

@@ -513,19 +513,24 @@ def write_c3d(path, xyz: np.ndarray, labels, rate_hz: float, first_frame: int = 
     rate_hz : float
     first_frame : int
         The number of the first frame, 1-based as the C3D header holds it (what :func:`read_c3d` returns; at least 1,
-        as a TRC file's first Frame#).
+        as a TRC file's first Frame#, and the last frame at most :data:`MAX_FRAMES`: the header's numbers are 16-bit,
+        and ezc3d would write them less 65536).
 
     Raises
     ------
     InputError
         ezc3d missing (:class:`MissingDependencyError`), a label C3D cannot store (longer than 255 bytes: a
         parameter's dimension is one byte, and the file would not read back), more than :data:`MAX_FRAMES` frames
-        (ezc3d would write only the first 65535), or the file cannot be written.
+        (ezc3d would write only the first 65535), a last frame numbered beyond it, or the file cannot be written.
     """
     path = Path(path)
     if len(xyz) > MAX_FRAMES:
         raise InputError([f"{len(xyz)} frames; a C3D file counts at most {MAX_FRAMES} (its header and POINT:FRAMES "
                           "are 16-bit): write a TRC file, or fewer frames"], source=str(path))
+    if max(int(first_frame), 1) + len(xyz) - 1 > MAX_FRAMES:
+        raise InputError([f"frames numbered {first_frame} to {int(first_frame) + len(xyz) - 1}; a C3D header numbers "
+                          f"them at most to {MAX_FRAMES} (16-bit): number them from 1, or write a TRC file"],
+                         source=str(path))
     long = [lab for lab in labels if len(str(lab).encode("utf-8")) > MAX_LABEL_BYTES]
     if long:
         raise InputError([f"marker label {lab[:40]!r}... is {len(lab.encode('utf-8'))} bytes long; a C3D file stores "

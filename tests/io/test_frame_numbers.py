@@ -6,6 +6,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from identcheck.errors import InputError
+from identcheck.io.c3d import write_c3d
 from identcheck.io.trc import write_trc
 from identcheck.trial import Trial
 
@@ -173,3 +174,31 @@ def test_an_arrays_rows_keep_their_written_numbers_when_cut_or_cleaned(tmp_path_
     clean, _ = without_spikes(t)
     clean.to_file(folder / "clean.trc")
     assert Trial.from_file(folder / "clean.trc").first_frame == 1
+
+
+@settings(max_examples=15, deadline=None)
+@given(first=st.integers(65000, 70000), n=st.integers(2, 800))
+def test_a_c3d_written_from_a_trial_numbered_past_its_16_bits_is_written_from_1_with_a_warning(
+        tmp_path_factory, first, n):
+    """A C3D header numbers frames at most to 65535: a trial whose frames run past it (a TRC numbered from 70 000) is
+    written from 1 with a warning naming the file's numbers, where it had been written from the number less 65 536
+    without one; a trial whose frames end within it keeps its numbering, silently."""
+    import warnings as pywarnings
+
+    folder = tmp_path_factory.mktemp("c3d16")
+    write_trc(folder / "a.trc", np.random.default_rng(n).normal(0.0, 100.0, (n, 2, 3)), ["A", "B"], 100.0,
+              first_frame=first)
+    read = Trial.from_file(folder / "a.trc")
+    with pywarnings.catch_warnings(record=True) as said:
+        pywarnings.simplefilter("always")
+        read.to_file(folder / "a.c3d")
+    back = Trial.from_file(folder / "a.c3d")
+    past = first + n - 1 > 65535
+    assert back.first_frame == (1 if past else first)
+    assert np.allclose(back.as_array(), read.as_array(), atol=1e-3)
+    warned = [str(w.message) for w in said if "numbers its frames from 1" in str(w.message)]
+    assert bool(warned) == past
+    if past:
+        assert f"{first} to {first + n - 1}" in warned[0] and "a.c3d" in warned[0]
+    with pytest.raises(InputError, match="16-bit"):
+        write_c3d(folder / "b.c3d", read.as_array(), ["A", "B"], 100.0, first_frame=65536 - n + 1)
