@@ -400,9 +400,12 @@ class Grouping:
     """Every pair's spread (:class:`PairStatistics`), marker columns in trial order."""
 
     def to_dict(self) -> dict:
+        """The JSON's ``grouping``; ``too_rarely_seen``: the markers an inferred grouping could not judge, seen in too
+        few frames (markers a segments file leaves out are the user's choice, and not listed)."""
+        rare = sorted(self.unused) if self.source == "inferred" else []
         return {"source": self.source, **self.tolerance.to_dict(),
                 "internal_spread_mm": {k: _num(v) for k, v in self.internal_spread_mm.items()},
-                "widened": self.widened}
+                "widened": self.widened, "too_rarely_seen": rare}
 
 
 def _num(x):

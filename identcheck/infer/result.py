@@ -51,15 +51,19 @@ class SkeletonResult:
 
     @property
     def ok(self) -> bool:
-        """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, and no
-        group held together beyond the rigidity tolerance (``grouping.widened``) or moving inside beyond the noise
-        (``may_be_two_segments``), which needs the marker noise: an inferred grouping whose noise could not be
-        estimated (``noise`` null) is not settled. A marker that moves with both segments of a joint
-        (``markers_on_joints``) leaves it settled: whichever segment carries it, it moves the same."""
+        """The data settle the skeleton: some joint, none ambiguous or poor, every group of markers placed, every
+        marker judged (a marker seen in too few frames to group, ``grouping.too_rarely_seen``, may be on a segment
+        the model lacks: a pelvis seen in 5 frames had been left out of a trial called settled; a marker judged
+        loose, fitting no joint, is an answer), and no group held together beyond the rigidity tolerance
+        (``grouping.widened``) or moving inside beyond the noise (``may_be_two_segments``), which needs the marker
+        noise: an inferred grouping whose noise could not be estimated (``noise`` null) is not settled. A marker
+        that moves with both segments of a joint (``markers_on_joints``) leaves it settled: whichever segment
+        carries it, it moves the same."""
         grouping = self.other.get("grouping") or {}
         unchecked = self.other.get("noise") is None and grouping.get("source") == "inferred"
         return (bool(self.joints) and not self.ambiguous and not self.cannot_place and not self.poor_joints
-                and not grouping.get("widened") and not self.other.get("may_be_two_segments") and not unchecked)
+                and not grouping.get("too_rarely_seen") and not grouping.get("widened")
+                and not self.other.get("may_be_two_segments") and not unchecked)
 
     @classmethod
     def from_dict(cls, doc: dict) -> "SkeletonResult":

@@ -174,3 +174,20 @@ def test_bad_arguments(leg, capsys, argv, words):
     case, trial, d = leg
     rc, stdout, err = run(["skeleton"] + [a.format(d=d, trial=trial) for a in argv], capsys)
     assert rc == 2 and words in err and "Traceback" not in err and not stdout
+
+
+def test_a_marker_seen_in_too_few_frames_to_group_leaves_the_skeleton_open(leg, capsys):
+    """A segment's marker seen in 3 frames only cannot be grouped, and may be on a segment the model lacks: the
+    skeleton is written but not settled (exit 1, ``grouping.too_rarely_seen`` names it), where it had been called
+    settled (exit 0); the loose marker the data judge loose leaves the same trial settled (the test above)."""
+    case, path, d = leg
+    trial = Trial.from_file(path)
+    marker = case.segments[next(iter(case.segments))][0]
+    xyz = trial.as_array().copy()
+    xyz[3:, trial.labels.index(marker)] = np.nan
+    rare = d / "rare.trc"
+    Trial(xyz, trial.labels, trial.rate_hz).to_file(rare)
+    rc, stdout, _ = run(["skeleton", rare, "--out", d / "rare.toml", "--json"], capsys)
+    doc = json.loads(stdout)
+    assert rc == 1 and not doc["ok"] and doc["grouping"]["too_rarely_seen"] == [marker], doc["grouping"]
+    assert marker in doc["unassigned_markers"] and "seen in only" in doc["unassigned"][marker]
