@@ -568,7 +568,10 @@ class Trial:
                               f"({first}:{last} here)"], source=self._source) from None
         start = first if start is None else start
         end = last if end is None else end
-        if end < start or end < first or start > last:
+        if end < start:
+            raise InputError([f"--frames {spec}: END before START (give START:END, both included, in the file's "
+                              f"frame numbers: {first} to {last} here)"], source=self._source)
+        if end < first or start > last:
             raise InputError([f"--frames {spec}: no frame of the trial in that range (the file's frames are "
                               f"{first} to {last})"], source=self._source)
         if start < first or end > last:

@@ -16,14 +16,15 @@ from identcheck.trial import Trial
 def test_frames_keeps_the_files_numbering(first, n, a, b):
     """A random file numbering and a random START:END: the sub-trial holds exactly the file's frames in
     [START, END] that exist, and its first frame keeps the file's number; an empty range is an error that
-    gives the file's own range."""
+    gives the file's own range (a reversed one says so)."""
     xyz = np.arange(n * 3, dtype=float).reshape(n, 1, 3)
     t = Trial(xyz, ["M"], 100.0, "t", first_frame=first)
     start, end = first + a, first + b
     want = [f for f in range(first, first + n) if start <= f <= end]
     if not want:
-        with pytest.raises(InputError, match=f"{first} to {first + n - 1}"):
+        with pytest.raises(InputError, match=f"{first} to {first + n - 1}") as info:
             t.frames(f"{start}:{end}")
+        assert ("END before START" in str(info.value)) == (end < start), str(info.value)
         return
     sub = t.frames(f"{start}:{end}")
     assert sub.first_frame == want[0] and sub.n_frames == len(want)
