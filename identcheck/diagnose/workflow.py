@@ -366,11 +366,16 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
         state = _naming(files, start_state, model, chain, data, trial.rate_hz, trial.source)
     except DegenerateError as exc:
         seg = exc.segment
-        markerless = seg in model.segments and not model.segments[seg].markers and model.joint_points(seg) < 3
+        # a segment without markers that the start cannot pose: its joints lend fewer than three points, or lend
+        # more that no closed form can place without its markers (a shank between a thigh and a foot, both hinges:
+        # ``fit`` calls both not identifiable, and diagnose had stopped on degenerate data, blaming the trial)
+        markerless = seg in model.segments and not model.segments[seg].markers
         above = model.parent_joint(seg) if seg in model.segments else None
         if markerless and above is not None:
-            raise Unposed(above.name, f"segments.{seg}.markers: none, and the joints beside it lend fewer than three "
-                                      "points: nothing poses the segment") from None
+            few = model.joint_points(seg) < 3
+            raise Unposed(above.name, f"segments.{seg}.markers: none, and the joints beside it " + (
+                "lend fewer than three points" if few else "cannot be placed without its markers to lend it points")
+                + ": nothing poses the segment") from None
         if markerless:
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "

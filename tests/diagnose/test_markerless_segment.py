@@ -114,3 +114,26 @@ def test_a_static_trial_stays_a_degenerate_answer(tmp_path, capsys, examples):
     out = capsys.readouterr()
     doc = json.loads(out.out)
     assert doc["ok"] is False and "still.trc" in doc["degenerate"] and "Traceback" not in out.err
+
+
+def test_a_markerless_shank_between_two_hinges_is_left_out_as_fit_leaves_it(tmp_path, capsys, examples):
+    """The bundled leg with its shank's markers taken off: the knee and ankle hinges beside it would lend four points,
+    but neither can be placed without the shank's markers (``fit`` calls both not identifiable). ``diagnose`` leaves
+    the knee and what hangs below out and diagnoses the hip, as ``fit`` answers it, where it had stopped on
+    degenerate data naming the trial (exit 1)."""
+    model = tmp_path / "leg_bare_shank.toml"
+    text = (examples / "leg.toml").read_text().replace('markers = ["RTIB", "RANK"]', "markers = []")
+    assert text != (examples / "leg.toml").read_text()
+    model.write_text(text)
+    trial = tmp_path / "full.c3d"
+    assert cli.main(["simulate", str(examples / "leg.toml"), "--out", str(trial), "--frames", "300", "--noise-mm",
+                     "0.5", "--seed", "4"]) == 0
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(model), str(trial), "--json"]) in (0, 1)
+    doc = json.loads(capsys.readouterr().out)
+    assert "degenerate" not in doc
+    for joint in ("knee_r", "ankle_r"):
+        assert doc["joints"][joint]["practical"]["verdict"] == "undetermined"
+        assert doc["joints"][joint]["practical"]["reason"].startswith("left out")
+    assert "segments.shank_r.markers: none" in doc["joints"]["knee_r"]["practical"]["reason"]
+    assert doc["joints"]["hip_r"]["practical"]["verdict"] == "determined"
