@@ -468,6 +468,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the counts and the failed jobs as JSON")
     s.set_defaults(func=_cmd_batch)
 
+    for verb in sub.choices.values():       # also after the verb (``fit ... --json -v``), as users type it
+        verb.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                          help="log progress to stderr (as before the verb)")
     return p
 
 

@@ -356,3 +356,15 @@ def test_identify_names_the_marker_occluded_in_a_frame_asked_for(tmp_path, capsy
     err = capsys.readouterr().err
     assert "frame 3: 'LPELVIS' occluded there" in err and "frame 4: 'LPELVIS' occluded there" in err, err
     assert "frame 2:" not in err and "'L5' occluded" not in err, err
+
+
+@pytest.mark.parametrize("argv", [["fit", "m.toml", "t.trc", "--json"], ["diagnose", "m.toml", "t.trc"],
+                                  ["plan", "m.toml"], ["skeleton", "t.trc", "--out", "m.toml"], ["table"]])
+def test_verbose_is_taken_before_or_after_the_verb(argv):
+    """``-v`` before the verb, after it, or not at all: the verb's own arguments parse alike, and only the flag
+    differs; after the verb it had been refused with the top-level usage line."""
+    from identcheck.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["-v"] + argv).verbose and parser.parse_args(argv + ["-v"]).verbose
+    assert parser.parse_args(argv + ["--verbose"]).verbose and not parser.parse_args(argv).verbose
