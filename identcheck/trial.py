@@ -338,11 +338,15 @@ class Trial:
                                 "empty): fix its labelling, choose other frames, or remove it from the model")
         present = [lab for lab in labels if lab in self._index]
         pairs = self.coincident(present)
-        if len(present) >= 3 and len(pairs) == len(present) * (len(present) - 1) // 2:
-            # every marker within a millimetre of every other: one scale error, not many labelling ones
+        every = len(present) * (len(present) - 1) // 2
+        if len(present) >= 3 and 2 * len(pairs) >= every:
+            # every marker, or most pairs, within a millimetre of each other: one scale error, not many labelling ones
+            # (metres labelled mm put a leg's 45 pairs 43 times within a millimetre, and each had been listed as two
+            # labels of one marker, units never mentioned)
             span = float(np.nanmax(np.abs(self.select(present).as_array())))
-            raise InputError(problems + [f"all {len(present)} markers of the model lie within {COINCIDENT_MM:g} mm of "
-                                         f"each other in every frame (no coordinate beyond {span:.3g} mm): the "
+            how = "all" if len(pairs) == every else f"{len(pairs)} pairs of the"
+            raise InputError(problems + [f"{how} {len(present)} markers of the model lie within {COINCIDENT_MM:g} mm "
+                                         f"of each other in every frame (no coordinate beyond {span:.3g} mm): the "
                                          "coordinates look like metres in a file that says mm; fix its units field"],
                              source=self._source)
         for a, b in pairs:

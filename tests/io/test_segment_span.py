@@ -232,3 +232,32 @@ def test_a_leg_ten_times_too_large_is_warned_about_by_fit_and_diagnose_and_refus
         api.fit(root / "leg.toml", large)
     assert "declared" in str(info.value) and "length_mm" in str(info.value) and "leg_x10.trc" in str(info.value)
     assert cli.main(["fit", str(root / "leg.toml"), str(large), "--json"]) == 2
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(4, 12), st.integers(0, 2**32 - 1), st.data())
+def test_most_pairs_within_a_millimetre_are_one_units_message_and_one_pair_is_a_label(n, seed, data):
+    """`n` markers of a body in metres written as mm, `far` of them placed away (a stray marker in mm): while half the
+    pairs or more lie within a millimetre, one message about units and none about two labels (43 of 45 such pairs had
+    been listed one by one as a marker exported under two labels); a single marker under two labels in a body in mm
+    is named as such, units never mentioned."""
+    rng = np.random.default_rng(seed)
+    body = rng.normal(0.0, 200.0, (1, n, 3)) + rng.normal(0.0, 0.5, (40, n, 3)) + rng.normal(0.0, 300.0, (40, 1, 3))
+    labels = [f"M{i}" for i in range(n)]
+    far = data.draw(st.integers(0, n), label="markers far")
+    tiny = body / 1000.0
+    tiny[:, :far] += np.arange(1, far + 1)[None, :, None] * 50.0
+    near = n - far
+    pairs = near * (near - 1) // 2
+    trial = Trial(tiny, labels, 100.0, source="metres.trc")
+    if 2 * pairs >= n * (n - 1) // 2:
+        with pytest.raises(InputError) as info:
+            trial.require_usable(labels)
+        msg = str(info.value)
+        assert "metres in a file that says mm" in msg and "two labels" not in msg, msg
+    twice = body.copy()
+    twice[:, 1] = twice[:, 0] + rng.normal(0.0, 0.05, (40, 3))
+    with pytest.raises(InputError) as info:
+        Trial(twice, labels, 100.0, source="mm.trc").require_usable(labels)
+    msg = str(info.value)
+    assert "'M0'" in msg and "'M1'" in msg and "two labels" in msg and "metres" not in msg, msg
