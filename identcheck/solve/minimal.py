@@ -46,19 +46,44 @@ def _spherical_posed(parents, children) -> list:
     return [dist]
 
 
+CIRCLE_STEPS = 50
+"""Gauss-Newton steps at most for a circle's geometric fit (:func:`circle`); a few suffice from the algebraic start."""
+
+
 def circle(points) -> tuple:
-    """Centre, unit normal and radius of the circle through ≥ 3 points (least squares beyond 3)."""
+    """Centre, unit normal and radius of the circle through ≥ 3 points: exact through 3, and beyond them the least
+    squares one, its plane the points' best (least-squares) plane and, in that plane, the circle whose distances to
+    the projected points are least (Gauss-Newton from the algebraic fit about the points' mean).
+
+    Why not the algebraic fit alone: written as the points' equal distance from the centre, each point's equation
+    less the first's (mediating planes), it carried the first point's noise into every equation. A 350 mm arc of 90°
+    with 0.5 mm of noise left residuals of 10-17 mm RMS where the least-squares circle leaves 0.5; a knee's markers
+    were then read as moving over a sphere, not a circle (``skeleton`` typed a hinge spherical), and the hinge starts
+    of ``fit`` and ``identify`` came from such centres."""
     P = np.asarray(points, dtype=float)
     c0 = P.mean(axis=0)
     _, s, vt = np.linalg.svd(P - c0, full_matrices=False)
     n = vt[2]
     if s[1] <= 1e-9 * max(s[0], 1e-300):
         raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
-    # centre: in the plane, equidistant from all points (mediating planes, least squares)
-    A = np.vstack([2 * (P[1:] - P[0]), n])
-    rhs = np.concatenate([np.sum(P[1:] ** 2, axis=1) - np.sum(P[0] ** 2), [n @ c0]])
-    J = np.linalg.lstsq(A, rhs, rcond=None)[0]
-    return J, n, float(np.linalg.norm(P - J, axis=1).mean())
+    e1, e2 = vt[0], vt[1]
+    uv = np.stack([(P - c0) @ e1, (P - c0) @ e2], axis=1)                  # the points in their plane, about the mean
+    A = np.column_stack([2.0 * uv, np.ones(len(uv))])
+    a, b, c = np.linalg.lstsq(A, np.sum(uv ** 2, axis=1), rcond=None)[0]   # |x|² = 2x·centre + c (Kåsa)
+    centre = np.array([a, b])
+    radius = float(np.sqrt(max(c + a * a + b * b, 0.0)))
+    for _ in range(CIRCLE_STEPS):                                           # geometric: Σ(|x − centre| − r)² least
+        d = uv - centre
+        dist = np.linalg.norm(d, axis=1)
+        if np.any(dist <= 0.0):
+            break
+        J = np.column_stack([-d / dist[:, None], -np.ones(len(uv))])        # ∂(|x − centre| − r)/∂(centre, r)
+        step = np.linalg.lstsq(J, -(dist - radius), rcond=None)[0]
+        centre, radius = centre + step[:2], radius + float(step[2])
+        if np.linalg.norm(step) <= 1e-12 * max(radius, 1.0):
+            break
+    J = c0 + centre[0] * e1 + centre[1] * e2
+    return J, n, float(abs(radius))
 
 
 def _axis_distance(p, J, n) -> float:

@@ -1,0 +1,59 @@
+"""The circle through marker samples (:func:`identcheck.solve.minimal.circle`), which starts hinges in ``fit`` and
+``identify`` and types them in ``skeleton``: exact through noise-free points of any arc, and the least-squares circle
+under noise, its residual the noise's (the algebraic fit it replaced left 10-17 mm RMS on a 90° arc with 0.5 mm of
+noise)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from identcheck.errors import DegenerateError
+from identcheck.solve.minimal import circle
+
+
+def _arc(seed: int, radius: float, arc_deg: float, n: int, noise: float):
+    """`n` points on an arc of `arc_deg` of a circle of `radius` with a random centre and plane, plus isotropic
+    noise; (points, centre, normal)."""
+    rng = np.random.default_rng(seed)
+    centre = rng.normal(0.0, 200.0, 3)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    t = np.deg2rad(rng.uniform(0.0, 360.0) + np.linspace(0.0, arc_deg, n))
+    pts = centre + radius * (np.cos(t)[:, None] * q[:, 0] + np.sin(t)[:, None] * q[:, 1])
+    return pts + rng.normal(0.0, noise, pts.shape) if noise else pts, centre, q[:, 2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), radius=st.floats(20.0, 600.0), arc=st.floats(10.0, 360.0),
+       n=st.integers(3, 200))
+def test_noise_free_points_give_their_circle(seed, radius, arc, n):
+    pts, centre, normal = _arc(seed, radius, arc, n, 0.0)
+    J, nrm, r = circle(pts)
+    assert np.allclose(J, centre, atol=1e-6 * radius) and r == pytest.approx(radius, rel=1e-8)
+    assert abs(abs(nrm @ normal) - 1.0) < 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), radius=st.floats(100.0, 500.0), arc=st.floats(45.0, 360.0),
+       noise=st.floats(0.05, 1.5))
+def test_noisy_samples_leave_the_noise_as_residual(seed, radius, arc, noise):
+    """300 samples with noise σ per coordinate: the residuals (in-plane radial and out-of-plane) of the least-squares
+    circle have about the noise's RMS, σ·√(2/3) for these two of three coordinates, and the truth is no better a
+    circle than the fit (within 2 %: the plane and the circle in it are fitted one after the other)."""
+    pts, centre, normal = _arc(seed, radius, arc, 300, noise)
+
+    def rms(J, nrm, r):
+        w = pts - J
+        along = w @ nrm
+        radial = np.linalg.norm(w - along[:, None] * nrm, axis=1)
+        return float(np.sqrt(np.mean(np.concatenate([radial - r, along]) ** 2)))
+
+    fitted = rms(*circle(pts))
+    assert fitted <= 1.2 * noise, (fitted, noise)
+    assert fitted <= 1.02 * rms(centre, normal, radius) + 1e-9
+
+
+def test_collinear_samples_are_no_circle():
+    with pytest.raises(DegenerateError, match="collinear"):
+        circle(np.outer(np.linspace(0.0, 1.0, 10), [1.0, 2.0, 3.0]))
