@@ -133,10 +133,15 @@ def classify_small(small, sigma_mm: float) -> JointType:
         Marker noise, mm (NaN: unknown).
     """
     sph, cir = small.sphere_mm, small.circle_mm
+    # the markers' noise as the parent's frame sees them: their own, grown by the parent's pose noise there (a thigh
+    # posed by three markers along the femur turns its roll's noise into 6 mm off the knee's plane at the shank's
+    # markers, 12 times their own 0.5 mm; against the marker noise alone, a simulated hinge was typed a ball joint)
+    seen = sigma_mm * small.noise_factor if np.isfinite(sigma_mm) else 0.0
     ev = {"sphere_residual_mm": None if not np.isfinite(sph) else float(sph),
           "circle_residual_mm": None if not np.isfinite(cir) else float(cir),
-          "travel_mm": float(small.travel_mm), "n_frames": int(small.n_frames)}
-    floor = max(sph if np.isfinite(sph) else 0.0, sigma_mm if np.isfinite(sigma_mm) else 0.0, 1e-9)
+          "travel_mm": float(small.travel_mm), "n_frames": int(small.n_frames),
+          "noise_in_parent_mm": float(seen) if np.isfinite(sigma_mm) else None}
+    floor = max(sph if np.isfinite(sph) else 0.0, seen, 1e-9)
     if not np.isfinite(cir):
         ev["rule"] = "no circle (hinge) fits the markers' path in the parent's frame; a sphere (ball joint) does"
         return JointType("spherical", 0.84, ev)
