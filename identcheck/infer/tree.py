@@ -127,8 +127,14 @@ class SmallFit:
 
     @property
     def residual_mm(self) -> float:
-        vals = [v for v in (self.sphere_mm, self.circle_mm) if np.isfinite(v)]
-        return float(min(vals)) if vals else float("nan")
+        """How well a joint ties the group to the segment, for the tree: the ball joint's (sphere's) residual, the
+        general joint, whose family holds every circle; the hinge's (circle's) only where no plausible sphere fits.
+        The circle's residual types the joint (:func:`identcheck.infer.joint_types.classify_small`). (The smaller of
+        the two had been taken while the circle fit carried its first sample's noise and came out the larger: fitted
+        as least squares, its residual joined the tree's comparisons, against thresholds set on the sphere's.)"""
+        if np.isfinite(self.sphere_mm):
+            return float(self.sphere_mm)
+        return float(self.circle_mm) if np.isfinite(self.circle_mm) else float("nan")
 
 
 @dataclass(frozen=True)
@@ -414,7 +420,7 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
         return SmallFit(np.nan, np.nan, travel, np.nan, n,
                         f"moves {travel:.3g} mm in this segment's frame, but on no sphere or circle within "
                         f"{MAX_REACH_MM:g} mm of it")
-    reach = reach_s if np.isfinite(sphere) and (not np.isfinite(circ) or sphere <= circ) else reach_c
+    reach = reach_s if np.isfinite(sphere) else reach_c                   # (the fit residual_mm gives)
     factor = float(np.mean(np.sqrt(1.0 + pose_noise_factor(poses.local, np.median(X, axis=0)) ** 2)))
     return SmallFit(sphere, circ, travel, float(reach), n, noise_factor=factor, monotone=monotone)
 
