@@ -48,12 +48,18 @@ def _spherical_posed(parents, children) -> list:
 
 CIRCLE_STEPS = 50
 """Gauss-Newton steps at most for a circle's geometric fit (:func:`circle`); a few suffice from the algebraic start."""
+CIRCLE_REACH = 100.0
+"""A circle whose radius is more than this many times the extent of its points in their plane is a straight path
+read as an arc (an arc of half a degree): the least-squares circle of a nearly straight noisy path heads for a line
+(radii of 10⁷-10¹¹ mm on 2° arcs with 0.5 mm of noise), and no hinge is fixed by it (:func:`circle` raises)."""
 
 
 def circle(points) -> tuple:
     """Centre, unit normal and radius of the circle through ≥ 3 points: exact through 3, and beyond them the least
     squares one, its plane the points' best (least-squares) plane and, in that plane, the circle whose distances to
-    the projected points are least (Gauss-Newton from the algebraic fit about the points' mean).
+    the projected points are least (Gauss-Newton from the algebraic fit about the points' mean, each step halved until
+    it lowers the sum of squares). Raises DegenerateError for points on a line, or on an arc too straight to fix a
+    circle (:data:`CIRCLE_REACH`).
 
     Why not the algebraic fit alone: written as the points' equal distance from the centre, each point's equation
     less the first's (mediating planes), it carried the first point's noise into every equation. A 350 mm arc of 90°
@@ -72,6 +78,11 @@ def circle(points) -> tuple:
     a, b, c = np.linalg.lstsq(A, np.sum(uv ** 2, axis=1), rcond=None)[0]   # |x|² = 2x·centre + c (Kåsa)
     centre = np.array([a, b])
     radius = float(np.sqrt(max(c + a * a + b * b, 0.0)))
+
+    def cost(cen, r) -> float:
+        return float(np.sum((np.linalg.norm(uv - cen, axis=1) - r) ** 2))
+
+    now = cost(centre, radius)
     for _ in range(CIRCLE_STEPS):                                           # geometric: Σ(|x − centre| − r)² least
         d = uv - centre
         dist = np.linalg.norm(d, axis=1)
@@ -79,9 +90,20 @@ def circle(points) -> tuple:
             break
         J = np.column_stack([-d / dist[:, None], -np.ones(len(uv))])        # ∂(|x − centre| − r)/∂(centre, r)
         step = np.linalg.lstsq(J, -(dist - radius), rcond=None)[0]
-        centre, radius = centre + step[:2], radius + float(step[2])
-        if np.linalg.norm(step) <= 1e-12 * max(radius, 1.0):
+        t = 1.0
+        while t >= 1.0 / 1024 and not cost(centre + t * step[:2], radius + t * float(step[2])) <= now:
+            t /= 2.0
+        if t < 1.0 / 1024:
+            break                                                           # no step lowers it: a minimum
+        centre, radius = centre + t * step[:2], radius + t * float(step[2])
+        now = cost(centre, radius)
+        if t * np.linalg.norm(step) <= 1e-12 * max(abs(radius), 1.0):
             break
+    extent = float(np.max(np.ptp(uv, axis=0)))
+    if abs(radius) > CIRCLE_REACH * extent:
+        raise DegenerateError(f"the samples lie on a nearly straight path (a circle through them would have a radius "
+                              f"{abs(radius):.3g}, over {CIRCLE_REACH:g} times their extent {extent:.3g}): no circle "
+                              "(the hinge hardly turned)")
     J = c0 + centre[0] * e1 + centre[1] * e2
     return J, n, float(abs(radius))
 

@@ -57,3 +57,22 @@ def test_noisy_samples_leave_the_noise_as_residual(seed, radius, arc, noise):
 def test_collinear_samples_are_no_circle():
     with pytest.raises(DegenerateError, match="collinear"):
         circle(np.outer(np.linspace(0.0, 1.0, 10), [1.0, 2.0, 3.0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), radius=st.floats(100.0, 500.0), arc=st.floats(0.5, 15.0),
+       noise=st.floats(0.1, 1.0))
+def test_a_short_noisy_arc_gives_a_circle_of_its_own_size_or_none(seed, radius, arc, noise):
+    """A few degrees of arc under noise: the least-squares circle of a nearly straight path heads for a line (radii
+    of 10⁷-10¹¹ mm had come out, and a hinge start weighting circles by radius² trusted them most); either a circle
+    within CIRCLE_REACH times the points' extent comes out, or DegenerateError says the path is too straight."""
+    from identcheck.solve.minimal import CIRCLE_REACH
+
+    pts, _, _ = _arc(seed, radius, arc, 300, noise)
+    extent = float(np.ptp(pts, axis=0).max())
+    try:
+        _, _, r = circle(pts)
+    except DegenerateError as exc:
+        assert "straight" in str(exc) or "collinear" in str(exc)
+        return
+    assert np.isfinite(r) and r <= CIRCLE_REACH * extent * 1.01
