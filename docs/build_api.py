@@ -37,6 +37,8 @@ CLASSES = (
     ("identcheck.errors", "InputError"),
     ("identcheck.errors", "DegenerateError"),
     ("identcheck.errors", "IdentifiabilityWarning"),
+    ("identcheck.errors", "KindedWarning"),
+    ("identcheck.errors", "UnitsWarning"),
 )
 """The result and input classes, in the order the reference lists them (those that do not exist are left out)."""
 

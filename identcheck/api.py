@@ -21,7 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from identcheck.errors import InputError, warning_kind
+from identcheck.errors import DegenerateError, InputError, warning_kind
 from identcheck.io.model import Model
 from identcheck.plan import capture
 
@@ -256,8 +256,8 @@ def fit(model, trial, progress=None, frames: str | None = None, export_markers=N
     doc = fit_trial(model, data, progress=progress, export=export_markers,
                     on_fit=keep if report is not None or export_osim is not None else None,
                     decided=lambda joints: _certified_unique(planned(), joints))
-    doc["warnings"] = [{"kind": warning_kind(w.category), "message": str(w.message)} for w in read
-                       if issubclass(w.category, UserWarning)] + doc["warnings"]
+    doc["warnings"] = _one_units_question([{"kind": warning_kind(w.category), "message": str(w.message)} for w in read
+                                           if issubclass(w.category, UserWarning)] + doc["warnings"])
     if not all(j["identifiable"] for j in doc["joints"].values()):
         _certified_identifiability(doc, planned())
     res = FitResult.from_dict(doc)
@@ -362,14 +362,14 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
     steps = workflow.MAX_STEPS if max_steps is None else max_steps
     model = _model_with_joints(model, "diagnose")         # (the model is read before the trial, as fit's is)
-    with _shown_and_kept() as said:
+    with _kept_then_shown() as said:
         data = _frames(trial, frames)
         diag = workflow.diagnose(model, data, progress=progress, max_steps=steps)
-    diag = replace(diag, warnings=tuple({m: {"kind": k, "message": m} for k, m in said}.values()))
-    if export_markers is not None:
-        from identcheck.fit.export import export_markers as write_markers
+        if export_markers is not None:
+            from identcheck.fit.export import export_markers as write_markers
 
-        write_markers(export_markers, data, diag.after.fit, diag.offset)
+            write_markers(export_markers, data, diag.after.fit, diag.offset)
+    diag = replace(diag, warnings=tuple(said))
     if report is not None:
         from identcheck.fit.scene import fit_scene
 
@@ -381,22 +381,51 @@ def diagnose(model, trial, progress=None, max_steps: int | None = None, frames: 
 
 
 @contextmanager
-def _shown_and_kept():
-    """Warnings shown as they arise (as the warnings filters let them: on standard error from the command line) and
-    also kept, as ``(kind, message)`` (:func:`identcheck.errors.warning_kind`), for a verb's JSON: a units question
-    or a subject prefix said while the trial was read and diagnosed had reached standard error only."""
-    kept, shown = [], warnings.showwarning
-
-    def both(message, category, filename, lineno, file=None, line=None):
-        if issubclass(category, UserWarning):
-            kept.append((warning_kind(category), str(message)))
-        shown(message, category, filename, lineno, file, line)
-
-    warnings.showwarning = both
+def _kept_then_shown():
+    """Every warning said inside, kept as ``{"kind", "message"}`` (:func:`identcheck.errors.warning_kind`; each once,
+    in order, a large span asked about once: :func:`_one_units_question`) whatever the caller's warning filters, and
+    said again on leaving under the caller's filters (on standard error from the command line): what a verb's JSON
+    carries does not depend on them. (Kept as they reached the display, a batch run, which ignores warnings, had
+    written diagnose's JSON without its units question.) A DegenerateError raised inside carries them
+    (``warnings``), for the degenerate answer's JSON."""
+    kept: list = []
+    recorded: list = []
     try:
-        yield kept
-    finally:
-        warnings.showwarning = shown
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            try:
+                yield kept
+            except DegenerateError as exc:
+                exc.warnings = _as_kept(said)
+                raise
+            finally:
+                recorded = list(said)
+                kept[:] = _as_kept(recorded)
+    finally:                                 # said again under the caller's filters, an error raised or not
+        seen, said_once = set(), {w["message"] for w in kept}
+        for w in recorded:
+            if (w.category, str(w.message)) not in seen and (
+                    str(w.message) in said_once or not issubclass(w.category, UserWarning)):
+                seen.add((w.category, str(w.message)))
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+
+
+def _as_kept(said) -> list:
+    """The user warnings of a record, as the JSON keeps them (:func:`_kept_then_shown`)."""
+    items = [{"kind": warning_kind(w.category), "message": str(w.message)} for w in said
+             if issubclass(w.category, UserWarning)]
+    return _one_units_question(list({w["message"]: w for w in items}.values()))
+
+
+def _one_units_question(items: list) -> list:
+    """`items` (``{"kind", "message"}``) less the model's large-span question where the trial's reader asked about
+    its span already: a file in mm labelled cm is one mistake, said once (:data:`identcheck.io.trc.READ_TOO_LARGE`,
+    :data:`identcheck.io.trc.MODEL_TOO_LARGE`)."""
+    from identcheck.io.trc import MODEL_TOO_LARGE, READ_TOO_LARGE
+
+    if not any(w["kind"] == "units" and READ_TOO_LARGE in w["message"] for w in items):
+        return items
+    return [w for w in items if not (w["kind"] == "units" and MODEL_TOO_LARGE in w["message"])]
 
 
 @_one_blas_thread

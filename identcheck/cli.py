@@ -810,7 +810,8 @@ def main(argv=None) -> int:
         if getattr(a, "json", False):   # exit 1 is an answer, and --json promises one document for it
             try:
                 with _named_stdout():
-                    _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {})})
+                    said = {"warnings": exc.warnings} if getattr(exc, "warnings", None) else {}
+                    _print_json({"ok": False, "degenerate": f"{where}{exc}", **DEGENERATE_KEYS.get(a.verb, {}), **said})
                     sys.stdout.flush()
             except BrokenPipeError:     # a reader that stopped early: quiet, as everywhere (run())
                 raise

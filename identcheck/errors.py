@@ -74,16 +74,37 @@ class IdentifiabilityWarning(UserWarning):
     """Usable but near-degenerate data: the answer is sensitive to noise."""
 
 
-class UnitsWarning(UserWarning):
+class KindedWarning(UserWarning):
+    """A warning with the ``kind`` the verbs' JSON ``warnings`` give it (:func:`warning_kind`), the same whichever
+    verb says it."""
+
+    kind = "warning"
+
+
+class UnitsWarning(KindedWarning):
     """The coordinates and the units they are read in disagree in a way that only suggests a mistake (a body spanning
     a few "millimetres", or ten metres): the answer is computed, and every distance in it is off by the same factor
-    if the suspicion is right. Reported with the kind ``units`` (:func:`warning_kind`)."""
+    if the suspicion is right."""
+
+    kind = "units"
+
+
+class SubjectPrefixWarning(KindedWarning):
+    """A Vicon ``Subject:`` prefix was taken off the trial's labels to match the model's markers."""
+
+    kind = "subject_prefix"
+
+
+class GrossErrorWarning(KindedWarning):
+    """Samples far from where their neighbours in time put their marker were left out."""
+
+    kind = "gross_error"
 
 
 def warning_kind(category: type) -> str:
-    """The ``kind`` a warning of this class has in the JSON ``warnings``: ``units`` for :class:`UnitsWarning`, else
-    the class's name."""
-    return "units" if issubclass(category, UnitsWarning) else category.__name__
+    """The ``kind`` a warning of this class has in the JSON ``warnings``: a :class:`KindedWarning`'s own (``units``,
+    ``subject_prefix``, ``gross_error``), else the class's name."""
+    return category.kind if issubclass(category, KindedWarning) else category.__name__
 
 
 class StaleCodeWarning(RuntimeWarning):

@@ -19,7 +19,8 @@ from functools import cached_property
 import numpy as np
 
 from identcheck.skeleton import Skeleton
-from identcheck.errors import DegenerateError, InputError, UnitsWarning
+from identcheck.errors import (DegenerateError, GrossErrorWarning, InputError, SubjectPrefixWarning,
+                               UnitsWarning)
 from identcheck.io.jsonable import plain
 from identcheck.io.model import left_out_reasons, refuse_exported_points, unposed_root
 from identcheck.io.trc import centimetres_suspected, scaled_up_suspected
@@ -344,7 +345,7 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     :meth:`identcheck.trial.Trial.unprefixed`)."""
     trial, unprefixed = trial.unprefixed(model.markers)
     if unprefixed:
-        warnings.warn(unprefixed, UserWarning, stacklevel=2)
+        warnings.warn(unprefixed, SubjectPrefixWarning, stacklevel=2)
     refuse_exported_points(trial, model.joints)
     model.require_markers_in(trial)
     for said in (centimetres_suspected(trial.as_array(), trial.source),
@@ -461,7 +462,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     of coordinates 100 m from the origin lose the millimetres); the result carries the move (``offset``)."""
     trial, spikes = without_spikes(trial)
     if spikes:
-        warnings.warn(spikes["message"], UserWarning, stacklevel=2)
+        warnings.warn(spikes["message"], GrossErrorWarning, stacklevel=2)
     trial, offset = trial.recentred()
     try:
         ctx, base, left_out = start_leaving_out(model, trial, progress)

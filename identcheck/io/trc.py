@@ -93,8 +93,15 @@ about, since a small rig could span that little."""
 
 
 LARGE_SPAN_MM = 5_000.0
-"""A span of the markers of one frame that is suspicious (warned about) when the units field scaled the numbers
-up: mm labelled cm read as a leg 10 m long, a body 20 m tall; a span that large in the file's own mm is left alone."""
+"""A span of the markers of one frame that is suspicious (warned about): when the units field scaled the numbers up,
+the file's markers (mm labelled cm read as a leg 10 m long, a body 20 m tall); in the file's own mm, the model's
+markers only (:func:`scaled_up_suspected`: a file may hold several subjects, or props, across the volume)."""
+
+READ_TOO_LARGE = "more than one capture volume holds"
+"""Words of the reader's question about a span its units field made too large (:func:`units_problem`)."""
+MODEL_TOO_LARGE = "more than a body spans"
+"""Words of the question about a model's markers spanning too much (:func:`scaled_up_suspected`): not asked again
+where the reader asked already (:func:`identcheck.api._one_units_question`)."""
 
 
 def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool]:
@@ -111,7 +118,7 @@ def units_problem(xyz: np.ndarray, factor: float, where: str) -> tuple[str, bool
                 "frames): the coordinates are in mm; fix the units field"), True
     if span > LARGE_SPAN_MM and factor > 1.0:
         return (f"{where} says {name}, but then the markers of a frame span {span / 1e3:.3g} m (median over "
-                f"frames), more than one capture volume holds: are the coordinates in mm (or in a unit smaller than "
+                f"frames), {READ_TOO_LARGE}: are the coordinates in mm (or in a unit smaller than "
                 f"{name})?"), False
     if span < low and factor == 1.0:
         return (f"{where} says {name}, but the markers of a frame span only {span:.3g} mm (median over frames): are "
@@ -161,10 +168,10 @@ def scaled_up_suspected(xyz: np.ndarray, source: str) -> str:
     span = frame_span(xyz)
     if span is None or not LARGE_SPAN_MM < span <= BODY_SPAN_MM[1]:
         return ""
-    return (f"{source}: the model's markers span {span / 1e3:.3g} m in a frame (median over frames), more than a "
-            "body spans: coordinates ten times too large for the units they are read in (a scale factor off, or a "
-            "units field naming a smaller unit than the numbers are in)? Then every distance here is ten times too "
-            "large: fix the units (a file's POINT:UNITS or Units field, or its scale)")
+    return (f"{source}: the model's markers span {span / 1e3:.3g} m in a frame (median over frames), "
+            f"{MODEL_TOO_LARGE}: coordinates ten times too large for the units they are read in (a scale factor off, "
+            "or a units field naming a smaller unit than the numbers are in)? Then every distance here is ten times "
+            "too large: fix the units (a file's POINT:UNITS or Units field, or its scale)")
 
 
 def check_units(xyz: np.ndarray, factor: float, where: str, src: str, stacklevel: int = 4) -> None:

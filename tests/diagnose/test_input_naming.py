@@ -28,3 +28,31 @@ def test_a_trial_whose_frames_never_show_two_segments_whole_is_refused_naming_it
     with pytest.raises(InputError) as info:
         getattr(api, verb)(ROOT / "leg.toml", bad)
     assert "alternating.trc" in str(info.value) and "<array>" not in str(info.value), str(info.value)
+
+
+def test_diagnose_keeps_what_it_warned_in_its_json_whatever_the_filters_and_on_degenerate_data(tmp_path, capsys):
+    """The subject prefix taken off a trial's labels is a warning of kind ``subject_prefix`` in diagnose's JSON, as
+    in fit's, under warnings ignored too (a batch run's filters had emptied diagnose's list); a static trial's
+    degenerate answer (exit 1) carries the warnings said before it stopped."""
+    import json
+    import warnings
+
+    from identcheck import cli
+    from identcheck.trial import Trial
+
+    src = tmp_path / "leg.trc"
+    api.simulate(ROOT / "leg.toml", src, seed=1, n_frames=120, noise_mm=0.5)
+    trial = Trial.from_file(src)
+    prefixed = tmp_path / "subject.trc"
+    Trial(trial.as_array(), ["Subj:" + lab for lab in trial.labels], trial.rate_hz).to_file(prefixed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        kinds = [w["kind"] for w in api.diagnose(ROOT / "leg.toml", prefixed).to_dict()["warnings"]]
+    assert "subject_prefix" in kinds
+    still = tmp_path / "still.trc"
+    xyz = np.repeat(trial.as_array()[:1], 120, axis=0) + np.random.default_rng(0).normal(0.0, 0.5, (120, 10, 3))
+    Trial(xyz, ["Subj:" + lab for lab in trial.labels], trial.rate_hz).to_file(still)
+    capsys.readouterr()
+    assert cli.main(["diagnose", str(ROOT / "leg.toml"), str(still), "--json"]) == 1
+    doc = json.loads(capsys.readouterr().out)
+    assert "degenerate" in doc and "subject_prefix" in [w["kind"] for w in doc["warnings"]], doc

@@ -205,6 +205,8 @@ def test_a_leg_ten_times_too_large_is_warned_about_by_fit_and_diagnose_and_refus
     the trial is refused (exit 2) naming a segment and its length; as simulated, nothing is said."""
     from pathlib import Path
 
+    import warnings as pywarnings
+
     from identcheck import api, cli
     from identcheck.io.model import Model
     from identcheck.io.trc import LARGE_SPAN_MM, frame_span, read_trc, write_trc
@@ -226,7 +228,9 @@ def test_a_leg_ten_times_too_large_is_warned_about_by_fit_and_diagnose_and_refus
     write_trc(large, trial.xyz * factor, trial.labels, trial.rate_hz)
     said = lambda doc: [w["message"] for w in doc["warnings"] if w["kind"] == "units"]       # noqa: E731
     assert any("ten times too large" in m and "leg_x10.trc" in m for m in said(api.fit(model, large).to_dict()))
-    assert any("ten times too large" in m for m in said(api.diagnose(model, large).to_dict()))
+    with pywarnings.catch_warnings():
+        pywarnings.simplefilter("ignore")             # (a batch run's filters: the JSON keeps what they hide)
+        assert any("ten times too large" in m for m in said(api.diagnose(model, large).to_dict()))
     assert not said(api.fit(model, good).to_dict())
     with pytest.raises(InputError) as info:
         api.fit(root / "leg.toml", large)
@@ -261,3 +265,36 @@ def test_most_pairs_within_a_millimetre_are_one_units_message_and_one_pair_is_a_
         Trial(twice, labels, 100.0, source="mm.trc").require_usable(labels)
     msg = str(info.value)
     assert "'M0'" in msg and "'M1'" in msg and "two labels" in msg and "metres" not in msg, msg
+
+
+def test_millimetres_labelled_cm_are_one_units_question_in_both_verbs(tmp_path):
+    """The bundled leg written in mm under a 'cm' units field (scaled so that no segment, read as cm, exceeds 3 m):
+    the reader asks whether the coordinates are in mm (its span over 5 m), and the model's span is not asked again: one `units` warning in ``fit``'s JSON and in
+    ``diagnose``'s, where both had carried two."""
+    from pathlib import Path
+
+    from identcheck import api
+    from identcheck.io.model import Model
+    from identcheck.io.trc import LARGE_SPAN_MM, frame_span, read_trc, write_trc
+
+    root = Path(__file__).resolve().parents[2] / "examples"
+    model = tmp_path / "leg.toml"
+    model.write_text("\n".join(line for line in (root / "leg.toml").read_text().splitlines()
+                               if not line.startswith("length_mm")))
+    good, labelled = tmp_path / "leg.trc", tmp_path / "leg_cm.trc"
+    api.simulate(root / "leg.toml", good, seed=5, n_frames=120)
+    trial = read_trc(good)
+    index = {lab: i for i, lab in enumerate(trial.labels)}
+    widest = max(np.nanmax(np.linalg.norm(trial.xyz[:, [index[m] for m in s.markers]][:, :, None]
+                                          - trial.xyz[:, [index[m] for m in s.markers]][:, None], axis=3))
+                 for s in Model.from_toml(model).segments.values())
+    factor = 0.95 * LONGEST_SEGMENT_MM / widest          # read as cm, every segment within the 3 m none exceeds
+    assert factor * frame_span(trial.xyz) > LARGE_SPAN_MM
+    write_trc(labelled, trial.xyz * factor / 10.0, trial.labels, trial.rate_hz)
+    text = labelled.read_text().splitlines()
+    head = text[2].split("\t")
+    head[4] = "cm"                                                      # the Units field of line 3
+    labelled.write_text("\n".join(text[:2] + ["\t".join(head)] + text[3:]) + "\n")
+    for verb in (api.fit, api.diagnose):
+        units = [w["message"] for w in verb(model, labelled).to_dict()["warnings"] if w["kind"] == "units"]
+        assert len(units) == 1 and "says cm" in units[0], units
