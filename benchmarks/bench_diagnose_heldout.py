@@ -117,13 +117,16 @@ data determine: the part of a moving centre that is linear in the angle is a shi
 ``joint_translation``), so a determined joint may sit away from that reference without being wrong about the data."""
 
 
-def moving_axis(effects: list, joint: str) -> bool:
+def moving_axis(effects: list, joint: str, named: list) -> bool:
     """Whether the truth turns the hinge `joint` about a second axis with a profile of time (an ``extra_dof`` other
-    than a ball): its axis in the child then has no one place, and the truth's distances are to it at the generator's
-    zero turn, where ``diagnose`` places it at the trial's mean turn (a constant turn is the axis placed otherwise:
-    no data tell the two apart, and the report says which it gives)."""
-    return any(e["name"] == "extra_dof" and (e.get("where") or {}).get("joint") == joint
-               and (e.get("where") or {}).get("dof") not in (None, "ball") for e in effects)
+    than a ball) and ``diagnose`` modelled a second rotation there (its `named` effects, as its JSON gives them): its
+    axis in the child then has no one place, and the truth's distances are to it at the generator's zero turn, where
+    ``diagnose`` places it at the trial's mean turn (a constant turn is the axis placed otherwise: no data tell the two
+    apart, and the report says which it gives). A joint whose extra turn went unnamed is judged as any other."""
+    turned = any(e["name"] == "extra_dof" and (e.get("where") or {}).get("joint") == joint
+                 and (e.get("where") or {}).get("dof") not in (None, "ball") for e in effects)
+    return turned and any(e.get("name") == "extra_dof" and (e.get("where") or {}).get("joint") == joint
+                          for e in named)
 
 
 def other_type(diag_joint: dict, truth_joint: dict, effects: list, joint: str) -> bool:
@@ -155,7 +158,7 @@ def joints_against_truth(diag: dict, truth: dict) -> dict:
         moving = any(e["name"] in MOVING_CENTRE and (e.get("where") or {}).get("joint") == j
                      for e in truth.get("effects", []))
         out[j] = {"verdict": ans["practical"]["verdict"], "markers": len(marks), "moving_centre": moving,
-                  "moving_axis": moving_axis(truth.get("effects", []), j),
+                  "moving_axis": moving_axis(truth.get("effects", []), j, diag.get("effects", [])),
                   "other_type": other_type(ans, truth.get("joints", {}).get(j) or {}, truth.get("effects", []), j),
                   "covered": sum(x == 0.0 for x in misses),
                   "worst_miss_mm": round(max(misses, default=0.0), 3),

@@ -28,12 +28,21 @@ model declares the segment longer (``length_mm``): no limb, trunk or head is 3 m
 trial whose units field scaled its numbers up (millimetres in a file that says cm made a thigh 3.7 m long, and every
 joint was reported 10 times too far, exit 0), or markers mislabelled across bodies."""
 
+METRES_ROOM_MM = 20.0
+"""A model's markers that coincide in pairs but none of whose coordinates reaches this ("mm") are a capture volume in
+metres read as mm (a room of a few metres), not markers exported under several labels: those, in mm, lie hundreds of
+millimetres from the volume's origin."""
+
 LONGEST_SHARE = 4.0
 """The farthest two markers of a segment whose length the model declares (``length_mm``) may lie at most this many
-times that length apart (the median over the frames where both are seen): the bundled models' simulations span at
-most 1.2 times theirs (a foot's heel to toe beside its declared length). A segment spanning more is a trial whose
-numbers are ten times too large for their units, or a length written in the wrong unit: a thigh declared 420 mm whose
-markers lay 5 m apart had been fitted, its hip 1.3-1.5 m from them (exit 1, no warning)."""
+times that length apart (the median over the frames where both are seen), and at least :data:`LONGEST_DECLARED_MM`
+apart whatever it declares: the bundled models' simulations span at most 1.2 times theirs (a foot's heel to toe beside
+its declared length), and a length given for ``simulate`` may be short of a segment's marker spread (a pelvis's to its
+hips, beside markers on both iliac spines). A segment spanning more is a trial whose numbers are ten times too large
+for their units, or a length written in the wrong unit: a shank declared 400 mm whose markers lay 1.65 m apart, and a
+foot declared 200 mm at 2.3 m, had been fitted (exit 1, no warning)."""
+
+LONGEST_DECLARED_MM = 1000.0
 
 SMALLEST_REACH_SHARE = 1 / 4
 """A segment the model declares L long (``length_mm``) has some marker, on it or on a segment within two joints of
@@ -339,12 +348,15 @@ class Trial:
         present = [lab for lab in labels if lab in self._index]
         pairs = self.coincident(present)
         every = len(present) * (len(present) - 1) // 2
-        if len(present) >= 3 and 2 * len(pairs) >= every:
-            # every marker, or most pairs, within a millimetre of each other: one scale error, not many labelling ones
-            # (metres labelled mm put a leg's 45 pairs 43 times within a millimetre, and each had been listed as two
-            # labels of one marker, units never mentioned)
-            span = float(np.nanmax(np.abs(self.select(present).as_array())))
+        close = sorted({lab for pair in pairs for lab in pair})
+        span = float(np.nanmax(np.abs(self.select(close).as_array()))) if close else float("inf")
+        if len(present) >= 3 and (len(pairs) == every or (2 * len(pairs) >= every and span < METRES_ROOM_MM)):
+            # every marker, or most pairs, within a millimetre of each other, in a room's size in metres: one scale
+            # error, not many labelling ones (metres labelled mm put a leg's 45 pairs 43 times within a millimetre,
+            # and each had been listed as two labels of one marker, units never mentioned); one marker exported under
+            # several labels, in mm, stays a labelling problem
             how = "all" if len(pairs) == every else f"{len(pairs)} pairs of the"
+            span = float(np.nanmax(np.abs(self.select(present).as_array()))) if len(pairs) == every else span
             raise InputError(problems + [f"{how} {len(present)} markers of the model lie within {COINCIDENT_MM:g} mm "
                                          f"of each other in every frame (no coordinate beyond {span:.3g} mm): the "
                                          "coordinates look like metres in a file that says mm; fix its units field"],
@@ -402,7 +414,7 @@ class Trial:
     def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
         """A problem for each segment (`where`: label -> segment) two of whose markers among `labels` lie more than
         :data:`LONGEST_SEGMENT_MM` apart or, where the model declares the segment's length (`declared`: segment -> mm,
-        ``length_mm``), more than :data:`LONGEST_SHARE` times that: the median of the two markers' distance over the
+        ``length_mm``), more than :data:`LONGEST_SHARE` times that and :data:`LONGEST_DECLARED_MM`: the median of the two markers' distance over the
         frames where both are seen (at most :data:`SPAN_FRAMES` of them, evenly spread), naming the farthest pair."""
         by_segment: dict = {}
         for lab in labels:
@@ -411,7 +423,7 @@ class Trial:
         out = []
         for segment, names in by_segment.items():
             length = float(declared.get(segment) or 0.0)
-            limit = LONGEST_SHARE * length if length > 0 else LONGEST_SEGMENT_MM
+            limit = max(LONGEST_SHARE * length, LONGEST_DECLARED_MM) if length > 0 else LONGEST_SEGMENT_MM
             d = self._median_distances(names, names)
             if not np.isfinite(d).any():
                 continue
@@ -421,9 +433,9 @@ class Trial:
                 if length > 0:
                     out.append(f"segment {segment!r} is declared {length:g} mm long (length_mm), but its markers span "
                                f"{widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over the frames where both "
-                               f"are seen), over {LONGEST_SHARE:g} times that: are the coordinates ten times too large "
-                               f"for their units (millimetres in a file that says cm, a scale factor off)? fix the "
-                               f"units field, the labels, or the model's length_mm")
+                               f"are seen), over {limit / length:.3g} times that: are the coordinates ten times too "
+                               f"large for their units (millimetres in a file that says cm, a scale factor off)? fix "
+                               f"the units field, the labels, or the model's length_mm")
                     continue
                 out.append(f"segment {segment!r} spans {widest / 1000:.3g} m ({pair[0]!r} to {pair[1]!r}, median over "
                            f"the frames where both are seen): no body segment is that long; are the coordinates in a "
@@ -570,12 +582,12 @@ class Trial:
         except ValueError:
             raise InputError([f"--frames {spec!r}: expected START:END in the file's frame numbers "
                               f"({first}:{last} here)"], source=self._source) from None
-        start = first if start is None else start
-        end = last if end is None else end
-        if end < start:
+        if start is not None and end is not None and end < start:         # (both given: an end filled in is no END)
             raise InputError([f"--frames {spec}: END before START (give START:END, both included, in the file's "
                               f"frame numbers: {first} to {last} here)"], source=self._source)
-        if end < first or start > last:
+        start = first if start is None else start
+        end = last if end is None else end
+        if end < start or end < first or start > last:
             raise InputError([f"--frames {spec}: no frame of the trial in that range (the file's frames are "
                               f"{first} to {last})"], source=self._source)
         if start < first or end > last:

@@ -294,10 +294,11 @@ def _naming(files: str, call, *args):
 
 
 class Unposed(Exception):
-    """The rigid fit cannot start because a segment below `joint` (its child) has no markers and its joints lend fewer
-    than three points (a foot without markers): the model's plan, not the trial. :func:`diagnose` leaves that joint and
-    everything hanging from it out, as ``fit`` does, and says `why`. (A segment the trial cannot pose or move, a
-    hinge that never turns in a static trial, stays a degenerate answer, as documented.)"""
+    """The rigid fit cannot start because a segment below `joint` (its child) has no markers and its joints do not pose
+    it: they lend fewer than three points (a foot without markers), or cannot be placed without its markers (a shank
+    between two hinges): the model's plan, not the trial. :func:`diagnose` leaves that joint and everything hanging
+    from it out, as ``fit`` does, and says `why`. (A segment with markers the trial cannot pose or move, a hinge that
+    never turns in a static trial, stays a degenerate answer, as documented.)"""
 
     def __init__(self, joint: str, why: str):
         super().__init__(why)

@@ -34,6 +34,7 @@ refused rather than grouped by noise.
 from __future__ import annotations
 
 import difflib
+import re
 import warnings
 from dataclasses import dataclass, field
 
@@ -400,12 +401,24 @@ class Grouping:
     """Every pair's spread (:class:`PairStatistics`), marker columns in trial order."""
 
     def to_dict(self) -> dict:
-        """The JSON's ``grouping``; ``too_rarely_seen``: the markers an inferred grouping could not judge, seen in too
-        few frames (markers a segments file leaves out are the user's choice, and not listed)."""
-        rare = sorted(self.unused) if self.source == "inferred" else []
+        """The JSON's ``grouping``; ``too_rarely_seen``: the labelled markers an inferred grouping could not judge, seen
+        in too few frames (markers a segments file leaves out are the user's choice, and unlabelled fragments,
+        :func:`unlabelled`, no marker of the body: neither is listed)."""
+        rare = sorted(m for m in self.unused if not unlabelled(m)) if self.source == "inferred" else []
         return {"source": self.source, **self.tolerance.to_dict(),
                 "internal_spread_mm": {k: _num(v) for k, v in self.internal_spread_mm.items()},
                 "widened": self.widened, "too_rarely_seen": rare}
+
+
+UNLABELLED = re.compile(r"^(\*\d+|unlabell?ed\b.*)$", re.IGNORECASE)
+"""Labels capture software gives trajectories no one labelled: Vicon Nexus ``*12``, Qualisys and Motive
+``Unlabeled 1234`` (``Unlabelled`` too)."""
+
+
+def unlabelled(label: str) -> bool:
+    """Whether `label` names an unlabelled fragment (:data:`UNLABELLED`): a stray reflection or a piece of a marker's
+    path the software did not join, which a short trial of a labelled capture often holds."""
+    return bool(UNLABELLED.match(str(label).strip()))
 
 
 def _num(x):

@@ -165,6 +165,7 @@ def classify_small(small, sigma_mm: float) -> JointType:
                       f"{small.noise_factor:.3g} times the markers' own): a hinge or a ball joint cannot be told "
                       "apart; written spherical, the general type")
         return JointType("spherical", 0.5, ev)
+    wide = CIRCLE_FACTOR * max(sph, seen, 1e-9)      # (its confidence from there: 0.5 at the line, as beside it)
     ev["rule"] = (f"the markers move over a sphere, not a circle, in the parent's frame (sphere residual {sph:.3g} mm, "
                   f"circle {cir:.3g} mm > {CIRCLE_FACTOR:g} x {max(sph, seen, 1e-9):.3g} mm)")
-    return JointType("spherical", conf, ev)
+    return JointType("spherical", _phi(abs(math.log(cir / wide)) / math.log(CONFIDENCE_FACTOR)), ev)

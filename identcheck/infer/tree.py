@@ -105,7 +105,8 @@ class SmallFit:
     travel_mm : float
         How far the group's markers move in the segment's frame (largest range of a coordinate).
     reach_mm : float
-        The plausible fit's centre (or axis) distance from the segment's marker centroid.
+        The centre's distance from the segment's marker centroid, of the fit :attr:`residual_mm` gives (the sphere's
+        where plausible, else the circle's axis).
     n_frames : int
     reason : str
         Why neither fit counts ('' when one does).

@@ -191,3 +191,19 @@ def test_a_marker_seen_in_too_few_frames_to_group_leaves_the_skeleton_open(leg, 
     doc = json.loads(stdout)
     assert rc == 1 and not doc["ok"] and doc["grouping"]["too_rarely_seen"] == [marker], doc["grouping"]
     assert marker in doc["unassigned_markers"] and "seen in only" in doc["unassigned"][marker]
+
+
+def test_an_unlabelled_fragment_seen_briefly_leaves_the_skeleton_settled(leg, capsys):
+    """A stray trajectory the capture software left unlabelled (``*12``), seen in 3 frames: listed unassigned, and the
+    skeleton still settled (exit 0), where a labelled marker seen as little leaves it open (the test above)."""
+    case, path, d = leg
+    trial = Trial.from_file(path)
+    xyz = trial.as_array()
+    stray = np.full((len(xyz), 1, 3), np.nan)
+    stray[:3, 0] = xyz[:3, 0] + 300.0
+    fragment = d / "fragment.trc"
+    Trial(np.concatenate([xyz, stray], axis=1), trial.labels + ("*12",), trial.rate_hz).to_file(fragment)
+    rc, stdout, _ = run(["skeleton", fragment, "--out", d / "fragment.toml", "--json"], capsys)
+    doc = json.loads(stdout)
+    assert "*12" in doc["unassigned_markers"] and doc["grouping"]["too_rarely_seen"] == []
+    assert rc == 0 and doc["ok"], doc

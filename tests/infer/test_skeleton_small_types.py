@@ -35,6 +35,22 @@ def test_a_small_group_is_a_hinge_a_ball_or_not_told_apart_by_its_circle_against
     assert typed.evidence["noise_in_parent_mm"] == pytest.approx(sigma * factor)
 
 
+@settings(max_examples=40, deadline=None)
+@given(sphere=st.floats(0.05, 5.0), sigma=st.floats(0.05, 2.0), factor=st.floats(1.5, 20.0))
+def test_the_confidence_of_a_ball_joint_grows_from_one_half_past_the_noise_its_parent_sees(sphere, sigma, factor):
+    """Just past the line where a circle no longer fits within the parent-frame noise, a ball joint is called at about
+    the confidence 0.5 of 'cannot be told apart' just inside it, not at full confidence (it had jumped from 0.5 to
+    1.0 there), and the confidence grows with the circle's misfit."""
+    wide = CIRCLE_FACTOR * max(sphere, sigma * factor)
+    if wide <= CIRCLE_FACTOR * max(sphere, sigma) * 1.05:
+        return                                        # (no zone between the two lines)
+    inside = classify_small(SmallFit(sphere, wide * 0.999, 100.0, 300.0, 200, noise_factor=factor), sigma)
+    past = classify_small(SmallFit(sphere, wide * 1.001, 100.0, 300.0, 200, noise_factor=factor), sigma)
+    far = classify_small(SmallFit(sphere, wide * 5.0, 100.0, 300.0, 200, noise_factor=factor), sigma)
+    assert inside.type == past.type == far.type == "spherical"
+    assert inside.confidence == 0.5 and abs(past.confidence - 0.5) < 0.05 and far.confidence > past.confidence
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 @pytest.mark.parametrize("knee", ["revolute", "spherical"])
 def test_the_bundled_legs_knee_through_its_two_shank_markers_is_never_typed_wrong_with_confidence(tmp_path, seed, knee):

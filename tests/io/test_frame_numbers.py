@@ -25,6 +25,11 @@ def test_frames_keeps_the_files_numbering(first, n, a, b):
         with pytest.raises(InputError, match=f"{first} to {first + n - 1}") as info:
             t.frames(f"{start}:{end}")
         assert ("END before START" in str(info.value)) == (end < start), str(info.value)
+        for one_end in (f"{start}:", f":{end}"):                   # one end given: never "END before START"
+            try:
+                t.frames(one_end)
+            except InputError as exc:
+                assert "END before START" not in str(exc) and f"{first} to {first + n - 1}" in str(exc)
         return
     sub = t.frames(f"{start}:{end}")
     assert sub.first_frame == want[0] and sub.n_frames == len(want)

@@ -160,9 +160,10 @@ def test_a_knee_in_centimetres_labelled_mm_is_warned_about_by_fit_and_diagnose(t
 @settings(max_examples=30, deadline=None)
 @given(st.floats(150.0, 600.0), st.floats(4.6, 12.0), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
 def test_markers_spanning_several_times_their_declared_segment_are_refused(length, ratio, together, seed):
-    """A segment declared `length` mm long whose markers lie `ratio` times that apart (coordinates ten times too large
-    for their units): refused, naming the segment, its declared length and the span, however little the two markers
-    are seen together; declared long enough, the same markers pass."""
+    """A segment declared `length` mm long whose markers lie `ratio` times that apart, and over 1 m (coordinates ten
+    times too large for their units): refused, naming the segment, its declared length and the span, however little
+    the two markers are seen together; declared long enough, the same markers pass."""
+    ratio = max(ratio, 1.1 * 1000.0 / length)
     trial = _trial(ratio * length, together, seed)
     where = {m: "thigh" for m in "ABC"}
     with pytest.raises(InputError) as info:
@@ -178,6 +179,14 @@ def test_markers_spanning_several_times_their_declared_segment_are_refused(lengt
 def test_markers_spanning_about_their_declared_segment_pass(length, ratio, together, seed):
     _trial(ratio * length, together, seed).require_usable(["A", "B", "C"], {m: "thigh" for m in "ABC"},
                                                           {"thigh": length})
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(20.0, 200.0), st.floats(300.0, 900.0), st.floats(0.05, 1.0), st.integers(0, 2**32 - 1))
+def test_a_short_declared_length_does_not_refuse_markers_spread_under_a_metre(length, apart, together, seed):
+    """A length given for ``simulate`` short of the segment's marker spread (a pelvis declared 70 mm, its markers on
+    both iliac spines 300 mm apart) is no units error: under 1 m apart, the markers pass whatever it declares."""
+    _trial(apart, together, seed).require_usable(["A", "B", "C"], {m: "pelvis" for m in "ABC"}, {"pelvis": length})
 
 
 @settings(max_examples=40, deadline=None)
@@ -243,8 +252,8 @@ def test_a_leg_ten_times_too_large_is_warned_about_by_fit_and_diagnose_and_refus
 def test_most_pairs_within_a_millimetre_are_one_units_message_and_one_pair_is_a_label(n, seed, data):
     """`n` markers of a body in metres written as mm, `far` of them placed away (a stray marker in mm): while half the
     pairs or more lie within a millimetre, one message about units and none about two labels (43 of 45 such pairs had
-    been listed one by one as a marker exported under two labels); a single marker under two labels in a body in mm
-    is named as such, units never mentioned."""
+    been listed one by one as a marker exported under two labels); a marker in mm exported under two labels, or under
+    most of them, is named as such, units never mentioned."""
     rng = np.random.default_rng(seed)
     body = rng.normal(0.0, 200.0, (1, n, 3)) + rng.normal(0.0, 0.5, (40, n, 3)) + rng.normal(0.0, 300.0, (40, 1, 3))
     labels = [f"M{i}" for i in range(n)]
@@ -259,12 +268,13 @@ def test_most_pairs_within_a_millimetre_are_one_units_message_and_one_pair_is_a_
             trial.require_usable(labels)
         msg = str(info.value)
         assert "metres in a file that says mm" in msg and "two labels" not in msg, msg
-    twice = body.copy()
-    twice[:, 1] = twice[:, 0] + rng.normal(0.0, 0.05, (40, 3))
-    with pytest.raises(InputError) as info:
-        Trial(twice, labels, 100.0, source="mm.trc").require_usable(labels)
-    msg = str(info.value)
-    assert "'M0'" in msg and "'M1'" in msg and "two labels" in msg and "metres" not in msg, msg
+    for k in (2, n // 2 + 1):                         # one marker in mm exported under k labels, even most of them
+        twice = body.copy()
+        twice[:, 1:k] = twice[:, :1] + rng.normal(0.0, 0.05, (40, k - 1, 3))
+        with pytest.raises(InputError) as info:
+            Trial(twice, labels, 100.0, source="mm.trc").require_usable(labels)
+        msg = str(info.value)
+        assert "'M0'" in msg and "'M1'" in msg and "two labels" in msg and "metres" not in msg, msg
 
 
 def test_millimetres_labelled_cm_are_one_units_question_in_both_verbs(tmp_path):
