@@ -414,8 +414,9 @@ class Trial:
     def _overlong_segments(self, labels: Sequence[str], where: dict, declared: dict) -> list[str]:
         """A problem for each segment (`where`: label -> segment) two of whose markers among `labels` lie more than
         :data:`LONGEST_SEGMENT_MM` apart or, where the model declares the segment's length (`declared`: segment -> mm,
-        ``length_mm``), more than :data:`LONGEST_SHARE` times that and :data:`LONGEST_DECLARED_MM`: the median of the two markers' distance over the
-        frames where both are seen (at most :data:`SPAN_FRAMES` of them, evenly spread), naming the farthest pair."""
+        ``length_mm``), more than :data:`LONGEST_SHARE` times that and :data:`LONGEST_DECLARED_MM`: the median of the
+        two markers' distance over the frames where both are seen (at most :data:`SPAN_FRAMES` of them, evenly
+        spread), naming the farthest pair."""
         by_segment: dict = {}
         for lab in labels:
             if lab in where:

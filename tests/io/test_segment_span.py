@@ -279,8 +279,8 @@ def test_most_pairs_within_a_millimetre_are_one_units_message_and_one_pair_is_a_
 
 def test_millimetres_labelled_cm_are_one_units_question_in_both_verbs(tmp_path):
     """The bundled leg written in mm under a 'cm' units field (scaled so that no segment, read as cm, exceeds 3 m):
-    the reader asks whether the coordinates are in mm (its span over 5 m), and the model's span is not asked again: one `units` warning in ``fit``'s JSON and in
-    ``diagnose``'s, where both had carried two."""
+    the reader asks whether the coordinates are in mm (its span over 5 m), and the model's span is not asked again:
+    one `units` warning in ``fit``'s JSON and in ``diagnose``'s, where both had carried two."""
     from pathlib import Path
 
     from identcheck import api
