@@ -43,6 +43,8 @@ for their units, or a length written in the wrong unit: a shank declared 400 mm 
 foot declared 200 mm at 2.3 m, had been fitted (exit 1, no warning)."""
 
 LONGEST_DECLARED_MM = 1000.0
+"""The least a declared length lets a segment's markers lie apart (:data:`LONGEST_SHARE`): a short length given for
+``simulate`` does not refuse a trial whose markers spread under a metre."""
 
 SMALLEST_REACH_SHARE = 1 / 4
 """A segment the model declares L long (``length_mm``) has some marker, on it or on a segment within two joints of
