@@ -153,9 +153,9 @@ def _common_axis(X: np.ndarray) -> tuple:
     The direction is the least-variance direction of all markers' positions, each centred on its
     own mean (every marker moves in a plane normal to the hinge); each marker's circle centre in
     its plane then lies on the hinge: the point is their average weighted by radius² (a larger
-    circle fixes its centre better), moved onto the line along the direction. A marker whose path is
-    too straight for a circle (:func:`~identcheck.solve.minimal.circle` raises) is left out of the
-    average, unless every marker's is.
+    circle fixes its centre better), moved onto the line along the direction. A marker whose path
+    fixes no circle (:func:`~identcheck.solve.minimal.circle` raises) is left out of the average,
+    unless every marker's is.
     """
     centred = (X - X.mean(axis=0)).reshape(-1, 3)
     n = np.linalg.svd(centred, full_matrices=False)[2][2]
@@ -163,7 +163,7 @@ def _common_axis(X: np.ndarray) -> tuple:
     for i in range(X.shape[1]):
         try:
             c, _, r = circle(X[:, i]) if len(X) >= 3 else (X[:, i].mean(0), None, 0.0)
-        except DegenerateError as exc:          # a marker on a nearly straight path fixes no centre: it is left out
+        except DegenerateError as exc:          # a marker on a straight path fixes no centre: it is left out
             c, r, problem = X[:, i].mean(0), 0.0, exc
         pts.append(c - (c @ n) * n)
         wts.append(r * r)

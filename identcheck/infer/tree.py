@@ -53,7 +53,7 @@ from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
 from identcheck.infer.body_frames import STILL_DEG, is_drift, path_monotone, turn_deg
 from identcheck.solve.gamage_lasenby import sphere_centre
-from identcheck.solve.minimal import circle
+from identcheck.solve.minimal import circle_fit
 
 FLOOR_TRUST = 0.8
 """Share of the noise-only mean square (the floor) taken off each pair's before the tree is chosen. The floor scales
@@ -364,8 +364,8 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
     """Fit a one- or two-marker group as a ball joint (sphere) and as a hinge (circle) in a posed segment's frame.
 
     Sphere: one centre for the group's markers, each with its own radius
-    (:func:`identcheck.solve.gamage_lasenby.sphere_centre`); circle: each marker's own circle
-    (:func:`identcheck.solve.minimal.circle`), its residual the RMS of the radial and out-of-plane deviations.
+    (:func:`identcheck.solve.gamage_lasenby.sphere_centre`); circle: each marker's own least-squares circle
+    (:func:`identcheck.solve.minimal.circle_fit`), its residual the RMS of the radial and out-of-plane deviations.
     At most :data:`MAX_FIT_FRAMES` frames, evenly spread, are used.
 
     Parameters
@@ -405,7 +405,7 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
         try:
             res, reach = [], 0.0
             for i in range(X.shape[1]):
-                J, nrm, _ = circle(X[:, i])
+                J, nrm, _ = circle_fit(X[:, i])
                 J = J - ((J - X[:, i].mean(axis=0)) @ nrm) * nrm   # onto the mean plane (noisy arcs tilt it off)
                 w = X[:, i] - J
                 along = w @ nrm
