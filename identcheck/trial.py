@@ -357,8 +357,7 @@ class Trial:
             # error, not many labelling ones (metres labelled mm put a leg's 45 pairs 43 times within a millimetre,
             # and each had been listed as two labels of one marker, units never mentioned); one marker exported under
             # several labels, in mm, stays a labelling problem
-            how = "all" if len(pairs) == every else f"{len(pairs)} pairs of the"
-            span = float(np.nanmax(np.abs(self.select(present).as_array()))) if len(pairs) == every else span
+            how = "all" if len(pairs) == every else f"{len(pairs)} pairs of the"       # (all: `close` is every one)
             raise InputError(problems + [f"{how} {len(present)} markers of the model lie within {COINCIDENT_MM:g} mm "
                                          f"of each other in every frame (no coordinate beyond {span:.3g} mm): the "
                                          "coordinates look like metres in a file that says mm; fix its units field"],

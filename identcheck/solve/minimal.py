@@ -46,6 +46,17 @@ def _spherical_posed(parents, children) -> list:
     return [dist]
 
 
+def _best_plane(points) -> tuple:
+    """(points (n, 3), their mean, the rows of their principal directions (3, 3), the last the plane's normal), for
+    :func:`circle` and :func:`circle_fit`; DegenerateError when the points lie on a line."""
+    P = np.asarray(points, dtype=float)
+    c0 = P.mean(axis=0)
+    _, s, vt = np.linalg.svd(P - c0, full_matrices=False)
+    if s[1] <= 1e-9 * max(s[0], 1e-300):
+        raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
+    return P, c0, vt
+
+
 def circle(points) -> tuple:
     """Centre, unit normal and radius of the circle through ≥ 3 points (least squares beyond 3): exact through 3, and
     beyond them the algebraic fit by mediating planes (each point's equal distance from the centre less the first's),
@@ -57,12 +68,8 @@ def circle(points) -> tuple:
     but on a thigh posed along its own line (two markers and the hip) with one marker 30 ms late, ``diagnose`` then
     named an extra rotation of 61° before the delay, where from this start it names the delay alone: the whole-tree
     fit and its held-out calibrations rest on these starts, and a change of them needs a fresh validation."""
-    P = np.asarray(points, dtype=float)
-    c0 = P.mean(axis=0)
-    _, s, vt = np.linalg.svd(P - c0, full_matrices=False)
+    P, c0, vt = _best_plane(points)
     n = vt[2]
-    if s[1] <= 1e-9 * max(s[0], 1e-300):
-        raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
     # centre: in the plane, equidistant from all points (mediating planes, least squares)
     A = np.vstack([2 * (P[1:] - P[0]), n])
     rhs = np.concatenate([np.sum(P[1:] ** 2, axis=1) - np.sum(P[0] ** 2), [n @ c0]])
@@ -71,7 +78,7 @@ def circle(points) -> tuple:
 
 
 CIRCLE_STEPS = 50
-"""Gauss-Newton steps at most for a circle's geometric fit (:func:`circle`); a few suffice from the algebraic start."""
+"""Gauss-Newton steps at most for a circle's geometric fit (:func:`circle_fit`); a few suffice from the algebraic start."""
 CIRCLE_REACH = 100.0
 """A circle whose radius is more than this many times the extent of its points in their plane is a straight path
 read as an arc (an arc of half a degree): the least-squares circle of a nearly straight noisy path heads for a line
@@ -88,12 +95,8 @@ def circle_fit(points) -> tuple:
     What ``skeleton`` measures a hinge's fit by (:func:`identcheck.infer.tree.small_fit`): the algebraic fit
     (:func:`circle`) carries its first point's noise into every equation, and a 350 mm arc of 90° with 0.5 mm of noise
     left it residuals of 10-17 mm RMS where the least-squares circle leaves 0.5."""
-    P = np.asarray(points, dtype=float)
-    c0 = P.mean(axis=0)
-    _, s, vt = np.linalg.svd(P - c0, full_matrices=False)
+    P, c0, vt = _best_plane(points)
     n = vt[2]
-    if s[1] <= 1e-9 * max(s[0], 1e-300):
-        raise DegenerateError("the samples are collinear: no circle (the hinge did not turn)")
     e1, e2 = vt[0], vt[1]
     uv = np.stack([(P - c0) @ e1, (P - c0) @ e2], axis=1)                  # the points in their plane, about the mean
     A = np.column_stack([2.0 * uv, np.ones(len(uv))])
