@@ -28,7 +28,7 @@ from identcheck.bundle.anatomical_angles import ROM_SHARE, motion_ranges
 from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
 from identcheck.bundle.gauge import turning_blocks
-from identcheck.bundle.model import null_count
+from identcheck.bundle.model import Terms, null_count
 from identcheck.bundle.honest import assess, joint_answer
 from identcheck.bundle.start import better_start, start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
@@ -892,6 +892,20 @@ trial 74 (varus/valgus play peaking at 6.3°), every thigh distance held the gen
 the shank's three were 0.5-1.4 mm short of it at ±0.4-0.5 mm."""
 
 
+def with_choices_free(ctx: Context, h: Hypothesis, progress=None) -> Hypothesis:
+    """`h` refitted to convergence with what its effects fixed by a discrete choice left free
+    (:meth:`identcheck.effects.base.Effect.judged_free`: a delay adopted as a whole number of frames), so that the
+    joints judged from it carry that choice's uncertainty and sit where its continuous best puts them; `h` itself when
+    its effects fixed nothing so."""
+    free = [t for p in h.effects if getattr(p, "effect", None) in EFFECTS
+            for t in EFFECTS[p.effect].judged_free(ctx, h, p)]
+    if not free:
+        return h
+    if progress:
+        progress("refitting the final model with the delays' fractions of a frame free")
+    return h.refit(terms=h.terms + Terms(world=free)).converged(progress)
+
+
 def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) -> dict:
     """Each joint as ``fit`` reports it, from the final model and by fit's rules (one estimator, one set of
     rules: :func:`identcheck.bundle.honest.assess`): marker distances with 95 % intervals from the sandwich
@@ -902,6 +916,7 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) 
     `progress` hears of the profiles and bootstrap refits, at most once a second. The model error counts the
     motions the effects fit as the adopted `steps` read them and as the effects the data cannot tell from them would
     (:func:`equivalent_readings`)."""
+    h = with_choices_free(ctx, h, progress)
     ch = h.chain
     if progress:
         progress("judging the joints of the model with the effects (covariance, intervals)")

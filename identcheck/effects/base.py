@@ -133,6 +133,13 @@ class Effect:
         fits no motion with the angles)."""
         return []
 
+    def judged_free(self, ctx, hyp, proposal: Proposal) -> list:
+        """World terms (columns, field (F, m, 3)) for what this effect, as hypothesis `hyp` holds it, fixed by a
+        discrete choice that the joints' judgement must leave free: the joints' intervals then hold that choice's
+        uncertainty. None by default: an effect's fitted sizes are in its terms already, and a label swap or a sample
+        set aside has no continuous remainder."""
+        return []
+
     def scale_sd(self, proposal: Proposal, hyp) -> float:
         """The relative standard deviation this effect, as hypothesis `hyp` fits it, leaves on every length the trial
         measures, which no fit can remove (a distortion of the capture volume says its calibration is off, and the

@@ -529,3 +529,52 @@ def test_a_delays_screen_then_its_full_fit_are_the_full_fit_alone(seed, frames):
     assert alone.where == screened.where
     assert np.array_equal(direct.fit.pred, after.fit.pred, equal_nan=True) and direct.rss == after.rss
     assert direct.extra_params == after.extra_params and "newton" not in screened.payload
+
+
+@settings(max_examples=3, deadline=None)
+@given(st.integers(0, 2**16), st.integers(1, 3), st.floats(0.2, 0.45), st.sampled_from([-1.0, 1.0]))
+def test_a_delay_adopted_in_whole_frames_leaves_its_fraction_free_for_the_joints(seed, frames, fraction, side):
+    """The shank late by a whole number of frames and a fraction (0.2-0.45 frame; 0.6 mm white noise), the delay
+    adopted at the whole frame on either side: the joints are judged from a refit that fits the fraction (within
+    0.1 frame of the truth), and the knee's intervals hold the marker distances a fit to the data realigned by the
+    true delay gives (at the whole frame the knee moves by millimetres)."""
+    import identcheck.effects.time_offset as time_offset
+    from identcheck.diagnose.workflow import joint_report, marker_distances, start, with_choices_free
+    from identcheck.effects.registry import EFFECTS
+
+    model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=600, noise_mm=0.0, seed=seed)
+    xyz = sim.trial.as_array().copy()
+    cols = [sim.trial.labels.index(m) for m in model.segments["shank"].markers]
+    rate = sim.trial.rate_hz
+    lag = frames + fraction
+    xyz[:, cols] = shifted(xyz[:, cols], rate, -lag / rate, extrapolate=True)
+    xyz += np.random.default_rng(seed).normal(0, 0.6, xyz.shape)
+    ctx, h = start(model, sim.trial.replace(xyz=xyz))
+    eff = EFFECTS["time_offset"]
+
+    def adopted_at(whole: float):
+        prop = next(p for p in eff.propose(ctx, h) if p.where["segment"] == "shank" and "markers" not in p.where)
+        prop.payload["tau"] = whole / rate
+        steps, time_offset.NEWTON_STEPS, walk = time_offset.NEWTON_STEPS, 0, time_offset.best_whole_frame
+        time_offset.best_whole_frame = lambda scored, start: (scored(start[0]), start[0])[1]   # kept at that frame
+        try:
+            return eff.apply(ctx, h, prop).converged()
+        finally:
+            time_offset.NEWTON_STEPS, time_offset.best_whole_frame = steps, walk
+
+    whole = float(np.floor(lag) if side < 0 else np.ceil(lag))
+    late = adopted_at(whole)
+    assert late.effects[-1].where["delay_ms"] == round(1000 * whole / rate, 2)
+    freed = with_choices_free(ctx, late)
+    refined = whole - float(freed.fit.state.term_params[-1][0]) * rate
+    assert abs(refined - lag) < 0.1
+    data = xyz.copy()
+    data[:, cols] = shifted(xyz[:, cols], rate, lag / rate)
+    lost = ~np.isfinite(data).all(axis=2)
+    aligned = h.refit_corrected(ctx, data, np.where(lost, 0.0, h.weights)).converged()
+    ideal = {m: d for m, (d, _sd) in marker_distances(ctx, aligned)["knee"].items()}
+    knee = joint_report(ctx, late)["knee"]
+    for m, d in ideal.items():
+        lo, hi = knee["marker_distances_ci95"][m]
+        assert lo <= d and (hi is None or d <= hi), (m, d, lo, hi)
