@@ -13,7 +13,7 @@ import numpy as np
 from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
 from identcheck.bundle.starts import candidates, start_combinations
 from identcheck.errors import DegenerateError, InputError
-from identcheck.estimate.closed_forms import fit_model
+from identcheck.estimate.closed_forms import fit_model, not_identifiable
 from identcheck.estimate.joint import start_stride
 from identcheck.geometry.poses import farthest_pair, poses_segment, refine_local, segment_poses
 from identcheck.skeleton import Skeleton
@@ -169,7 +169,15 @@ def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
     if any(j not in joints for j in chain.joints):
         combos = start_combinations(chain, fitted, lambda fixed: fit_model(model, trial, fixed=fixed)[0], data)[0]
         joints = combos[0] if combos else joints
-    return state_from_joints(model, chain, data, joints)
+    try:
+        return state_from_joints(model, chain, data, joints)
+    except DegenerateError as exc:
+        # the segment no points pose hangs from a joint whose case no motion identifies: say that (``fit``'s answer
+        # for the joint), as ``not_identifiable`` = (joint, why), for a caller that can leave the joint out
+        above = model.parent_joint(exc.segment) if exc.segment in model.segments else None
+        if above is not None and fitted[above.name][0] is None and "reason" not in fitted[above.name][1]:
+            exc.not_identifiable = (above.name, not_identifiable(fitted[above.name][1]))
+        raise
 
 
 def start_state(model, chain: Skeleton, data: np.ndarray, rate_hz: float, source: str = "<array>"):

@@ -296,9 +296,11 @@ def _naming(files: str, call, *args):
 class Unposed(Exception):
     """The rigid fit cannot start because a segment below `joint` (its child) has no markers and its joints do not pose
     it: they lend fewer than three points (a foot without markers), or cannot be placed without its markers (a shank
-    between two hinges): the model's plan, not the trial. :func:`diagnose` leaves that joint and everything hanging
-    from it out, as ``fit`` does, and says `why`. (A segment with markers the trial cannot pose or move, a hinge that
-    never turns in a static trial, stays a degenerate answer, as documented.)"""
+    between two hinges); or its markers and the joints' points are too few because `joint` is a case no motion
+    identifies (a ball knee on the hip centre and one thigh marker, one shank marker: spherical (2,1)): the model's
+    plan, not the trial. :func:`diagnose` leaves that joint and everything hanging from it out, as ``fit`` does, and
+    says `why`. (A segment with markers the trial cannot pose or move, a hinge that never turns in a static trial,
+    stays a degenerate answer, as documented.)"""
 
     def __init__(self, joint: str, why: str):
         super().__init__(why)
@@ -341,6 +343,14 @@ def start_leaving_out(model, trial, progress=None) -> tuple[Context, Hypothesis,
             model = smaller
 
 
+def not_moving(data: np.ndarray) -> bool:
+    """Whether every marker of `data` (F, M, 3) is where it was in every frame it is seen: a frozen or single-pose
+    export, which ``fit`` answers as degenerate data (no motion), not a trial without noise."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)         # (a marker never seen: all-NaN)
+        return bool(np.all(np.nan_to_num(np.nanmax(data, axis=0) - np.nanmin(data, axis=0)) == 0.0))
+
+
 def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     """Noise floor and the rigid-joint fit of `trial` (a subject prefix taken off its labels first, with a warning:
     :meth:`identcheck.trial.Trial.unprefixed`)."""
@@ -357,6 +367,9 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     seen = np.all(np.isfinite(data), axis=2)
     files = f"{trial.source} (model {model.source})"
     noise = _naming(files, noise_floor, data, model.markers, {s: model.segments[s].markers for s in model.segments})
+    if noise.sigma_mm <= 0 and not_moving(data):
+        raise DegenerateError(f"{trial.source}: every frame is the same: no marker moves, so no joint turns and none "
+                              "can be located; record the joints' functional movement")
     if noise.sigma_mm <= 0:
         raise InputError(["the distances within every segment are exactly constant: no measurement noise to "
                           "scale the gap against (a noise-free synthetic trial?)"], source=trial.source)
@@ -382,6 +395,8 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "
                 "segment is posed from it; give it markers"], source=model.source) from None
+        if getattr(exc, "not_identifiable", None):     # a segment with markers below a joint no motion identifies
+            raise Unposed(*exc.not_identifiable) from None
         raise
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)

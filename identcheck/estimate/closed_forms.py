@@ -166,6 +166,13 @@ def fit_model(model, trial, progress=None, fixed: dict | None = None) -> dict:
     return {n: done[n] for n in model.joint_order}, points
 
 
+def not_identifiable(info: dict) -> str:
+    """Why a joint `fit_model` left without an estimate and without a reason of its data (its ``info``: case and
+    markers) has none: its case is not identifiable from those markers, whatever the motion (the table's answer)."""
+    return (f"not identifiable: {info['case']} with markers {info['parent_markers']} | {info['child_markers']} "
+            "(see `identcheck table`); add markers")
+
+
 def _sphere_rms(p: np.ndarray) -> float:
     """RMS distance of points (N, 3) from their least-squares sphere (algebraic fit), mm."""
     p = p[np.all(np.isfinite(p), axis=1)]

@@ -6,7 +6,7 @@ import logging
 import math
 
 from identcheck.errors import InputError
-from identcheck.estimate.closed_forms import fit_model
+from identcheck.estimate.closed_forms import fit_model, not_identifiable
 from identcheck.estimate.screen_findings import with_screen_findings
 from identcheck.io.model import refuse_exported_points
 
@@ -28,9 +28,7 @@ def report(model, fitted: dict, points: dict) -> dict:
         if est is None:
             out[name] = {"type": jt.type, "case": info["case"], "unique": False, "identifiable": "reason" in info,
                          "marker_distances": {}, "alternatives": [], "rms_residual": None, "uncertainty_mm": None,
-                         "excitation": {"ok": False, "reason": info.get("reason") or (
-                             f"not identifiable: {info['case']} with markers {info['parent_markers']} | "
-                             f"{info['child_markers']} (see `identcheck table`); add markers")},
+                         "excitation": {"ok": False, "reason": info.get("reason") or not_identifiable(info)},
                          "estimator": None, "markers_used": info}
             continue
         dist = lambda e: {m: _num(e.distance(x)) for m, x in adjacent.items()}  # noqa: E731

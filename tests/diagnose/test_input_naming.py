@@ -56,3 +56,20 @@ def test_diagnose_keeps_what_it_warned_in_its_json_whatever_the_filters_and_on_d
     assert cli.main(["diagnose", str(ROOT / "leg.toml"), str(still), "--json"]) == 1
     doc = json.loads(capsys.readouterr().out)
     assert "degenerate" in doc and "subject_prefix" in [w["kind"] for w in doc["warnings"]], doc
+
+
+@pytest.mark.parametrize("verb", ["fit", "diagnose"])
+def test_a_trial_frozen_in_one_pose_is_degenerate_data_to_both_verbs(tmp_path, capsys, verb):
+    """Every frame the same pose (a frozen export): both verbs answer degenerate data, exit 1 (diagnose had refused
+    it as bad input, exit 2, calling it a noise-free trial), diagnose naming the file and saying why."""
+    from identcheck import cli
+
+    src = tmp_path / "leg.trc"
+    api.simulate(ROOT / "leg.toml", src, seed=4, n_frames=80, noise_mm=0.5)
+    trial = read_trc(src)
+    frozen = tmp_path / "frozen.trc"
+    write_trc(frozen, np.repeat(trial.xyz[:1], 80, axis=0), trial.labels, trial.rate_hz)
+    capsys.readouterr()
+    assert cli.main([verb, str(ROOT / "leg.toml"), str(frozen)]) == 1
+    err = capsys.readouterr().err
+    assert verb == "fit" or ("frozen.trc" in err and "every frame is the same" in err), err

@@ -137,3 +137,34 @@ def test_a_markerless_shank_between_two_hinges_is_left_out_as_fit_leaves_it(tmp_
         assert doc["joints"][joint]["practical"]["reason"].startswith("left out")
     assert "segments.shank_r.markers: none" in doc["joints"]["knee_r"]["practical"]["reason"]
     assert doc["joints"]["hip_r"]["practical"]["verdict"] == "determined"
+
+
+@pytest.mark.parametrize("seed", [1, 6])
+def test_a_joint_no_motion_identifies_is_left_out_with_what_hangs_below_and_the_rest_diagnosed(tmp_path, capsys,
+                                                                                               examples, seed):
+    """One marker on each segment below a three-marker pelvis, every joint a ball: the knee is spherical (2,1) on the
+    hip centre and the thigh's marker, which no motion identifies (``fit`` says so); ``diagnose`` had stopped on
+    degenerate data, blaming the trial for a segment no points pose. It leaves the knee and the ankle below it out
+    with ``fit``'s reason and diagnoses the hip."""
+    model = tmp_path / "chain_of_ones.toml"
+    model.write_text('units = "mm"\n[segments.pelvis]\nmarkers = ["LASI", "RASI", "SACR"]\n'
+                     '[segments.thigh_r]\nmarkers = ["RKNE"]\n[segments.shank_r]\nmarkers = ["RANK"]\n'
+                     '[segments.foot_r]\nmarkers = ["RTOE"]\n'
+                     + "".join(f'[joints.{j}]\ntype = "spherical"\nparent = "{p}"\nchild = "{c}"\n' for j, p, c in [
+                         ("hip_r", "pelvis", "thigh_r"), ("knee_r", "thigh_r", "shank_r"),
+                         ("ankle_r", "shank_r", "foot_r")]))
+    trial = tmp_path / "leg.trc"
+    assert cli.main(["simulate", str(examples / "leg.toml"), "--out", str(trial), "--frames", "300",
+                     "--noise-mm", "0.5", "--seed", str(seed)]) == 0
+    capsys.readouterr()
+    assert cli.main(["fit", str(model), str(trial), "--json"]) in (0, 1)
+    fitted = json.loads(capsys.readouterr().out)["joints"]
+    assert not fitted["knee_r"]["identifiable"] and "not identifiable" in fitted["knee_r"]["excitation"]["reason"]
+    assert cli.main(["diagnose", str(model), str(trial), "--json"]) in (0, 1)
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert "degenerate" not in doc and "knee_r left out" in out.err
+    knee, ankle = doc["joints"]["knee_r"], doc["joints"]["ankle_r"]
+    assert knee["practical"]["reason"] == "left out: " + fitted["knee_r"]["excitation"]["reason"]
+    assert ankle["practical"]["verdict"] == "undetermined" and "hangs below knee_r" in ankle["practical"]["reason"]
+    assert doc["joints"]["hip_r"]["marker_distances"].keys() == fitted["hip_r"]["marker_distances"].keys()
