@@ -59,11 +59,15 @@ class InputError(ValueError):
 class DegenerateError(ValueError):
     """The samples do not determine the answer (singular system, coincident markers, α = 0, ...).
 
-    ``segment``, when given, names the model segment the samples fail to pose or move (see :class:`InputError`)."""
+    ``segment``, when given, names the model segment the samples fail to pose or move (see :class:`InputError`).
+    ``leave_out``, when given, says why a whole-tree fit may leave out the joint above that segment, with every
+    joint below it, and go on with the rest (as ``fit`` does) rather than stop: the segment's markers are seen in
+    too few frames, or the joint above it is a case no motion identifies."""
 
-    def __init__(self, *args, segment: str | None = None):
+    def __init__(self, *args, segment: str | None = None, leave_out: str | None = None):
         super().__init__(*args)
         self.segment = segment
+        self.leave_out = leave_out
 
 
 class DerivationError(RuntimeError):

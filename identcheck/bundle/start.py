@@ -46,7 +46,11 @@ def virtual_frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         except ValueError as exc:
             raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
         if poses.valid.sum() < 3:
-            raise DegenerateError(f"segment {seg!r}: fewer than 3 frames show three of its points", segment=seg)
+            seen = np.isfinite(data[:, idx]).all(axis=2).sum(axis=0)
+            rare = [chain.labels[c] for c, n in zip(idx, seen) if n < len(data) / 2]
+            why = f"segment {seg!r}: fewer than 3 frames show three of its points" + (
+                f" (seen in fewer than half the frames: {', '.join(rare)})" if rare else "")
+            raise DegenerateError(why, segment=seg, leave_out=why)
         out[seg] = filled_poses(pts, local, poses, n_markers=len(idx))
     return out
 
@@ -173,10 +177,10 @@ def closed_form_state(model, trial, chain: Skeleton, data: np.ndarray):
         return state_from_joints(model, chain, data, joints)
     except DegenerateError as exc:
         # the segment no points pose hangs from a joint whose case no motion identifies: say that (``fit``'s answer
-        # for the joint), as ``not_identifiable`` = (joint, why), for a caller that can leave the joint out
+        # for the joint), for a caller that can leave the joint out (DegenerateError.leave_out)
         above = model.parent_joint(exc.segment) if exc.segment in model.segments else None
         if above is not None and fitted[above.name][0] is None and "reason" not in fitted[above.name][1]:
-            exc.not_identifiable = (above.name, not_identifiable(fitted[above.name][1]))
+            exc.leave_out = not_identifiable(fitted[above.name][1])
         raise
 
 

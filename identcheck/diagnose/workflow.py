@@ -297,10 +297,11 @@ class Unposed(Exception):
     """The rigid fit cannot start because a segment below `joint` (its child) has no markers and its joints do not pose
     it: they lend fewer than three points (a foot without markers), or cannot be placed without its markers (a shank
     between two hinges); or its markers and the joints' points are too few because `joint` is a case no motion
-    identifies (a ball knee on the hip centre and one thigh marker, one shank marker: spherical (2,1)): the model's
-    plan, not the trial. :func:`diagnose` leaves that joint and everything hanging from it out, as ``fit`` does, and
-    says `why`. (A segment with markers the trial cannot pose or move, a hinge that never turns in a static trial,
-    stays a degenerate answer, as documented.)"""
+    identifies (a ball knee on the hip centre and one thigh marker, one shank marker: spherical (2,1)); or its
+    markers are seen together in fewer than three frames (a foot marker seen once). :func:`diagnose` leaves that joint
+    and everything hanging from it out, as ``fit`` does, and says `why`
+    (:attr:`identcheck.errors.DegenerateError.leave_out`). (Markers seen but not moving, a hinge that never turns in
+    a static trial, stay a degenerate answer, as documented.)"""
 
     def __init__(self, joint: str, why: str):
         super().__init__(why)
@@ -395,8 +396,8 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
             raise InputError([
                 f"segments.{seg}.markers: none, and no joint points pose the segment, the model's root: every other "
                 "segment is posed from it; give it markers"], source=model.source) from None
-        if getattr(exc, "not_identifiable", None):     # a segment with markers below a joint no motion identifies
-            raise Unposed(*exc.not_identifiable) from None
+        if exc.leave_out and above is not None:     # markers seen too rarely, or a joint above no motion identifies
+            raise Unposed(above.name, exc.leave_out) from None
         raise
     weights = seen.astype(float)
     fit = restarted_stuck_frames(fit_chain(chain, data, state, weights=weights, max_iter=BASE_ITER), data, weights)

@@ -168,3 +168,36 @@ def test_a_joint_no_motion_identifies_is_left_out_with_what_hangs_below_and_the_
     assert knee["practical"]["reason"] == "left out: " + fitted["knee_r"]["excitation"]["reason"]
     assert ankle["practical"]["verdict"] == "undetermined" and "hangs below knee_r" in ankle["practical"]["reason"]
     assert doc["joints"]["hip_r"]["marker_distances"].keys() == fitted["hip_r"]["marker_distances"].keys()
+
+
+@pytest.mark.parametrize("marker, joint", [("RTIB", "knee_r"), ("RHEE", "ankle_r")])
+def test_a_segment_seen_in_too_few_frames_is_left_out_as_fit_leaves_it(tmp_path, capsys, examples, marker, joint):
+    """One shank (foot) marker seen in a single frame: no start poses the segment. ``fit`` leaves the joint above it
+    and what hangs below out of its whole-tree fit and answers the rest; ``diagnose`` had stopped on degenerate data
+    for the whole model. It now leaves the same joints out, naming the marker, and diagnoses the rest."""
+    from identcheck.io.trc import read_trc, write_trc
+
+    trial = tmp_path / "leg.trc"
+    assert cli.main(["simulate", str(examples / "leg.toml"), "--out", str(trial), "--frames", "200",
+                     "--noise-mm", "0.5", "--seed", "3"]) == 0
+    data = read_trc(trial)
+    xyz = data.xyz.copy()
+    xyz[1:, data.labels.index(marker)] = np.nan
+    rare = tmp_path / "rare.trc"
+    write_trc(rare, xyz, data.labels, data.rate_hz)
+    capsys.readouterr()
+    assert cli.main(["fit", str(examples / "leg.toml"), str(rare), "--json"]) == 1
+    fitted = json.loads(capsys.readouterr().out)["joints"]
+    assert cli.main(["diagnose", str(examples / "leg.toml"), str(rare), "--json"]) in (0, 1)
+    out = capsys.readouterr()
+    doc = json.loads(out.out)
+    assert "degenerate" not in doc and f"{joint} left out" in out.err
+    below = ["knee_r", "ankle_r"][["knee_r", "ankle_r"].index(joint):]
+    for j in doc["joints"]:
+        verdict = doc["joints"][j]["practical"]["verdict"]
+        if j in below:
+            assert verdict == "undetermined" and fitted[j]["practical"]["verdict"] == "undetermined"
+            assert "left out" in doc["joints"][j]["practical"]["reason"] and marker in doc["joints"][j]["practical"][
+                "reason"]
+        else:
+            assert doc["joints"][j]["marker_distances"], j
