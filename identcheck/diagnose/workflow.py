@@ -567,6 +567,7 @@ def diagnose(model, trial, progress=None, max_steps: int = MAX_STEPS) -> Diagnos
     if progress:
         progress("fitting the final model to convergence")
     h = h.converged(progress)               # the model reported and judged is a maximum of the likelihood, or says not
+    h = with_choices_free(ctx, h, progress)  # (and a delay's fraction of a frame is fitted: the joints move with it)
     if steps:
         steps[-1] = replace(steps[-1], gap_after=h.gap(ctx))
     kept = {place(st.name, st.where) for st in steps}
@@ -912,7 +913,9 @@ def with_choices_free(ctx: Context, h: Hypothesis, progress=None) -> Hypothesis:
     """`h` refitted to convergence with what its effects fixed by a discrete choice left free
     (:meth:`identcheck.effects.base.Effect.judged_free`: a delay adopted as a whole number of frames), so that the
     joints judged from it carry that choice's uncertainty and sit where its continuous best puts them; `h` itself when
-    its effects fixed nothing so."""
+    its effects fixed nothing so. :func:`diagnose`'s final model (what it reports, judges, draws and exports).
+    Its parameters count the freed ones on top of the effects' own charges (one a delay: the criterion has chosen by
+    then, and the noise floor moves by a part in ten thousand)."""
     free = [t for p in h.effects if getattr(p, "effect", None) in EFFECTS
             for t in EFFECTS[p.effect].judged_free(ctx, h, p)]
     if not free:
@@ -932,7 +935,6 @@ def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) 
     `progress` hears of the profiles and bootstrap refits, at most once a second. The model error counts the
     motions the effects fit as the adopted `steps` read them and as the effects the data cannot tell from them would
     (:func:`equivalent_readings`)."""
-    h = with_choices_free(ctx, h, progress)
     ch = h.chain
     if progress:
         progress("judging the joints of the model with the effects (covariance, intervals)")

@@ -574,7 +574,7 @@ def test_a_delay_adopted_in_whole_frames_leaves_its_fraction_free_for_the_joints
     lost = ~np.isfinite(data).all(axis=2)
     aligned = h.refit_corrected(ctx, data, np.where(lost, 0.0, h.weights)).converged()
     ideal = {m: d for m, (d, _sd) in marker_distances(ctx, aligned)["knee"].items()}
-    knee = joint_report(ctx, late)["knee"]
+    knee = joint_report(ctx, freed)["knee"]
     for m, d in ideal.items():
         lo, hi = knee["marker_distances_ci95"][m]
         assert lo <= d and (hi is None or d <= hi), (m, d, lo, hi)
