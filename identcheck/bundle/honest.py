@@ -209,7 +209,7 @@ def skin_unseen(chain: Skeleton, joint: str) -> bool:
     return any(len(chain.seg_markers[s]) < 3 for s in (chain.parent[joint], chain.child[joint]))
 
 
-def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=None, profile_all: bool = False) -> dict:
+def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=None) -> dict:
     """95 % intervals for the marker distances of the joints the quadratic interval cannot describe:
     those with a direction the data leave free, or an interval wider than ±TOLERANCE_MM (``undetermined``).
 
@@ -227,9 +227,6 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
       all measure Δχ² from a minimum that is not one along it), and its profiles not yet begun are not run
       (held-out draw 55, trial 0: a knee turning about three axes whose fit still crept by 0.02 χ² an iteration;
       each of its seven profiles found a fit 1-3 χ² better, 3-13 s apiece).
-    `profile_all`: every joint's distances are treated as wide (profiled, or unbounded by the rules above), for a
-    fit whose quadratic intervals are not trusted (``fit``: a gap the noise does not explain and no residual following
-    the angles to say why; :func:`identcheck.fit.whole_tree.fit_tree`).
     A fit that did not converge (:func:`identcheck.bundle.converge.converged_fit`) is no maximum of the likelihood:
     every distance is ``unbounded`` and nothing is profiled (its profiles had met fits better than the "minimum",
     a minute of refits to learn that).
@@ -245,7 +242,7 @@ def honest_intervals(best: Minimum, data, scale: float, progress=None, weights=N
         dist = best.distances[j]
         free = (free_markers(cov, grads[j]) or single_axis(chain, fit, cov.sigma_mm, j)[0]
                 or hardly_moved(chain, fit, cov.sigma_mm, j) is not None)
-        wide = profile_all or any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
+        wide = any(Z95 * se > TOLERANCE_MM for _, se in dist.values())
         misfit = j in best.model_error
         if not (free or wide or misfit):
             continue

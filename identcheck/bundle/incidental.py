@@ -25,7 +25,7 @@ MAX_RIVALS = 4
 
 
 def without_incidental_rolls(best: Minimum, others: list, data, model_error: dict, scale: float,
-                             weights=None, profile_all: bool = False) -> Minimum:
+                             weights=None) -> Minimum:
     """The other joints refitted without the markers below each joint that hangs from a segment not posed by
     itself (:func:`posed_by_itself`).
 
@@ -44,10 +44,7 @@ def without_incidental_rolls(best: Minimum, others: list, data, model_error: dic
     those below the cuts beneath it (:func:`refit_groups`): on a chain of 3 | 1 | 3 | 1 | 1 markers (balls, then a
     hinge) the third ball, below the one-marker second segment, kept the roll the hinge's one child marker lends the
     one-marker fourth segment, and its four distances were 0.2-1.4 mm off at ±0.4 mm (6 standard errors; fitted
-    without that marker, ±0.8 mm around the truth).
-
-    `profile_all`: the refitted joints' distances are profiled whatever their quadratic intervals
-    (:func:`identcheck.bundle.honest.honest_intervals`), as the whole fit's were."""
+    without that marker, ±0.8 mm around the truth)."""
     chain = best.fit.chain
     cut = [j for j in chain.joints if not posed_by_itself(chain, chain.parent[j], best.fit)]
     if not cut:
@@ -64,7 +61,7 @@ def without_incidental_rolls(best: Minimum, others: list, data, model_error: dic
         for c in left_out:
             w[:, chain.downstream[c]] = 0.0
         refitted, found_rivals, errors, misfit, found = _upstream_refit(best, others, data, model_error, scale, w,
-                                                                        keep, profile_all)
+                                                                        keep)
         for j in keep:
             dist[j] = refitted.distances[j]
             if j in found:
@@ -102,7 +99,7 @@ def refit_groups(chain: Skeleton, cut: list, unbounded: set) -> list:
 
 
 def _upstream_refit(best: Minimum, others: list, data, model_error: dict, scale: float, w: np.ndarray,
-                    keep: list, profile_all: bool = False) -> tuple:
+                    keep: list) -> tuple:
     """The refit of :func:`without_incidental_rolls` for the joints `keep`, the samples weighted `w`: (the refit
     as a Minimum; its rivals, [(Minimum, Δχ², p)] among the first :data:`MAX_RIVALS` other minima refitted alike; the
     model errors; the markers' misfit judged on it; the honest intervals of `keep` where the quadratic one is not
@@ -134,5 +131,5 @@ def _upstream_refit(best: Minimum, others: list, data, model_error: dict, scale:
     # the joints judged by the same rules on the fit they now come from: a wide one's quadratic interval from this
     # refit is as untrustworthy as the whole fit's was (minimal legs in gait: hips 100 mm off at ±10 mm)
     judged = replace(upstream, misfit=misfit, model_error={j: errors[j] for j in keep if j in errors})
-    redone = honest_intervals(judged, data, scale, weights=w, profile_all=profile_all)
+    redone = honest_intervals(judged, data, scale, weights=w)
     return upstream, rivals, errors, misfit, {j: redone[j] for j in keep if j in redone}

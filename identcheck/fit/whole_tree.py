@@ -166,12 +166,8 @@ def _fit_once(model, trial, closed_form: dict, progress, restart, starts_budget_
     best = with_misfit(best, data)
     model_error = best.model_error
     others = [(with_model_error(m, model_error), delta, p) for m, delta, p in others]
-    # a gap the noise does not explain: the minimum may not be the likelihood's (a start that missed its basin) or
-    # the model may miss something, so no quadratic interval is trusted: the distances of every joint whose intervals
-    # no model error widens already are profiled, and a profile that meets a lower fit claims no bound
-    unexplained = gap_test(best.fit, model, trial) is not None
-    best = replace(best, intervals=honest_intervals(best, data, scale, progress, profile_all=unexplained))
-    best = without_incidental_rolls(best, others, data, model_error, scale, profile_all=unexplained)
+    best = replace(best, intervals=honest_intervals(best, data, scale, progress))
+    best = without_incidental_rolls(best, others, data, model_error, scale)
     best = with_sampling_spread(best, data, trial.rate_hz, progress)
     return TreeFit(best, others, n_starts=tried, starts_left_out=left_out, one_joint_starts=singles,
                    one_joint_left_out=singles_cut), set()
@@ -293,29 +289,6 @@ def misfit_warnings(tree: TreeFit, model, trial) -> list:
              "markers": [m.marker for m in moving], "joints": joints, "kind": "model_misfit"}]
 
 
-def gap_test(fit, model, trial) -> tuple | None:
-    """(context, test) when the whole-tree `fit` leaves more than the measurement noise explains, by ``diagnose``'s
-    stated test (:func:`identcheck.bundle.hypothesis.consistency`: the prewhitened residual against a noise floor
-    estimated without the joint model, from the distances within segments); None when it does not, or when no segment
-    has two markers to estimate the noise from."""
-    from identcheck.bundle.hypothesis import Context, Hypothesis, consistency
-    from identcheck.estimate.noise import noise_floor
-
-    chain = fit.chain
-    data = trial.select(chain.labels).as_array()
-    try:
-        noise = noise_floor(data, chain.labels, {s: [chain.labels[i] for i in chain.seg_markers[s]]
-                                                 for s in chain.segments})
-    except (InputError, DegenerateError, ValueError):
-        return None
-    seen = np.isfinite(data).all(axis=2)
-    if not noise.sigma_mm > 0 or not seen.any():
-        return None
-    ctx = Context(model, chain.labels, trial.rate_hz, data, noise, int(seen.sum()), trial.source)
-    test = consistency(ctx, Hypothesis(chain, fit.terms, data, seen.astype(float), fit))
-    return None if test["consistent"] else (ctx, test)
-
-
 def gap_warnings(tree: TreeFit, model, trial) -> list:
     """An ``unexplained_gap`` warning (dict with ``message``, ``kind``, ``ratio``, ``limit``) when the whole-tree fit
     leaves more than the measurement noise explains, by ``diagnose``'s stated test
@@ -325,13 +298,25 @@ def gap_warnings(tree: TreeFit, model, trial) -> list:
     drive (a knee turning a few degrees about axes across its hinge, in a smooth random profile, read by the fit's
     noise model as correlated noise: an independent check's knees were reported determined at ±1-3 mm with no
     warning, exit 0, the residual twice the noise)."""
+    from identcheck.bundle.hypothesis import Context, Hypothesis, consistency
+    from identcheck.estimate.noise import noise_floor
+
     fit = tree.best.fit
-    found = gap_test(fit, model, trial)
-    if found is None:
+    chain = fit.chain
+    data = trial.select(chain.labels).as_array()
+    try:
+        noise = noise_floor(data, chain.labels, {s: [chain.labels[i] for i in chain.seg_markers[s]]
+                                                 for s in chain.segments})
+    except (InputError, DegenerateError, ValueError):
         return []
-    ctx, test = found
-    chain, noise = fit.chain, ctx.noise
-    gap = float(np.sqrt(fit.rss / max(ctx.n_samples, 1)))
+    seen = np.isfinite(data).all(axis=2)
+    if not noise.sigma_mm > 0 or not seen.any():
+        return []
+    ctx = Context(model, chain.labels, trial.rate_hz, data, noise, int(seen.sum()), trial.source)
+    test = consistency(ctx, Hypothesis(chain, fit.terms, data, seen.astype(float), fit))
+    if test["consistent"]:
+        return []
+    gap = float(np.sqrt(fit.rss / max(int(seen.sum()), 1)))
     weak = [s for s in chain.segments if not posed_by_itself(chain, s, fit)]
     bias = (f", or the fit's own bias where {', '.join(weak)} {'is' if len(weak) == 1 else 'are'} posed only through "
             "the joints" if weak else "")
