@@ -152,7 +152,8 @@ class Diagnosis:
     ctx : Context
         The model, the trial's data and the noise estimate (``ctx.noise.sigma_mm``, per coordinate).
     before, after : Hypothesis
-        The rigid-joint fit, and the fit with every adopted effect.
+        The rigid-joint fit, and the fit with every adopted effect (and each adopted delay's fraction of a frame
+        fitted: :func:`with_choices_free`).
     steps : tuple of Step
         The adopted effects, in order (most important first).
     test_before, test_after : dict
@@ -915,14 +916,26 @@ def with_choices_free(ctx: Context, h: Hypothesis, progress=None) -> Hypothesis:
     joints judged from it carry that choice's uncertainty and sit where its continuous best puts them; `h` itself when
     its effects fixed nothing so. :func:`diagnose`'s final model (what it reports, judges, draws and exports).
     Its parameters count the freed ones on top of the effects' own charges (one a delay: the criterion has chosen by
-    then, and the noise floor moves by a part in ten thousand)."""
+    then, and the noise floor moves by a part in ten thousand).
+
+    `h` itself, too, when a segment is not posed by its own markers
+    (:func:`identcheck.bundle.honest.posed_by_itself`): the joints above it are judged from a refit without the
+    markers below it (:func:`identcheck.bundle.incidental.without_incidental_rolls`), which a model with terms does
+    not make, and a delay's remainder would switch it off; or when the refit fails (the delay then stays as adopted)."""
+    from identcheck.bundle.honest import posed_by_itself
+
     free = [t for p in h.effects if getattr(p, "effect", None) in EFFECTS
             for t in EFFECTS[p.effect].judged_free(ctx, h, p)]
-    if not free:
+    free = [(cols, f) for cols, f in free if np.any(f)]               # a field of zeros would be a free parameter
+    if not free or (not h.terms.ordered() and not all(posed_by_itself(h.chain, s, h.fit) for s in h.chain.segments)):
         return h
     if progress:
         progress("refitting the final model with the delays' fractions of a frame free")
-    return h.refit(terms=h.terms + Terms(world=free)).converged(progress)
+    try:
+        return h.refit(terms=h.terms + Terms(world=free)).converged(progress)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        log.debug("the delays' remainders not freed: %s", exc)
+        return h
 
 
 def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) -> dict:
