@@ -60,7 +60,7 @@ def test_a_hip_turning_about_several_axes_beside_a_two_marker_thigh_is_never_rea
     assert not one, (second_deg, noise_deg)
 
 
-def test_a_hip_turning_about_one_axis_beside_a_two_marker_thigh_is_read_as_one_in_half_the_trials():
+def test_a_one_axis_hip_beside_a_two_marker_thigh_is_read_as_one_in_half_the_trials():
     """The same thigh, the hip turned about one axis (1 mm noise, 600 frames, 12 subjects and motions): its
     markers within 3σ of circles in 6 of 12 (measured; asserted at 5). The others come out 3.4-6.3σ off, most
     likely from the pelvis's pose noise, which moves markers far from its centroid by more than their own noise and
