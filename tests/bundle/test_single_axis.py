@@ -65,8 +65,8 @@ def test_a_one_axis_hip_beside_a_two_marker_thigh_is_read_as_one_in_half_the_tri
     markers within 3σ of circles in 6 of 12 (measured; asserted at 5). The others come out 3.4-6.3σ off, most
     likely from the pelvis's pose noise, which moves markers far from its centroid by more than their own noise and
     which the threshold does not count (counting it flagged hips turning about several axes in an independent
-    session's trials); those joints are judged as before. (An independent session's flexion-only hips with two thigh markers, called
-    determined 65-82 mm from the truth, lie within 1.8-2.7σ.)"""
+    session's trials); those joints are judged as before. (An independent session's flexion-only hips with two
+    thigh markers, called determined 65-82 mm from the truth, lie within 1.8-2.7σ.)"""
     found = 0
     for seed in range(12):
         sim = simulate(MODEL, n_frames=600, seed=seed, n_axes=1, noise_mm=1.0)
