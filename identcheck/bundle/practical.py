@@ -199,7 +199,7 @@ def single_axis_by_circles(chain, fit, sigma_mm: float, joint: str) -> tuple[boo
             return False, nan, nan
         try:
             middle, normal, radius = circle_fit(path)
-        except DegenerateError:
+        except (DegenerateError, np.linalg.LinAlgError, ValueError):
             return False, nan, nan
         d = path - middle
         out = d @ normal

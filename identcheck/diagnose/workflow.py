@@ -29,7 +29,7 @@ from identcheck.bundle.chain import fit_chain, information
 from identcheck.bundle.stuck_frames import restarted_stuck_frames
 from identcheck.bundle.gauge import turning_blocks
 from identcheck.bundle.model import Terms, null_count
-from identcheck.bundle.honest import assess, joint_answer
+from identcheck.bundle.honest import assess, joint_answer, posed_by_itself
 from identcheck.bundle.start import better_start, start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
@@ -922,8 +922,6 @@ def with_choices_free(ctx: Context, h: Hypothesis, progress=None) -> Hypothesis:
     (:func:`identcheck.bundle.honest.posed_by_itself`): the joints above it are judged from a refit without the
     markers below it (:func:`identcheck.bundle.incidental.without_incidental_rolls`), which a model with terms does
     not make, and a delay's remainder would switch it off; or when the refit fails (the delay then stays as adopted)."""
-    from identcheck.bundle.honest import posed_by_itself
-
     free = [t for p in h.effects if getattr(p, "effect", None) in EFFECTS
             for t in EFFECTS[p.effect].judged_free(ctx, h, p)]
     free = [(cols, f) for cols, f in free if np.any(f)]               # a field of zeros would be a free parameter

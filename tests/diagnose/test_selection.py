@@ -24,6 +24,7 @@ class _OnTheRigidFit:
         self.base, self.chain, self.added = base, base.chain, added
         self.terms = object()          # a model of its own, not another's data corrected (corrects_data_only)
         self.data, self.weights = base.data, base.weights                  # the trial's, uncorrected
+        self.effects = []              # none of the registry's (no delay whose fraction the final model frees)
 
     def polish(self, max_iter: int = 40):
         return self
