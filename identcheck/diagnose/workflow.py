@@ -922,18 +922,21 @@ def with_choices_free(ctx: Context, h: Hypothesis, progress=None) -> Hypothesis:
     (:func:`identcheck.bundle.honest.posed_by_itself`): the joints above it are judged from a refit without the
     markers below it (:func:`identcheck.bundle.incidental.without_incidental_rolls`), which a model with terms does
     not make, and a delay's remainder would switch it off; or when the refit fails (the delay then stays as adopted)."""
-    free = [t for p in h.effects if getattr(p, "effect", None) in EFFECTS
-            for t in EFFECTS[p.effect].judged_free(ctx, h, p)]
-    free = [(cols, f) for cols, f in free if np.any(f)]               # a field of zeros would be a free parameter
-    if not free or (not h.terms.ordered() and not all(posed_by_itself(h.chain, s, h.fit) for s in h.chain.segments)):
+    owned = [(p, t) for p in h.effects if getattr(p, "effect", None) in EFFECTS
+             for t in EFFECTS[p.effect].judged_free(ctx, h, p) if np.any(t[1])]   # (a field of zeros: a free parameter)
+    if not owned or (not h.terms.ordered() and not all(posed_by_itself(h.chain, s, h.fit) for s in h.chain.segments)):
         return h
     if progress:
         progress("refitting the final model with the delays' fractions of a frame free")
     try:
-        return h.refit(terms=h.terms + Terms(world=free)).converged(progress)
+        freed = h.refit(terms=h.terms + Terms(world=[t for _, t in owned])).converged(progress)
     except (np.linalg.LinAlgError, ValueError) as exc:
         log.debug("the delays' remainders not freed: %s", exc)
         return h
+    values = freed.fit.state.term_params[len(freed.fit.state.term_params) - len(owned):]
+    for p in {id(p): p for p, _ in owned}.values():                 # each effect told what its terms fitted
+        EFFECTS[p.effect].freed(p, [float(np.ravel(v)[0]) for (q, _), v in zip(owned, values) if q is p])
+    return freed
 
 
 def joint_report(ctx: Context, h: Hypothesis, progress=None, steps: tuple = ()) -> dict:

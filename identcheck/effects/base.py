@@ -140,6 +140,10 @@ class Effect:
         set aside has no continuous remainder."""
         return []
 
+    def freed(self, proposal: Proposal, values: list) -> None:
+        """Record in the proposal's ``where`` what the final model fitted for the terms :meth:`judged_free` gave (one
+        fitted scalar a term, in their order); nothing by default."""
+
     def scale_sd(self, proposal: Proposal, hyp) -> float:
         """The relative standard deviation this effect, as hypothesis `hyp` fits it, leaves on every length the trial
         measures, which no fit can remove (a distortion of the capture volume says its calibration is off, and the

@@ -596,6 +596,12 @@ class TimeOffset(Effect):
         idx = proposal.payload["columns"]
         return [(idx, np.nan_to_num(shifted(usable(hyp, idx), ctx.rate_hz, 0.0, derivative=1)))]
 
+    def freed(self, proposal: Proposal, values: list) -> None:
+        """``where.delay_ms_fitted``: the adopted delay less its fitted remainder (the term's scalar s: the data
+        realigned by τ and moved by s times their velocity are the data realigned by τ − s), what the joints are judged
+        at; ``delay_ms`` stays the delay adopted."""
+        proposal.where["delay_ms_fitted"] = round(1000.0 * (proposal.payload["tau"] - float(values[0])), 2)
+
     def own_params(self, proposal: Proposal, before, after) -> float:
         """One: the delay. The noise that interpolating between frames averages away is charged in the score, but is
         not the story's parameter."""

@@ -536,8 +536,10 @@ def test_a_delays_screen_then_its_full_fit_are_the_full_fit_alone(seed, frames):
 def test_a_delay_adopted_in_whole_frames_leaves_its_fraction_free_for_the_joints(seed, frames, fraction, side):
     """The shank late by a whole number of frames and a fraction (0.2-0.45 frame; 0.6 mm white noise), the delay
     adopted at the whole frame on either side: the joints are judged from a refit that fits the fraction (within
-    0.1 frame of the truth), and the knee's intervals hold the marker distances a fit to the data realigned by the
-    true delay gives (at the whole frame the knee moves by millimetres)."""
+    0.1 frame of the truth, and reported as ``delay_ms_fitted``), and the knee's distances come within two
+    half-widths of their intervals of those a fit to the data realigned by the true delay gives, a quarter of the way
+    at most that the whole frame leaves them (there the knee moves by millimetres; the two realignments smooth the
+    noise differently, so the two fits differ by about a standard error)."""
     import identcheck.effects.time_offset as time_offset
     from identcheck.diagnose.workflow import joint_report, marker_distances, start, with_choices_free
     from identcheck.effects.registry import EFFECTS
@@ -569,12 +571,16 @@ def test_a_delay_adopted_in_whole_frames_leaves_its_fraction_free_for_the_joints
     freed = with_choices_free(ctx, late)
     refined = whole - float(freed.fit.state.term_params[-1][0]) * rate
     assert abs(refined - lag) < 0.1
+    assert freed.effects[-1].where["delay_ms_fitted"] == round(1000 * refined / rate, 2)
     data = xyz.copy()
     data[:, cols] = shifted(xyz[:, cols], rate, lag / rate)
     lost = ~np.isfinite(data).all(axis=2)
     aligned = h.refit_corrected(ctx, data, np.where(lost, 0.0, h.weights)).converged()
     ideal = {m: d for m, (d, _sd) in marker_distances(ctx, aligned)["knee"].items()}
+    whole_frame = {m: d for m, (d, _sd) in marker_distances(ctx, late)["knee"].items()}
     knee = joint_report(ctx, freed)["knee"]
+    off = {m: abs(knee["marker_distances"][m] - d) for m, d in ideal.items()}
+    assert max(off.values()) < 0.25 * max(abs(whole_frame[m] - d) for m, d in ideal.items()), (off, whole_frame)
     for m, d in ideal.items():
         lo, hi = knee["marker_distances_ci95"][m]
-        assert hi is not None and lo <= d <= hi, (m, d, lo, hi)
+        assert hi is not None and off[m] <= 2 * (hi - lo) / 2, (m, d, lo, hi)
