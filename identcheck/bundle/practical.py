@@ -181,7 +181,7 @@ def single_axis_by_circles(chain, fit, sigma_mm: float, joint: str) -> tuple[boo
     simulator's one-axis hips with a greater trochanter and a thigh wand marker were read as one axis in 6 of 12
     (1 mm, 600 frames), its two- and three-axis hips never (24 of 24 at 5.7 σ and above)."""
     from identcheck.errors import DegenerateError
-    from identcheck.solve.minimal import circle_fit
+    from identcheck.solve.minimal import circle_deviations, circle_fit
 
     nan = float("nan")
     P, C = chain.parent[joint], chain.child[joint]
@@ -201,9 +201,8 @@ def single_axis_by_circles(chain, fit, sigma_mm: float, joint: str) -> tuple[boo
             middle, normal, radius = circle_fit(path)
         except (DegenerateError, np.linalg.LinAlgError, ValueError):
             return False, nan, nan
-        d = path - middle
-        out = d @ normal
-        rms = float(np.sqrt(np.mean((np.linalg.norm(d - np.outer(out, normal), axis=1) - radius) ** 2 + out ** 2)))
+        radial, out, _ = circle_deviations(path, middle, normal, radius)
+        rms = float(np.sqrt(np.mean(radial ** 2 + out ** 2)))
         if not np.isfinite(rms):
             return False, nan, nan
         if not rms / sigma_mm <= worst:                 # (the first, or a marker farther from its circle)

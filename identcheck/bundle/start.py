@@ -46,13 +46,19 @@ def virtual_frames(chain: Skeleton, data: np.ndarray, virtual: dict) -> dict:
         except ValueError as exc:
             raise DegenerateError(f"segment {seg!r}: {exc}", segment=seg) from None
         if poses.valid.sum() < 3:
-            seen = np.isfinite(data[:, idx]).all(axis=2).sum(axis=0)
-            rare = [chain.labels[c] for c, n in zip(idx, seen) if n < len(data) / 2]
+            rare = rarely_seen(data[:, idx], [chain.labels[c] for c in idx])
             why = f"segment {seg!r}: fewer than 3 frames show three of its points" + (
-                f" (seen in fewer than half the frames: {', '.join(rare)})" if rare else "")
+                f" ({'; '.join(rare)})" if rare else "")
             raise DegenerateError(why, segment=seg, leave_out=why)
         out[seg] = filled_poses(pts, local, poses, n_markers=len(idx))
     return out
+
+
+def rarely_seen(data: np.ndarray, labels) -> list:
+    """The markers of `data` (F, m, 3; `labels` their names) seen in fewer than half its frames, each as
+    ``"M is seen in n of F frames"``: the usual reason a segment cannot be posed or seen to move."""
+    seen = np.isfinite(data).all(axis=2).sum(axis=0)
+    return [f"{m} is seen in {int(n)} of {len(data)} frames" for m, n in zip(labels, seen) if n < len(data) / 2]
 
 
 def _start_poses(pts: np.ndarray) -> tuple:

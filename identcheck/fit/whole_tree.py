@@ -39,7 +39,7 @@ from identcheck.bundle.honest import (SAME_MM, Minimum, ci, honest_intervals, jo
                                       with_sampling_spread, without_bounds)
 from identcheck.bundle.incidental import without_incidental_rolls
 from identcheck.bundle.model import n_const
-from identcheck.bundle.start import state_from_joints
+from identcheck.bundle.start import rarely_seen, state_from_joints
 from identcheck.bundle.starts import candidates, start_combinations
 from identcheck.bundle.uncertainty import distance_gradients
 from identcheck.errors import DegenerateError, InputError
@@ -85,15 +85,12 @@ def without_an_unposed_root(model, closed_form: dict) -> tuple:
 def _rarely_seen(model, trial, joints) -> str:
     """The markers of the segments below `joints` that the trial shows in fewer than half its frames, with their
     counts: the usual reason a segment cannot be posed or seen to move."""
-    data = trial.select([m for m in model.markers if m in trial.labels]).as_array()
-    col = {m: i for i, m in enumerate(m for m in model.markers if m in trial.labels)}
-    segs = {model.joints[j].child for j in joints}
-    rare = []
-    for seg in segs:
-        for m in model.segments[seg].markers:
-            n = int(np.isfinite(data[:, col[m]]).all(axis=1).sum()) if m in col else 0
-            if n < len(data) / 2:
-                rare.append(f"{m} is seen in {n} of {len(data)} frames")
+    shown = [m for seg in dict.fromkeys(model.joints[j].child for j in joints) for m in model.segments[seg].markers]
+    data = np.full((trial.n_frames, len(shown), 3), np.nan)          # a marker the trial lacks: never seen
+    present = [k for k, m in enumerate(shown) if m in trial.labels]
+    if present:
+        data[:, present] = trial.select([shown[k] for k in present]).as_array()
+    rare = rarely_seen(data, shown)
     return f" ({'; '.join(rare)})" if rare else ""
 
 

@@ -53,7 +53,7 @@ from identcheck.estimate.obrien import MIN_FRAMES, as_poses, joint_location
 from identcheck.geometry.poses import MIN_MARKERS, pose_noise_factor
 from identcheck.infer.body_frames import STILL_DEG, is_drift, path_monotone, turn_deg
 from identcheck.solve.gamage_lasenby import sphere_centre
-from identcheck.solve.minimal import circle_fit
+from identcheck.solve.minimal import circle_deviations, circle_fit
 
 FLOOR_TRUST = 0.8
 """Share of the noise-only mean square (the floor) taken off each pair's before the tree is chosen. The floor scales
@@ -407,11 +407,8 @@ def small_fit(poses, child_points: np.ndarray) -> SmallFit:
             for i in range(X.shape[1]):
                 J, nrm, _ = circle_fit(X[:, i])
                 J = J - ((J - X[:, i].mean(axis=0)) @ nrm) * nrm   # onto the mean plane (noisy arcs tilt it off)
-                w = X[:, i] - J
-                along = w @ nrm
-                radial = np.linalg.norm(w - along[:, None] * nrm, axis=1)
-                radius = float(radial.mean())
-                res.append(np.concatenate([radial - radius, along]))
+                radial, along, radius = circle_deviations(X[:, i], J, nrm)
+                res.append(np.concatenate([radial, along]))
                 reach = max(reach, float(np.linalg.norm(J - (J @ nrm) * nrm)), radius)
             if reach <= MAX_REACH_MM:
                 circ, reach_c = float(np.sqrt(np.mean(np.concatenate(res) ** 2))), reach

@@ -133,6 +133,18 @@ def circle_fit(points) -> tuple:
     return J, n, float(abs(radius))
 
 
+def circle_deviations(points, centre, normal, radius: float | None = None) -> tuple:
+    """(radial deviations (N,), out-of-plane deviations (N,), radius) of points (N, 3) from the circle about `centre`
+    in the plane of unit `normal` (:func:`circle_fit`'s three values); `radius` None: the points' mean distance from
+    the circle's axis. How far a path is from turning about one axis, in ``skeleton``'s small groups and in the
+    one-axis test beside a two-marker segment (:func:`identcheck.bundle.practical.single_axis_by_circles`)."""
+    w = np.asarray(points, dtype=float) - centre
+    along = w @ normal
+    radial = np.linalg.norm(w - along[:, None] * normal, axis=1)
+    r = float(radial.mean()) if radius is None else float(radius)
+    return radial - r, along, r
+
+
 def _axis_distance(p, J, n) -> float:
     w = np.asarray(p) - J
     return float(np.linalg.norm(w - (w @ n) * n))

@@ -78,3 +78,26 @@ def test_a_short_noisy_arc_gives_a_circle_of_its_own_size_or_none(seed, radius, 
         assert "straight" in str(exc) or "collinear" in str(exc)
         return
     assert np.isfinite(r) and r <= CIRCLE_REACH * extent * 1.01
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(20.0, 400.0), st.floats(-5.0, 5.0), st.floats(-5.0, 5.0))
+def test_circle_deviations_are_the_offsets_off_the_circle_and_out_of_its_plane(seed, radius, out, off):
+    """Points on a random circle, moved off it by `off` within its plane and by `out` across it: the radial
+    deviations are `off` (radius given) and the out-of-plane ones `out`; with no radius, the mean distance from the
+    axis is the radius and the radial deviations have mean zero."""
+    from identcheck.solve.minimal import circle_deviations
+
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    e1 = np.cross(normal, rng.normal(size=3))
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    centre = rng.uniform(-500, 500, 3)
+    t = rng.uniform(0, 2 * np.pi, 50)
+    pts = centre + (radius + off) * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2) + out * normal
+    radial, along, r = circle_deviations(pts, centre, normal, radius)
+    assert np.allclose(radial, off, atol=1e-7) and np.allclose(along, out, atol=1e-7) and r == radius
+    radial, _, r = circle_deviations(pts, centre, normal)
+    assert abs(r - (radius + off)) < 1e-7 and abs(radial.mean()) < 1e-7
