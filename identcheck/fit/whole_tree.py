@@ -16,7 +16,8 @@ Every centre along its weak line: a sphere fitted to one or two child markers ov
 through one thigh marker) fixes the direction to the centre far better than its distance, and the whole-tree
 fit from that one start can settle in a wrong minimum. Each such centre also starts fits with its distance
 from those markers scaled by :data:`~identcheck.bundle.starts.RADIAL_FACTORS` (held-out minimal gait trial: the
-closed-form start settled with the hip 100 mm off, while a minimum near the truth fitted better by Δχ² 139); the
+closed-form start settled with the hip 100 mm off, while a minimum near the truth fitted better by Δχ² 139), and
+the joints whose closed forms took that centre (a knee posed through the hip) fitted again from the moved one; the
 combinations are made in :mod:`identcheck.bundle.starts`.
 
 Practical identifiability (:mod:`identcheck.bundle.practical`): from the sandwich covariance, each joint is

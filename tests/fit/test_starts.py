@@ -112,3 +112,74 @@ def test_every_one_joint_change_is_started_before_any_combination(sizes, cap):
     assert len(set(chosen)) == len(chosen) <= max(cap, 1 + singles)
     assert len(chosen) + unlisted == math.prod(sizes)
     assert all(0 <= i < s for idx in chosen for i, s in zip(idx, sizes))
+
+
+def _leg_3_1_1() -> "Model":
+    from identcheck.io.model import Model
+
+    return Model.from_dict({
+        "units": "mm",
+        "segments": {"pelvis": {"markers": ["P1", "P2", "P3"]}, "thigh": {"markers": ["T1"], "length_mm": 420},
+                     "shank": {"markers": ["S1"], "length_mm": 400}},
+        "joints": {"hip": {"type": "spherical", "parent": "pelvis", "child": "thigh"},
+                   "knee": {"type": "revolute", "parent": "thigh", "child": "shank"}}})
+
+
+def test_a_moved_centre_restarts_the_joints_posed_through_it():
+    """A hip moved along its weak line starts its fits with the knee fitted again from the moved hip (the knee's
+    closed form takes the hip's centre as a thigh point): each moved start's knee is the closed form with that hip
+    fixed, not the first start's knee; without a restart the first start's knee is kept."""
+    import warnings
+
+    from identcheck.bundle.starts import start_combinations
+    from identcheck.estimate.closed_forms import fit_model
+    from identcheck.fit.whole_tree import skeleton_of
+    from identcheck.simulate.rigid import simulate
+
+    model = _leg_3_1_1()
+    trial = simulate(model, n_frames=400, noise_mm=0.3, seed=5).trial
+    chain = skeleton_of(model, trial)
+    data = trial.select(chain.labels).as_array()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = fit_model(model, trial)[0]
+
+        def restart(fixed):
+            return fit_model(model, trial, fixed=fixed)[0]
+
+        combos = start_combinations(chain, fitted, restart, data)[0]
+        moved = [c for c in combos if "×" in c["hip"].estimator]
+        assert len(moved) == len(RADIAL_FACTORS)
+        for combo in moved:
+            again = restart({"hip": combo["hip"]})["knee"][0]
+            assert np.allclose(combo["knee"].point, again.point, equal_nan=True)
+            assert not np.allclose(combo["knee"].point, combos[0]["knee"].point, equal_nan=True)
+        plain = start_combinations(chain, fitted, None, data)[0]
+        assert all(c["knee"] is plain[0]["knee"] for c in plain if "×" in c["hip"].estimator)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.lists(st.integers(0, 7), max_size=3), min_size=1, max_size=8), st.integers(0, 7),
+       st.randoms(use_true_random=False))
+def test_dependents_are_every_joint_reached_through_virtual_markers(uses, moved, rnd):
+    """Joints whose closed forms took a joint's virtual markers, directly or through another such joint, in any
+    order of the closed forms: exactly the joints reachable from the moved one (a breadth-first search)."""
+    from identcheck.bundle.starts import dependents
+    from identcheck.io.model import virtual_names
+
+    n = len(uses)
+    moved %= n
+    names = [f"j{k}" for k in range(n)]
+    kinds = ["spherical" if k % 2 else "revolute" for k in range(n)]
+    closed = {}
+    for k in rnd.sample(range(n), n):
+        points = [v for u in uses[k] if u % n != k for v in virtual_names(names[u % n], kinds[u % n])[:1]]
+        closed[names[k]] = (None, {"parent_markers": ["M1"] + points[:1], "child_markers": points[1:]})
+    reach, frontier = set(), {moved}
+    while frontier:
+        frontier = {k for k in range(n) if k not in reach | {moved} and any(u % n in frontier | reach
+                                                                            for u in uses[k] if u % n != k)}
+        reach |= frontier
+    found = dependents(closed, names[moved])
+    assert set(found) == {names[k] for k in reach}
+    assert found == [name for name in closed if name in found]
