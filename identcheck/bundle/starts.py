@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import segment_poses
 from identcheck.io.model import virtual_names
 from identcheck.skeleton import Skeleton
@@ -94,7 +95,10 @@ def with_dependents(closed_form: dict, combo: dict, joint: str, restart) -> dict
     below = dependents(closed_form, joint)
     if not below or restart is None:
         return combo
-    again = restart({joint: combo[joint]})
+    try:
+        again = restart({joint: combo[joint]})
+    except (DegenerateError, InputError):     # the moved centre's points too few for a closed form: as it was
+        return combo
     if any(again.get(j, (None,))[0] is None for j in below):
         return combo
     return {**combo, **{j: again[j][0] for j in below}}

@@ -183,3 +183,22 @@ def test_dependents_are_every_joint_reached_through_virtual_markers(uses, moved,
     found = dependents(closed, names[moved])
     assert set(found) == {names[k] for k in reach}
     assert found == [name for name in closed if name in found]
+
+
+def test_a_restart_that_cannot_fit_leaves_the_moved_start_as_it_was():
+    """A restart from the moved centre that raises (too few points for a closed form) or leaves a dependent joint
+    without an estimate keeps the start's other joints as they were, rather than stopping the fit."""
+    from identcheck.bundle.starts import with_dependents
+    from identcheck.errors import DegenerateError
+
+    closed = {"hip": (None, {"parent_markers": ["P1"], "child_markers": ["T1"]}),
+              "knee": (None, {"parent_markers": ["T1", "hip.centre"], "child_markers": ["S1"]})}
+    combo = {"hip": "moved hip", "knee": "first knee"}
+
+    def raising(fixed):
+        raise DegenerateError("too few frames")
+
+    assert with_dependents(closed, combo, "hip", raising) == combo
+    assert with_dependents(closed, combo, "hip", lambda fixed: {"knee": (None, {})}) == combo
+    assert with_dependents(closed, combo, "hip", lambda fixed: {"knee": ("new knee", {})})["knee"] == "new knee"
+    assert with_dependents(closed, combo, "knee", raising) == combo          # nothing took the knee's points
