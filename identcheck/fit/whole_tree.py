@@ -291,11 +291,11 @@ def gap_warnings(tree: TreeFit, model, trial) -> list:
     """An ``unexplained_gap`` warning (dict with ``message``, ``kind``, ``ratio``, ``limit``) when the whole-tree fit
     leaves more than the measurement noise explains, by ``diagnose``'s stated test
     (:func:`identcheck.bundle.hypothesis.consistency`: the prewhitened residual against a noise floor estimated without
-    the joint model, from the distances within segments) and its plain RMS exceeds the noise's floor; [] when it does
-    not, or when no segment has two markers to estimate the noise from. What it catches that :func:`misfit_warnings`
-    does not: motion the joint angles do not drive (a knee turning a few degrees about axes across its hinge, in a
-    smooth random profile, read by the fit's noise model as correlated noise: an independent check's knees were
-    reported determined at ±1-3 mm with no warning, exit 0, the residual twice the noise)."""
+    the joint model, from the distances within segments); [] when it does not, or when no segment has two markers to
+    estimate the noise from. What it catches that :func:`misfit_warnings` does not: motion the joint angles do not
+    drive (a knee turning a few degrees about axes across its hinge, in a smooth random profile, read by the fit's
+    noise model as correlated noise: an independent check's knees were reported determined at ±1-3 mm with no
+    warning, exit 0, the residual twice the noise)."""
     from identcheck.bundle.hypothesis import Context, Hypothesis, consistency
     from identcheck.estimate.noise import noise_floor
 
@@ -312,21 +312,16 @@ def gap_warnings(tree: TreeFit, model, trial) -> list:
         return []
     ctx = Context(model, chain.labels, trial.rate_hz, data, noise, int(seen.sum()), trial.source)
     test = consistency(ctx, Hypothesis(chain, fit.terms, data, seen.astype(float), fit))
-    gap = float(np.sqrt(fit.rss / max(int(seen.sum()), 1)))
-    floor = ctx.noise.floor(ctx.n_samples, fit.n_params)
-    if test["consistent"] or not gap > floor:
-        # (a residual below the noise's floor is no evidence of a missing effect, whatever its prewhitened sum says:
-        # prewhitening with a lag-1 coefficient near 1 read from a single distance (AR(1) noise, φ 0.88-0.95) had
-        # turned 0.67 mm RMS against a floor of 1.34 into gap²/floor² 1.96 on a 1 | 2 ankle, and the warning said
-        # the rigid model misses something)
+    if test["consistent"]:
         return []
+    gap = float(np.sqrt(fit.rss / max(int(seen.sum()), 1)))
     weak = [s for s in chain.segments if not posed_by_itself(chain, s, fit)]
     bias = (f", or the fit's own bias where {', '.join(weak)} {'is' if len(weak) == 1 else 'are'} posed only through "
             "the joints" if weak else "")
     return [{"kind": "unexplained_gap", "ratio": round(test["ratio"], 3), "limit": round(test["limit"], 3),
              "message": (f"{trial.source}: the whole-tree fit leaves {gap:.3g} mm RMS where the measurement noise "
                          f"({noise.sigma_mm:.3g} mm a coordinate, from the distances within segments) would leave "
-                         f"{floor:.3g} (gap²/floor² {test['ratio']:.3g}, "
+                         f"{ctx.noise.floor(ctx.n_samples, fit.n_params):.3g} (gap²/floor² {test['ratio']:.3g}, "
                          f"limit {test['limit']:.3g}): the rigid-joint model misses something (a joint that turns "
                          f"about more axes than declared, skin or marker motion, errors in the data{bias}), and "
                          "the intervals describe the best rigid approximation to the trial, not the joint. "
