@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
-from identcheck.bundle.starts import candidates, start_combinations
-from identcheck.errors import DegenerateError, InputError
+from identcheck.bundle.starts import CANNOT_START, candidates, start_combinations  # noqa: F401 (re-exported)
+from identcheck.errors import DegenerateError
 from identcheck.estimate.closed_forms import fit_model, not_identifiable
 from identcheck.estimate.joint import start_stride
 from identcheck.geometry.poses import farthest_pair, poses_segment, refine_local, segment_poses
@@ -211,8 +211,6 @@ PICK_ITER = 40
 """Iterations of each of those fits: the starts that reach the noise had been the highest after 8 (see
 :func:`better_start`), and converged within 35."""
 
-CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
-"""What a start that cannot be made raises: it is skipped, never the fit."""
 
 
 def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float, margin: float,

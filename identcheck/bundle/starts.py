@@ -17,10 +17,12 @@ import numpy as np
 
 from identcheck.errors import DegenerateError, InputError
 from identcheck.geometry.poses import segment_poses
-from identcheck.io.model import virtual_names
+from identcheck.io.model import reserved_names
 from identcheck.skeleton import Skeleton
 
 MAX_STARTS = 16          # candidate combinations started (more when the one-joint changes alone exceed it)
+CANNOT_START = (DegenerateError, InputError, np.linalg.LinAlgError, ValueError)
+"""What a start that cannot be made raises: it is skipped, never the fit."""
 RADIAL_FACTORS = (0.6, 1.7, 2.5)
 """A centre seen by at most two markers on one side also starts fits at these multiples of its distance from
 their centroid (along the line through them, fixed on that side)."""
@@ -47,8 +49,9 @@ def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
     sides carry three markers or more (the fit is well conditioned there)."""
     if est.kind != "spherical" or est.centre is None:
         return []
-    sides = sorted([chain.seg_markers[chain.parent[joint]], chain.seg_markers[chain.child[joint]]], key=len)
-    sparse, rich = sides
+    sparse_seg = sparse_side(chain, joint)
+    rich_seg = chain.child[joint] if sparse_seg == chain.parent[joint] else chain.parent[joint]
+    sparse, rich = chain.seg_markers[sparse_seg], chain.seg_markers[rich_seg]
     if len(sparse) == 0 or len(sparse) > 2:
         return []
     with np.errstate(invalid="ignore"):
@@ -64,44 +67,56 @@ def radial_variants(chain: Skeleton, data: np.ndarray, joint: str, est) -> list:
             for k, c in zip(RADIAL_FACTORS, moved) if np.isfinite(c).all(axis=1).sum() >= 3]
 
 
-def dependents(closed_form: dict, joint: str) -> list:
-    """The joints whose closed forms took `joint`'s virtual markers (its centre or axis points), directly or through
-    another such joint, in the closed forms' order."""
-    def names(j):
-        return set(virtual_names(j, "spherical") + virtual_names(j, "revolute"))
+def sparse_side(chain: Skeleton, joint: str) -> str:
+    """The segment of `joint` with fewer markers (the parent on a tie): where a centre moved along its weak line
+    moves (:func:`radial_variants`); on the other side the moved centre is a rigid point by construction."""
+    return min((chain.parent[joint], chain.child[joint]), key=lambda seg: len(chain.seg_markers[seg]))
 
-    used, found = names(joint), {joint}
+
+def dependents(chain: Skeleton, closed_form: dict, joint: str, side: str) -> list:
+    """The joints whose closed forms took `joint`'s virtual markers (its centre or axis points) as points of segment
+    `side`, and, through each of them, the joints that took its points on its other segment (away from the one it
+    was reached through), in the closed forms' order. A centre is passed to both its segments, so a left hip lists
+    the right hip's centre among its pelvis points: moved on the thigh's side, the right hip reaches its knee, not
+    the left leg."""
+    reached = {joint: side}          # joint -> the segment its change reaches onward
     grown = True
-    while grown:                # a knee's axis points may pose the thigh for the hip above it: any order
+    while grown:                     # a knee's axis points may pose the thigh for the hip above it: any order
         grown = False
         for name, (_est, info) in closed_form.items():
-            if name not in found and used & set(info.get("parent_markers", ()) + info.get("child_markers", ())):
-                found.add(name)
-                used |= names(name)
-                grown = True
-    return [name for name in closed_form if name in found - {joint}]
+            if name in reached or name not in chain.parent:
+                continue
+            ends = {chain.parent[name]: info.get("parent_markers", ()),
+                    chain.child[name]: info.get("child_markers", ())}
+            for src, seg in list(reached.items()):
+                if seg in ends and set(reserved_names([src])) & set(ends[seg]):
+                    reached[name] = chain.child[name] if seg == chain.parent[name] else chain.parent[name]
+                    grown = True
+                    break
+    return [name for name in closed_form if name in reached and name != joint]
 
 
-def with_dependents(closed_form: dict, combo: dict, joint: str, restart) -> dict:
-    """`combo` (joint -> JointEstimate) whose `joint` was moved, with the joints whose closed forms took its virtual
-    markers fitted again from the moved one (``restart``, the closed forms with `joint` fixed), each to its first
-    candidate; as it is when there are none, no restart, or a restart leaves one without an estimate.
+def with_dependents(chain: Skeleton, closed_form: dict, combo: dict, joint: str, restart) -> dict:
+    """`combo` (joint -> JointEstimate) whose `joint` was moved along its weak line, started again from the closed
+    forms with the moved joint fixed (``restart``) when a joint took its points on the side it moved
+    (:func:`dependents`): every other joint from that restart, its first candidate, so that the start is one pass of
+    the closed forms; as it is when no joint depends on it, there is no restart, or the restart cannot make one.
 
     A hip moved along its weak line above a knee posed through it (a 3 | 1 | 1 gait leg) had kept the knee
     computed from the unmoved hip: from a start near the true hip (RTH1 113 mm from it, 119 in truth) the whole
     tree settled back 43 mm from the marker, with the knee 12 mm from the thigh marker (322 in truth); the knee
     refitted from the moved hip gives a start whose fit stays near the true hip, with 4 900 mm² less residual sum of
     squares over the trial's 1 457 frames (held-out fit draw 5970, trial 75)."""
-    below = dependents(closed_form, joint)
+    below = dependents(chain, closed_form, joint, sparse_side(chain, joint))
     if not below or restart is None:
         return combo
     try:
         again = restart({joint: combo[joint]})
-    except (DegenerateError, InputError):     # the moved centre's points too few for a closed form: as it was
+    except CANNOT_START:                # the moved centre's points too few for a closed form: as it was
         return combo
     if any(again.get(j, (None,))[0] is None for j in below):
         return combo
-    return {**combo, **{j: again[j][0] for j in below}}
+    return {j: combo[j] if j == joint or again.get(j, (None,))[0] is None else again[j][0] for j in combo}
 
 
 def by_changes(cands: dict, names: list, cap: int) -> tuple[list, int]:
@@ -134,8 +149,9 @@ def start_combinations(chain, closed_form: dict, restart, data=None) -> tuple[li
     combos = [dict(zip(names, (cands[n][i] for n, i in zip(names, idx)))) for idx in chosen]
     missing = [j for j in chain.joints if j not in cands]
     if not missing and combos and data is not None:     # the first combination with one weak centre moved
-        moved = [with_dependents(closed_form, {**combos[0], n: v}, n, restart)
-                 for n in names for v in radial_variants(chain, data, n, combos[0][n])]
+        room = max(cap - 1 - singles, 0)                  # (those the cap would cut are not restarted)
+        variants = [(n, v) for n in names for v in radial_variants(chain, data, n, combos[0][n])][:room]
+        moved = [with_dependents(chain, closed_form, {**combos[0], n: v}, n, restart) for n, v in variants]
         combos = combos[:1 + singles] + moved + combos[1 + singles:]
     if missing:
         ambiguous = [n for n in names if len(cands[n]) > 1]

@@ -158,47 +158,73 @@ def test_a_moved_centre_restarts_the_joints_posed_through_it():
         assert all(c["knee"] is plain[0]["knee"] for c in plain if "×" in c["hip"].estimator)
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.lists(st.lists(st.integers(0, 7), max_size=3), min_size=1, max_size=8), st.integers(0, 7),
-       st.randoms(use_true_random=False))
-def test_dependents_are_every_joint_reached_through_virtual_markers(uses, moved, rnd):
-    """Joints whose closed forms took a joint's virtual markers, directly or through another such joint, in any
-    order of the closed forms: exactly the joints reachable from the moved one (a breadth-first search)."""
+def _chain_of_joints(n: int):
+    """Joints j0..j(n-1) in a line of segments s0..sn (j_k from s_k to s_k+1): the chain object carries only what
+    :func:`dependents` and :func:`with_dependents` read."""
+    return SimpleNamespace(parent={f"j{k}": f"s{k}" for k in range(n)}, child={f"j{k}": f"s{k + 1}" for k in range(n)},
+                           seg_markers={f"s{k}": [0] * (1 + k % 3) for k in range(n + 1)})
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 7), st.data(), st.randoms(use_true_random=False))
+def test_dependents_are_reached_through_points_on_the_moved_side_and_onward(n, data, rnd):
+    """In a line of joints whose closed forms took their neighbours' points on either segment at random (in any order
+    of the closed forms), the dependents of a joint moved on one side are exactly the joints reached by walking away
+    from the other side: the next joint took the moved one's points on the segment they share, then its own next one
+    took its points, and so on; never a joint across the other side, which the moved centre does not change."""
     from identcheck.bundle.starts import dependents
     from identcheck.io.model import virtual_names
 
-    n = len(uses)
-    moved %= n
-    names = [f"j{k}" for k in range(n)]
-    kinds = ["spherical" if k % 2 else "revolute" for k in range(n)]
+    chain = _chain_of_joints(n)
+    moved = data.draw(st.integers(0, n - 1))
+    down = data.draw(st.booleans())                     # moved on its child's side, else its parent's
+    took_above = [data.draw(st.booleans()) for _ in range(n)]   # j_k took j_(k-1)'s points on s_k
+    took_below = [data.draw(st.booleans()) for _ in range(n)]   # j_k took j_(k+1)'s points on s_(k+1)
     closed = {}
     for k in rnd.sample(range(n), n):
-        points = [v for u in uses[k] if u % n != k for v in virtual_names(names[u % n], kinds[u % n])[:1]]
-        closed[names[k]] = (None, {"parent_markers": ["M1"] + points[:1], "child_markers": points[1:]})
-    reach, frontier = set(), {moved}
-    while frontier:
-        frontier = {k for k in range(n) if k not in reach | {moved} and any(u % n in frontier | reach
-                                                                            for u in uses[k] if u % n != k)}
-        reach |= frontier
-    found = dependents(closed, names[moved])
-    assert set(found) == {names[k] for k in reach}
+        kind = "revolute" if k % 2 else "spherical"
+        above = list(virtual_names(f"j{k - 1}", kind)) if k > 0 and took_above[k] else []
+        below = list(virtual_names(f"j{k + 1}", "spherical")) if k < n - 1 and took_below[k] else []
+        closed[f"j{k}"] = (None, {"parent_markers": ["M"] + above, "child_markers": ["N"] + below})
+    expected, k = [], moved
+    while True:
+        k = k + 1 if down else k - 1
+        if not 0 <= k < n or not (took_above[k] if down else took_below[k]):
+            break
+        expected.append(f"j{k}")
+    side = chain.child[f"j{moved}"] if down else chain.parent[f"j{moved}"]
+    found = dependents(chain, closed, f"j{moved}", side)
+    assert set(found) == set(expected)
     assert found == [name for name in closed if name in found]
 
 
 def test_a_restart_that_cannot_fit_leaves_the_moved_start_as_it_was():
-    """A restart from the moved centre that raises (too few points for a closed form) or leaves a dependent joint
-    without an estimate keeps the start's other joints as they were, rather than stopping the fit."""
+    """A restart from the moved centre that raises (too few points for a closed form, a singular system) or leaves
+    a dependent joint without an estimate keeps the start as it was, rather than stopping the fit; one that makes
+    them takes every joint but the moved one from that restart."""
     from identcheck.bundle.starts import with_dependents
     from identcheck.errors import DegenerateError
 
-    closed = {"hip": (None, {"parent_markers": ["P1"], "child_markers": ["T1"]}),
-              "knee": (None, {"parent_markers": ["T1", "hip.centre"], "child_markers": ["S1"]})}
-    combo = {"hip": "moved hip", "knee": "first knee"}
+    chain = SimpleNamespace(parent={"hip": "pelvis", "knee": "thigh", "hip_l": "pelvis"},
+                            child={"hip": "thigh", "knee": "shank", "hip_l": "thigh_l"},
+                            seg_markers={"pelvis": [0, 1, 2], "thigh": [3], "shank": [4], "thigh_l": [5]})
+    closed = {"hip": (None, {"parent_markers": ["P1", "hip_l.centre"], "child_markers": ["T1"]}),
+              "knee": (None, {"parent_markers": ["T1", "hip.centre"], "child_markers": ["S1"]}),
+              "hip_l": (None, {"parent_markers": ["P1", "hip.centre"], "child_markers": ["L1"]})}
+    combo = {"hip": "moved hip", "knee": "first knee", "hip_l": "first left hip"}
 
-    def raising(fixed):
-        raise DegenerateError("too few frames")
+    def raising(error):
+        def restart(fixed):
+            raise error
+        return restart
 
-    assert with_dependents(closed, combo, "hip", raising) == combo
-    assert with_dependents(closed, combo, "hip", lambda fixed: {"knee": (None, {})}) == combo
-    assert with_dependents(closed, combo, "hip", lambda fixed: {"knee": ("new knee", {})})["knee"] == "new knee"
-    assert with_dependents(closed, combo, "knee", raising) == combo          # nothing took the knee's points
+    for error in (DegenerateError("too few frames"), np.linalg.LinAlgError("singular"), ValueError("nan")):
+        assert with_dependents(chain, closed, combo, "hip", raising(error)) == combo
+    assert with_dependents(chain, closed, combo, "hip", lambda fixed: {"knee": (None, {})}) == combo
+    again = with_dependents(chain, closed, combo, "hip",
+                            lambda fixed: {"hip": ("copy", {}), "knee": ("new knee", {}), "hip_l": ("new left", {})})
+    assert again == {"hip": "moved hip", "knee": "new knee", "hip_l": "new left"}
+    assert with_dependents(chain, closed, combo, "hip_l", raising(ValueError())) == combo   # nothing took its points
+    #                                                   on the left thigh: the right hip took them on the pelvis
+
+
