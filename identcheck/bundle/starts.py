@@ -103,8 +103,8 @@ def with_dependents(chain: Skeleton, closed_form: dict, combo: dict, joint: str,
     the closed forms; as it is when no joint depends on it, there is no restart, or the restart cannot make one.
 
     A hip moved along its weak line above a knee posed through it (a 3 | 1 | 1 gait leg) had kept the knee
-    computed from the unmoved hip: from a start near the true hip (RTH1 113 mm from it, 119 in truth) the whole
-    tree settled back 43 mm from the marker, with the knee 12 mm from the thigh marker (322 in truth); the knee
+    computed from the unmoved hip (12-14 mm from the thigh marker, 322 in truth): from a start near the true hip
+    (RTH1 113 mm from it, 119 in truth) the whole tree settled back 43 mm from the marker; the knee
     refitted from the moved hip gives a start whose fit stays near the true hip, with 4 900 mm² less residual sum of
     squares over the trial's 1 457 frames (held-out fit draw 5970, trial 75)."""
     below = dependents(chain, closed_form, joint, sparse_side(chain, joint))
