@@ -114,7 +114,7 @@ def test_every_one_joint_change_is_started_before_any_combination(sizes, cap):
     assert all(0 <= i < s for idx in chosen for i, s in zip(idx, sizes))
 
 
-def _leg_3_1_1() -> "Model":
+def _leg_3_1_1():
     from identcheck.io.model import Model
 
     return Model.from_dict({
