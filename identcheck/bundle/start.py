@@ -212,7 +212,6 @@ PICK_ITER = 40
 :func:`better_start`), and converged within 35."""
 
 
-
 def better_start(model, chain: Skeleton, data: np.ndarray, weights: np.ndarray, rate_hz: float, margin: float,
                  source: str = "<array>", max_iter: int = PICK_ITER):
     """The starting state (every frame, not yet fitted) of the combination of the closed-form candidates
