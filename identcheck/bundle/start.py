@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.chain import filled_poses, fit_chain, initial_state
-from identcheck.bundle.starts import CANNOT_START, candidates, start_combinations  # noqa: F401 (re-exported)
+from identcheck.bundle.starts import CANNOT_START, candidates, start_combinations
 from identcheck.errors import DegenerateError
 from identcheck.estimate.closed_forms import fit_model, not_identifiable
 from identcheck.estimate.joint import start_stride

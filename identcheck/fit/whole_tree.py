@@ -311,17 +311,17 @@ def gap_warnings(tree: TreeFit, model, trial) -> list:
     if not noise.sigma_mm > 0 or not seen.any():
         return []
     ctx = Context(model, chain.labels, trial.rate_hz, data, noise, int(seen.sum()), trial.source)
-    test = consistency(ctx, Hypothesis(chain, fit.terms, data, seen.astype(float), fit))
+    h = Hypothesis(chain, fit.terms, data, seen.astype(float), fit)
+    test = consistency(ctx, h)
     if test["consistent"]:
         return []
-    gap = float(np.sqrt(fit.rss / max(int(seen.sum()), 1)))
     weak = [s for s in chain.segments if not posed_by_itself(chain, s, fit)]
     bias = (f", or the fit's own bias where {', '.join(weak)} {'is' if len(weak) == 1 else 'are'} posed only through "
             "the joints" if weak else "")
     return [{"kind": "unexplained_gap", "ratio": round(test["ratio"], 3), "limit": round(test["limit"], 3),
-             "message": (f"{trial.source}: the whole-tree fit leaves {gap:.3g} mm RMS where the measurement noise "
+             "message": (f"{trial.source}: the whole-tree fit leaves {h.gap(ctx):.3g} mm RMS where the measurement noise "
                          f"({noise.sigma_mm:.3g} mm a coordinate, from the distances within segments) would leave "
-                         f"{ctx.noise.floor(ctx.n_samples, fit.n_params):.3g} (gap²/floor² {test['ratio']:.3g}, "
+                         f"{h.floor(ctx):.3g} (gap²/floor² {test['ratio']:.3g}, "
                          f"limit {test['limit']:.3g}): the rigid-joint model misses something (a joint that turns "
                          f"about more axes than declared, skin or marker motion, errors in the data{bias}), and "
                          "the intervals describe the best rigid approximation to the trial, not the joint. "

@@ -70,7 +70,7 @@ def fit_closed_then_tree(model, trial, progress=None, starts_budget_s: float | N
         if refined is not None:
             import warnings as _w
 
-            from identcheck.bundle.start import CANNOT_START
+            from identcheck.bundle.starts import CANNOT_START
 
             with _w.catch_warnings(record=True) as said:   # said again only if this fit is kept
                 _w.simplefilter("always")
@@ -117,7 +117,8 @@ def _refined_start(model, trial, fitted: dict, tree):
     import numpy as np
 
     from identcheck.bundle.chain import fit_chain
-    from identcheck.bundle.start import CANNOT_START, PICK_FRAMES, PICK_ITER, refined_closed_forms, state_from_joints
+    from identcheck.bundle.start import PICK_FRAMES, PICK_ITER, refined_closed_forms, state_from_joints
+    from identcheck.bundle.starts import CANNOT_START
 
     best = tree.best.fit
     chain = best.chain
