@@ -228,3 +228,35 @@ def test_a_restart_that_cannot_fit_leaves_the_moved_start_as_it_was():
     #                                                   on the left thigh: the right hip took them on the pelvis
 
 
+
+
+def test_moved_starts_the_cap_would_cut_are_not_restarted(monkeypatch):
+    """A moved start beyond the start cap is never fitted, so its restart (a pass of the closed forms) is not made:
+    on the 3 | 1 | 1 leg each of the hip's moved starts restarts the knee under the default cap, none when the cap
+    leaves room only for the first combination and its one-joint changes."""
+    import warnings
+
+    import identcheck.bundle.starts as starts
+    from identcheck.estimate.closed_forms import fit_model
+    from identcheck.fit.whole_tree import skeleton_of
+    from identcheck.simulate.rigid import simulate
+
+    model = _leg_3_1_1()
+    trial = simulate(model, n_frames=400, noise_mm=0.3, seed=5).trial
+    chain = skeleton_of(model, trial)
+    data = trial.select(chain.labels).as_array()
+    calls = []
+
+    def restart(fixed):
+        calls.append(fixed)
+        return fit_model(model, trial, fixed=fixed)[0]
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fitted = fit_model(model, trial)[0]
+        singles = starts.start_combinations(chain, fitted, restart, data)[3]
+        assert len(calls) == len(RADIAL_FACTORS)
+        calls.clear()
+        monkeypatch.setattr(starts, "MAX_STARTS", 1)
+        combos = starts.start_combinations(chain, fitted, restart, data)[0]
+    assert calls == [] and len(combos) == 1 + singles
