@@ -318,13 +318,23 @@ def gap_warnings(tree: TreeFit, model, trial) -> list:
     weak = [s for s in chain.segments if not posed_by_itself(chain, s, fit)]
     bias = (f", or the fit's own bias where {', '.join(weak)} {'is' if len(weak) == 1 else 'are'} posed only through "
             "the joints" if weak else "")
+    gap, floor = h.gap(ctx), h.floor(ctx)
+    noise_said = (f"{noise.sigma_mm:.3g} mm a coordinate, lag-1 correlation {noise.lag1:.2f} from frame to frame, "
+                  f"from {noise.n_pairs} distance{'s' if noise.n_pairs != 1 else ''} within segments")
+    if gap > floor:
+        found = (f"the whole-tree fit leaves {gap:.3g} mm RMS where the measurement noise ({noise_said}) would leave "
+                 f"{floor:.3g} (prewhitened gap²/floor² {test['ratio']:.3g}, limit {test['limit']:.3g})")
+        cause = ""
+    else:   # the RMS is within the floor: what exceeds it is the residual's change from frame to frame
+        found = (f"the whole-tree fit leaves {gap:.3g} mm RMS, within the {floor:.3g} the measurement noise "
+                 f"({noise_said}) would leave, but its changes from frame to frame exceed what noise that correlated "
+                 f"makes (prewhitened gap²/floor² {test['ratio']:.3g}, limit {test['limit']:.3g})")
+        cause = (", or noise less correlated from frame to frame than the distances within segments suggest"
+                 if noise.lag1 > 0 else "")
     return [{"kind": "unexplained_gap", "ratio": round(test["ratio"], 3), "limit": round(test["limit"], 3),
-             "message": (f"{trial.source}: the whole-tree fit leaves {h.gap(ctx):.3g} mm RMS where the measurement noise "
-                         f"({noise.sigma_mm:.3g} mm a coordinate, from the distances within segments) would leave "
-                         f"{h.floor(ctx):.3g} (gap²/floor² {test['ratio']:.3g}, "
-                         f"limit {test['limit']:.3g}): the rigid-joint model misses something (a joint that turns "
-                         f"about more axes than declared, skin or marker motion, errors in the data{bias}), and "
-                         "the intervals describe the best rigid approximation to the trial, not the joint. "
+             "message": (f"{trial.source}: {found}: the rigid-joint model misses something (a joint that turns "
+                         f"about more axes than declared, skin or marker motion, errors in the data{bias}{cause}), "
+                         "and the intervals describe the best rigid approximation to the trial, not the joint. "
                          "`identcheck diagnose` names what it misses")}]
 
 

@@ -574,3 +574,29 @@ def test_a_hinge_that_turns_about_a_second_axis_is_said_to_leave_a_gap(examples,
     gap = [w for w in said if w["kind"] == "unexplained_gap"]
     assert gap and gap[0]["ratio"] > gap[0]["limit"] and "diagnose" in gap[0]["message"]
     assert not [w for w in clean if w["kind"] == "unexplained_gap"]
+
+
+@pytest.mark.parametrize("within", [False, True])
+def test_an_unexplained_gap_within_its_floor_says_what_exceeds_it(examples, monkeypatch, within):
+    """The warning states what the test found: a residual whose RMS exceeds the noise's floor is said to leave more
+    than the noise would; one whose RMS is within it (the prewhitened test failing on the residual's changes from frame
+    to frame, as on a one-pair ankle under strongly correlated noise, 0.67 mm RMS against a floor of 1.34) is said to
+    be within it, and what exceeds the noise named, where it had read '0.667 mm RMS where the noise would leave
+    1.34' as a finding of more than the noise."""
+    import identcheck as ic
+    import identcheck.bundle.hypothesis as H
+
+    model = Model.from_toml(examples / "diagnose_leg.toml")
+    sim = simulate(model, n_frames=300, noise_mm=0.5, seed=3)
+    monkeypatch.setattr(H, "consistency", lambda ctx, h: {"ratio": 2.0, "limit": 1.3, "dof": 100,
+                                                           "consistent": False})
+    monkeypatch.setattr(H.Hypothesis, "floor", lambda self, ctx: self.gap(ctx) * (2.0 if within else 0.5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        said = ic.fit(model, sim.trial).to_dict()["warnings"]
+    gap = [w for w in said if w["kind"] == "unexplained_gap"]
+    assert len(gap) == 1 and gap[0]["ratio"] == 2.0
+    message = gap[0]["message"]
+    assert ("within the" in message and "changes from frame to frame" in message) == within
+    assert ("mm RMS where the measurement noise" in message) == (not within)
+    assert "lag-1 correlation" in message
