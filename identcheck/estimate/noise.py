@@ -15,7 +15,14 @@ coefficient φ: the lag-1 correlation of a distance's first differences is ``−
 noise), which gives φ per pair (median over pairs); the second differences then have variance
 ``σ_d² (1 − φ)(6 − 2φ)``, which gives the marginal σ. For white noise this is the estimate above. The seed
 001 whole-trial scatter is reported alongside (``sigma_scatter_mm``): much larger than ``sigma_mm`` means the
-segments deform slowly. A least-squares fit with P free parameters to 3N coordinates leaves, in
+segments deform slowly.
+
+Near φ = 1 the marginal σ hangs on φ's last digits (at φ 0.94 a change of 0.01 moves it by 9 %), and φ read from one
+distance's 1 000 frames scatters by ±0.05: a one-pair ankle under noise of 1.09 mm and φ 0.94 read φ 0.98 and σ 1.97
+mm. A distance's whole-trial spread bounds it: noise cannot scatter a distance more than the distance scatters, so
+each pair's φ is at most the one that puts its marginal σ at its whole-trial spread (bias-corrected for the serial
+correlation and raised by one standard error; slow deformation only raises the spread, and with it the bound), and
+σ's relative standard error counts φ's sampling error (``2/√n`` for n first differences) even with one pair. A least-squares fit with P free parameters to 3N coordinates leaves, in
 expectation, ``σ²(3N − P)``; the floor in the contract's gap measure (RMS 3-D distance over the N
 marker samples) is therefore ``σ·sqrt((3N − P)/N)``.
 """
@@ -72,6 +79,32 @@ def second_difference_factor(phi: float) -> float:
     return (1 - phi) * (6 - 2 * phi) / 6.0
 
 
+def phi_of_factor(factor: float) -> float:
+    """The φ whose :func:`second_difference_factor` is `factor` (its inverse on [0, 1]: ``2 − √(1 + 3 factor)``),
+    clipped to [0, :data:`MAX_PHI`]."""
+    return float(np.clip(2.0 - np.sqrt(1.0 + 3.0 * max(factor, 0.0)), 0.0, MAX_PHI))
+
+
+def spread_bound(d: np.ndarray, sd: float, phi: float) -> float:
+    """The largest lag-1 coefficient a distance series d (F,) allows, given its frame-to-frame standard deviation
+    `sd` (:func:`frame_to_frame_sd`) and its own coefficient `phi` (:func:`ar1_coefficient`): the one whose
+    marginal σ (``sd / √factor``) equals the series' whole-trial standard deviation, that bias-corrected for the
+    serial correlation (``1 − 1/n_eff``, ``n_eff = n (1 − φ)/(1 + φ)``) and raised by one standard error
+    (``1/√(2 n_eff)``). Slow deformation and gross errors only raise the spread, and with it the bound."""
+    x = d[np.isfinite(d)]
+    var = float(np.var(x)) if len(x) > 1 else 0.0
+    if not (var > 0 and sd > 0):
+        return MAX_PHI
+
+    def n_eff(p: float) -> float:
+        return max(len(x) * (1 - p) / (1 + p), 2.0)
+
+    var /= 1 - 1 / n_eff(phi)
+    first = phi_of_factor(sd ** 2 / var)
+    upper = var * (1 + 1 / np.sqrt(2 * n_eff(first))) ** 2
+    return phi_of_factor(sd ** 2 / upper)
+
+
 @dataclass(frozen=True)
 class NoiseFloor:
     """Marker noise from within-segment distances.
@@ -124,8 +157,10 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
     """
     col = {m: i for i, m in enumerate(labels)}
     pair_sd, scatter, counts, phis = {}, [], [], []
+    independent = 0                  # distances whose noise is independent of the others': a segment's markers less 1
     for seg, markers in segments.items():
         idx = [col[m] for m in markers if m in col]
+        independent += max(len(idx) - 1, 0)
         for a in range(len(idx)):
             for b in range(a + 1, len(idx)):
                 pts = data[:, [idx[a], idx[b]]]
@@ -140,7 +175,8 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
                 if not np.isfinite(sd):
                     continue
                 pair_sd[f"{labels[idx[a]]}-{labels[idx[b]]}"] = sd / np.sqrt(2.0)
-                phis.append(ar1_coefficient(dist))
+                phi = ar1_coefficient(dist)
+                phis.append(min(phi, spread_bound(dist, sd, phi)) if np.isfinite(phi) else phi)
                 scatter.append(pts)
                 counts.append(n)
     if not pair_sd:
@@ -156,8 +192,11 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
     # standard error of a median of n estimates, each with MAD's own sampling error
     mad_se = 1.167 / np.sqrt(max(np.median(counts), 1))
     spread = 1.2533 * 1.4826 * np.median(np.abs(vals - sigma)) / max(sigma, 1e-300) / np.sqrt(n) if n > 1 else 0.0
-    # and φ's: d ln σ / dφ = ½ (1/(1 − φ) + 2/(6 − 2φ)), φ's standard error that of a median of the pairs'
-    phi_se = 1.2533 * 1.4826 * np.median(np.abs(phis - phi)) / np.sqrt(len(phis)) if len(phis) > 1 else 0.0
+    # and φ's: d ln σ / dφ = ½ (1/(1 − φ) + 2/(6 − 2φ)), φ's standard error that of a median of the pairs', at least
+    # its sampling error from the frames (2/√n for n first differences: one pair's φ is no better known than that),
+    # over the distances whose noise is independent (six pairs of four markers carry four markers' noise)
+    spread_phi = 1.2533 * 1.4826 * np.median(np.abs(phis - phi)) / np.sqrt(len(phis)) if len(phis) > 1 else 0.0
+    phi_se = max(spread_phi, 2.0 / np.sqrt(max(np.median(counts), 1) * max(min(len(phis), independent), 1)))
     phi_part = 0.5 * (1 / (1 - phi) + 2 / (6 - 2 * phi)) * phi_se if phi > 0 else 0.0
     whole = marker_noise(*scatter).noise_mm
     rel_se = float(np.hypot(max(mad_se / np.sqrt(n), spread), phi_part))
