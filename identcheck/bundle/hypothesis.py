@@ -24,6 +24,7 @@ from identcheck.errors import DegenerateError, InputError
 from identcheck.estimate.noise import NoiseFloor
 
 SCREEN_ITER = 6          # LM iterations when screening a candidate (warm start)
+POLISH_ITER = 40         # LM iterations a candidate is fitted on for to be compared and checked (Hypothesis.polish)
 CONSISTENCY_MARGIN = 0.02
 """Allowance on gap²/floor² beyond its sampling spreads before the residual counts as unexplained
 (1 % of the gap): the floor's model of noise (white, isotropic, the same on every marker) is never
@@ -193,7 +194,7 @@ class Hypothesis:
             fresh = None
         return warm if fresh is None or ctx.rss(fresh) >= ctx.rss(warm) else fresh
 
-    def polish(self, max_iter: int = 40) -> "Hypothesis":
+    def polish(self, max_iter: int = POLISH_ITER) -> "Hypothesis":
         """The same hypothesis fitted on for at most `max_iter` iterations: near convergence, as the search
         needs to compare candidates (the final model is taken all the way by :meth:`converged`)."""
         fit = fit_chain(self.chain, self.data, self.fit.state, self.terms, self.weights, max_iter=max_iter)

@@ -33,7 +33,7 @@ from identcheck.bundle.honest import assess, joint_answer, posed_by_itself
 from identcheck.bundle.start import better_start, start_state
 from identcheck.bundle.uncertainty import distance_gradients, gauge_free_inverse
 from identcheck.effects.registry import EFFECTS
-from identcheck.bundle.hypothesis import Context, Hypothesis, consistency, score
+from identcheck.bundle.hypothesis import POLISH_ITER, Context, Hypothesis, consistency, score
 from identcheck.diagnose.backward import Adopted, Redundant, redundant
 from identcheck.estimate.noise import noise_floor
 from identcheck.estimate.screen_findings import with_screen_findings
@@ -418,11 +418,11 @@ def start(model, trial, progress=None) -> tuple[Context, Hypothesis]:
     return ctx, h
 
 
-def creep(ctx: Context, h: Hypothesis) -> float:
-    """What refitting `h` as it is gains (:data:`CREEP_ITER` more iterations, no effect added), in the
-    criterion's units (≥ 0): the rigid fit of data an effect corrupts creeps on for long, and every candidate's
-    refit takes that gain too, so each candidate's score is counted net of it."""
-    return max(score(ctx, h.refit(max_iter=CREEP_ITER), h), 0.0)
+def creep(ctx: Context, h: Hypothesis, iterations: int = CREEP_ITER) -> float:
+    """What refitting `h` as it is gains (`iterations` more, no effect added), in the criterion's units (≥ 0): the
+    rigid fit of data an effect corrupts creeps on for long, and every candidate's refit takes that gain too, so each
+    candidate's score is counted net of it."""
+    return max(score(ctx, h.refit(max_iter=iterations), h), 0.0)
 
 
 def widens(where: dict, of: dict) -> bool:
@@ -637,19 +637,20 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
            drift: float | None, progress, step: int) -> tuple:
     """The round's adoption: (the candidates in the order considered, the adopted (score, effect, proposal,
     hypothesis) or None, the limit and free directions for the rounds after). Candidates are considered in
-    :func:`ranked` order; each is fitted on (:meth:`Hypothesis.polish`) and adopted when it keeps the joints
-    determined (or only corrects the data), else recorded in `refused`. The proposals left at their screen
+    :func:`ranked` order, the leading ones scored fitted on (:func:`contested`); each is fitted on
+    (:meth:`Hypothesis.polish`) and adopted when it keeps the joints determined (or only corrects the data), else
+    recorded in `refused`. The proposals left at their screen
     (`screened`, (estimate, effect, proposal)) are fitted in full, and the round considered again with them,
     when its choice reaches below :data:`COMPLETE_SHARE` of the round's best or ends with none; each candidate is
     fitted on once. The choice, the refusals and the candidates equivalent to the one adopted are then those of the
     round with every proposal fitted in full, provided each screened proposal's full score is below half the best
     (:data:`SCREEN_FROM`)."""
-    polished, before, logged = {}, dict(refused), set()
+    polished, before, logged, screen = {}, dict(refused), set(), {}
     while True:
         refused.clear()
         refused.update(before)                     # (a second pass records its own refusals, as a single one would)
-        tried = contested(ctx, h, ranked(tried, h, bars.bar, logged), tried, bars.bar, polished, drift, progress,
-                          step)
+        screen.update({id(x[2]): x[0] for x in tried if id(x[2]) not in screen})   # each one's score after its screen
+        tried = contested(ctx, h, ranked(tried, h, bars.bar, logged), tried, bars.bar, polished, progress, step)
         order = ranked(tried, h, bars.bar, logged)
         limit, free_floor = bars.limit, bars.free_floor
         adopted, closed = None, False
@@ -659,8 +660,9 @@ def choose(ctx: Context, base: Hypothesis, h: Hypothesis, tried: list, screened:
             closed = closed or sc <= bars.bar
             if sc <= bar_for(eff, bars.bar) or (closed and not eff.sparse):
                 continue
-            if screened and sc < COMPLETE_SHARE * bars.best:
-                break                              # (the screened proposals are fitted in full first)
+            if screened and screen[id(prop)] < COMPLETE_SHARE * bars.best:
+                break                              # (the screened proposals are fitted in full first; the share is of
+                # the scores after the screen, the round's best's basis, whatever a contest fitted on since)
             if id(prop) not in polished:
                 if progress:
                     progress(f"step {step}: fitting {eff.name} {prop.where} further, to check the joints stay "
@@ -694,11 +696,16 @@ MAX_CONTENDERS = 4
 """At most this many contenders a round (the leader included)."""
 
 
-def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float, polished: dict, drift: float,
-              progress, step: int) -> list:
-    """The round's candidates `tried` with each contender's (:data:`CONTENDER_SHARE`, :data:`MAX_CONTENDERS`, taken
-    from `order`, the candidates as :func:`ranked` puts them) score and hypothesis those of its fit carried on
-    (:meth:`Hypothesis.polish`, kept in `polished` by proposal), net of `drift`; unchanged with fewer than two.
+def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float, polished: dict, progress,
+              step: int) -> list:
+    """The round's candidates `tried` with each contender's score and hypothesis those of its fit carried on
+    (:meth:`Hypothesis.polish`, kept in `polished` by proposal), net of what `h` itself gains over as many more
+    iterations (:func:`creep`, kept in `polished` as ``"creep"``); unchanged with fewer than two contenders. The
+    contenders are the highest-scoring of the candidates `order` (as :func:`ranked` puts them) puts above the bar, at
+    most :data:`MAX_CONTENDERS`, scoring at least :data:`CONTENDER_SHARE` of the best; none when `order` opens with an
+    error the data show without the joint model (a swap: adopted ahead of any score). The other candidates keep their
+    scores after the screen: below half the best, they are outside the margin within which two explanations are equal
+    (unless more than :data:`MAX_CONTENDERS` are within it), and a report's scores mix the two bases.
 
     Why: a candidate is scored after :data:`~identcheck.bundle.hypothesis.SCREEN_ITER` iterations from the round's
     hypothesis, and one with many parameters, or one that trades off with an effect adopted before it, is then
@@ -707,12 +714,15 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
     translation at 63 793 (one parameter), which was adopted; a round later the skin scored 24, the trial's gap
     stayed 2.1 mm where the skin alone brings it to 0.53. Only the candidate about to be adopted had been fitted on."""
     heads = [x for x in order if x[0] > bar_for(x[1], bar)]
-    if len(heads) < 2 or drift is None:
+    if len(heads) < 2 or heads[0][1].read_without_joints(heads[0][2]):
         return tried
-    top = max(x[0] for x in heads)
-    contenders = [x for x in heads[:MAX_CONTENDERS] if x[0] >= CONTENDER_SHARE * top]
+    heads = sorted(heads, key=lambda x: -x[0])
+    contenders = [x for x in heads[:MAX_CONTENDERS] if x[0] >= CONTENDER_SHARE * heads[0][0]]
     if len(contenders) < 2:
         return tried
+    if "creep" not in polished:     # (once a round; the screen's own drift counted CREEP_ITER iterations)
+        polished["creep"] = creep(ctx, h, CREEP_ITER + POLISH_ITER)
+    drift = polished["creep"]
     rescored = {}
     for sc, eff, prop, cand in contenders:
         if id(prop) not in polished:

@@ -15,16 +15,17 @@ coefficient φ: the lag-1 correlation of a distance's first differences is ``−
 noise), which gives φ per pair (median over pairs); the second differences then have variance
 ``σ_d² (1 − φ)(6 − 2φ)``, which gives the marginal σ. For white noise this is the estimate above. The seed
 001 whole-trial scatter is reported alongside (``sigma_scatter_mm``): much larger than ``sigma_mm`` means the
-segments deform slowly.
+segments deform slowly. A least-squares fit with P free parameters to 3N coordinates leaves, in
+expectation, ``σ²(3N − P)``; the floor in the contract's gap measure (RMS 3-D distance over the N
+marker samples) is therefore ``σ·sqrt((3N − P)/N)``.
 
 Near φ = 1 the marginal σ hangs on φ's last digits (at φ 0.94 a change of 0.01 moves it by 9 %), and φ read from one
 distance's 1 000 frames scatters by ±0.05: a one-pair ankle under noise of 1.09 mm and φ 0.94 read φ 0.98 and σ 1.97
 mm. A distance's whole-trial spread bounds it: noise cannot scatter a distance more than the distance scatters, so
 each pair's φ is at most the one that puts its marginal σ at its whole-trial spread (bias-corrected for the serial
-correlation and raised by one standard error; slow deformation only raises the spread, and with it the bound), and
-σ's relative standard error counts φ's sampling error (``2/√n`` for n first differences) even with one pair. A least-squares fit with P free parameters to 3N coordinates leaves, in
-expectation, ``σ²(3N − P)``; the floor in the contract's gap measure (RMS 3-D distance over the N
-marker samples) is therefore ``σ·sqrt((3N − P)/N)``.
+correlation and raised by about one standard error; slow deformation only raises the spread, and with it the bound),
+and σ's relative standard error counts φ's sampling error (``2/√n`` for n first differences) even with one pair, or
+the spread's own where most pairs' φ is set by it.
 """
 from __future__ import annotations
 
@@ -89,8 +90,10 @@ def spread_bound(d: np.ndarray, sd: float, phi: float) -> float:
     """The largest lag-1 coefficient a distance series d (F,) allows, given its frame-to-frame standard deviation
     `sd` (:func:`frame_to_frame_sd`) and its own coefficient `phi` (:func:`ar1_coefficient`): the one whose
     marginal σ (``sd / √factor``) equals the series' whole-trial standard deviation, that bias-corrected for the
-    serial correlation (``1 − 1/n_eff``, ``n_eff = n (1 − φ)/(1 + φ)``) and raised by one standard error
-    (``1/√(2 n_eff)``). Slow deformation and gross errors only raise the spread, and with it the bound."""
+    serial correlation (``1 − 1/n_eff``, ``n_eff = n (1 − φ)/(1 + φ)``, the mean's) and raised by ``1/√(2 n_eff)``
+    (about one standard error of a standard deviation; the variance's own n_eff, ``n (1 − φ²)/(1 + φ²)``, is larger
+    near φ = 1, so the bound is looser than one). Slow deformation and gross errors only raise the spread, and with it
+    the bound."""
     x = d[np.isfinite(d)]
     var = float(np.var(x)) if len(x) > 1 else 0.0
     if not (var > 0 and sd > 0):
@@ -119,7 +122,9 @@ class NoiseFloor:
     pair_sigma_mm : dict
         "A-B" → that pair's own robust estimate, mm.
     rel_se : float
-        Relative standard error of ``sigma_mm`` (from the spread of the pairs' estimates, φ's included).
+        Relative standard error of ``sigma_mm`` (from the spread of the pairs' estimates, φ's included: at least its
+        sampling error over the frames, or the spread's where that bounds φ; near φ = 1 a linear reading of a
+        σ known only within a factor, so large).
     n_pairs, n_samples : int
     lag1 : float
         φ, the AR(1) coefficient of the noise from frame to frame (0: white).
@@ -156,11 +161,11 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
         No pair of markers on one segment is seen together in enough frames.
     """
     col = {m: i for i, m in enumerate(labels)}
-    pair_sd, scatter, counts, phis = {}, [], [], []
-    independent = 0                  # distances whose noise is independent of the others': a segment's markers less 1
+    pair_sd, scatter, counts, phis, capped = {}, [], [], [], []
+    independent = 0          # distances whose noise is independent of the others': a segment's markers paired, less 1
     for seg, markers in segments.items():
         idx = [col[m] for m in markers if m in col]
-        independent += max(len(idx) - 1, 0)
+        paired = set()
         for a in range(len(idx)):
             for b in range(a + 1, len(idx)):
                 pts = data[:, [idx[a], idx[b]]]
@@ -176,9 +181,13 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
                     continue
                 pair_sd[f"{labels[idx[a]]}-{labels[idx[b]]}"] = sd / np.sqrt(2.0)
                 phi = ar1_coefficient(dist)
-                phis.append(min(phi, spread_bound(dist, sd, phi)) if np.isfinite(phi) else phi)
+                bound = spread_bound(dist, sd, phi) if np.isfinite(phi) else phi
+                phis.append(min(phi, bound))
+                capped.append(bool(np.isfinite(phi) and bound < phi))
                 scatter.append(pts)
                 counts.append(n)
+                paired |= {a, b}
+        independent += max(len(paired) - 1, 0)
     if not pair_sd:
         raise InputError(["no two markers of one segment are seen together in "
                           f"{MIN_SAMPLES_PER_PAIR} or more frames: the noise floor cannot be estimated"])
@@ -194,10 +203,15 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
     spread = 1.2533 * 1.4826 * np.median(np.abs(vals - sigma)) / max(sigma, 1e-300) / np.sqrt(n) if n > 1 else 0.0
     # and φ's: d ln σ / dφ = ½ (1/(1 − φ) + 2/(6 − 2φ)), φ's standard error that of a median of the pairs', at least
     # its sampling error from the frames (2/√n for n first differences: one pair's φ is no better known than that),
-    # over the distances whose noise is independent (six pairs of four markers carry four markers' noise)
+    # over the distances whose noise is independent (six pairs of four markers: three). Where most pairs' φ is set
+    # by their spread (spread_bound), σ is that spread's, known to 1/√(2 n_eff) a distance
+    m_pairs = max(min(len(phis), independent), 1)
     spread_phi = 1.2533 * 1.4826 * np.median(np.abs(phis - phi)) / np.sqrt(len(phis)) if len(phis) > 1 else 0.0
-    phi_se = max(spread_phi, 2.0 / np.sqrt(max(np.median(counts), 1) * max(min(len(phis), independent), 1)))
+    phi_se = max(spread_phi, 2.0 / np.sqrt(max(np.median(counts), 1) * m_pairs))
     phi_part = 0.5 * (1 / (1 - phi) + 2 / (6 - 2 * phi)) * phi_se if phi > 0 else 0.0
+    if capped and np.mean(capped) >= 0.5:
+        n_eff = max(np.median(counts) * (1 - phi) / (1 + phi), 2.0)
+        phi_part = min(phi_part, 1 / np.sqrt(2 * n_eff * m_pairs))
     whole = marker_noise(*scatter).noise_mm
     rel_se = float(np.hypot(max(mad_se / np.sqrt(n), spread), phi_part))
     return NoiseFloor(sigma, whole, pair_sd, rel_se, n, int(np.sum(counts)), phi)

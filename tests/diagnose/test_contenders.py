@@ -1,6 +1,7 @@
 """The round's leading candidates are compared fitted on, not after their few screening iterations
 (:func:`identcheck.diagnose.workflow.contested`): a candidate far from its own minimum after the screen (many
 parameters, or trading off with an effect adopted before it) is not passed over for one that was nearly there."""
+import sys
 from types import SimpleNamespace
 
 import pytest
@@ -40,7 +41,11 @@ def stubbed(monkeypatch):
     monkeypatch.setattr(W, "score", lambda ctx, cand, h: cand.value)
     monkeypatch.setattr(W, "corrects_data_only", lambda h, cand: False)
     monkeypatch.setattr(W, "undetermined", lambda cand: 0)
-    monkeypatch.setattr(W, "worst_joint", lambda ctx, cand: ("knee", 1.0))
+    monkeypatch.setattr(W, "worst_joint", lambda ctx, cand: ("knee", getattr(cand, "sd", 1.0)))
+    monkeypatch.setattr(W, "creep", lambda ctx, h, iterations=W.CREEP_ITER: CREEP_PER_ITERATION * iterations)
+
+
+CREEP_PER_ITERATION = 0.0
 
 
 screens = st.floats(1.0, 5e4, allow_nan=False)
@@ -88,3 +93,71 @@ def test_a_many_parameter_candidate_slow_to_settle_wins_once_fitted_on(stubbed):
     _, adopted, _, _ = W.choose(None, None, None, tried, [], W.Bars(0.0, 63_793.0, 10.0, 0, 10.0), {}, 0.0, None, 2)
     assert adopted[2] is props[0] and adopted[0] == 74_823.0
     assert slip.polishes == 0 and skin.polishes == 1 and knee.polishes == 1
+
+
+class Sized(Candidate):
+    """A candidate with the standard error it leaves on the joints (`sd`, mm: above 10 it is refused)."""
+
+    def __init__(self, value: float, polished: float, sd: float = 1.0):
+        super().__init__(value, polished)
+        self.sd = sd
+
+    def polish(self):
+        self.polishes += 1
+        return Sized(self.polished, self.polished, self.sd)
+
+
+class Fitted(Stub):
+    """A stub whose screened proposals are fitted in full to given candidates."""
+
+    def __init__(self, full: dict):
+        self.full, self.fits = full, 0
+
+    def apply(self, ctx, h, prop):
+        self.fits += 1
+        return self.full[id(prop)]
+
+
+def test_a_contender_fitted_on_above_the_share_still_waits_for_the_screened_proposals(stubbed):
+    """The leader (100) is refused for the joints; the second scored 50 after its screen, under COMPLETE_SHARE of the
+    best, and 70 fitted on, above it; one proposal was left at its screen and scores 90 in full. The share is taken of
+    the round's best as fitted on, so the screened proposal is fitted in full and adopted (the contender's fitted-on
+    score against the screen's best had let the 70 in without it)."""
+    props = [SimpleNamespace(where={"n": i}) for i in range(3)]
+    leader, second, waiting = Sized(100.0, 100.0, sd=50.0), Sized(50.0, 70.0), Sized(90.0, 90.0)
+    eff = Fitted({id(props[2]): waiting})
+    tried = [(100.0, eff, props[0], leader), (50.0, eff, props[1], second)]
+    _, adopted, _, _ = W.choose(None, None, None, tried, [(9.0, eff, props[2])], W.Bars(0.0, 100.0, 10.0, 0, 10.0),
+                                {}, 0.0, None, 1)
+    assert eff.fits == 1 and adopted is not None and adopted[2] is props[2]
+
+
+def test_contenders_are_scored_net_of_the_creep_over_as_many_iterations(stubbed, monkeypatch):
+    """The fitted-on scores are counted net of what the round's hypothesis gains over the screen's creep iterations
+    and the polish's together (the screen's own drift counted only CREEP_ITER): with a creep of 10 an iteration, a
+    candidate whose fitting on gains only that creep keeps its screened score, and one that gains less than the creep
+    loses to it."""
+    monkeypatch.setattr(sys.modules[__name__], "CREEP_PER_ITERATION", 10.0)
+    props = [SimpleNamespace(where={"n": i}) for i in range(2)]
+    settled = Candidate(1000.0, 1000.0 + 10.0 * (W.CREEP_ITER + W.POLISH_ITER))
+    creeping = Candidate(900.0, 1000.0 + 10.0 * (W.CREEP_ITER + W.POLISH_ITER) - 50.0)
+    eff = Stub()
+    tried = [(1000.0, eff, props[0], settled), (900.0, eff, props[1], creeping)]
+    _, adopted, _, _ = W.choose(None, None, None, tried, [], W.Bars(0.0, 1000.0, 10.0, 0, 10.0), {}, 0.0, None, 1)
+    assert adopted[2] is props[0] and adopted[0] == pytest.approx(1000.0)
+    assert settled.polishes == 1 and creeping.polishes == 1
+
+
+def test_no_contest_behind_an_error_the_data_show_without_the_joints(stubbed):
+    """A swap read from the distances alone heads the round whatever the scores: nothing is fitted on to be compared
+    with it."""
+    class Shown(Stub):
+        def read_without_joints(self, prop):
+            return prop.where["n"] == 0
+
+    props = [SimpleNamespace(where={"n": i}) for i in range(3)]
+    swap, big, other = Candidate(600.0, 600.0), Candidate(1000.0, 3000.0), Candidate(900.0, 2000.0)
+    eff = Shown()
+    tried = [(c.value, eff, p, c) for p, c in zip(props, (swap, big, other))]
+    _, adopted, _, _ = W.choose(None, None, None, tried, [], W.Bars(0.0, 1000.0, 10.0, 0, 10.0), {}, 0.0, None, 1)
+    assert adopted[2] is props[0] and big.polishes == 0 and other.polishes == 0

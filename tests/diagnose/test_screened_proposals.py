@@ -50,6 +50,7 @@ def stubbed(monkeypatch):
     monkeypatch.setattr(W, "corrects_data_only", lambda h, cand: False)
     monkeypatch.setattr(W, "undetermined", lambda cand: 0)
     monkeypatch.setattr(W, "worst_joint", lambda ctx, cand: ("knee", cand.sd))
+    monkeypatch.setattr(W, "creep", lambda ctx, h, iterations=W.CREEP_ITER: 0.0)
 
 
 def equivalents(order: list, adopted) -> list:
