@@ -712,12 +712,23 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
     further from its own minimum than a small one: skin on the four pelvis markers of the real walking2 trial's sparse
     legs (324 parameters) scored 43 582 after 6 iterations, 66 911 after 20 and 74 823 after 60, against a knee's
     translation at 63 793 (one parameter), which was adopted; a round later the skin scored 24, the trial's gap
-    stayed 2.1 mm where the skin alone brings it to 0.53. Only the candidate about to be adopted had been fitted on."""
+    stayed 2.1 mm where the skin alone brings it to 0.53. Only the candidate about to be adopted had been fitted on.
+
+    Two variants of one story (:func:`related`: skin on one shank marker or on all three, a pelvis cluster moving with
+    the hip or the hip's centre moving) are not contested: the one after the screen's ranking stands for both. Fitted
+    on, the more flexible one gains the more, and with it the more room to trade off with the joints: skin on all
+    three shank markers outscored skin on the one that moved (9 532 against 9 121) and left the knee 66 mm off,
+    unbounded; a pelvis cluster's skin outscored the hip translation it is, by 5 %, and the hip was claimed."""
     heads = [x for x in order if x[0] > bar_for(x[1], bar)]
     if len(heads) < 2 or heads[0][1].read_without_joints(heads[0][2]):
         return tried
     heads = sorted(heads, key=lambda x: -x[0])
-    contenders = [x for x in heads[:MAX_CONTENDERS] if x[0] >= CONTENDER_SHARE * heads[0][0]]
+    contenders = []
+    for x in heads:
+        if len(contenders) == MAX_CONTENDERS or x[0] < CONTENDER_SHARE * heads[0][0]:
+            break
+        if not any(related(x[2].where, c[2].where) for c in contenders):
+            contenders.append(x)
     if len(contenders) < 2:
         return tried
     if "creep" not in polished:     # (once a round; the screen's own drift counted CREEP_ITER iterations)
@@ -732,6 +743,15 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
             polished[id(prop)] = cand.polish()
         rescored[id(prop)] = (score(ctx, polished[id(prop)], h) - drift, eff, prop, polished[id(prop)])
     return [rescored.get(id(x[2]), x) for x in tried]
+
+
+def related(where: dict, other: dict) -> bool:
+    """Whether two places are variants of one story: the same segment, a joint in common (the joint an effect is at or
+    driven by), or a marker in common."""
+    joints = lambda w: {w.get("joint"), *(w.get("joints") or ())} - {None}    # noqa: E731
+    seg, other_seg = where.get("segment"), other.get("segment")
+    return bool((seg is not None and seg == other_seg) or joints(where) & joints(other)
+                or set(where.get("markers") or ()) & set(other.get("markers") or ()))
 
 
 def complete(ctx: Context, h: Hypothesis, screened: list, drift: float, progress, step: int) -> list:

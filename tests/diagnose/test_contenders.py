@@ -161,3 +161,21 @@ def test_no_contest_behind_an_error_the_data_show_without_the_joints(stubbed):
     tried = [(c.value, eff, p, c) for p, c in zip(props, (swap, big, other))]
     _, adopted, _, _ = W.choose(None, None, None, tried, [], W.Bars(0.0, 1000.0, 10.0, 0, 10.0), {}, 0.0, None, 1)
     assert adopted[2] is props[0] and big.polishes == 0 and other.polishes == 0
+
+
+def test_variants_of_one_story_are_not_contested(stubbed):
+    """Skin on one shank marker (the leader after the screen) and on all three, or a pelvis cluster moving with the
+    hip and the hip's centre moving: variants of one story are not fitted on to be compared (the more flexible one
+    gains the more and trades off with the joints); the leader after the screen stands. A variant at another place
+    is still contested."""
+    props = [SimpleNamespace(where=w) for w in ({"segment": "shank", "markers": ["RANK"], "joint": "knee"},
+                                                 {"segment": "shank", "markers": ["RTIB", "RTIB2", "RANK"],
+                                                  "joint": "knee"},
+                                                 {"joint": "hip"})]
+    one, three, hip = Candidate(9_121.0, 9_130.0), Candidate(9_000.0, 9_532.0), Candidate(5_000.0, 5_100.0)
+    eff = Stub()
+    tried = [(c.value, eff, p, c) for p, c in zip(props, (one, three, hip))]
+    _, adopted, _, _ = W.choose(None, None, None, tried, [], W.Bars(0.0, 9_121.0, 10.0, 0, 10.0), {}, 0.0, None, 1)
+    assert adopted[2] is props[0] and three.polishes == 0 and hip.polishes == 1 and one.polishes == 1
+    assert W.related({"segment": "pelvis", "joint": "hip_r", "joints": ["hip_r", "hip_l"]}, {"joint": "hip_l"})
+    assert not W.related({"segment": "pelvis", "joint": "hip_r"}, {"joint": "knee_l"})

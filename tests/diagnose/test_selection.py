@@ -86,7 +86,7 @@ def _patched(monkeypatch, model, trial, effects, max_steps, score=lambda ctx, ca
     """diagnose with stand-in effects, scores and joints (`worst_joint`, through which worst_sd reads too)."""
     monkeypatch.setattr(workflow, "EFFECTS", {e.name: e for e in effects})
     monkeypatch.setattr(workflow, "score", score)
-    monkeypatch.setattr(workflow, "creep", lambda ctx, h: 0.0)
+    monkeypatch.setattr(workflow, "creep", lambda ctx, h, iterations=workflow.CREEP_ITER: 0.0)
     monkeypatch.setattr(workflow, "undetermined", lambda cand: 0)
     monkeypatch.setattr(workflow, "worst_joint", worst_joint)
     monkeypatch.setattr(workflow, "consistency",
