@@ -700,12 +700,14 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
               step: int) -> list:
     """The round's candidates `tried` with each contender's score and hypothesis those of its fit carried on
     (:meth:`Hypothesis.polish`, kept in `polished` by proposal), net of what `h` itself gains over as many more
-    iterations (:func:`creep`, kept in `polished` as ``"creep"``); unchanged with fewer than two contenders. The
-    contenders are the highest-scoring of the candidates `order` (as :func:`ranked` puts them) puts above the bar, at
-    most :data:`MAX_CONTENDERS`, scoring at least :data:`CONTENDER_SHARE` of the best; none when `order` opens with an
-    error the data show without the joint model (a swap: adopted ahead of any score). The other candidates keep their
-    scores after the screen: below half the best, they are outside the margin within which two explanations are equal
-    (unless more than :data:`MAX_CONTENDERS` are within it), and a report's scores mix the two bases.
+    iterations (:func:`creep`, kept in `polished` as ``"creep"``); unchanged with fewer than two contenders. Of the
+    candidates `order` (as :func:`ranked` puts them, the simplest of equals first) puts above the bar, each group of
+    variants of one story (:func:`related`) is represented by its first; the contenders are the highest-scoring of
+    those, at most :data:`MAX_CONTENDERS`, scoring at least :data:`CONTENDER_SHARE` of the round's best; none when
+    `order` opens with an error the data show without the joint model (a swap: adopted ahead of any score). The other
+    candidates keep their scores after the screen, and a report's scores mix the two bases: those below half the best
+    are outside the margin within which two explanations are equal, but a variant a contender stands for may be above
+    it, and if its stand-in is refused for the joints it is compared, unfitted, with contenders fitted on.
 
     Why: a candidate is scored after :data:`~identcheck.bundle.hypothesis.SCREEN_ITER` iterations from the round's
     hypothesis, and one with many parameters, or one that trades off with an effect adopted before it, is then
@@ -722,13 +724,13 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
     heads = [x for x in order if x[0] > bar_for(x[1], bar)]
     if len(heads) < 2 or heads[0][1].read_without_joints(heads[0][2]):
         return tried
-    heads = sorted(heads, key=lambda x: -x[0])
-    contenders = []
-    for x in heads:
-        if len(contenders) == MAX_CONTENDERS or x[0] < CONTENDER_SHARE * heads[0][0]:
-            break
-        if not any(related(x[2].where, c[2].where) for c in contenders):
-            contenders.append(x)
+    stand_ins = []
+    for x in heads:                       # in ranked order: the simplest of equal variants stands for them
+        if not any(related(x[2].where, c[2].where) for c in stand_ins):
+            stand_ins.append(x)
+    best = max(x[0] for x in heads)
+    contenders = [x for x in sorted(stand_ins, key=lambda x: -x[0])[:MAX_CONTENDERS]
+                  if x[0] >= CONTENDER_SHARE * best]
     if len(contenders) < 2:
         return tried
     if "creep" not in polished:     # (once a round; the screen's own drift counted CREEP_ITER iterations)
@@ -746,12 +748,14 @@ def contested(ctx: Context, h: Hypothesis, order: list, tried: list, bar: float,
 
 
 def related(where: dict, other: dict) -> bool:
-    """Whether two places are variants of one story: the same segment, a joint in common (the joint an effect is at or
-    driven by), or a marker in common."""
+    """Whether two places are variants of one story: the same segment, or a joint in common (the joint an effect is at
+    or driven by). Markers in common are not enough: gross errors name every marker they flag, across segments, and
+    are another story than skin on any one of them. Broad where a skin's driving joint is another segment's (skin on
+    a shank driven by the hip is related to the hip's translation), and blind to a delay and a translation that move
+    the same markers alike: a bound on what is contested, not the effects' own ``alike``."""
     joints = lambda w: {w.get("joint"), *(w.get("joints") or ())} - {None}    # noqa: E731
     seg, other_seg = where.get("segment"), other.get("segment")
-    return bool((seg is not None and seg == other_seg) or joints(where) & joints(other)
-                or set(where.get("markers") or ()) & set(other.get("markers") or ()))
+    return bool((seg is not None and seg == other_seg) or joints(where) & joints(other))
 
 
 def complete(ctx: Context, h: Hypothesis, screened: list, drift: float, progress, step: int) -> list:
