@@ -86,6 +86,12 @@ def phi_of_factor(factor: float) -> float:
     return float(np.clip(2.0 - np.sqrt(1.0 + 3.0 * max(factor, 0.0)), 0.0, MAX_PHI))
 
 
+def effective_samples(n: float, phi: float) -> float:
+    """How many independent samples `n` consecutive samples of AR(1) noise of coefficient `phi` are worth for their
+    mean, ``n (1 − φ)/(1 + φ)``, at least 2."""
+    return max(n * (1 - phi) / (1 + phi), 2.0)
+
+
 def spread_bound(d: np.ndarray, sd: float, phi: float) -> float:
     """The largest lag-1 coefficient a distance series d (F,) allows, given its frame-to-frame standard deviation
     `sd` (:func:`frame_to_frame_sd`) and its own coefficient `phi` (:func:`ar1_coefficient`): the one whose
@@ -98,13 +104,9 @@ def spread_bound(d: np.ndarray, sd: float, phi: float) -> float:
     var = float(np.var(x)) if len(x) > 1 else 0.0
     if not (var > 0 and sd > 0):
         return MAX_PHI
-
-    def n_eff(p: float) -> float:
-        return max(len(x) * (1 - p) / (1 + p), 2.0)
-
-    var /= 1 - 1 / n_eff(phi)
+    var /= 1 - 1 / effective_samples(len(x), phi)
     first = phi_of_factor(sd ** 2 / var)
-    upper = var * (1 + 1 / np.sqrt(2 * n_eff(first))) ** 2
+    upper = var * (1 + 1 / np.sqrt(2 * effective_samples(len(x), first))) ** 2
     return phi_of_factor(sd ** 2 / upper)
 
 
@@ -210,8 +212,7 @@ def noise_floor(data, labels, segments: dict) -> NoiseFloor:
     phi_se = max(spread_phi, 2.0 / np.sqrt(max(np.median(counts), 1) * m_pairs))
     phi_part = 0.5 * (1 / (1 - phi) + 2 / (6 - 2 * phi)) * phi_se if phi > 0 else 0.0
     if capped and np.mean(capped) >= 0.5:
-        n_eff = max(np.median(counts) * (1 - phi) / (1 + phi), 2.0)
-        phi_part = min(phi_part, 1 / np.sqrt(2 * n_eff * m_pairs))
+        phi_part = min(phi_part, 1 / np.sqrt(2 * effective_samples(np.median(counts), phi) * m_pairs))
     whole = marker_noise(*scatter).noise_mm
     rel_se = float(np.hypot(max(mad_se / np.sqrt(n), spread), phi_part))
     return NoiseFloor(sigma, whole, pair_sd, rel_se, n, int(np.sum(counts)), phi)
