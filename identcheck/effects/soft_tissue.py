@@ -1,8 +1,9 @@
 """``soft_tissue``: a marker moves on its segment as a smooth function of its segment's joints' angles.
 
 Detector: each marker's residual in its own segment's frame, regressed on smooth functions of the
-angles of each joint its segment takes part in, and of each pair of them together (:func:`drivers`); the
-variance explained, net of the parameters it costs, ranks the (marker, joints) pairs. Augmentation: the
+angles (smoothed in time, :func:`~identcheck.bundle.hypothesis.driving_angles`: the fitted angles carry the noise
+of their frames, which terms built from them fit) of each joint its segment takes part in, and of each pair of
+them together (:func:`drivers`); the variance explained, net of the parameters it costs, ranks the (marker, joints) pairs. Augmentation: the
 marker's position on its segment becomes ``local + basis(angles) @ B`` with B (K × 3) fitted with everything
 else. ``where`` names the joint (with two, ``joints`` names both and ``joint`` the first).
 
@@ -21,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from identcheck.bundle.model import Terms
-from identcheck.bundle.hypothesis import angle_basis, joint_angles, main_angle, segment_residuals
+from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle, segment_residuals
 from identcheck.bundle.score_test import quadratic_form
 from identcheck.bundle.score_selection import Selection, forward_selection
 from identcheck.bundle.misfit import ModelledMotion
@@ -174,7 +175,7 @@ class SoftTissue(Effect):
         short (the real walking2 trial's sparse model: the pelvis markers' skin with both hips' angles, chosen,
         scored 43 486 fitted against 71 158 with every function, and a knee's translation came first instead)."""
         seg_res = segment_residuals(hyp)
-        angles = joint_angles(hyp)
+        angles = driving_angles(hyp, ctx.rate_hz)      # (smoothed: fitted angles carry the frames' noise)
         ch = hyp.chain
         best = {}
 
