@@ -3,9 +3,10 @@
 Detector: each marker's residual in its own segment's frame, regressed on smooth functions of the
 angles (smoothed in time, :func:`~identcheck.bundle.hypothesis.driving_angles`: the fitted angles carry the noise
 of their frames, which terms built from them fit) of each joint its segment takes part in, and of each pair of
-them together (:func:`drivers`); the variance explained, net of the parameters it costs, ranks the (marker, joints) pairs. Augmentation: the
-marker's position on its segment becomes ``local + basis(angles) @ B`` with B (K × 3) fitted with everything
-else. ``where`` names the joint (with two, ``joints`` names both and ``joint`` the first).
+them together (:func:`drivers`); the variance explained, net of the parameters it costs, ranks the (marker,
+joints) pairs. Augmentation: the marker's position on its segment becomes ``local + basis(angles) @ B`` with B
+(K × 3) fitted with everything else. ``where`` names the joint (with two, ``joints`` names both and ``joint`` the
+first).
 
 Only the functions the criterion asks for are proposed and fitted (:func:`selected`: forward selection of
 :mod:`identcheck.bundle.score_selection` over the functions, each with a free 3-vector, the choice charged), and
