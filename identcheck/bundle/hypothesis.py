@@ -281,19 +281,32 @@ quarter of its standard deviation)."""
 
 
 def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
-    """`x` (F, ...) smoothed along axis 0 by a Gaussian of standard deviation `width_frames`, the ends held (no
-    wrap), NaN frames left out of their neighbours' averages and left NaN."""
-    from scipy.ndimage import gaussian_filter1d
+    """`x` (F, ...) smoothed along axis 0 by a Gaussian of standard deviation `width_frames` (cut at four of them)
+    with each frame's own sample left out of its average, near the ends over the frames there are (no padding, which
+    would repeat an end's own sample), NaN frames left out of their neighbours' averages and left NaN; a frame with
+    no finite neighbour within the cut keeps its own value.
 
+    Why its own sample out: what is smoothed is fitted per frame (a joint's angle), and its noise is that frame's
+    measurement noise; functions of it fitted to the same frame's markers fit that noise, however small its share
+    (a centre weight of 0.1 at 4 frames). Left out, white noise has no part in the frame's own value, and noise
+    correlated in time (AR(1), φ 0.9) less: skin fitted on beside a knee translating 8-15 mm explained up to 78
+    criterion units more than the true translation with 16 parameters, −99 with the frame left out (four simulated
+    trials), while the translation's own score moved by less than 0.1 %."""
+    from scipy.ndimage import convolve1d
+
+    reach = max(int(4.0 * width_frames + 0.5), 1)
+    kernel = np.exp(-0.5 * (np.arange(-reach, reach + 1) / max(width_frames, 1e-9)) ** 2)
+    kernel[reach] = 0.0                                   # each frame's own sample out of its average
     ok = np.isfinite(x)
-    num = gaussian_filter1d(np.where(ok, x, 0.0), width_frames, axis=0, mode="nearest")
-    den = gaussian_filter1d(ok.astype(float), width_frames, axis=0, mode="nearest")
+    num = convolve1d(np.where(ok, x, 0.0), kernel, axis=0, mode="constant")
+    den = convolve1d(ok.astype(float), kernel, axis=0, mode="constant")
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(ok, num / den, np.nan)
+        return np.where(ok, np.where(den > 0, num / np.where(den > 0, den, 1.0), x), np.nan)
 
 
 def driving_angles(h, rate_hz: float) -> dict:
-    """:func:`joint_angles` smoothed in time (:func:`smoothed_in_time`, :data:`DRIVING_SMOOTHING_S`): the angles a
+    """:func:`joint_angles` smoothed in time, each frame's own angle left out (:func:`smoothed_in_time`,
+    :data:`DRIVING_SMOOTHING_S`): the angles a
     translating joint's fields and skin's functions are built from (:mod:`identcheck.effects.joint_translation`,
     :mod:`identcheck.effects.soft_tissue`).
 

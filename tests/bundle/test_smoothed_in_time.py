@@ -1,0 +1,41 @@
+"""The driving angles' smoothing leaves each frame's own sample out of its average: a function of a fitted angle
+built at a frame carries none of that frame's measurement noise."""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from identcheck.bundle.hypothesis import smoothed_in_time
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), width=st.floats(0.5, 12.0), n=st.integers(5, 400), cols=st.integers(1, 3))
+def test_a_frames_smoothed_value_does_not_depend_on_its_own_sample(seed, width, n, cols):
+    """Changing one frame's sample changes its neighbours' smoothed values, never its own (where it has a finite
+    neighbour within the cut, four widths; at the ends too, where padding by the nearest sample would repeat it), and
+    gaps stay gaps."""
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.normal(size=(n, cols)), axis=0)
+    x[rng.random(n) < 0.1] = np.nan
+    t = int(rng.integers(0, n))
+    y = x.copy()
+    if np.isfinite(y[t]).all():
+        y[t] += rng.normal(scale=100.0, size=cols)
+    a, b = smoothed_in_time(x, width), smoothed_in_time(y, width)
+    assert np.array_equal(np.isnan(a), np.isnan(x))
+    reach = max(int(4.0 * width + 0.5), 1)
+    lo, hi = max(t - reach, 0), min(t + reach + 1, n)
+    if np.isfinite(x[lo:hi, 0]).sum() - np.isfinite(x[t, 0]) > 0 and np.isfinite(x[t]).all():   # a neighbour
+        assert np.allclose(a[t], b[t], rtol=0, atol=1e-9 * (1 + np.nanmax(np.abs(x))))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), sigma=st.floats(0.1, 3.0))
+def test_white_noise_in_the_angles_has_no_share_in_their_own_frames_smoothed_values(seed, sigma):
+    """Smoothed noise keeps no correlation with the same frame's noise (white noise, 4 000 frames: the sample
+    correlation within 5/√F of zero), where a Gaussian with its centre in keeps about its centre weight (0.1)."""
+    rng = np.random.default_rng(seed)
+    e = rng.normal(scale=sigma, size=(4000, 1))
+    s = smoothed_in_time(e, 4.0)
+    r = np.corrcoef(e[:, 0], s[:, 0])[0, 1]
+    assert abs(r) < 5 / np.sqrt(len(e))
