@@ -29,13 +29,32 @@ def test_a_frames_smoothed_value_does_not_depend_on_its_own_sample(seed, width, 
         assert np.allclose(a[t], b[t], rtol=0, atol=1e-9 * (1 + np.nanmax(np.abs(x))))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**32 - 1), sigma=st.floats(0.1, 3.0))
 def test_white_noise_in_the_angles_has_no_share_in_their_own_frames_smoothed_values(seed, sigma):
-    """Smoothed noise keeps no correlation with the same frame's noise (white noise, 4 000 frames: the sample
-    correlation within 5/√F of zero), where a Gaussian with its centre in keeps about its centre weight (0.1)."""
+    """Smoothed white noise keeps no correlation with the same frame's noise (4 000 frames: the sample correlation,
+    whose spread is about 1.4/√F here, within 8/√F of zero), where a Gaussian mean with its centre in keeps 0.39."""
     rng = np.random.default_rng(seed)
     e = rng.normal(scale=sigma, size=(4000, 1))
     s = smoothed_in_time(e, 4.0)
     r = np.corrcoef(e[:, 0], s[:, 0])[0, 1]
-    assert abs(r) < 5 / np.sqrt(len(e))
+    assert abs(r) < 8 / np.sqrt(len(e))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), width=st.floats(0.5, 10.0), n=st.integers(3, 300))
+def test_a_quadratic_in_time_is_kept_exactly(seed, width, n):
+    """Each frame's value is that of a quadratic fitted to its neighbours, so a quadratic (and a line, and a constant)
+    comes back as it went in at every frame with three finite neighbours within the cut, near gaps and ends too: a
+    smooth motion loses nothing of its peaks to the smoothing."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n, dtype=float)
+    x = (rng.normal() + rng.normal() * t + rng.normal() * t ** 2 / n)[:, None] * rng.normal(size=2)
+    x[rng.random(n) < 0.2] = np.nan
+    out = smoothed_in_time(x, width)
+    finite = np.isfinite(x)
+    assert np.array_equal(np.isfinite(out), finite)
+    reach = max(int(4.0 * width + 0.5), 1)
+    seen = finite[:, 0]
+    three = np.array([seen[max(f - reach, 0):f + reach + 1].sum() - seen[f] >= 3 for f in range(n)]) & seen
+    assert np.allclose(out[three], x[three], rtol=1e-6, atol=1e-6 * (1 + np.nanmax(np.abs(x))))

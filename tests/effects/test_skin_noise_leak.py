@@ -26,7 +26,7 @@ def _model() -> Model:
     return Model.from_toml(MODEL)
 
 
-@settings(max_examples=2, deadline=None)
+@settings(max_examples=2, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 10_000))
 @example(seed=3)
 def test_skin_fitted_on_explains_no_more_than_the_true_translation_allows(seed):
