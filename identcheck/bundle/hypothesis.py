@@ -291,10 +291,10 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     measurement noise; functions of it fitted to the same frame's markers fit that noise, however small its share
     (a centre weight of 0.1 at 4 frames). Left out, white noise has no part in the frame's own value, and noise
     correlated in time (AR(1), φ 0.9) less. Skin on a shank's three markers each its own way, beside a knee
-    translating 12 mm (white noise, 1 500 frames), fitted to convergence: 1 416 criterion units more with functions
-    of the fitted angles than with the same functions of the true angles, 121 less with these. Why a quadratic: a weighted mean of the neighbours lags a motion
-    near an end or a gap, where they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 %
-    at 2 Hz at 0.04 s), and a smooth function of the flattened angle misses the same function of the angle: skin
+    translating with its angle (the simulator's, seed 3; white noise, 1 500 frames), fitted to convergence: 1 416
+    criterion units more with functions of the fitted angles than with the same functions of the true angles, 121
+    less with these. Why a quadratic: a weighted mean of the neighbours lags a motion near an end or a gap, where
+    they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 % at 2 Hz at 0.04 s), and a smooth function of the flattened angle misses the same function of the angle: skin
     moving 9 mm with gait-like angles (1 and 2 Hz), fitted on functions of the smoothed angles, missed by 0.23 mm RMS
     (2.1 mm at worst, at an end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34)
     with this quadratic; it passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27)."""
