@@ -294,10 +294,11 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     translating with its angle (the simulator's, seed 3; white noise, 1 500 frames), fitted to convergence: 1 416
     criterion units more with functions of the fitted angles than with the same functions of the true angles, 121
     less with these. Why a quadratic: a weighted mean of the neighbours lags a motion near an end or a gap, where
-    they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 % at 2 Hz at 0.04 s), and a smooth function of the flattened angle misses the same function of the angle: skin
-    moving 9 mm with gait-like angles (1 and 2 Hz), fitted on functions of the smoothed angles, missed by 0.23 mm RMS
-    (2.1 mm at worst, at an end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34)
-    with this quadratic; it passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27)."""
+    they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 % at 2 Hz at 0.04 s), and a
+    smooth function of the flattened angle misses the same function of the angle: skin moving 9 mm with gait-like
+    angles (1 and 2 Hz), fitted on functions of the smoothed angles, missed by 0.23 mm RMS (2.1 mm at worst, at an
+    end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34) with this quadratic; it
+    passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27)."""
     from scipy.ndimage import correlate1d
 
     width = max(float(width_frames), 0.5)
