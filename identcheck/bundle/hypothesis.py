@@ -284,8 +284,9 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     """`x` (F, ...) smoothed along axis 0: at each frame, the value at that frame of a quadratic fitted to the frames
     around it, weighted by a Gaussian of standard deviation `width_frames` (at least half a frame; cut at four of
     them), the frame's own sample left out. NaN (or infinite) frames are left out of their neighbours' fits and left
-    NaN; where the neighbours within the cut lie at fewer than three offsets a line (two) or their mean (one) is
-    fitted instead, and a frame with none keeps its own value.
+    NaN; where the quadratic would pass more of the noise than one sample carries (:data:`MAX_NOISE_GAIN`: neighbours
+    on one side, or at fewer than three offsets) a line is fitted instead, or else their weighted mean, and a frame
+    with no neighbour keeps its own value.
 
     Why its own sample out: what is smoothed is fitted per frame (a joint's angle), and its noise is that frame's
     measurement noise; functions of it fitted to the same frame's markers fit that noise, however small its share
@@ -297,8 +298,8 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 % at 2 Hz at 0.04 s), and a
     smooth function of the flattened angle misses the same function of the angle: skin moving 9 mm with gait-like
     angles (1 and 2 Hz), fitted on functions of the smoothed angles, missed by 0.23 mm RMS (2.1 mm at worst, at an
-    end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34) with this quadratic; it
-    passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27)."""
+    end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34) with this quadratic; away
+    from the ends it passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27), at most 1."""
     from scipy.ndimage import correlate1d
 
     width = max(float(width_frames), 0.5)
@@ -309,20 +310,33 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     ok = np.isfinite(x)
     xv, okv = np.where(ok, x, 0.0), ok.astype(float)
-    S = [correlate1d(okv, w * k ** p, axis=0, mode="constant") for p in range(5)]   # Σ w(k) kᵖ over the neighbours
-    T = [correlate1d(xv, w * k ** p, axis=0, mode="constant") for p in range(3)]    # Σ w(k) kᵖ x(t + k)
-    minor = S[2] * S[4] - S[3] ** 2
-    det3 = S[0] * minor - S[1] * (S[1] * S[4] - S[2] * S[3]) + S[2] * (S[1] * S[3] - S[2] ** 2)
-    det2 = S[0] * S[2] - S[1] ** 2
-    quad = det3 > 1e-9 * np.maximum(S[0] * S[2] * S[4], 1e-300)      # neighbours at three offsets at least
-    line = ~quad & (det2 > 1e-9 * np.maximum(S[0] * S[2], 1e-300))
-    mean = ~quad & ~line & (S[0] > 0)
+    S = [correlate1d(okv, w * k ** p, axis=0, mode="constant") for p in range(5)]       # Σ w kᵖ over the neighbours
+    Q = [correlate1d(okv, w * w * k ** p, axis=0, mode="constant") for p in range(5)]   # Σ w² kᵖ: the noise passed
+    T = [correlate1d(xv, w * k ** p, axis=0, mode="constant") for p in range(3)]        # Σ w kᵖ x(t + k)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        at_zero = np.select(
-            [quad, line, mean],
-            [(T[0] * minor - S[1] * (T[1] * S[4] - S[3] * T[2]) + S[2] * (T[1] * S[3] - S[2] * T[2])) / det3,
-             (S[2] * T[0] - S[1] * T[1]) / det2, T[0] / S[0]], default=x)   # Cramer's rule: the fit's value at 0
+        # each fit's value at 0 is Σ w(k) (a₀ + a₁k + a₂k²) x(t + k), a the first row of its normal matrix's inverse
+        # (cofactors over the determinant); the noise it passes, relative to one sample's, is √(Σ w² (a·kᵖ)²)
+        cof = [S[2] * S[4] - S[3] ** 2, S[2] * S[3] - S[1] * S[4], S[1] * S[3] - S[2] ** 2]
+        det3 = S[0] * cof[0] + S[1] * cof[1] + S[2] * cof[2]
+        a3 = [c / det3 for c in cof]
+        det2 = S[0] * S[2] - S[1] ** 2
+        a2 = [S[2] / det2, -S[1] / det2]
+        fits = []
+        for a, det, scale in ((a3, det3, S[0] * S[2] * S[4]), (a2, det2, S[0] * S[2]), ([1.0 / S[0]], S[0], 1.0)):
+            value = sum(a[i] * T[i] for i in range(len(a)))
+            gain = sum(a[i] * a[j] * Q[i + j] for i in range(len(a)) for j in range(len(a)))
+            solvable = det > 1e-9 * np.maximum(scale, 1e-300)         # neighbours at as many offsets as it has terms
+            fits.append((value, solvable & np.isfinite(value) & (gain <= MAX_NOISE_GAIN ** 2)))
+    (quad, quad_ok), (line, line_ok), (mean, mean_ok) = fits
+    at_zero = np.select([quad_ok, line_ok, S[0] > 0], [quad, line, mean], default=x)
     return np.where(ok, at_zero, np.nan)
+
+
+MAX_NOISE_GAIN = 1.0
+"""The most noise a frame's smoothed value may carry, relative to one sample's (white noise): a quadratic or a line
+fitted to neighbours on one side only extrapolates (a frame at an end: 1.17 for the quadratic at 4 frames; beyond a
+long gap with three neighbours 14-16 frames off: 275), and then a lower order is fitted; the weighted mean of the
+neighbours never passes more than one sample's."""
 
 
 def driving_angles(h, rate_hz: float) -> dict:
@@ -341,8 +355,8 @@ def driving_angles(h, rate_hz: float) -> dict:
     translating 9 mm in gait, held-out draw 93, trial 100: a shank cluster's skin scored 1 458 after 10 iterations and
     1 512 after 40, the shank's markers each their own way 1 197, 1 584 and 2 494 after 10, 40 and 200, its vectors
     300 mm long and the knee's axis turned 10°, against 1 469 for the true translation; smoothed, each frame's own
-    angle out: 1 267 and 1 204, settled by 40, and the translation, 1 393, named). What smoothing takes from the
-    motion is its curvature's share (3.5 % of a 1 Hz motion), which a smooth function of the angle mostly holds."""
+    angle out: 1 267 and 1 204, settled by 40, and the translation, 1 393, named). The local quadratic of
+    :func:`smoothed_in_time` keeps a motion's peaks (it passes 99.9 % of a 1 Hz motion at 0.04 s)."""
     return {j: smoothed_in_time(a, DRIVING_SMOOTHING_S * rate_hz) for j, a in joint_angles(h).items()}
 
 

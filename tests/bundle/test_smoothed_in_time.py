@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 from identcheck.bundle.hypothesis import smoothed_in_time
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**32 - 1), width=st.floats(0.5, 12.0), n=st.integers(5, 400), cols=st.integers(1, 3))
 def test_a_frames_smoothed_value_does_not_depend_on_its_own_sample(seed, width, n, cols):
     """Changing one frame's sample changes its neighbours' smoothed values, never its own (where it has a finite
@@ -33,7 +33,7 @@ def test_a_frames_smoothed_value_does_not_depend_on_its_own_sample(seed, width, 
 @given(seed=st.integers(0, 2**32 - 1), sigma=st.floats(0.1, 3.0))
 def test_white_noise_in_the_angles_has_no_share_in_their_own_frames_smoothed_values(seed, sigma):
     """Smoothed white noise keeps no correlation with the same frame's noise (4 000 frames: the sample correlation,
-    whose spread is about 1.4/√F here, within 8/√F of zero), where a Gaussian mean with its centre in keeps 0.39."""
+    whose spread is about 1.4/√F here, within 8/√F of zero), where a Gaussian mean with its centre in keeps 0.38."""
     rng = np.random.default_rng(seed)
     e = rng.normal(scale=sigma, size=(4000, 1))
     s = smoothed_in_time(e, 4.0)
@@ -41,20 +41,38 @@ def test_white_noise_in_the_angles_has_no_share_in_their_own_frames_smoothed_val
     assert abs(r) < 8 / np.sqrt(len(e))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 2**32 - 1), width=st.floats(0.5, 10.0), n=st.integers(3, 300))
 def test_a_quadratic_in_time_is_kept_exactly(seed, width, n):
     """Each frame's value is that of a quadratic fitted to its neighbours, so a quadratic (and a line, and a constant)
-    comes back as it went in at every frame with three finite neighbours within the cut, near gaps and ends too: a
-    smooth motion loses nothing of its peaks to the smoothing."""
+    comes back as it went in at every frame whose neighbours within the cut are all seen (near the ends and gaps,
+    where the quadratic would pass more noise than one sample, a line or a mean is fitted instead): a smooth motion
+    loses nothing of its peaks to the smoothing."""
     rng = np.random.default_rng(seed)
     t = np.arange(n, dtype=float)
     x = (rng.normal() + rng.normal() * t + rng.normal() * t ** 2 / n)[:, None] * rng.normal(size=2)
-    x[rng.random(n) < 0.2] = np.nan
+    x[rng.random(n) < 0.05] = np.nan
     out = smoothed_in_time(x, width)
     finite = np.isfinite(x)
     assert np.array_equal(np.isfinite(out), finite)
     reach = max(int(4.0 * width + 0.5), 1)
     seen = finite[:, 0]
-    three = np.array([seen[max(f - reach, 0):f + reach + 1].sum() - seen[f] >= 3 for f in range(n)]) & seen
-    assert np.allclose(out[three], x[three], rtol=1e-6, atol=1e-6 * (1 + np.nanmax(np.abs(x))))
+    both = np.array([reach <= f < n - reach and seen[f - reach:f + reach + 1].all() for f in range(n)])
+    assert np.allclose(out[both], x[both], rtol=1e-6, atol=1e-6 * (1 + np.nanmax(np.abs(x))))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), width=st.floats(0.5, 8.0), n=st.integers(2, 120))
+def test_no_frame_carries_more_noise_than_one_sample(seed, width, n):
+    """The smoothing is linear in the samples: each frame's value is a weighted sum of its neighbours', and the weights'
+    root sum of squares (the white noise it passes, relative to one sample's) is at most 1 at every frame, ends and gap
+    edges included (a quadratic fitted to neighbours on one side extrapolates: up to 275 beyond a long gap)."""
+    rng = np.random.default_rng(seed)
+    seen = rng.random(n) > rng.uniform(0.0, 0.6)
+    weights = np.zeros((n, n))
+    for j in np.flatnonzero(seen):
+        unit = np.where(seen, 0.0, np.nan)
+        unit[j] = 1.0
+        weights[:, j] = np.nan_to_num(smoothed_in_time(unit, width))
+    gain = np.sqrt(np.sum(weights ** 2, axis=1))[seen]
+    assert np.all(gain <= 1.0 + 1e-9)
