@@ -298,7 +298,8 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     they lie on one side, and flattens its peaks everywhere (by 3.5 % at 1 Hz and 13 % at 2 Hz at 0.04 s), and a
     smooth function of the flattened angle misses the same function of the angle: skin moving 9 mm with gait-like
     angles (1 and 2 Hz), fitted on functions of the smoothed angles, missed by 0.23 mm RMS (2.1 mm at worst, at an
-    end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.021 (0.34) with this quadratic; away
+    end) with the Gaussian mean, 0.27 (3.9) with the mean of the neighbours, 0.042 with this quadratic (2.0 at a
+    first or last frame, where a line is fitted: a quadratic there passes more noise than the sample); away
     from the ends it passes 0.37 of white noise's standard deviation (the Gaussian mean 0.27), at most 1."""
     from scipy.ndimage import correlate1d
 
