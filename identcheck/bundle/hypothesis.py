@@ -356,8 +356,8 @@ def driving_angles(h, rate_hz: float) -> dict:
     translating 9 mm in gait, held-out draw 93, trial 100: a shank cluster's skin scored 1 458 after 10 iterations and
     1 512 after 40, the shank's markers each their own way 1 197, 1 584 and 2 494 after 10, 40 and 200, its vectors
     300 mm long and the knee's axis turned 10°, against 1 469 for the true translation; with these angles: the
-    cluster 1 355, each its own way 1 196 and 1 267, settled by 40, and the translation, 1 426, named). The local quadratic of
-    :func:`smoothed_in_time` keeps a motion's peaks (it passes 99.9 % of a 1 Hz motion at 0.04 s)."""
+    cluster 1 355, each its own way 1 196 and 1 267, settled by 40, and the translation, 1 426, named). The local
+    quadratic of :func:`smoothed_in_time` keeps a motion's peaks (it passes 99.9 % of a 1 Hz motion at 0.04 s)."""
     return {j: smoothed_in_time(a, DRIVING_SMOOTHING_S * rate_hz) for j, a in joint_angles(h).items()}
 
 
