@@ -280,6 +280,13 @@ passes the motion (at 1 Hz 99.9 % of the amplitude, at 2 Hz 99 %) and takes out 
 the fitted angles carry (white noise at 100 Hz: to 0.37 of its standard deviation, none of it the frame's own)."""
 
 
+MAX_NOISE_GAIN = 1.0
+"""The most noise a frame's smoothed value may carry, relative to one sample's (white noise): a quadratic or a line
+fitted to neighbours on one side only extrapolates (a frame at an end: 1.17 for the quadratic at 4 frames; beyond a
+long gap with three neighbours 14-16 frames off: 275), and then a lower order is fitted; the weighted mean of the
+neighbours never passes more than one sample's."""
+
+
 def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
     """`x` (F, ...) smoothed along axis 0: at each frame, the value at that frame of a quadratic fitted to the frames
     around it, weighted by a Gaussian of standard deviation `width_frames` (at least half a frame; cut at four of
@@ -328,16 +335,9 @@ def smoothed_in_time(x: np.ndarray, width_frames: float) -> np.ndarray:
             gain = sum(a[i] * a[j] * Q[i + j] for i in range(len(a)) for j in range(len(a)))
             solvable = det > 1e-9 * np.maximum(scale, 1e-300)         # neighbours at as many offsets as it has terms
             fits.append((value, solvable & np.isfinite(value) & (gain <= MAX_NOISE_GAIN ** 2)))
-    (quad, quad_ok), (line, line_ok), (mean, mean_ok) = fits
+    (quad, quad_ok), (line, line_ok), (mean, _) = fits          # (the mean passes at most one sample's noise)
     at_zero = np.select([quad_ok, line_ok, S[0] > 0], [quad, line, mean], default=x)
     return np.where(ok, at_zero, np.nan)
-
-
-MAX_NOISE_GAIN = 1.0
-"""The most noise a frame's smoothed value may carry, relative to one sample's (white noise): a quadratic or a line
-fitted to neighbours on one side only extrapolates (a frame at an end: 1.17 for the quadratic at 4 frames; beyond a
-long gap with three neighbours 14-16 frames off: 275), and then a lower order is fitted; the weighted mean of the
-neighbours never passes more than one sample's."""
 
 
 def driving_angles(h, rate_hz: float) -> dict:
