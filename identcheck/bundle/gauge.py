@@ -4,7 +4,8 @@ Each segment's body frame is a choice: moving it by t and turning it by ω moves
 points it carries and the hinge axes it holds by ``t + ω × x`` (axes by ``ω × a``), and the per-frame poses
 undo it. A hinge adds two: sliding its point along its axis (both sides), and turning its rest rotation about
 the axis while its angles take the turn back: :meth:`identcheck.skeleton.Skeleton.gauge` directions in all.
-Effect terms (``diagnose``) turn with the frame they are written in: a marker's or a joint centre's offsets.
+Effect terms (``diagnose``) turn with the frame they are written in: a marker's or a joint centre's offsets; a
+hinge's screw runs along its axis and turns with it.
 
 Why write them out rather than read them off the information's smallest eigenvalues: on sparse marker sets the
 Schur complement's roundoff lifts gauge directions to 1e-8 of the largest (scaled) eigenvalue, among directions
@@ -24,9 +25,9 @@ def gauge_basis(chain, state, n_params: int, terms: Terms | None = None) -> np.n
     own update coordinates (:func:`identcheck.bundle.model.apply_step`: markers, then per joint the centre in parent
     and child, and for a hinge the rest rotation's left rotation vector and the axis' two tangent steps, then the
     effect terms' parameters). Of the effect terms, a marker's or a centre's offsets turn with their segment's frame
-    (rows of B or D: ``ω × row``) and a world field's scale does not move; None when the fit carries a hinge's second
-    rotation (its angle is measured from a tangent of the axis, whose gauge is not written out here) or when
-    ``n_params`` is not the constants' count."""
+    (rows of B or D: ``ω × row``); a world field's scale and a screw's do not move (a screw runs along the hinge's
+    axis, which turns); None when the fit carries a hinge's second rotation (its angle is measured from a tangent of
+    the axis, whose gauge is not written out here) or when ``n_params`` is not the constants' count."""
     terms = terms or Terms()
     offsets = joint_offsets(chain)
     if terms.rotations or n_const(chain, terms) != n_params:
@@ -80,8 +81,9 @@ def turning_blocks(chain, terms: Terms | None = None) -> list:
     """The constants' columns (index arrays, in :func:`gauge_basis`'s order) in the groups a change of a segment's
     body frame turns together, each by a rotation of its own coordinates: each marker's three coordinates, a joint's
     centre in parent and in child, a hinge's rest rotation (three) and its axis' two tangent steps, each row of a
-    marker's or a centre's effect offsets; every other column (an extra rotation's profile, a world field's scale)
-    alone. Moving a frame's origin changes none of the constants' information (the per-frame poses take it up).
+    marker's or a centre's effect offsets; every other column (an extra rotation's profile, a world field's or a
+    screw's scale) alone. Moving a frame's origin changes none of the constants' information (the per-frame poses
+    take it up).
 
     What for: a cutoff on the eigenvalues of the information scaled with one scale a block
     (:func:`identcheck.bundle.uncertainty.block_scaled`) reads the same in every choice of frames, where scaling

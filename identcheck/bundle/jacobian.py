@@ -96,6 +96,7 @@ def _touched(chain: Skeleton, terms: Terms) -> list:
     out = [set(np.atleast_1d(c).tolist()) for c, _ in terms.markers]
     out += [set(chain.downstream[j].tolist()) for j, _ in terms.centres]
     out += [set(chain.downstream[j].tolist()) for j, _, _ in terms.rotations]
+    out += [set(chain.downstream[j].tolist()) for j, _ in terms.screws]
     out += [set(np.atleast_1d(c).tolist()) for c, _ in terms.world]
     return out
 
@@ -176,9 +177,9 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
     them (53 MB on a 42-marker body at 1500 frames) beside the coupling B they are summed into."""
     lay = layout(chain, terms)
     F = pred.shape[0]
-    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    n0, nw = terms.screws_start(), terms.world_start()
     lever = pred - world_motion(terms, s) if terms.world else pred    # lever arms: the rigid bodies' points
-    runs_at = {n0 + first: (cols, fields) for first, cols, fields in terms.world_runs()}
+    runs_at = {nw + first: (cols, fields) for first, cols, fields in terms.world_runs()}
     turns = hinge_turns(chain, terms, s) if terms.rotations else {}
     hinge_w, rest_w, tilt_w = {}, {}, {}
     for j in chain.joints:
@@ -208,6 +209,9 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
         second[n_mc + r] = (np.einsum("fij,fjk,fk->fi", R[P], hinge_matrix(s.axis[j], s.theta[j]), turn_u),
                             np.einsum("fij,fj->fi", R[P], turn_rate(chain, terms, s, j, turn_beta(n_mc + r))))
     ordered = terms.ordered()
+    screw = {}                                  # each hinge's screws, summed: (F,) mm along its axis
+    for (j, profile), p in zip(terms.screws, s.term_params[n0:nw]):
+        screw[j] = screw.get(j, 0.0) + p[0] * profile
 
     def block(grp: Group) -> Block:
         idx, m = grp.cols, len(grp.cols)
@@ -235,6 +239,9 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
                     G[..., cc + a] = cross3(rest_w[j][a][:, None], d)
                 for a in range(2):                          # axis direction, tangent plane
                     G[..., cc + 3 + a] = cross3(tilt_w[j][a][:, None], d)
+                    if j in screw:                          # a screw along the axis follows it
+                        G[..., cc + 3 + a] += (screw[j][:, None] * np.einsum("fij,j->fi", R[P], tangents(
+                            s.axis[j])[a]))[:, None]
                 cc += 5
         base = []
         for ti in grp.terms:
@@ -250,6 +257,10 @@ def jacobian_blocks(chain: Skeleton, terms: Terms, s: State, R: dict, centre: di
                 turn = cross3(w_psi[:, None], dx[j])
                 base.append(turn[..., None])
                 G[..., cc] = cross3(w_beta[:, None], dx[j])
+                cc += 1
+            elif ti < nw:                                    # a screw: the hinge's centre along its axis
+                j, profile = term
+                G[..., cc] = (profile[:, None] * hinge_w[j])[:, None]
                 cc += 1
             elif ti in runs_at:                              # fields in the world, a run of them at once
                 cols, fields = runs_at[ti]

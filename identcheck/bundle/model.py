@@ -29,23 +29,36 @@ class Terms:
     """Linear effect terms: a per-frame basis times fitted 3-vectors.
 
     ``markers``: list of (column or columns of one segment, basis (F, K)): the marker's (or each of the
-    markers') position on its segment moves by ``basis @ B`` (B (K, 3), segment frame, shared). ``centres``: list of (joint, basis (F, K)): the joint's
-    centre in the parent moves by ``basis @ D``. ``rotations``: list of (hinge, basis (F, K), β₀): the
-    hinge's relative rotation becomes ``Rot(a, θ) Exp(ψ u) rest`` with ψ = ``basis @ p[:K]`` (p (K + 1, 1))
-    and u the unit vector at angle β = β₀ + p[K] in the plane perpendicular to the hinge axis a
-    (:func:`tangents`): a second rotation about a fitted axis that turns with the child. ``world``: list of (columns (m,), field (F, m, 3)):
-    those markers' predictions move by a scalar times the field (a delay's velocity, a distortion's
-    basis field), in the world. Parameters are kept in that order: markers, centres, rotations, world.
+    markers') position on its segment moves by ``basis @ B`` (B (K, 3), segment frame, shared). ``centres``: list of
+    (joint, basis (F, K)): the joint's centre in the parent moves by ``basis @ D``. ``rotations``: list of (hinge,
+    basis (F, K), β₀): the hinge's relative rotation becomes ``Rot(a, θ) Exp(ψ u) rest`` with ψ = ``basis @ p[:K]``
+    (p (K + 1, 1)) and u the unit vector at angle β = β₀ + p[K] in the plane perpendicular to the hinge axis a
+    (:func:`tangents`): a second rotation about a fitted axis that turns with the child. ``screws``: list of (hinge,
+    profile (F,)): the hinge's centre in the parent moves along its fitted axis a by a scalar times the profile (a
+    translation linear in its angle, ``θ a``): it turns with the parent and follows the axis as they are fitted.
+    ``world``: list of (columns (m,), field (F, m, 3)): those markers' predictions move by a scalar times the field (a
+    delay's velocity, a distortion's basis field), in the world. Parameters are kept in that order: markers, centres,
+    rotations, screws, world (the world's last: an effect that adds world terms finds them at the end).
+
+    Why a screw is not a world field built from the round's parent rotations and axis: those rotations carry the
+    noise of the frames they were fitted to, and a field frozen from them, fitted beside a term that turns with the
+    fit (skin on the child's markers, linear in the same angle: along the axis it is the same motion), takes that
+    noise up through their difference: on a rigid leg, a knee's ``θ a`` beside shank skin explained 1 957 and 2 834
+    criterion units with one parameter (simulated, seeds 3 and 4), as a screw 0. Why it follows the axis: fixed in
+    the parent's frame, it let the fit turn the axis 90° away and read it as a translation across the axis (a knee
+    translating 9 mm: its centre then 170 mm off), and a direction fixed in a frame the gauge turns breaks the gauge
+    (:mod:`identcheck.bundle.gauge`); along the axis it turns with it.
     """
 
     markers: list = field(default_factory=list)
     centres: list = field(default_factory=list)
     world: list = field(default_factory=list)
     rotations: list = field(default_factory=list)
+    screws: list = field(default_factory=list)
 
     def size(self) -> int:
         return 3 * sum(b.shape[1] for _, b in self.markers + self.centres) \
-            + sum(b.shape[1] + 1 for _, b, _ in self.rotations) + len(self.world)
+            + sum(b.shape[1] + 1 for _, b, _ in self.rotations) + len(self.screws) + len(self.world)
 
     def redundant(self) -> int:
         """Directions of the terms' parameters that change no prediction: a hinge turning about two axes across it
@@ -57,11 +70,19 @@ class Terms:
     def shapes(self) -> list:
         """Shape of each term's parameters, in ``State.term_params`` order."""
         return [(b.shape[1], 3) for _, b in self.markers + self.centres] \
-            + [(b.shape[1] + 1, 1) for _, b, _ in self.rotations] + [(1,)] * len(self.world)
+            + [(b.shape[1] + 1, 1) for _, b, _ in self.rotations] + [(1,)] * (len(self.screws) + len(self.world))
 
     def ordered(self) -> list:
         """Every term in ``State.term_params`` order."""
-        return self.markers + self.centres + self.rotations + self.world
+        return self.markers + self.centres + self.rotations + self.screws + self.world
+
+    def screws_start(self) -> int:
+        """Index of the first screw's parameter in ``State.term_params``."""
+        return len(self.markers) + len(self.centres) + len(self.rotations)
+
+    def world_start(self) -> int:
+        """Index of the first world field's parameter in ``State.term_params``."""
+        return self.screws_start() + len(self.screws)
 
     def world_runs(self) -> list:
         """The world fields in runs of consecutive terms acting on the same markers, each run's fields stacked:
@@ -85,8 +106,9 @@ class Terms:
         return runs
 
     def __add__(self, other: "Terms") -> "Terms":
-        return Terms(self.markers + other.markers, self.centres + other.centres, self.world + other.world,
-                     self.rotations + other.rotations)
+        return Terms(markers=self.markers + other.markers, centres=self.centres + other.centres,
+                     world=self.world + other.world, rotations=self.rotations + other.rotations,
+                     screws=self.screws + other.screws)
 
 
 @dataclass
@@ -173,6 +195,8 @@ def forward(chain: Skeleton, terms: Terms, s: State):
     coffs = {}
     for (j, basis), D in zip(terms.centres, s.term_params[len(terms.markers):]):
         coffs[j] = coffs.get(j, 0.0) + basis @ D
+    for (j, profile), c in zip(terms.screws, s.term_params[terms.screws_start():]):
+        coffs[j] = coffs.get(j, 0.0) + c[0] * np.outer(profile, s.axis[j])
     turns = hinge_turns(chain, terms, s)
     rel = {j: s.rel_R[j] if chain.types[j] == "spherical" else turns[j] @ s.rest[j] for j in chain.joints}
     cp = {j: s.c_parent[j] + coffs[j] if j in coffs else s.c_parent[j] for j in chain.joints}
@@ -196,7 +220,7 @@ def world_motion(terms: Terms, s: State) -> np.ndarray | float:
     runs = terms.world_runs()
     if not runs:
         return 0.0
-    n0 = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    n0 = terms.world_start()
     out = 0.0
     for first, cols, fields in runs:
         coef = np.array([p[0] for p in s.term_params[n0 + first:n0 + first + fields.shape[-1]]])

@@ -17,13 +17,14 @@ def term_offsets(hyp, kind: str, basis) -> list:
     return [(key, b @ p) for (key, b), p in zip(getattr(terms, kind), params[first:]) if b is basis]
 
 
-def world_coefficients(hyp, fields: list) -> list:
-    """The fitted scalar of each of hypothesis `hyp`'s world terms whose field is one of `fields` (the very arrays an
-    effect's ``apply`` gave them), as [(index in `fields`, coefficient)]."""
+def world_coefficients(hyp, fields: list, kind: str = "world") -> list:
+    """The fitted scalar of each of hypothesis `hyp`'s terms of `kind` (``"world"`` or ``"screws"``) whose field or
+    profile is one of `fields` (the very arrays an effect's ``apply`` gave them), as [(index in `fields`,
+    coefficient)]."""
     terms, params = hyp.terms, hyp.fit.state.term_params
-    first = len(terms.markers) + len(terms.centres) + len(terms.rotations)
+    first = terms.world_start() if kind == "world" else terms.screws_start()
     out = []
-    for (_, f), p in zip(terms.world, params[first:]):
+    for (_, f), p in zip(getattr(terms, kind), params[first:]):
         out += [(k, float(p[0])) for k, g in enumerate(fields) if f is g]
     return out
 

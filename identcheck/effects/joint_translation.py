@@ -109,7 +109,11 @@ def _not_a_shift(fields: list, omega: np.ndarray) -> list:
 
 def in_world(hyp, joint: str, fields: list) -> list:
     """Fields given in `joint`'s parent frame (each (F, 3), NaN read as 0), turned into the world by the parent's
-    fitted rotations."""
+    fitted rotations: how a ball joint's linear fields are fitted (world terms). Frozen from the round's rotations,
+    they could take up those rotations' noise beside a term that turns with the fit, as a hinge's had (see
+    :class:`~identcheck.bundle.model.Terms`, ``screws``), but written in the parent's frame they would break the
+    gauge of its frame (no constant of the joint turns them as a hinge's axis turns a screw); on a rigid leg (four
+    seeds) thigh skin in the hip's angles then gained no more with the hip's six fields frozen than turning."""
     R = hyp.fit.seg_R[hyp.chain.parent[joint]]
     return [np.einsum("fij,fj->fi", R, np.nan_to_num(g)) for g in fields]
 
@@ -216,31 +220,40 @@ class JointTranslation(Effect):
         return [("soft_tissue", c) for c in same_motion_clusters(chain, where["joint"])]
 
     def apply(self, ctx, hyp, proposal):
+        """The centre's terms: the chosen functions as a centre term; the part linear in the angles, a hinge's
+        ``θ a`` as a screw along its fitted axis, a ball joint's fields as world terms (:func:`in_world`)."""
         j = proposal.payload["joint"]
         ch = hyp.chain
         idx = ch.downstream[j]
-        world = [(idx, np.broadcast_to(g[:, None, :], (len(g), len(idx), 3)).copy())
-                 for g in in_world(hyp, j, proposal.payload.get("linear", []))]
+        linear = proposal.payload.get("linear", [])
+        screws = [np.nan_to_num(g) @ hyp.fit.state.axis[j] for g in linear] if ch.types[j] == "revolute" else []
+        world = [] if screws else [(idx, np.broadcast_to(g[:, None, :], (len(g), len(idx), 3)).copy())
+                                   for g in in_world(hyp, j, linear)]
         proposal.payload["world_fields"] = [f for _, f in world]      # how modelled_motion finds their terms
+        proposal.payload["screws"] = screws
         basis = proposal.payload["basis"]
-        terms = Terms(centres=[(j, basis)] if basis.shape[1] else [], world=world)   # the linear part alone: no centre
+        terms = Terms(centres=[(j, basis)] if basis.shape[1] else [],   # the linear part alone: no centre term
+                      screws=[(j, profile) for profile in screws], world=world)
         return hyp.refit(terms=hyp.terms + terms, effect=proposal, max_iter=10,
                          extra_params=proposal.payload.get("choice_params", 0))
 
     def modelled_motion(self, proposal, hyp) -> list:
         """The joint's centre moving in its parent as fitted, RMS about its mean over the frames: its term quadratic
-        and cubic in the angles plus the part linear in them (fields given in the parent's frame, fitted as world
-        terms); the distances to a centre fixed in both segments are then a convention of the pose they are taken
-        at."""
+        and cubic in the angles plus the part linear in them (a hinge's screw along its fitted axis; a ball joint's
+        fields given in the parent's frame, fitted as world terms); the distances to a centre fixed in both segments
+        are then a convention of the pose they are taken at."""
         j = proposal.payload["joint"]
         ch = hyp.chain
         linear = [np.nan_to_num(g) for g in proposal.payload.get("linear", [])]
         basis = proposal.payload["basis"]
         found = term_offsets(hyp, "centres", basis) if basis.shape[1] else []
         coefficients = world_coefficients(hyp, proposal.payload.get("world_fields", []))
-        if not found and not coefficients:
+        screws = proposal.payload.get("screws", [])
+        along = world_coefficients(hyp, screws, kind="screws")
+        if not found and not coefficients and not along:
             return []                       # the proposal's terms are not in `hyp`
-        offsets = (found[0][1] if found else 0.0) + sum((c * linear[k] for k, c in coefficients), 0.0)
+        offsets = (found[0][1] if found else 0.0) + sum((c * linear[k] for k, c in coefficients), 0.0) \
+            + sum((c * np.outer(screws[k], hyp.fit.state.axis[j]) for k, c in along), 0.0)
         return [ModelledMotion((ch.parent[j], ch.child[j]), motion_rms_mm(offsets), joint=j)]
 
     def reading(self, chain, where: dict, rms_mm: float) -> list:

@@ -38,6 +38,7 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size, second,
     terms = Terms(markers=[(0, angle_basis(rng.normal(size=(40, 1)))), (np.array(seg0), tb[:, :2])],
                   centres=[(ball, tb[:, :3])],
                   rotations=[(hinge, tb, beta)] + ([(hinge, tb[:, :4], beta + second)] if two else []),
+                  screws=[(hinge, rng.normal(size=40)), (hinge, rng.normal(size=40))],
                   world=[(np.arange(chain.n_markers), rng.normal(size=data.shape)),   # a run of two on every marker
                          (np.arange(chain.n_markers), rng.normal(size=data.shape)),
                          (np.array([0, 2]), rng.normal(size=(40, 2, 3)))])
@@ -61,8 +62,8 @@ def test_constants_jacobian_matches_finite_differences(seed, beta, size, second,
 @given(seed=st.integers(0, 10_000), turned=st.booleans())
 def test_per_frame_jacobian_matches_finite_differences(seed, turned):
     """The per-frame columns (the root's pose, each joint's angles) against central differences of the step; with
-    `turned`, every kind of effect term is on (a marker's and a centre's offsets, world fields) and the hinge also
-    turns about two axes across it (fitted profiles of up to 0.3 rad)."""
+    `turned`, every kind of effect term is on (a marker's and a centre's offsets, a hinge's screw, world fields) and the
+    hinge also turns about two axes across it (fitted profiles of up to 0.3 rad)."""
     sim = simulate(MODEL, n_frames=12, seed=seed)
     chain = Skeleton.from_model(MODEL)
     data = sim.trial.as_array()
@@ -75,6 +76,7 @@ def test_per_frame_jacobian_matches_finite_differences(seed, turned):
         tb = time_basis(12, 100.0, 0.05)
         terms = Terms(markers=[(0, tb[:, :2])], centres=[(ball, tb[:, :3])],
                       rotations=[(hinge, tb, 0.3), (hinge, tb, 1.9)],
+                      screws=[(hinge, rng.normal(size=12))],
                       world=[(np.arange(chain.n_markers), rng.normal(size=data.shape))])
         s.term_params = [rng.normal(size=sh) * (0.3 if len(sh) == 2 and sh[1] == 1 else 1.0) for sh in terms.shapes()]
     R, t, centre, pred = forward(chain, terms, s)

@@ -47,6 +47,7 @@ def _terms(chain: Skeleton, F: int, rng, kind: str) -> Terms:
     return Terms(markers=[(0, angle_basis(rng.normal(size=(F, 2)))), (np.array(seg), tb[:, :2])],
                  centres=[(ball[0], tb[:, :3])] if ball else [],
                  rotations=[(hinge[0], tb[:, :3], 0.4)] if hinge else [],
+                 screws=[(hinge[0], rng.normal(size=F))] if hinge else [],
                  world=[(np.arange(chain.n_markers), rng.normal(size=(F, chain.n_markers, 3))),
                         (np.sort(cols), rng.normal(size=(F, len(cols), 3)))])
 

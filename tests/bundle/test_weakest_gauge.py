@@ -146,11 +146,13 @@ def test_the_weakest_direction_does_not_depend_on_the_gauge(fitted, seed, offset
 
 @pytest.fixture(scope="module")
 def with_terms():
-    """A whole-chain fit carrying effect terms of the three kinds whose gauge is written out: a thigh marker's
-    offset and the knee's centre offset following smooth functions of time, and a world field on the ankle marker."""
+    """A whole-chain fit carrying effect terms of the four kinds whose gauge is written out: a thigh marker's
+    offset and the knee's centre offset following smooth functions of time, the knee's centre moving along its axis
+    (a screw, 20 mm over the trial, in the data too: its fitted scalar is far from 0), and a world field on the ankle
+    marker."""
     model = Model.from_toml(EXAMPLES / "diagnose_leg.toml")
-    trial = simulate(model, n_frames=400, noise_mm=0.7, seed=5).trial
-    data = trial.select(model.markers).as_array()
+    sim = simulate(model, n_frames=400, noise_mm=0.7, seed=5)
+    data = sim.trial.select(model.markers).as_array()
     chain = Skeleton.from_model(model)
     F = len(data)
     time = np.linspace(0.0, 1.0, F)
@@ -158,8 +160,9 @@ def with_terms():
     ankle = chain.labels.index("RANK")
     field = np.zeros((F, 1, 3))
     field[:, 0] = np.stack([time, time ** 2, np.sin(time)], axis=1) * 10.0
+    data[:, chain.downstream["knee"]] += (20.0 * (time - 0.5))[:, None, None] * sim.truth.axis_world("knee")[:, None]
     terms = Terms(markers=[(chain.labels.index("RTHI"), smooth)], centres=[("knee", smooth[:, :1])],
-                  world=[(np.array([ankle]), field)])
+                  screws=[("knee", time - time.mean())], world=[(np.array([ankle]), field)])
     w = np.ones(data.shape[:2])
     rigid = fit_chain(chain, data, initial_state(chain, data), weights=w)
     start = rigid.state.copy()
@@ -170,10 +173,11 @@ def with_terms():
 @settings(max_examples=8, deadline=None)
 @given(st.integers(0, 2**16), st.floats(0.0, 1000.0))
 def test_effect_terms_turn_with_their_segment_in_the_written_out_gauge(with_terms, seed, offset_mm):
-    """With marker, centre and world terms: a move of any segment's frame lies in the written-out gauge, which the
-    information annihilates, and the weakest direction's standard error is the same in the moved frame (under
-    white noise, to 1e-3)."""
+    """With marker, centre, screw and world terms: a move of any segment's frame lies in the written-out gauge,
+    which the information annihilates, and the weakest direction's standard error is the same in the moved frame
+    (under white noise, to 1e-3)."""
     chain, data, w, fit, terms = with_terms
+    assert abs(float(fit.state.term_params[terms.screws_start()][0])) > 10.0      # the screw is fitted (20 mm)
     cov = covariance(fit, data, weights=w)
     B = gauge_basis(chain, fit.state, len(cov.information), terms)
     assert B is not None and B.shape[1] == chain.gauge()
