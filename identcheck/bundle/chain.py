@@ -90,7 +90,8 @@ def fit_chain(chain: Skeleton, data, state: State, terms: Terms | None = None, w
     state : State
         Starting point (:func:`initial_state`, or an earlier fit's state).
     terms : Terms, optional
-        Effect terms; ``state.term_params`` must hold one (K, 3) array per term (zeros to start).
+        Effect terms; ``state.term_params`` holds one array per term, shaped as ``terms.shapes()`` (new terms start
+        at zero).
     weights : array (F, M), optional
         Per-sample weights (0 drops a sample: gaps, gross errors).
     penalty : callable, optional

@@ -7,9 +7,11 @@ positions on their segments, each joint's centre in both adjacent segments and e
 
 Effects add to this model through :class:`Terms`: marker offsets on their segment and joint-centre offsets in
 the parent, each a fixed basis of per-frame functions times fitted 3-vectors (soft tissue, a slipped marker, a
-translating joint), and a hinge's second rotation about a fixed axis perpendicular to it, its angle a fixed
-basis times fitted coefficients (a knee's varus/valgus or axial play). Effects of the recording (swapped
-labels, a delay, a distorted volume, gross errors) change the data or the weights instead.
+translating joint), a hinge's second rotation about a fixed axis perpendicular to it, its angle a fixed
+basis times fitted coefficients (a knee's varus/valgus or axial play), a hinge's centre moving along its fitted
+axis (a screw: a fixed profile times a fitted scalar), and fields in the world times fitted scalars (a delay's
+velocity, a distorted volume's basis fields, a ball joint's translation linear in its angles). Effects of the
+recording (swapped labels, gross errors) also change the data or the weights.
 
 Rotation updates are applied on the left in the world frame: a per-frame step ω turns the root about its
 origin, or the child of a ball joint about the joint's centre, in the world.
@@ -124,7 +126,7 @@ class State:
     root_t: np.ndarray           # (F, 3)
     rel_R: dict                  # spherical joint -> (F, 3, 3) child-from-parent relative rotation
     theta: dict                  # revolute joint -> (F,) radians
-    term_params: list = field(default_factory=list)   # one (K, 3) per term, markers then centres
+    term_params: list = field(default_factory=list)   # one array per term, in Terms.ordered() order (Terms.shapes)
 
     def copy(self) -> "State":
         return self.at_frames(slice(None))

@@ -335,12 +335,15 @@ class ExtraDof(Effect):
         res = np.where((hyp.weights > 0)[..., None], hyp.residuals(), 0.0)
         out = []
         turned = [j for j, _, _ in hyp.terms.rotations]
+        screwed = {j for j, _ in hyp.terms.screws}
         for j in ch.joints:
             if ch.types[j] not in NEXT_TYPE:
                 continue
             if turned.count(j) < 2:          # a second axis of play: the hinge is then a ball with smooth play
                 out.extend(second_rotation_proposals(ctx, hyp, j, self.name, fitted_betas(hyp, j)))
-            if j not in turned:
+            # a hinge whose centre moves along its axis (a screw) keeps the axis the screw runs along: its play is
+            # looked for as second rotations (declared a ball, its screw had no axis left to run along)
+            if j not in turned and j not in screwed:
                 # at most all the residual below the joint, less two angles per frame
                 rss = float(np.sum(res[:, ch.downstream[j]] ** 2)) / ctx.noise.sigma_mm ** 2
                 bound = rss - 2 * int(np.any(hyp.weights[:, ch.downstream[j]] > 0, axis=1).sum()) * np.log(ctx.n_obs)

@@ -210,7 +210,7 @@ class JointTranslation(Effect):
             where = {"joint": j, "modelled": MODELLED, "functions": [names[u] for u in sorted(chosen.units)]}
             out.append(Proposal(self.name, where, chosen.gain,
                                 {"joint": j, "basis": basis[:, functions], "linear": linear,
-                                 "choice_params": chosen.choice_params}))
+                                 "choice_params": chosen.choice_params, "proposed_for": ch.types[j]}))
         return sorted(out, key=lambda p: -p.strength)
 
     def alike(self, chain, where: dict) -> list:
@@ -221,12 +221,15 @@ class JointTranslation(Effect):
 
     def apply(self, ctx, hyp, proposal):
         """The centre's terms: the chosen functions as a centre term; the part linear in the angles, a hinge's
-        ``θ a`` as a screw along its fitted axis, a ball joint's fields as world terms (:func:`in_world`)."""
+        ``θ a`` as a screw along its fitted axis, a ball joint's fields as world terms (:func:`in_world`), also where
+        a ball joint's proposal is fitted again after the joint was declared a hinge again (a search going back
+        over its steps): its fields are not along the axis."""
         j = proposal.payload["joint"]
         ch = hyp.chain
         idx = ch.downstream[j]
         linear = proposal.payload.get("linear", [])
-        screws = [np.nan_to_num(g) @ hyp.fit.state.axis[j] for g in linear] if ch.types[j] == "revolute" else []
+        hinge = ch.types[j] == "revolute" and proposal.payload.get("proposed_for", "revolute") == "revolute"
+        screws = [np.nan_to_num(g) @ hyp.fit.state.axis[j] for g in linear] if hinge else []
         world = [] if screws else [(idx, np.broadcast_to(g[:, None, :], (len(g), len(idx), 3)).copy())
                                    for g in in_world(hyp, j, linear)]
         proposal.payload["world_fields"] = [f for _, f in world]      # how modelled_motion finds their terms
