@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import logging
 import threading
+import warnings
 from collections import OrderedDict
 
 import numpy as np
@@ -93,35 +94,45 @@ def _markers(model, points: dict, virtual: dict, seg: str) -> dict:
 
 
 CACHED_ESTIMATES = 64
-"""How many closed-form joint estimates :func:`estimate_once` keeps (the most recently used)."""
+"""How many closed-form joint estimates :func:`estimate_once` keeps (the most recently used): some 18 MB for
+1 500-frame (2, 1) hinges with four candidates each."""
 _cache: OrderedDict = OrderedDict()
 _cache_lock = threading.Lock()
 
 
 def estimate_once(fn, P: list, C: list, kind: str, case: str):
     """``fn(P, C, case)``, the estimator :func:`_choose` picked for a joint of `kind`, computed once for the same
-    points: every estimator is a deterministic function of its points (the scattered starts of a (2, 1) hinge are
-    seeded), so the answer kept for an earlier call with equal arrays is the answer (a copy: callers mark
-    estimates).
+    points under the same warning filters: every estimator is a deterministic function of its points (the scattered
+    starts of a (2, 1) hinge are seeded), so the answer kept for an earlier call with equal arrays is the answer (a
+    copy: callers mark estimates). The warnings it gave are given again on every call, as if it had run (a verb
+    reports them: a sphere centre the motion barely determines); an estimate's notes record some warnings as the
+    filters in force let them through, so those filters are part of what is kept apart.
 
     Why: ``diagnose`` starts the whole tree again from the closed forms on data an effect corrected (a delay undone,
     swapped labels put back), and such a correction leaves most joints' points as they were; on a walking trial with
     four joints, eight such restarts spent 86 of 245 s refitting the same (2, 1) hinges."""
-    digest = hashlib.blake2b(f"{kind}|{case}|{len(P)}|{len(C)}".encode(), digest_size=20)
+    digest = hashlib.blake2b(f"{kind}|{case}|{len(P)}|{len(C)}|{warnings.filters!r}".encode(), digest_size=20)
     for a in list(P) + list(C):
         a = np.ascontiguousarray(a, dtype=float)
         digest.update(str(a.shape).encode())
         digest.update(a.tobytes())
     key = digest.hexdigest()
     with _cache_lock:
-        if key in _cache:
+        kept = _cache.get(key)
+        if kept is not None:
             _cache.move_to_end(key)
-            return copy.deepcopy(_cache[key])
-    est = fn(P, C, case)
-    with _cache_lock:
-        _cache[key] = copy.deepcopy(est)
-        while len(_cache) > CACHED_ESTIMATES:
-            _cache.popitem(last=False)
+    if kept is None:
+        with warnings.catch_warnings(record=True) as caught:       # the caller's filters, the warnings recorded
+            est = fn(P, C, case)
+        kept = (copy.deepcopy(est), [(w.message, w.category, w.filename, w.lineno) for w in caught])
+        with _cache_lock:
+            _cache[key] = kept
+            while len(_cache) > CACHED_ESTIMATES:
+                _cache.popitem(last=False)
+    else:
+        est = copy.deepcopy(kept[0])
+    for message, category, filename, lineno in kept[1]:
+        warnings.warn_explicit(message, category, filename, lineno)
     return est
 
 

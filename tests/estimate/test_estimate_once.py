@@ -1,8 +1,10 @@
 """A closed-form joint estimate is computed once for the same points (:func:`identcheck.estimate.closed_forms.
-estimate_once`): a call with equal arrays gives the earlier answer, as a copy; any change of a point computes it
-again; and the model's closed forms come out the same from a cold or a warm cache."""
+estimate_once`): a call with equal arrays gives the earlier answer, as a copy, and its warnings again; any change of a
+point, or of the warning filters, computes it again; and the model's closed forms come out the same from a cold or a
+warm cache."""
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -65,3 +67,31 @@ def test_the_model_closed_forms_are_the_same_from_a_cold_and_a_warm_cache():
     warm = fit_model(model, trial)[0]
     assert len(closed_forms._cache) >= 1
     assert all(_same(cold[j][0], warm[j][0]) for j in model.joint_order)
+
+
+def test_the_warnings_an_estimate_gave_are_given_again_and_filters_keep_answers_apart():
+    """A verb reports the warnings the estimators give (a sphere centre the motion barely determines): a kept
+    answer gives them again. An estimate's notes record warnings as the filters in force let them through, so an
+    answer computed with warnings ignored is not handed out where they are shown."""
+    closed_forms._cache.clear()
+    P, C = [np.arange(6.0).reshape(2, 3)], [np.ones((2, 3))]
+    calls = []
+
+    def estimator(parent, child, case):
+        calls.append(case)
+        with warnings.catch_warnings(record=True) as caught:           # as the estimators keep notes
+            warnings.warn("residuals correlated", UserWarning)
+        warnings.warn("the motion barely determines it", UserWarning)     # for the verb to report
+        return _Answer(1.0, [str(w.message) for w in caught])
+
+    for _ in range(2):
+        with warnings.catch_warnings(record=True) as shown:
+            warnings.simplefilter("always")
+            got = estimate_once(estimator, P, C, "spherical", "spherical(3,1)")
+        assert [str(w.message) for w in shown] == ["the motion barely determines it"]
+        assert got.notes == ["residuals correlated"]
+    assert len(calls) == 1
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("ignore")
+        quiet = estimate_once(estimator, P, C, "spherical", "spherical(3,1)")
+    assert len(calls) == 2 and quiet.notes == [] and not shown
