@@ -17,7 +17,7 @@ def term_offsets(hyp, kind: str, basis) -> list:
     return [(key, b @ p) for (key, b), p in zip(getattr(terms, kind), params[first:]) if b is basis]
 
 
-def world_coefficients(hyp, fields: list, kind: str = "world") -> list:
+def scalar_coefficients(hyp, fields: list, kind: str = "world") -> list:
     """The fitted scalar of each of hypothesis `hyp`'s terms of `kind` (``"world"`` or ``"screws"``) whose field or
     profile is one of `fields` (the very arrays an effect's ``apply`` gave them), as [(index in `fields`,
     coefficient)]."""

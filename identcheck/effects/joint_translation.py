@@ -27,7 +27,7 @@ from identcheck.bundle.score_test import modulated_score_moments
 from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.hypothesis import angle_basis, driving_angles, main_angle
 from identcheck.bundle.misfit import ModelledMotion
-from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets, world_coefficients
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, seen_mean, term_offsets, scalar_coefficients
 from identcheck.effects.injection import Change, cannot, normalised_angle, pick, rotate, rotations, subtree, subtree_columns, unit_vectors
 from identcheck.effects.soft_tissue import same_motion_clusters
 
@@ -250,9 +250,9 @@ class JointTranslation(Effect):
         linear = [np.nan_to_num(g) for g in proposal.payload.get("linear", [])]
         basis = proposal.payload["basis"]
         found = term_offsets(hyp, "centres", basis) if basis.shape[1] else []
-        coefficients = world_coefficients(hyp, proposal.payload.get("world_fields", []))
+        coefficients = scalar_coefficients(hyp, proposal.payload.get("world_fields", []))
         screws = proposal.payload.get("screws", [])
-        along = world_coefficients(hyp, screws, kind="screws")
+        along = scalar_coefficients(hyp, screws, kind="screws")
         if not found and not coefficients and not along:
             return []                       # the proposal's terms are not in `hyp`
         offsets = (found[0][1] if found else 0.0) + sum((c * linear[k] for k, c in coefficients), 0.0) \

@@ -24,7 +24,7 @@ import numpy as np
 from identcheck.bundle.score_test import score_moments_streamed
 from identcheck.bundle.score_selection import forward_selection
 from identcheck.bundle.model import Terms
-from identcheck.effects.base import Effect, Proposal, motion_rms_mm, world_coefficients
+from identcheck.effects.base import Effect, Proposal, motion_rms_mm, scalar_coefficients
 from identcheck.effects.injection import MONOMIALS, Change, cannot, monomials
 
 MAX_AMPLITUDE_MM = 25.0
@@ -233,7 +233,7 @@ class SpatialDistortion(Effect):
         trial scaled by 0.74 % along one axis (uniform part 0.25 %), all 16 marker distances came out 0.16-0.33 %
         long, at 95 % intervals of ±0.1-0.4 mm that missed the truth 14 times in 16."""
         flds, at = proposal.payload.get("fields", []), proposal.payload.get("data")
-        coefficients = world_coefficients(hyp, flds)
+        coefficients = scalar_coefficients(hyp, flds)
         seen = np.zeros((0,), bool) if at is None else np.all(np.isfinite(at), axis=-1)
         if not coefficients or not seen.any():
             return 0.0
